@@ -1,0 +1,40 @@
+"""Atomic file output: write to a temporary file beside the target, rename on success."""
+
+from __future__ import annotations
+
+import contextlib
+import os
+import tempfile
+from pathlib import Path
+from typing import Iterator
+
+from .errors import OutputExistsError, SpecGenError
+
+
+@contextlib.contextmanager
+def atomic_write(path: str | os.PathLike, overwrite: bool = False) -> Iterator[Path]:
+    """Yield a temporary path in the target's directory; move it onto ``path`` only on success.
+
+    The temporary name keeps the target's suffix so writers that dispatch on it (numpy, OpenEXR,
+    image libraries) behave the same. On any exception the temporary file is removed, so a failed
+    or cancelled write never leaves a half-written output.
+    """
+    target = Path(path)
+    if target.exists() and not overwrite:
+        raise OutputExistsError(f"{target}: already exists (pass overwrite to replace it)")
+    parent = target.parent if str(target.parent) else Path(".")
+    if not parent.is_dir():
+        raise SpecGenError(f"{target}: output directory {parent} does not exist")
+    if not os.access(parent, os.W_OK):
+        raise SpecGenError(f"{target}: output directory {parent} is not writable")
+    fd, tmp_name = tempfile.mkstemp(prefix=f".{target.stem}.", suffix="".join(target.suffixes) or ".tmp",
+                                    dir=parent)
+    os.close(fd)
+    tmp = Path(tmp_name)
+    try:
+        yield tmp
+        os.replace(tmp, target)
+    except BaseException:
+        with contextlib.suppress(FileNotFoundError):
+            tmp.unlink()
+        raise

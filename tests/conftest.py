@@ -1,0 +1,34 @@
+"""Shared fixtures. ``shared_dir`` points at ../shared beside the repo and skips when absent."""
+
+from __future__ import annotations
+
+import sys
+from pathlib import Path
+
+import pytest
+
+REPO = Path(__file__).resolve().parents[1]
+SHARED = REPO.parent / "shared"
+if str(REPO) not in sys.path:
+    sys.path.insert(0, str(REPO))
+
+
+@pytest.fixture(scope="session")
+def repo_dir() -> Path:
+    return REPO
+
+
+@pytest.fixture(scope="session")
+def shared_dir() -> Path:
+    """The project's ../shared folder (real RGL files); tests using it skip on a user's clone."""
+    if not (SHARED / "data" / "rgl").is_dir():
+        pytest.skip(f"needs ../shared/data/rgl beside the repo (not found at {SHARED}); "
+                    "it holds the real RGL measurements used for checks")
+    return SHARED
+
+
+@pytest.fixture(scope="session")
+def rgl_files(shared_dir: Path) -> dict[str, Path]:
+    """The real RGL RGB files by short name: ``felt`` and ``metallic``."""
+    d = shared_dir / "data" / "rgl"
+    return {"felt": d / "acrylic_felt_green_rgb.bsdf", "metallic": d / "ilm_l3_37_metallic_rgb.bsdf"}
