@@ -9,6 +9,7 @@ any cosine), one column per wavelength (nm) or per RGB channel.
 from __future__ import annotations
 
 import json
+import zipfile
 from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Callable, Sequence
@@ -233,7 +234,7 @@ class BRDFTable:
                 header = json.loads(bytes(z["header"]).decode())
                 values = z["values"]
                 wavelengths = z["wavelengths"]
-        except (OSError, ValueError, KeyError, EOFError, json.JSONDecodeError) as exc:
+        except (OSError, ValueError, KeyError, EOFError, zipfile.BadZipFile) as exc:
             raise BRDFFormatError(path, f"not a readable SpecGen table ({type(exc).__name__}: {exc})") from None
         if header.get("format") != TABLE_FORMAT:
             raise BRDFFormatError(path, "not a SpecGen BRDF table")
