@@ -26,6 +26,7 @@ and its directional albedo is below one.
 
 from __future__ import annotations
 
+import math
 import os
 import struct
 from dataclasses import dataclass, field
@@ -101,7 +102,7 @@ def read_tensor_file(path: str | os.PathLike) -> dict[str, np.ndarray]:
     if major != TENSOR_VERSION[0]:
         raise BRDFFormatError(path, f"unknown tensor file version {major}.{minor} "
                                     f"(supported: {TENSOR_VERSION[0]}.x)")
-    fields: dict[str, np.ndarray] = {}
+    descriptors = []
     for index in range(n_fields):
         (name_len,) = reader.take("<H", f"field {index}'s name length")
         (raw_name,) = reader.take(f"<{name_len}s", f"field {index}'s name")
@@ -110,11 +111,13 @@ def read_tensor_file(path: str | os.PathLike) -> dict[str, np.ndarray]:
         shape = reader.take(f"<{ndim}Q", f"field {name!r}'s shape") if ndim else ()
         if code not in TENSOR_DTYPES:
             raise BRDFFormatError(path, f"field {name!r} has unknown dtype code {code}")
-        dtype = TENSOR_DTYPES[code]
-        count = int(np.prod(shape, dtype=np.uint64)) if shape else 1
+        descriptors.append((name, TENSOR_DTYPES[code], offset, tuple(shape)))
+    fields: dict[str, np.ndarray] = {}
+    for name, dtype, offset, shape in descriptors:
+        count = math.prod(shape)
         end = offset + count * dtype.itemsize
         if end > len(data):
-            raise BRDFFormatError(path, f"truncated tensor file: field {name!r} {tuple(shape)} "
+            raise BRDFFormatError(path, f"truncated tensor file: field {name!r} {shape} "
                                         f"needs bytes {offset}–{end}, file has {len(data)}")
         fields[name] = np.frombuffer(data, dtype=dtype, count=count, offset=offset).reshape(shape)
     return fields
@@ -515,6 +518,44 @@ def _interp_matrix(src: np.ndarray, dst: np.ndarray) -> np.ndarray:
     mat[rows, j] = 1.0 - t
     mat[rows, j + 1] += t
     return mat
+
+
+def write_rgl(path: str | os.PathLike, *, description: str, theta_i: np.ndarray,
+              ndf: np.ndarray, sigma: np.ndarray, vndf: np.ndarray, luminance: np.ndarray,
+              rgb: np.ndarray | None = None, spectra: np.ndarray | None = None,
+              wavelengths: np.ndarray | None = None, jacobian: bool = True,
+              valid: np.ndarray | None = None, overwrite: bool = False) -> Path:
+    """Write an isotropic RGL ``.bsdf`` file in the published field order and dtypes.
+
+    Give either ``rgb`` (1, S, 3, m, m) or ``spectra`` (1, S, Λ, m, m) with ``wavelengths`` (Λ,)
+    in nm. Shapes follow :class:`RGLBSDF`; the file is re-read and validated before it replaces
+    ``path``, so an invalid measurement is never written.
+    """
+    if (rgb is None) == (spectra is None):
+        raise SpecGenError("write_rgl needs exactly one of rgb or spectra")
+    if spectra is not None and wavelengths is None:
+        raise SpecGenError("a spectral RGL file needs wavelengths (nm)")
+    f32 = lambda a: np.asarray(a, dtype="<f4")  # noqa: E731 - the format stores float32
+    fields: dict[str, np.ndarray] = {
+        "version": np.array([1, 0], dtype="<u4"),
+        "description": np.frombuffer(description.encode("utf-8"), dtype=np.uint8),
+        "phi_i": np.zeros(1, dtype="<f4"), "theta_i": f32(theta_i),
+        "sigma": f32(sigma), "ndf": f32(ndf), "vndf": f32(vndf), "luminance": f32(luminance),
+    }
+    if rgb is not None:
+        fields["rgb"] = f32(rgb)
+    else:
+        fields["wavelengths"] = f32(wavelengths)
+        fields["spectra"] = f32(spectra)
+    fields["jacobian"] = np.array([int(jacobian)], dtype=np.uint8)
+    m = fields["rgb" if rgb is not None else "spectra"].shape[-1]
+    fields["valid"] = (np.full(m * m, 255, np.uint8) if valid is None
+                       else np.asarray(valid, dtype=np.uint8))
+    path = Path(path)
+    with atomic_write(path, overwrite=overwrite) as tmp:
+        write_tensor_file(tmp, fields, overwrite=True)
+        RGLBSDF.load(tmp)
+    return path
 
 
 def read_rgl(path: str | os.PathLike) -> RGLBSDF:
