@@ -17,6 +17,7 @@ from .errors import SpecGenError
 #: Modules (relative to this package) that contribute sub-commands, in help order.
 COMMAND_MODULES = [
     "cli_brdf",
+    "cli_corpus",
 ]
 
 EXIT_USER_ERROR = 2
