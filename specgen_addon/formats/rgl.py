@@ -15,7 +15,7 @@ stores, per incident elevation ``θi`` (the slices of ``theta_i``):
 * ``rgb`` (1, S, 3, m, m) or ``spectra`` (1, S, Λ, m, m) with ``wavelengths`` (Λ,) in nm: the
   reflectance factor sampled on that warped grid.
 
-Evaluation (Sec. 5 of the paper): ``ωm = normalize(ωi + ωo)``; invert the VNDF warp at ``u(ωm)``
+Evaluation (as in the reference readers): ``ωm = normalize(ωi + ωo)``; invert the VNDF warp at ``u(ωm)``
 (with ``φm`` relative to ``φi``) to find the sample point; look the reflectance up there
 (bilinear, linear across ``θi`` slices); multiply by ``D(ωm) / (4 σ(ωi))``. The reference readers
 document this product as ``fr · cos θo`` (``powitacq.h``: "evaluate f_r * cos"; Mitsuba's
@@ -104,11 +104,11 @@ def read_tensor_file(path: str | os.PathLike) -> dict[str, np.ndarray]:
                                     f"(supported: {TENSOR_VERSION[0]}.x)")
     descriptors = []
     for index in range(n_fields):
-        (name_len,) = reader.take("<H", f"field {index}'s name length")
-        (raw_name,) = reader.take(f"<{name_len}s", f"field {index}'s name")
+        (name_len,) = reader.take("<H", f"the name length of field {index}")
+        (raw_name,) = reader.take(f"<{name_len}s", f"the name of field {index}")
         name = raw_name.decode("utf-8", errors="replace")
-        ndim, code, offset = reader.take(_FIELD_HEAD, f"field {name!r}'s descriptor")
-        shape = reader.take(f"<{ndim}Q", f"field {name!r}'s shape") if ndim else ()
+        ndim, code, offset = reader.take(_FIELD_HEAD, f"the descriptor of field {name!r}")
+        shape = reader.take(f"<{ndim}Q", f"the shape of field {name!r}") if ndim else ()
         if code not in TENSOR_DTYPES:
             raise BRDFFormatError(path, f"field {name!r} has unknown dtype code {code}")
         descriptors.append((name, TENSOR_DTYPES[code], offset, tuple(shape)))
@@ -159,7 +159,7 @@ def _align8(n: int) -> int:
 
 
 # --------------------------------------------------------------------------------------------
-# Unit-square parameterisation (Sec. 4 of the paper) and interpolants
+# Unit-square parameterisation and interpolants
 # --------------------------------------------------------------------------------------------
 
 def theta_to_u(theta: np.ndarray) -> np.ndarray:
@@ -282,8 +282,6 @@ class ConditionalWarp2D:
 # --------------------------------------------------------------------------------------------
 
 _REQUIRED = ("description", "phi_i", "theta_i", "ndf", "sigma", "vndf", "luminance", "jacobian")
-#: Wavelength range of RGL spectral measurements (nm).
-RGL_WAVELENGTH_RANGE_NM = (360.0, 1000.0)
 #: Number of samples per chunk when evaluating many directions (bounds temporary memory).
 EVAL_CHUNK = 1 << 17
 
@@ -404,7 +402,7 @@ class RGLBSDF:
 
     def info(self) -> dict:
         """Metadata for ``specgen info``: kind, description, slices, wavelength range."""
-        info = dict(self.metadata)
+        info = {k: v for k, v in self.metadata.items() if k != "format"}
         info["channels"] = len(self.channels)
         if self.is_spectral:
             info["wavelengths_nm"] = [float(self.wavelengths[0]), float(self.wavelengths[-1])]
