@@ -1,0 +1,455 @@
+"""Per-band Cycles driver: render a scene's SpecGen materials into a spectral stack.
+
+Each Cycles render (CPU, OSL) carries twelve bands: the shader (``ops/osl/specgen_brdf.osl``)
+writes three groups of four bands as closure weights, which Cycles stores in the Emission,
+Diffuse Color, Glossy Color and Transmission Color passes; one compositor File Output node per pass
+writes them (a single multi-input File Output node wrote only its first input in Blender 5.0, and
+view-layer AOVs stay empty under OSL). With no Cycles lights, a black world and zero bounces the
+colour passes cost nothing beyond the shader itself, which does the lighting (lights and
+environment baked by :mod:`ops.bake`). The bands are then assembled into a spectral OpenEXR
+(Fichet et al. 2021) plus an RGB preview, written atomically.
+
+The scene is modified only for the duration of a render and restored afterwards
+(:class:`_SceneState`). :class:`SpectralRenderJob` is a generator of progress steps so that a modal
+operator can run it one Cycles render per timer tick and cancel between renders.
+"""
+
+from __future__ import annotations
+
+import math
+import os
+import shutil
+import sys
+import tempfile
+import time
+from dataclasses import dataclass, field
+from pathlib import Path
+from typing import Callable, Iterator
+
+import bpy
+import numpy as np
+
+from ..specgen_addon import spectra
+from ..specgen_addon.errors import Cancelled, OutputExistsError, SpecGenError
+from . import bake
+
+SHADER_PATH = Path(__file__).resolve().parent / "osl" / "specgen_brdf.osl"
+SHADER_TEXT_NAME = "specgen_brdf.osl"
+MATERIAL_TAG = "specgen"
+PASSES = (("Emission", "emit"), ("Diffuse Color", "diffuse_color"),
+          ("Glossy Color", "glossy_color"), ("Transmission Color", "transmission_color"))
+SCRIPT_NODE_NAME = "SpecGen BRDF"
+
+
+def ensure_oslquery() -> None:
+    """Make Cycles' script-node compiler work in the bpy *module* (facts §4).
+
+    The module ships ``oslquery`` (and the OpenImageIO build it links against) under
+    ``bpy/<ver>/python/lib/python3.x/site-packages`` without putting it on ``sys.path``; without it
+    script nodes compile to no sockets. ``oslquery`` returns OpenImageIO ``TypeDesc`` objects, which
+    only convert if *that* OpenImageIO extension is loaded, so it is loaded privately (a pip
+    OpenImageIO imported earlier keeps its place in ``sys.modules``). A real Blender needs none of it.
+    """
+    import glob
+    import importlib.machinery
+    import importlib.util
+
+    site = os.path.join(bpy.utils.resource_path("LOCAL"), "python", "lib",
+                        f"python{sys.version_info.major}.{sys.version_info.minor}", "site-packages")
+    if not os.path.isdir(os.path.join(site, "oslquery")):
+        return
+    if site not in sys.path:
+        sys.path.append(site)
+    global _BPY_OIIO
+    if _BPY_OIIO is not None:
+        return
+    current = sys.modules.get("OpenImageIO")
+    if current is not None and os.path.dirname(getattr(current, "__file__", "")).startswith(site):
+        _BPY_OIIO = current
+        return
+    so = sorted(glob.glob(os.path.join(site, "OpenImageIO", "OpenImageIO.cpython-*.so")))
+    if not so:
+        return
+    loader = importlib.machinery.ExtensionFileLoader("OpenImageIO", so[0])
+    spec = importlib.util.spec_from_file_location("OpenImageIO", so[0], loader=loader)
+    _BPY_OIIO = importlib.util.module_from_spec(spec)
+    if current is not None:
+        sys.modules["OpenImageIO"] = current
+    else:
+        sys.modules.pop("OpenImageIO", None)
+
+
+_BPY_OIIO = None
+
+
+def shader_text() -> bpy.types.Text:
+    """The OSL source as a text datablock (internal script: the .blend stays self-contained)."""
+    text = bpy.data.texts.get(SHADER_TEXT_NAME)
+    source = SHADER_PATH.read_text()
+    if text is None:
+        text = bpy.data.texts.new(SHADER_TEXT_NAME)
+    if text.as_string() != source:
+        text.clear()
+        text.write(source)
+    return text
+
+
+def compile_script_node(node: bpy.types.Node) -> None:
+    """Compile the SpecGen OSL into ``node`` (internal script) and create its sockets.
+
+    Assigning the script runs Cycles' ``osl.update_script_node``; raises SpecGenError when the
+    shader did not compile (no OSL in this Cycles build, or a broken source).
+    """
+    ensure_oslquery()
+    scene = bpy.context.scene
+    engine = scene.render.engine
+    scene.render.engine = "CYCLES"  # the script-node update runs through the scene's engine
+    try:
+        node.mode = "INTERNAL"
+        text = shader_text()
+        if node.script == text:
+            node.script = None
+        node.script = text
+    finally:
+        scene.render.engine = engine
+    if "Atlas" not in node.inputs or "BSDF" not in node.outputs:
+        raise SpecGenError("the SpecGen OSL shader did not compile (is Cycles built with OSL?)")
+
+
+def make_material(name: str, atlas: bake.AtlasInfo) -> bpy.types.Material:
+    """A material whose surface is the SpecGen OSL shader reading ``atlas``."""
+    mat = bpy.data.materials.get(name) or bpy.data.materials.new(name)
+    tree = mat.node_tree
+    for node in list(tree.nodes):
+        tree.nodes.remove(node)
+    out = tree.nodes.new("ShaderNodeOutputMaterial")
+    out.location = (300, 0)
+    node = tree.nodes.new("ShaderNodeScript")
+    node.name = node.label = SCRIPT_NODE_NAME
+    compile_script_node(node)
+    tree.links.new(node.outputs["BSDF"], out.inputs["Surface"])
+    node.inputs["Atlas"].default_value = str(atlas.path)
+    node.inputs["PhiD"].default_value = int(atlas.n_phi_d)
+    mat.cycles.emission_sampling = "NONE"  # the emission is reflected light, not a light source
+    mat[MATERIAL_TAG] = True
+    mat["specgen_wavelengths_nm"] = [float(w) for w in atlas.wavelengths_nm]
+    mat["specgen_atlas"] = str(atlas.path)
+    return mat
+
+
+def is_specgen_material(mat: bpy.types.Material | None) -> bool:
+    return mat is not None and bool(mat.get(MATERIAL_TAG)) and SCRIPT_NODE_NAME in mat.node_tree.nodes
+
+
+def specgen_materials(scene: bpy.types.Scene) -> list[bpy.types.Material]:
+    """SpecGen materials used by render-visible objects of ``scene``."""
+    mats: dict[str, bpy.types.Material] = {}
+    for obj in scene.objects:
+        if obj.hide_render:
+            continue
+        for slot in getattr(obj, "material_slots", ()):
+            if is_specgen_material(slot.material):
+                mats[slot.material.name] = slot.material
+    return list(mats.values())
+
+
+# ------------------------------------------------------------------------------ scene lighting
+def _uplift(wavelengths_nm: np.ndarray) -> np.ndarray:
+    from ..specgen_addon.render.environment import uplift_basis
+
+    return uplift_basis(wavelengths_nm)
+
+
+def world_environment(scene: bpy.types.Scene, max_width: int = 512) -> np.ndarray | None:
+    """Linear-sRGB radiance (H, W, 3), row 0 at the zenith, of the world's environment texture
+    times its Background strength; a constant map for a plain Background colour; None if black."""
+    world = scene.world
+    if world is None or world.node_tree is None:
+        return None
+    background = next((n for n in world.node_tree.nodes if n.type == "BACKGROUND"), None)
+    if background is None:
+        return None
+    strength = float(background.inputs["Strength"].default_value)
+    color_in = background.inputs["Color"]
+    if color_in.is_linked:
+        src = color_in.links[0].from_node
+        if src.type != "TEX_ENVIRONMENT" or src.image is None:
+            raise SpecGenError(f"world background is driven by a {src.type} node; only an "
+                               "Environment Texture (equirectangular) or a plain colour is supported")
+        img = src.image
+        w, h = img.size
+        if w == 0 or h == 0:
+            raise SpecGenError(f"environment image {img.name!r} could not be loaded")
+        px = np.empty(w * h * 4, np.float32)
+        img.pixels.foreach_get(px)
+        rgb = px.reshape(h, w, 4)[::-1, :, :3].copy()
+        while rgb.shape[1] > max_width and rgb.shape[0] % 2 == 0 and rgb.shape[1] % 2 == 0:
+            rgb = rgb.reshape(rgb.shape[0] // 2, 2, rgb.shape[1] // 2, 2, 3).mean(axis=(1, 3))
+    else:
+        rgb = np.broadcast_to(np.asarray(color_in.default_value[:3], np.float32), (8, 16, 3)).copy()
+    rgb = np.clip(rgb * strength, 0.0, None)
+    return None if not np.any(rgb > 0) else rgb
+
+
+def scene_lights(scene: bpy.types.Scene, wavelengths_nm: np.ndarray,
+                 warn: Callable[[str], None] = print) -> bake.SceneLights:
+    """Sun and point lights plus the world environment of ``scene`` as spectra at the bands.
+
+    Light colours (linear sRGB) are uplifted with the same basis as environment texels (Mallett &
+    Yuksel 2019 × D65), so a white sun of strength E is D65 irradiance E, as in the reference
+    renderer. A point light of power P (W) has radiant intensity P/4π.
+    """
+    from mathutils import Vector
+
+    wl = np.asarray(wavelengths_nm, dtype=np.float64)
+    basis = _uplift(wl)
+    lights: list[bake.Light] = []
+    depsgraph = bpy.context.evaluated_depsgraph_get()  # fresh matrix_world of just-moved objects
+    for obj in scene.objects:
+        if obj.type != "LIGHT" or obj.hide_render:
+            continue
+        data = obj.data
+        matrix = obj.evaluated_get(depsgraph).matrix_world if scene == bpy.context.scene else obj.matrix_world
+        rgb = np.asarray(data.color[:3], dtype=np.float64)
+        if data.type == "SUN":
+            d = (matrix.to_3x3() @ Vector((0.0, 0.0, 1.0))).normalized()
+            lights.append(bake.Light("sun", tuple(d), float(data.energy) * (rgb @ basis)))
+        elif data.type == "POINT":
+            pos = matrix.translation
+            lights.append(bake.Light("point", tuple(pos), float(data.energy) / (4 * math.pi) * (rgb @ basis)))
+        else:
+            warn(f"SpecGen: {data.type.lower()} light {obj.name!r} is ignored (sun and point only)")
+    env_rgb = world_environment(scene)
+    env = None if env_rgb is None else bake.EnvironmentLight(env_rgb, basis)
+    return bake.SceneLights(wl, lights, env)
+
+
+# ------------------------------------------------------------------------------ scene state
+class _SceneState:
+    """Temporarily switch a scene to the spectral set-up; restore everything on exit."""
+
+    def __init__(self, scene: bpy.types.Scene, samples: int, resolution: tuple[int, int],
+                 out_dir: Path):
+        self.scene = scene
+        self.samples = samples
+        self.resolution = resolution
+        self.out_dir = out_dir
+        self.saved: list[tuple[object, str, object]] = []
+        self.created: list[tuple[object, object]] = []
+
+    def _set(self, owner, attr: str, value) -> None:
+        self.saved.append((owner, attr, getattr(owner, attr)))
+        setattr(owner, attr, value)
+
+    def __enter__(self) -> "_SceneState":
+        sc = self.scene
+        cy = sc.cycles
+        self._set(sc.render, "engine", "CYCLES")
+        for attr, value in (("device", "CPU"), ("shading_system", True), ("samples", self.samples),
+                            ("max_bounces", 0), ("diffuse_bounces", 0), ("glossy_bounces", 0),
+                            ("transmission_bounces", 0), ("transparent_max_bounces", 0),
+                            ("use_denoising", False)):
+            self._set(cy, attr, value)
+        self._set(sc.render, "resolution_x", self.resolution[0])
+        self._set(sc.render, "resolution_y", self.resolution[1])
+        self._set(sc.render, "resolution_percentage", 100)
+        self._set(sc.render, "use_compositing", True)
+        self._set(sc.render, "film_transparent", False)
+        vl = bpy.context.view_layer if bpy.context.view_layer.id_data == sc else sc.view_layers[0]
+        for _, flag in PASSES:
+            self._set(vl, f"use_pass_{flag}", True)
+        world = bpy.data.worlds.new("SpecGen black")
+        world.use_nodes = True if hasattr(world, "use_nodes") else None
+        bg = next(n for n in world.node_tree.nodes if n.type == "BACKGROUND")
+        bg.inputs["Strength"].default_value = 0.0
+        self.created.append((bpy.data.worlds, world))
+        self._set(sc, "world", world)
+        for obj in sc.objects:
+            if obj.type == "LIGHT" and not obj.hide_render:
+                self._set(obj, "hide_render", True)  # lighting happens in the shader
+            elif obj.type in ("MESH", "CURVE", "SURFACE", "META", "FONT") and not any(
+                    is_specgen_material(s.material) for s in obj.material_slots):
+                self._set(obj, "visible_camera", False)  # still occludes (shadow rays)
+        tree = bpy.data.node_groups.new("SpecGen passes", "CompositorNodeTree")
+        self.created.append((bpy.data.node_groups, tree))
+        layers = tree.nodes.new("CompositorNodeRLayers")
+        layers.scene = sc
+        layers.layer = vl.name
+        for i, (pass_name, _) in enumerate(PASSES):
+            # One File Output node per pass: Blender 5.0 wrote only the first input of one node.
+            fo = tree.nodes.new("CompositorNodeOutputFile")
+            fo.format.media_type = "MULTI_LAYER_IMAGE"
+            fo.format.file_format = "OPEN_EXR_MULTILAYER"
+            fo.format.color_depth = "32"
+            fo.format.exr_codec = "NONE"
+            fo.save_as_render = False
+            fo.directory = str(self.out_dir)
+            fo.file_name = f"pass{i}"
+            fo.file_output_items.new("RGBA", "P")
+            tree.links.new(layers.outputs[pass_name], fo.inputs["P"])
+        self._set(sc, "compositing_node_group", tree)
+        return self
+
+    def __exit__(self, *exc) -> None:
+        for owner, attr, value in reversed(self.saved):
+            try:
+                setattr(owner, attr, value)
+            except (ReferenceError, AttributeError, TypeError):
+                pass
+        for collection, block in reversed(self.created):
+            try:
+                collection.remove(block)
+            except (ReferenceError, RuntimeError):
+                pass
+
+
+def _read_pass(path: Path) -> np.ndarray:
+    import OpenEXR
+
+    with OpenEXR.File(str(path), separate_channels=True) as exr:
+        ch = exr.parts[0].channels
+        names = sorted(ch)
+        pick = {c: next(n for n in names if n.endswith("." + c) or n == c) for c in "RGB"}
+        return np.stack([np.asarray(ch[pick[c]].pixels, np.float32) for c in "RGB"], axis=-1)
+
+
+def _find_output(out_dir: Path, index: int) -> Path:
+    hits = sorted(out_dir.glob(f"pass{index}*.exr"))
+    if not hits:
+        raise SpecGenError(f"Cycles wrote no pass file pass{index}*.exr into {out_dir}")
+    return hits[-1]
+
+
+# ------------------------------------------------------------------------------ the job
+@dataclass
+class SpectralRenderJob:
+    """Render ``scene`` band group by band group, then write a spectral EXR and a PNG preview.
+
+    Iterate :meth:`steps` (each step is at most one Cycles render; yields progress in [0, 1]) or
+    call :meth:`run`. :meth:`cancel` stops before the next render and nothing is written.
+    """
+
+    scene: bpy.types.Scene
+    output: Path | None
+    samples: int = 16
+    resolution: tuple[int, int] = (256, 256)
+    overwrite: bool = False
+    env_samples: int = 2
+    env_lobe: float = 64.0
+    shadows: bool = True
+    preview_png: bool = True
+    attributes: dict = field(default_factory=dict)
+    warn: Callable[[str], None] = print
+    spectral: np.ndarray | None = field(default=None, init=False)
+    wavelengths_nm: np.ndarray | None = field(default=None, init=False)
+    timings: dict = field(default_factory=dict, init=False)
+    _cancelled: bool = field(default=False, init=False)
+
+    def cancel(self) -> None:
+        self._cancelled = True
+
+    def _check(self) -> None:
+        if self._cancelled:
+            raise Cancelled("spectral render cancelled; nothing was written")
+
+    def _outputs(self) -> tuple[Path, Path] | None:
+        if self.output is None:
+            return None
+        exr = Path(self.output)
+        return exr, exr.with_name(exr.stem + "_preview.png")
+
+    def _preflight(self) -> list[bpy.types.Material]:
+        outs = self._outputs()
+        if outs is not None:
+            for p in outs if self.preview_png else outs[:1]:
+                if p.exists() and not self.overwrite:
+                    raise OutputExistsError(f"{p}: already exists (pass overwrite to replace it)")
+            parent = outs[0].parent
+            if not parent.is_dir() or not os.access(parent, os.W_OK):
+                raise SpecGenError(f"{parent}: output folder does not exist or is not writable")
+        mats = specgen_materials(self.scene)
+        if not mats:
+            raise SpecGenError("no render-visible object uses a SpecGen material (Apply one first)")
+        wls = {tuple(m["specgen_wavelengths_nm"]) for m in mats}
+        if len(wls) != 1:
+            raise SpecGenError("SpecGen materials in the scene were baked for different band sets")
+        self.wavelengths_nm = np.asarray(next(iter(wls)), dtype=np.float64)
+        for m in mats:
+            if not Path(m["specgen_atlas"]).is_file():
+                raise SpecGenError(f"material {m.name!r}: baked atlas {m['specgen_atlas']} is missing")
+        return mats
+
+    def steps(self) -> Iterator[float]:
+        """Generator: bake lighting, one Cycles render per 12 bands, assemble, write."""
+        t0 = time.perf_counter()
+        mats = self._preflight()
+        wl = self.wavelengths_nm
+        renders = bake.n_renders(wl.size)
+        ensure_oslquery()
+        work = Path(tempfile.mkdtemp(prefix="specgen_render_"))
+        try:
+            lights = scene_lights(self.scene, wl, self.warn)
+            if not lights.lights and lights.environment is None:
+                raise SpecGenError("the scene has no sun, point light or world lighting")
+            table = bake.bake_light_table(lights, work / "lights.exr")
+            env_map = env_list = ""
+            if lights.environment is not None:
+                m, l = bake.bake_environment(lights.environment, work / "env.exr", work / "env_list.exr")
+                env_map, env_list = str(m), str(l)
+            for mat in mats:
+                node = mat.node_tree.nodes[SCRIPT_NODE_NAME]
+                node.inputs["LightTable"].default_value = str(table)
+                node.inputs["NumLights"].default_value = len(lights.lights)
+                node.inputs["EnvMap"].default_value = env_map
+                node.inputs["EnvList"].default_value = env_list
+                node.inputs["EnvSamples"].default_value = self.env_samples if env_map else 0
+                node.inputs["EnvLobe"].default_value = self.env_lobe
+                node.inputs["Shadows"].default_value = int(self.shadows)
+            self.timings["bake_s"] = time.perf_counter() - t0
+            yield 0.02
+            h, w = self.resolution[1], self.resolution[0]
+            stack = np.zeros((h, w, renders * bake.BANDS_PER_RENDER), np.float32)
+            t_render = 0.0
+            for r in range(renders):
+                self._check()
+                out_dir = work / f"r{r}"
+                out_dir.mkdir()
+                groups = min(bake.GROUPS_PER_RENDER, bake.n_groups(wl.size) - r * bake.GROUPS_PER_RENDER)
+                for mat in mats:
+                    node = mat.node_tree.nodes[SCRIPT_NODE_NAME]
+                    node.inputs["GroupOffset"].default_value = r * bake.GROUPS_PER_RENDER
+                    node.inputs["NumGroups"].default_value = groups
+                t = time.perf_counter()
+                with _SceneState(self.scene, self.samples, self.resolution, out_dir):
+                    bpy.ops.render.render(write_still=False, scene=self.scene.name)
+                t_render += time.perf_counter() - t
+                for i in range(len(PASSES)):
+                    band0 = r * bake.BANDS_PER_RENDER + 3 * i
+                    stack[:, :, band0:band0 + 3] = _read_pass(_find_output(out_dir, i))
+                yield 0.02 + 0.93 * (r + 1) / renders
+            self._check()
+            self.timings["cycles_s"] = t_render
+            self.spectral = stack[:, :, :wl.size]
+            outs = self._outputs()
+            if outs is not None:
+                from ..specgen_addon.spectral_exr import (linear_srgb_preview, write_preview_png,
+                                                          write_spectral_exr)
+
+                rgb = linear_srgb_preview(self.spectral, wl)
+                attrs = {"specgenRenderer": "SpecGen OSL/Cycles", "specgenSamples": str(self.samples),
+                         **{k: str(v) for k, v in self.attributes.items()}}
+                write_spectral_exr(outs[0], self.spectral, wl, overwrite=self.overwrite, rgb=rgb,
+                                   attributes=attrs)
+                if self.preview_png:
+                    write_preview_png(outs[1], rgb, overwrite=self.overwrite)
+            self.timings["total_s"] = time.perf_counter() - t0
+            yield 1.0
+        finally:
+            shutil.rmtree(work, ignore_errors=True)
+
+    def run(self, progress: Callable[[float], None] | None = None) -> np.ndarray:
+        """Run all steps; returns the spectral stack (H, W, Λ)."""
+        for fraction in self.steps():
+            if progress is not None:
+                progress(fraction)
+        return self.spectral
