@@ -34,7 +34,6 @@ its 17 × 17 faces).
 from __future__ import annotations
 
 import functools
-from pathlib import Path
 from typing import Callable
 
 import numpy as np
@@ -52,7 +51,7 @@ METHODS = (MALLETT2019, SMITS1999, OTSU2018, JAKOB2019)
 LABELS = {MALLETT2019: "Mallett 2019", SMITS1999: "Smits 1999", OTSU2018: "Otsu 2018",
           JAKOB2019: "Jakob 2019"}
 #: Face-grid size (nodes per side) of the tabulated methods.
-LUT_SIZE = {SMITS1999: 33, OTSU2018: 33, JAKOB2019: 17}
+LUT_SIZE = {SMITS1999: 17, OTSU2018: 17, JAKOB2019: 17}
 #: Wavelengths (nm) the tabulated spectra are stored on; lookups interpolate from here.
 LUT_WAVELENGTHS_NM = np.arange(380.0, 781.0, 5.0)
 #: Chroma of the brightest component (PBRT 4e's RGBUnboundedSpectrum uses max = 0.5).
@@ -119,6 +118,8 @@ def _face_colour(face: int, a: float, b: float) -> np.ndarray:
 
 def build_face_table(method: str, n: int, progress: Callable[[float], None] | None = None) -> np.ndarray:
     """Tabulate ``method`` on the chroma cube's faces: reflectances (3, n, n, len(LUT_WAVELENGTHS_NM))."""
+    import colour
+
     fn = _single_colour_fn(method)
     out = np.empty((3, n, n, LUT_WAVELENGTHS_NM.size))
     levels = np.linspace(0.0, 1.0, n)
@@ -129,7 +130,8 @@ def build_face_table(method: str, n: int, progress: Callable[[float], None] | No
             # Serpentine order so each colour starts from its neighbour's solution (Jakob 2019).
             js = range(n) if i % 2 == 0 else range(n - 1, -1, -1)
             for j in js:
-                out[face, i, j], state = fn(_face_colour(face, a, levels[j]), state)
+                with colour.utilities.suppress_warnings(colour_runtime_warnings=True):
+                    out[face, i, j], state = fn(_face_colour(face, a, levels[j]), state)
                 done += 1
             if progress is not None:
                 progress(done / total)
@@ -187,11 +189,13 @@ def _mallett_basis(key: tuple[float, ...]) -> np.ndarray:
     return np.stack([np.interp(w, basis.wavelengths, basis.values[:, c]) for c in range(3)])
 
 
-def uplift_reflectance(rgb: np.ndarray, method: str, wavelengths_nm: np.ndarray) -> np.ndarray:
+def uplift_reflectance(rgb: np.ndarray, method: str, wavelengths_nm: np.ndarray,
+                       lut_size: int | None = None) -> np.ndarray:
     """Reflectance-like spectra (…, Λ) of linear-sRGB colours ``rgb`` (…, 3) by ``method``.
 
     Colours are taken as ``s · c`` with ``c`` of largest component 0.5 (see module docstring), so
-    the result scales linearly with the colour's brightness for every method.
+    the result scales linearly with the colour's brightness for every method. ``lut_size``
+    overrides the face-grid size of tabulated methods (default :data:`LUT_SIZE`).
     """
     if method not in METHODS:
         raise SpecGenError(f"unknown uplifting method {method!r}; known: {', '.join(METHODS)}")
@@ -206,28 +210,15 @@ def uplift_reflectance(rgb: np.ndarray, method: str, wavelengths_nm: np.ndarray)
     lit = scale > 0
     if np.any(lit):
         chroma = flat[lit] / scale[lit, None]
-        out[lit] = scale[lit, None] * _resample(_lookup(face_table(method), chroma), w)
+        out[lit] = scale[lit, None] * _resample(_lookup(face_table(method, lut_size), chroma), w)
     return out.reshape(*shape, w.size)
 
 
 def uplift_radiance_image(rgb: np.ndarray, method: str, wavelengths_nm: np.ndarray,
-                          white: str = spectra.DEFAULT_ILLUMINANT) -> np.ndarray:
+                          white: str = spectra.DEFAULT_ILLUMINANT, lut_size: int | None = None) -> np.ndarray:
     """Spectral radiance image (H, W, Λ) estimated from a linear-sRGB render (H, W, 3).
 
     ``L(λ) = ρ̂(λ) · S_white(λ)``, so a pixel equal to the white's RGB returns the white's spectrum.
     """
-    rho = uplift_reflectance(rgb, method, wavelengths_nm)
+    rho = uplift_reflectance(rgb, method, wavelengths_nm, lut_size)
     return rho * spectra.illuminant_spd(white, np.atleast_1d(wavelengths_nm))
-
-
-def available_methods(requested: tuple[str, ...] | list[str] = METHODS) -> list[str]:
-    """Validate method names (keeping order)."""
-    bad = [m for m in requested if m not in METHODS]
-    if bad:
-        raise SpecGenError(f"unknown uplifting method(s) {bad}; known: {', '.join(METHODS)}")
-    return list(requested)
-
-
-def cached_table_path(method: str) -> Path:
-    """Where the face table of ``method`` is cached."""
-    return cache_root() / f"uplift_{method}_{LUT_SIZE[method]}.npz"
