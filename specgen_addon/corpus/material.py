@@ -36,7 +36,7 @@ from .microfacet import (cosine_weighted_mean, lookup_mu, specular_albedo_curves
 from .spectra_sources import REFLECTANCE_GRID_NM, SPLITS
 
 #: Cosine nodes of the Fresnel lookup (linear interpolation in cos θd).
-COS_NODES = np.linspace(0.0, 1.0, 2049)
+COS_NODES = np.linspace(0.0, 1.0, 1025)
 #: Wavelength grid (nm) a material is evaluated on before projecting to RGB (10 nm steps).
 RGB_WAVELENGTHS_NM = wavelength_grid(380.0, 780.0, 41)
 #: Roughness range accepted for any GGX lobe.

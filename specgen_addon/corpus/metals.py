@@ -27,12 +27,12 @@ METALS: tuple[str, ...] = ("Ag", "Al", "Au", "Cr", "Cu", "Ir", "Mo", "Ni", "Rh",
 def _table(metal: str) -> np.ndarray:
     if metal not in METALS:
         raise SpecGenError(f"unknown metal {metal!r}; known: {', '.join(METALS)}")
-    data = np.loadtxt(IOR_DIR / f"{metal}.csv", delimiter=",", comments="#", skiprows=0,
-                      converters=None, ndmin=2, dtype=str)
-    # The first non-comment row is the column header.
-    rows = np.asarray(data[1:], dtype=np.float64)
-    order = np.argsort(rows[:, 0])
-    rows = rows[order]
+    lines = [line for line in (IOR_DIR / f"{metal}.csv").read_text().splitlines()
+             if line.strip() and not line.startswith("#")]
+    if lines[0].replace(" ", "") != "wavelength_nm,eta,k":
+        raise SpecGenError(f"{metal}.csv: expected the header 'wavelength_nm,eta,k'")
+    rows = np.array([[float(x) for x in line.split(",")] for line in lines[1:]])
+    rows = rows[np.argsort(rows[:, 0])]
     rows.setflags(write=False)
     return rows
 
