@@ -139,6 +139,17 @@ def test_brdf_is_zero_below_the_horizon():
     assert np.all(f == 0.0)
 
 
+def test_eval_broadcasts_one_direction_against_many_and_defaults_to_21_bands():
+    m = Material("p", "train", 0.2, Dielectric(1.5, 0.005), FLAT_WHITE)
+    wo = _random_hemisphere(np.random.default_rng(9), 50)
+    wi = _direction(20.0)
+    f = m.eval(wi, wo, None)
+    assert f.shape == (50, WL.size)
+    np.testing.assert_array_equal(f, m.eval(np.repeat(wi[None], 50, 0), wo, WL))
+    with pytest.raises(SpecGenError, match="broadcast"):
+        m.eval(wo[:3], wo[:4], WL)
+
+
 def test_ggx_distribution_projects_to_unit_area():
     # ∫ D(h) cos θh dωh = 2π ∫₀¹ D(c) c dc = 1 (Walter et al. 2007), adaptive quadrature.
     from scipy.integrate import quad

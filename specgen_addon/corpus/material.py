@@ -199,10 +199,11 @@ class Material:
 
     # ------------------------------------------------------------------ evaluation
     def eval(self, wi: np.ndarray, wo: np.ndarray,
-             wavelengths_nm: np.ndarray = DEFAULT_WAVELENGTHS_NM) -> np.ndarray:
+             wavelengths_nm: np.ndarray | None = DEFAULT_WAVELENGTHS_NM) -> np.ndarray:
         """``f_r(ωi, ωo, λ)`` in sr⁻¹, shape (N, Λ); zero if either direction is below the horizon.
 
-        ``wi``, ``wo``: unit vectors (..., 3) in the local frame (normal +z).
+        ``wi``, ``wo``: unit vectors (..., 3) in the local frame (normal +z), broadcast together
+        and flattened to N rows. ``wavelengths_nm`` None means the default 21 bands.
         """
         return self._evaluate(*self._io_cosines(wi, wo), wavelengths_nm)
 
@@ -240,10 +241,11 @@ class Material:
     @staticmethod
     def _io_cosines(wi, wo):
         """``(cos θi, cos θo, cos θh, ωi·h)`` of direction pairs (..., 3)."""
-        wi = np.asarray(wi, dtype=np.float64).reshape(-1, 3)
-        wo = np.asarray(wo, dtype=np.float64).reshape(-1, 3)
-        if wi.shape != wo.shape:
-            raise SpecGenError(f"wi and wo differ in shape: {wi.shape} vs {wo.shape}")
+        try:
+            wi, wo = np.broadcast_arrays(np.asarray(wi, dtype=np.float64), np.asarray(wo, dtype=np.float64))
+        except ValueError:
+            raise SpecGenError(f"wi and wo do not broadcast: {np.shape(wi)} vs {np.shape(wo)}") from None
+        wi, wo = wi.reshape(-1, 3), wo.reshape(-1, 3)
         h = wi + wo
         h /= np.maximum(np.linalg.norm(h, axis=-1, keepdims=True), 1e-12)
         return wi[:, 2], wo[:, 2], h[:, 2], np.einsum("ij,ij->i", wi, h)
@@ -260,7 +262,8 @@ class Material:
         return a - b, a + b, cos_h, cos_d
 
     def _evaluate(self, cos_i, cos_o, cos_h, cos_d, wavelengths_nm, project=None) -> np.ndarray:
-        w = np.atleast_1d(np.asarray(wavelengths_nm, dtype=np.float64))
+        w = DEFAULT_WAVELENGTHS_NM if wavelengths_nm is None else wavelengths_nm
+        w = np.atleast_1d(np.asarray(w, dtype=np.float64))
         lut = _lookup(self, tuple(float(x) for x in w))
         n = cos_i.shape[0]
         out = np.empty((n, w.size if project is None else project.shape[1]))
