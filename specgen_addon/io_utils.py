@@ -11,6 +11,12 @@ from typing import Iterator
 from .errors import OutputExistsError, SpecGenError
 
 
+def _current_umask() -> int:
+    mask = os.umask(0)
+    os.umask(mask)
+    return mask
+
+
 @contextlib.contextmanager
 def atomic_write(path: str | os.PathLike, overwrite: bool = False) -> Iterator[Path]:
     """Yield a temporary path in the target's directory; move it onto ``path`` only on success.
@@ -33,6 +39,7 @@ def atomic_write(path: str | os.PathLike, overwrite: bool = False) -> Iterator[P
     tmp = Path(tmp_name)
     try:
         yield tmp
+        os.chmod(tmp, 0o666 & ~_current_umask())  # mkstemp makes 0600; give the usual mode
         os.replace(tmp, target)
     except BaseException:
         with contextlib.suppress(FileNotFoundError):
