@@ -18,6 +18,7 @@ from .errors import SpecGenError
 COMMAND_MODULES = [
     "cli_brdf",
     "cli_corpus",
+    "cli_eval",
 ]
 
 EXIT_USER_ERROR = 2

@@ -21,6 +21,9 @@ METHOD_STYLE = {
     "smits1999": ("tab:orange", "--"), "otsu2018": ("tab:green", "--"), "jakob2019": ("tab:purple", "--"),
 }
 
+#: Magnification of the error row of :func:`plot_wavelength_grid`.
+ERROR_GAIN = 4
+
 
 def _plt():
     import matplotlib
@@ -68,7 +71,7 @@ def plot_wavelength_grid(rows: Sequence[tuple[str, np.ndarray, np.ndarray, np.nd
     """GT and prediction at ``show_nm`` for each ``(label, gt, pred, mask)`` (images H×W×Λ).
 
     Each band of a material is shown with one grey scale (its GT maximum) so GT and prediction are
-    comparable; a third row shows |pred − GT| on the same scale.
+    comparable; a third row shows |pred − GT| magnified ``ERROR_GAIN`` times on the same scale.
     """
     plt = _plt()
     k = len(show_nm)
@@ -79,7 +82,7 @@ def plot_wavelength_grid(rows: Sequence[tuple[str, np.ndarray, np.ndarray, np.nd
             b = _band_index(wavelengths_nm, wl)
             vmax = max(float(gt[..., b][mask].max()) if mask.any() else 1.0, 1e-12)
             for j, (img, name) in enumerate(((gt[..., b], "GT"), (pred[..., b], "SpecGen"),
-                                             (np.abs(pred[..., b] - gt[..., b]), "|error|"))):
+                                             (ERROR_GAIN * np.abs(pred[..., b] - gt[..., b]), f"|error| ×{ERROR_GAIN}"))):
                 ax = axes[3 * r + j][c]
                 ax.imshow(np.where(mask, img, 0.0), cmap="gray", vmin=0.0, vmax=vmax)
                 ax.set_xticks([])

@@ -80,6 +80,16 @@ def robustness_table(get: CellGetter, materials: Sequence[str], roles: Mapping[s
     return md_table(header, rows)
 
 
+def group_table(get: CellGetter, groups: Mapping[str, Sequence[str]], roles: Sequence[str],
+                methods: Sequence[str], labels: Mapping[str, str]) -> str:
+    """Rows = material groups (label → materials), columns = methods; mean over group × ``roles``."""
+    header = ["Materials", "n"] + [f"{labels.get(m, m)} PSNR / SSIM" for m in methods]
+    rows = [[label, str(len(mats))] + _row([mean_cell([get(m, mat, r) for mat in mats for r in roles])
+                                            for m in methods])
+            for label, mats in groups.items() if mats]
+    return md_table(header, rows, "lr" + "r" * len(methods))
+
+
 def per_material_table(get: CellGetter, materials: Sequence[str], arm: str, roles: Mapping[str, str]) -> str:
     """Rows = materials, columns = scene roles, for one arm."""
     header = ["Material"] + [f"{label} PSNR / SSIM" for label in roles.values()]

@@ -1,0 +1,202 @@
+"""Equal-budget training arms for the ablations (paper §4.4, Tables 3 and 4).
+
+Four arms of the same network (the shipped model's :class:`~specgen_addon.model.Config`, fusion
+swapped) trained by the project's own training loop (:func:`specgen_addon.train.loop.train`):
+
+============================  ========  ===========================================
+arm                           fusion    data
+============================  ========  ===========================================
+``spectral-aff``              AFF       corpus spectral materials only
+``joint-aff``                 AFF       + RGB materials (corpus RGB versions, real RGL RGB files)
+``spectral-hadamard``         Hadamard  corpus spectral materials only
+``joint-hadamard``            Hadamard  + RGB materials
+============================  ========  ===========================================
+
+Every arm gets the same budget: the same number of steps, the same seed, and therefore the same
+spectral batches (a step's batches are a pure function of ``(seed, step)`` and the spectral draw
+comes first); joint arms add an RGB batch to each step. A budget given in minutes is converted
+once to a step count from a short timing of the joint AFF step and the count is cached, so reruns
+and resumes train exactly the same steps (wall-clock budgets would not be deterministic).
+"""
+
+from __future__ import annotations
+
+import dataclasses
+import time
+from dataclasses import dataclass, field
+from pathlib import Path
+from typing import Any, Callable
+
+from ..errors import SpecGenError
+from .cache import read_json, write_json
+
+
+@dataclass(frozen=True)
+class Arm:
+    name: str
+    label: str
+    fusion: str
+    joint: bool
+
+
+ARMS = (
+    Arm("spectral-aff", "Spectral only (AFF)", "aff", False),
+    Arm("joint-aff", "Joint RGB + spectral (AFF)", "aff", True),
+    Arm("spectral-hadamard", "Spectral only (Hadamard)", "hadamard", False),
+    Arm("joint-hadamard", "Joint RGB + spectral (Hadamard)", "hadamard", True),
+)
+ARMS_BY_NAME = {a.name: a for a in ARMS}
+#: Default wall-clock budget per arm (minutes, on an idle 2-core machine) when none is given.
+DEFAULT_BUDGET_MINUTES = 4.5
+SMOKE_STEPS = 3
+SEED = 0
+
+
+@dataclass
+class AblationSettings:
+    """Budget and configuration shared by every arm."""
+
+    steps: int
+    seed: int = SEED
+    arms: tuple[str, ...] = tuple(a.name for a in ARMS)
+    model: dict[str, Any] = field(default_factory=dict)        # Config fields (fusion set per arm)
+    train: dict[str, Any] = field(default_factory=dict)        # TrainConfig fields shared by all arms
+    budget_note: str = ""
+
+    def configs(self, arm: Arm):
+        """(model Config, TrainConfig) of ``arm``."""
+        from ..model import Config
+        from ..train.loop import TrainConfig
+
+        mcfg = Config.from_dict({**self.model, "fusion": arm.fusion})
+        t = {**self.train, "seed": self.seed, "steps": self.steps,
+             "lr_decay_every": max(1, self.steps // 4), "max_minutes": None}
+        if not arm.joint:
+            t.update(rgb_materials_per_step=0, use_shared_rgl=False)
+        return mcfg, TrainConfig.from_dict(t)
+
+    def key(self, arm: Arm) -> str:
+        import hashlib
+        import json
+
+        mcfg, tcfg = self.configs(arm)
+        blob = json.dumps({"m": mcfg.to_dict(), "t": dataclasses.asdict(tcfg)}, sort_keys=True, default=str)
+        return f"{arm.name}-{hashlib.sha1(blob.encode()).hexdigest()[:10]}"
+
+    def describe_markdown(self, results: dict[str, "ArmResult"]) -> str:
+        from . import report
+
+        rows = [[r.label, r.fusion.upper() if r.fusion == "aff" else "Hadamard",
+                 "corpus spectral + RGB" if r.joint else "corpus spectral", str(r.steps), str(r.seed),
+                 f"{r.wall_seconds / 60:.1f} min"] for r in results.values()]
+        text = (f"Ablation arms: same network as the shipped model (fusion swapped), each trained for "
+                f"**{self.steps} steps** with seed {self.seed} {self.budget_note}; learning rate halved "
+                f"every {max(1, self.steps // 4)} steps (four times per run, as the paper's schedule). "
+                "Wall times are as measured (the machine was shared, so they vary; the step budget does not).\n\n")
+        return text + report.md_table(["Arm", "Fusion", "Training data", "Steps", "Seed", "Wall time"], rows,
+                                      "lllrrr")
+
+
+@dataclass
+class ArmResult:
+    name: str
+    key: str
+    label: str
+    fusion: str
+    joint: bool
+    weights: Path
+    steps: int
+    wall_seconds: float
+    seed: int
+
+
+def _default_model_dict() -> dict[str, Any]:
+    """The shipped model's configuration (falls back to the Config defaults without weights)."""
+    from ..model import DEFAULT_WEIGHTS, Config
+
+    if DEFAULT_WEIGHTS.is_file():
+        try:
+            from ..model import load_weights
+
+            return load_weights(DEFAULT_WEIGHTS).cfg.to_dict()
+        except SpecGenError:
+            pass
+    return Config().to_dict()
+
+
+def ablation_settings(smoke: bool = False, steps: int | None = None, budget_minutes: float | None = None,
+                      cache_dir: Path | None = None, log: Callable[[str], None] = print) -> AblationSettings:
+    """Settings of the ablation: an explicit step count, the smoke budget, or minutes → steps."""
+    model = _default_model_dict()
+    if steps is not None:
+        return AblationSettings(steps=int(steps), model=model, budget_note="(step budget given)")
+    if smoke:
+        return AblationSettings(steps=SMOKE_STEPS, model=model, train={"val_every": 10 ** 9},
+                                budget_note="(smoke budget)")
+    minutes = DEFAULT_BUDGET_MINUTES if budget_minutes is None else float(budget_minutes)
+    probe = AblationSettings(steps=1, model=model)
+    timing_path = None if cache_dir is None else Path(cache_dir) / f"step_timing_{minutes:g}min.json"
+    cached = read_json(timing_path) if timing_path is not None else None
+    if cached is None:
+        sec = time_steps(probe, log=log)
+        cached = {"seconds_per_step": sec, "steps": max(10, int(minutes * 60.0 / sec))}
+        if timing_path is not None:
+            write_json(timing_path, cached)
+    return AblationSettings(steps=int(cached["steps"]), model=model,
+                            budget_note=f"(≈ {minutes:g} min each: {cached['seconds_per_step']:.2f} s per joint "
+                                        "AFF step measured once, then fixed as a step count)")
+
+
+def _material_sets(tcfg, mcfg, cache_dir: Path, log: Callable[[str], None]):
+    from ..train import build_material_sets
+
+    return build_material_sets(mcfg, tcfg, cache_dir=cache_dir, log=log)
+
+
+def time_steps(settings: AblationSettings, n: int = 12, log: Callable[[str], None] = print) -> float:
+    """Seconds per training step of the joint AFF arm (median-free mean of ``n`` steps after warm-up)."""
+    import tempfile
+
+    from ..train.loop import train
+
+    arm = ARMS_BY_NAME["joint-aff"]
+    probe = dataclasses.replace(settings, steps=n + 2)
+    mcfg, tcfg = probe.configs(arm)
+    tcfg = dataclasses.replace(tcfg, val_every=10 ** 9, checkpoint_every=10 ** 9)
+    spectral, rgb, val = _material_sets(tcfg, mcfg, _data_cache(), log)
+    stamps: list[float] = []
+    with tempfile.TemporaryDirectory() as tmp:
+        train(mcfg, tcfg, spectral, rgb, val, tmp, show_progress=False,
+              on_step=lambda step, rec: stamps.append(time.perf_counter()))
+    return (stamps[-1] - stamps[1]) / (len(stamps) - 2)
+
+
+def _data_cache() -> Path:
+    from .cache import cache_root
+
+    return cache_root() / "train-data"
+
+
+def train_arms(settings: AblationSettings, cache_dir: Path, progress: bool = True,
+               log: Callable[[str], None] = print) -> dict[str, ArmResult]:
+    """Train (or resume, or load) every arm; returns results by arm name."""
+    from ..train.loop import train
+
+    out: dict[str, ArmResult] = {}
+    for name in settings.arms:
+        arm = ARMS_BY_NAME[name]
+        key = settings.key(arm)
+        arm_dir = Path(cache_dir) / key
+        info_path = arm_dir / "arm.json"
+        info = read_json(info_path)
+        if info is None or not (arm_dir / "specgen.pt").is_file():
+            mcfg, tcfg = settings.configs(arm)
+            log(f"ablation: training {arm.label} for {settings.steps} steps (seed {settings.seed})")
+            spectral, rgb, val = _material_sets(tcfg, mcfg, _data_cache(), log)
+            res = train(mcfg, tcfg, spectral, rgb, val, arm_dir, resume=True, show_progress=progress,
+                        meta={"ablation_arm": arm.name})
+            info = {"steps": res.steps, "wall_seconds": res.wall_seconds, "seed": settings.seed}
+            write_json(info_path, info)
+        out[name] = ArmResult(name, key, arm.label, arm.fusion, arm.joint, arm_dir / "specgen.pt",
+                              int(info["steps"]), float(info["wall_seconds"]), int(info["seed"]))
+    return out

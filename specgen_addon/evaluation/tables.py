@@ -1,0 +1,256 @@
+"""Tables (a)–(e) and the real-data check of the paper's evaluation, resumable (paper §4.3–4.4).
+
+Every score is one ``(arm, material, scene)`` cell: an *arm* is a method (``specgen``, a baseline
+of :mod:`.baselines`, an ablation arm of :mod:`.ablation`), a *scene* a role of
+:func:`.protocol.scene_list`. Cells are cached as JSON under ``<cache>/cells/`` as soon as they are
+computed, ground-truth renders as ``.npz`` under ``<cache>/gt/``, so an interrupted run resumes
+where it stopped. PSNR and SSIM come from :mod:`specgen_addon.metrics` (one normalisation for all).
+"""
+
+from __future__ import annotations
+
+import shutil
+import time
+from dataclasses import dataclass, field
+from pathlib import Path
+from typing import Any, Callable, Sequence
+
+import numpy as np
+
+from .. import spectra
+from ..errors import SpecGenError
+from ..render import EnvSampling, RenderResult, render_rgb, render_spectral
+from . import baselines, protocol
+from .cache import read_json, write_json
+
+SPECGEN = "specgen"
+#: Scene roles of each table.
+ROLES_A = ("env_unseen1", "distant")
+ROLES_B = ("env_seen", "env_unseen1", "env_unseen2")
+ROLES_E = ("shape_env", "shape_distant")
+ROLES_ABLATION = ("distant",)
+#: Roles the main model and the baselines are scored on.
+MAIN_ROLES = ("distant", "env_seen", "env_unseen1", "env_unseen2", "shape_env", "shape_distant")
+#: Role whose images are kept for the figures.
+FIGURE_ROLE = "env_unseen1"
+
+
+@dataclass
+class Settings:
+    """What a run evaluates; the defaults are the full configuration of docs/results.md."""
+
+    resolution: int = 128
+    n_materials: int = 10
+    material_names: list[str] | None = None
+    baselines: tuple[str, ...] = baselines.METHODS
+    weights: Path | None = None
+    env_sampling_scale: float = 1.0
+    figure_materials: int = 2
+    lut_size: int | None = None  # face-table size of tabulated baselines (None: their default)
+    smoke: bool = False
+
+    def sampling(self) -> EnvSampling:
+        base = EnvSampling()
+        return base if self.env_sampling_scale == 1.0 else base.scaled(self.env_sampling_scale)
+
+    def describe(self) -> dict[str, Any]:
+        return {"resolution": self.resolution, "n_materials": self.n_materials,
+                "material_names": self.material_names, "baselines": list(self.baselines),
+                "lut_size": self.lut_size,
+                "env_samples_per_pixel": self.sampling().total,
+                "wavelengths_nm": [float(w) for w in protocol.WAVELENGTHS_NM]}
+
+
+def score(gt: np.ndarray, pred: np.ndarray, mask: np.ndarray) -> dict[str, Any]:
+    """Per-band and mean PSNR (dB) / SSIM of ``pred`` against ``gt`` (H×W×C) inside ``mask``."""
+    from .. import metrics
+
+    res = metrics.spectral_metrics(gt, pred, mask)
+    return {"psnr": [float(x) for x in res.psnr], "ssim": [float(x) for x in res.ssim],
+            "psnr_mean": float(res.psnr_mean), "ssim_mean": float(res.ssim_mean)}
+
+
+class Harness:
+    """Renders, scores and caches the cells of one evaluation run."""
+
+    def __init__(self, settings: Settings, cache_dir: Path, log: Callable[[str], None] = print):
+        self.s = settings
+        self.cache = Path(cache_dir)
+        self.log = log
+        self.envs = protocol.env_choice()
+        self.scenes = protocol.scene_list(self.envs)
+        self._geom: dict[str, tuple[Any, str]] = {}
+        self._lighting: dict[str, dict] = {}
+        self.wl = protocol.WAVELENGTHS_NM
+
+    # -- bookkeeping -------------------------------------------------------------------------
+    def cell_path(self, arm: str, material: str, role: str) -> Path:
+        return self.cache / "cells" / arm / material / f"{role}.json"
+
+    def cell(self, arm: str, material: str, role: str) -> dict | None:
+        return read_json(self.cell_path(arm, material, role))
+
+    def geometry(self, shape: str):
+        if shape not in self._geom:
+            self._geom[shape] = protocol.shape_geometry(shape, self.s.resolution)
+        return self._geom[shape]
+
+    def lighting(self, role: str) -> dict:
+        if role not in self._lighting:
+            self._lighting[role] = protocol.scene_lighting(self.scenes[role])
+        return self._lighting[role]
+
+    def _render(self, brdf: Any, role: str) -> RenderResult:
+        geom, _ = self.geometry(self.scenes[role].shape)
+        return render_spectral(brdf, geom, wavelengths_nm=self.wl, sampling=self.s.sampling(),
+                               **self.lighting(role))
+
+    # -- ground truth ------------------------------------------------------------------------
+    def ground_truth(self, material: Any, role: str) -> RenderResult:
+        """GT spectral render of ``material`` in scene ``role`` (cached as .npz)."""
+        path = self.cache / "gt" / material.name / f"{role}.npz"
+        geom, _ = self.geometry(self.scenes[role].shape)
+        if path.is_file():
+            with np.load(path) as d:
+                return RenderResult(rgb=d["rgb"], mask=d["mask"], spectral=d["spectral"],
+                                    wavelengths_nm=d["wavelengths_nm"])
+        res = self._render(material, role)
+        path.parent.mkdir(parents=True, exist_ok=True)
+        from ..io_utils import atomic_write
+
+        with atomic_write(path, overwrite=True) as tmp:
+            np.savez(tmp, rgb=res.rgb.astype(np.float32), mask=res.mask,
+                     spectral=res.spectral.astype(np.float32), wavelengths_nm=res.wavelengths_nm)
+        return res
+
+    # -- arms --------------------------------------------------------------------------------
+    def run_baselines(self, material: Any, roles: Sequence[str]) -> None:
+        for role in roles:
+            todo = [m for m in self.s.baselines if self.cell(m, material.name, role) is None]
+            if not todo:
+                continue
+            gt = self.ground_truth(material, role)
+            keep = self._keep_images(material, role)
+            for method in todo:
+                t0 = time.perf_counter()
+                pred = baselines.uplift_radiance_image(gt.rgb, method, self.wl, lut_size=self.s.lut_size)
+                pred = np.where(gt.mask[..., None], pred, 0.0)
+                cell = score(gt.spectral, pred, gt.mask) | {"seconds": time.perf_counter() - t0}
+                if keep:
+                    self._save_image(material.name, role, method, pred, gt)
+                write_json(self.cell_path(method, material.name, role), cell)
+
+    def run_model(self, arm: str, weights: Path | None, material: Any, roles: Sequence[str],
+                  keep_images: bool = False) -> None:
+        """Generate the spectral BRDF from the canonical sphere input and score it in ``roles``."""
+        todo = [r for r in roles if self.cell(arm, material.name, r) is None]
+        if not todo:
+            return
+        t0 = time.perf_counter()
+        table = generate_from_sphere(material, weights, self.wl)
+        t_gen = time.perf_counter() - t0
+        for role in todo:
+            gt = self.ground_truth(material, role)
+            t1 = time.perf_counter()
+            pred = self._render(table, role)
+            cell = score(gt.spectral, pred.spectral, gt.mask) | {
+                "seconds_generate": t_gen, "seconds_render": time.perf_counter() - t1}
+            if keep_images and self._keep_images(material, role):
+                self._save_image(material.name, role, arm, pred.spectral, gt)
+            write_json(self.cell_path(arm, material.name, role), cell)
+
+    def run_real(self, name: str, path: Path, weights: Path | None, roles: Sequence[str],
+                 arm: str = SPECGEN) -> dict[str, dict]:
+        """Real RGL RGB file: SpecGen from its sphere input, projected to RGB, vs the measured RGB BRDF.
+
+        Both are rendered in RGB (:func:`specgen_addon.render.render_rgb`) in each scene ``role``.
+        """
+        out = {r: self.cell(f"real-{arm}", name, r) for r in roles}
+        todo = [r for r in roles if out[r] is None]
+        if not todo:
+            return out
+        from ..formats import load_brdf
+
+        measured = load_brdf(path)
+        t0 = time.perf_counter()
+        rgb_table = project_table_to_rgb(generate_from_sphere(measured, weights, self.wl))
+        t_gen = time.perf_counter() - t0
+        for role in todo:
+            geom, _ = self.geometry(self.scenes[role].shape)
+            light = self.lighting(role)
+            t1 = time.perf_counter()
+            gt = render_rgb(measured, geom, sampling=self.s.sampling(), **light)
+            pred = render_rgb(rgb_table, geom, sampling=self.s.sampling(), **light)
+            out[role] = score(gt.rgb, pred.rgb, gt.mask) | {
+                "seconds_generate": t_gen, "seconds_render": time.perf_counter() - t1}
+            write_json(self.cell_path(f"real-{arm}", name, role), out[role])
+            imgs = self.cache / "images" / f"real-{arm}" / f"{name}_{role}.npz"
+            imgs.parent.mkdir(parents=True, exist_ok=True)
+            np.savez(imgs, gt=gt.rgb.astype(np.float32), pred=pred.rgb.astype(np.float32), mask=gt.mask)
+        return out
+
+    # -- images kept for figures -------------------------------------------------------------
+    def figure_material_names(self, materials: Sequence[Any]) -> list[str]:
+        """The first material, then the first of another kind (e.g. a metal), up to the count."""
+        chosen: list[Any] = []
+        for m in materials:
+            if len(chosen) >= self.s.figure_materials:
+                break
+            if not chosen or all(m.kind.split(":")[0] != c.kind.split(":")[0] for c in chosen):
+                chosen.append(m)
+        for m in materials:
+            if len(chosen) >= self.s.figure_materials:
+                break
+            if m not in chosen:
+                chosen.append(m)
+        return [m.name for m in chosen]
+
+    def _keep_images(self, material: Any, role: str) -> bool:
+        return role == FIGURE_ROLE and material.name in getattr(self, "figure_names", ())
+
+    def image_path(self, material: str, role: str, method: str) -> Path:
+        return self.cache / "images" / material / role / f"{method}.npz"
+
+    def _save_image(self, material: str, role: str, method: str, pred: np.ndarray, gt: RenderResult) -> None:
+        path = self.image_path(material, role, method)
+        path.parent.mkdir(parents=True, exist_ok=True)
+        np.savez(path, spectral=pred.astype(np.float32))
+
+
+# -- model-side helpers ---------------------------------------------------------------------------
+
+def generate_from_sphere(brdf: Any, weights: Path | None, wavelengths_nm: np.ndarray):
+    """SpecGen's spectral BRDF table generated from ``brdf``'s canonical sphere input image."""
+    from .. import infer, input_image
+
+    image = input_image.render_input(brdf)
+    return infer.generate_brdf(image, weights=weights, wavelengths_nm=wavelengths_nm)
+
+
+@dataclass
+class _RGBTable:
+    """An RGB view of a spectral table: ``eval_rgb`` = the BRDF spectrum under D65 → linear sRGB."""
+
+    table: Any
+    _proj: np.ndarray = field(init=False)
+
+    def __post_init__(self) -> None:
+        w = self.table.wavelengths
+        # Linear map spectrum → linear sRGB of a reflectance under D65 (white stays white).
+        self._proj = spectra.reflectance_to_linear_srgb(np.eye(len(w)), w)
+
+    def eval_rgb(self, wi: np.ndarray, wo: np.ndarray) -> np.ndarray:
+        return self.table.eval(wi, wo) @ self._proj
+
+
+def project_table_to_rgb(table: Any) -> _RGBTable:
+    """The predicted spectral BRDF projected to linear-sRGB BRDF values (under D65)."""
+    if not getattr(table, "is_spectral", False):
+        raise SpecGenError("projection to RGB needs a spectral table")
+    return _RGBTable(table)
+
+
+def clear_cache(cache_dir: Path) -> None:
+    """Forget every cached cell, render and trained arm of a run (``--fresh``)."""
+    if Path(cache_dir).is_dir():
+        shutil.rmtree(cache_dir)
