@@ -1,0 +1,37 @@
+"""Image encoder: RGB sphere image -> latent vector (the encoder half of the paper's Fig. 2)."""
+
+from __future__ import annotations
+
+import torch
+from torch import nn
+
+from .config import Config
+
+
+class ImageEncoder(nn.Module):
+    """Stride-2 3×3 convolutions with ReLU, then a linear layer to ``latent_dim``.
+
+    Input ``(B, 3, S, S)`` linear RGB in roughly [0, 1] (S = ``image_size``); the image is
+    log-compressed first (``log1p(16·x)/log(17)``) so specular highlights do not dominate.
+    Two extra coordinate channels (x, y in [-1, 1]) tell the convolutions where on the sphere
+    each pixel lies, i.e. which directions it saw.
+    """
+
+    def __init__(self, cfg: Config):
+        super().__init__()
+        layers: list[nn.Module] = []
+        c_in = 5
+        for c in cfg.encoder_channels:
+            layers += [nn.Conv2d(c_in, c, 3, stride=2, padding=1), nn.ReLU(inplace=True)]
+            c_in = c
+        self.convs = nn.Sequential(*layers)
+        side = cfg.image_size // 2 ** len(cfg.encoder_channels)
+        self.fc = nn.Linear(c_in * side * side, cfg.latent_dim)
+        ys, xs = torch.meshgrid(torch.linspace(-1, 1, cfg.image_size),
+                                torch.linspace(-1, 1, cfg.image_size), indexing="ij")
+        self.register_buffer("coords", torch.stack([xs, ys])[None], persistent=False)
+
+    def forward(self, image: torch.Tensor) -> torch.Tensor:
+        x = torch.log1p(16.0 * image.clamp_min(0.0)) / torch.log(torch.tensor(17.0))
+        x = torch.cat([x, self.coords.expand(x.shape[0], -1, -1, -1)], dim=1)
+        return torch.relu(self.fc(self.convs(x).flatten(1)))

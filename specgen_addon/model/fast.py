@@ -1,0 +1,173 @@
+"""Fast evaluation of SpecGen on the full MERL grid × a wavelength grid (used by inference).
+
+The structure of the network is exploited, exactly (no approximation):
+
+* the projector is bilinear and the AFF statistic ``s = Σ_k m_k·f_k + b`` (per-branch conv then
+  GAP) and the MLP's first layer ``W1·f_u = Σ_k w_k W1·f_k`` are linear in the features, so the
+  linear parts are applied once per plane *texel* (``W1·F``, ``m_k·F``) and then resampled onto
+  the grid;
+* the grid is a tensor product, so every plane is resampled once onto its two grid axes:
+  spatial planes do not depend on λ and spectral planes not on the third angle;
+* per grid point only the cheap remainder runs: ``s`` as a sum of six table entries, the
+  ``d = 32`` expansion, softmax, the weighted sum of six ``h1``-vectors, and layers 2–3.
+
+:class:`GridTables` (image + λ coordinates -> six tables) and :class:`GridHead` (a block of
+table rows -> r') are plain modules, so the same code runs in torch and, exported, in ONNX.
+"""
+
+from __future__ import annotations
+
+import math
+
+import torch
+import torch.nn.functional as F
+from torch import nn
+
+from ..table import N_PHI_D, N_THETA_D, N_THETA_H
+from .planes import PLANE_AXES, PLANE_NAMES
+from .specgen import SpecGen
+
+
+def merl_axis_coords() -> dict[str, torch.Tensor]:
+    """Normalised plane coordinates of the MERL grid samples (θh is √-warped: index/90)."""
+    return {"theta_h": 2.0 * torch.arange(N_THETA_H, dtype=torch.float32) / N_THETA_H - 1.0,
+            "theta_d": 2.0 * torch.arange(N_THETA_D, dtype=torch.float32) / N_THETA_D - 1.0,
+            "phi_d": 2.0 * torch.arange(N_PHI_D, dtype=torch.float32) / N_PHI_D - 1.0}
+
+
+def lambda_coords(model: SpecGen, wavelengths_nm) -> torch.Tensor:
+    """Normalised λ plane coordinates of wavelengths in nm."""
+    cfg = model.cfg
+    w = torch.as_tensor(wavelengths_nm, dtype=torch.float32)
+    return 2.0 * (w - cfg.lambda_min_nm) / (cfg.lambda_max_nm - cfg.lambda_min_nm) - 1.0
+
+
+def _resample(plane: torch.Tensor, u_rows: torch.Tensor, u_cols: torch.Tensor) -> torch.Tensor:
+    """Bilinear resample ``(1, ch, R, K)`` on the tensor grid rows × cols -> ``(nr, nc, ch)``."""
+    gy = u_rows[:, None].expand(-1, u_cols.shape[0])
+    gx = u_cols[None, :].expand(u_rows.shape[0], -1)
+    grid = torch.stack([gx, gy], dim=-1)[None]
+    out = F.grid_sample(plane, grid, mode="bilinear", padding_mode="border", align_corners=True)
+    return out[0].permute(1, 2, 0)
+
+
+class GridTables(nn.Module):
+    """Image ``(1, 3, S, S)`` and λ coordinates ``(Λ,)`` -> the six per-axis tables.
+
+    AFF: each table holds ``[W1·f, m_k·f]`` (``h1 + 1`` channels) for its plane; Hadamard: ``f``.
+    Shapes: d1 (90, 90), d2 (90, 180), d3 (90, 180), e1 (90, Λ), e2 (90, Λ), e3 (180, Λ).
+    """
+
+    def __init__(self, model: SpecGen):
+        super().__init__()
+        self.model = model
+        self.aff = model.cfg.fusion == "aff"
+        for k, v in merl_axis_coords().items():
+            self.register_buffer(f"u_{k}", v, persistent=False)
+
+    def derived_planes(self, planes: dict[str, torch.Tensor]) -> dict[str, torch.Tensor]:
+        if not self.aff:
+            return planes
+        w1 = self.model.mapping.fc1.weight                       # (h1, C)
+        m, _ = self.model.fusion.gap_functionals()               # (6, C)
+        out = {}
+        for k, name in enumerate(PLANE_NAMES):
+            rows = torch.cat([w1, m[k:k + 1]], dim=0)            # (h1 + 1, C)
+            out[name] = torch.einsum("oc,bcrk->bork", rows, planes[name])
+        return out
+
+    def forward(self, image: torch.Tensor, u_lambda: torch.Tensor) -> tuple[torch.Tensor, ...]:
+        planes = self.derived_planes(self.model.planes(image))
+        u = {"theta_h": self.u_theta_h, "theta_d": self.u_theta_d, "phi_d": self.u_phi_d,
+             "lambda": u_lambda}
+        return tuple(_resample(planes[n], u[PLANE_AXES[n][0]], u[PLANE_AXES[n][1]]) for n in PLANE_NAMES)
+
+
+class GridHead(nn.Module):
+    """Rows of the six tables -> r' ``(nh, nd, 180, Λ)`` (μ-law space).
+
+    Inputs: ``t1 (nh, nd, ch)``, ``t2 (nh, 180, ch)``, ``t3 (nd, 180, ch)``, ``t4 (nh, Λ, ch)``,
+    ``t5 (nd, Λ, ch)``, ``t6 (180, Λ, ch)`` for a block of θh rows (nh) and θd rows (nd).
+    """
+
+    def __init__(self, model: SpecGen):
+        super().__init__()
+        self.model = model
+        self.aff = model.cfg.fusion == "aff"
+
+    def forward(self, t1, t2, t3, t4, t5, t6) -> torch.Tensor:
+        # Broadcast each table to (nh, nd, np, nl, ch).
+        b = (t1[:, :, None, None], t2[:, None, :, None], t3[None, :, :, None],
+             t4[:, None, None, :], t5[None, :, None, :], t6[None, None, :, :])
+        mapping = self.model.mapping
+        if not self.aff:
+            f = b[0] * b[1] * b[2] * b[3] * b[4] * b[5]
+            return mapping(f)
+        _, bias = self.model.fusion.gap_functionals()
+        s = (b[0][..., -1] + b[1][..., -1] + b[2][..., -1] + b[3][..., -1] + b[4][..., -1]
+             + b[5][..., -1] + bias)
+        w = self.model.fusion.weights_from_statistic(s)         # (nh, nd, np, nl, 6)
+        h = mapping.fc1.bias + w[..., 0:1] * b[0][..., :-1]
+        for k in range(1, 6):
+            h = h + w[..., k:k + 1] * b[k][..., :-1]
+        h = torch.relu(h)
+        h = torch.relu(mapping.fc2(h))
+        return mapping.fc3(h)[..., 0]
+
+    @torch.no_grad()
+    def forward_inplace(self, t1, t2, t3, t4, t5, t6) -> torch.Tensor:
+        """Same result as :meth:`forward` with fewer memory passes (torch backend, AFF only).
+
+        The branch logits ``z_i(s) = β_i · ReLU(a s + c) + b_i`` are piecewise linear in the
+        scalar ``s`` with at most d kinks, so they are evaluated exactly as ``P_i[seg] s + Q_i[seg]``
+        after locating ``s`` among the kinks, instead of through the d-wide expansion.
+        """
+        if not self.aff:
+            return self.forward(t1, t2, t3, t4, t5, t6)
+        if not hasattr(self, "_pwl"):
+            self._pwl = _piecewise_logits(self.model.fusion)
+        kinks, p_seg, q_seg, bias = self._pwl
+        b = (t1[:, :, None, None], t2[:, None, :, None], t3[None, :, :, None],
+             t4[:, None, None, :], t5[None, :, None, :], t6[None, None, :, :])
+        mapping = self.model.mapping
+        s = b[0][..., -1] + b[1][..., -1]
+        for k in range(2, 6):
+            s = s + b[k][..., -1]
+        s += bias
+        seg = torch.bucketize(s, kinks)
+        logits = p_seg[:, seg] * s + q_seg[:, seg]                 # (6, ...) branch-major
+        logits -= logits.max(dim=0).values
+        w = logits.exp_()
+        w /= w.sum(dim=0)
+        h = torch.mul(w[0][..., None], b[0][..., :-1])
+        for k in range(1, 6):
+            h.addcmul_(w[k][..., None], b[k][..., :-1])
+        h += mapping.fc1.bias
+        h.relu_()
+        h = mapping.fc2(h).relu_()
+        return mapping.fc3(h)[..., 0]
+
+
+@torch.no_grad()
+def _piecewise_logits(fusion) -> tuple[torch.Tensor, torch.Tensor, torch.Tensor, torch.Tensor]:
+    """Kinks and per-segment slopes/offsets ``(6, n+1)`` of the AFF logits as functions of ``s``."""
+    a = fusion.expand.weight[:, 0].double()
+    c = fusion.expand.bias.double()
+    beta, beta_b = fusion.heads.weight.double(), fusion.heads.bias.double()
+    nz = a != 0
+    kinks = torch.unique(-c[nz] / a[nz])                           # sorted
+    if kinks.numel() == 0:
+        reps = torch.zeros(1, dtype=torch.float64)
+    else:
+        mids = (kinks[1:] + kinks[:-1]) / 2
+        reps = torch.cat([kinks[:1] - 1.0, mids, kinks[-1:] + 1.0])
+    active = ((a[None, :] * reps[:, None] + c[None, :]) > 0).double()      # (n+1, d)
+    p_seg = (beta @ (active * a).T)                                        # (6, n+1)
+    q_seg = (beta @ (active * c).T) + beta_b[:, None]
+    _, bias = fusion.gap_functionals()
+    return kinks.float(), p_seg.float(), q_seg.float(), bias.detach()
+
+
+def mu_law_decode_torch(rp: torch.Tensor, mu: float) -> torch.Tensor:
+    """Inverse μ-law, clamped to non-negative reflectance (sr⁻¹)."""
+    return torch.expm1(rp.clamp_min(0.0) * math.log1p(mu)) / mu

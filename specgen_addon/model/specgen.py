@@ -1,0 +1,107 @@
+"""The SpecGen network (paper §3): image -> tri-planes -> projection -> fusion -> MLP -> r'.
+
+Also the weights file format (``.pt``: config + state dict + provenance) and its loader, which
+turns every way a file can be wrong into :class:`~specgen_addon.errors.WeightsError`.
+"""
+
+from __future__ import annotations
+
+from pathlib import Path
+from typing import Any
+
+import torch
+from torch import nn
+
+from ..errors import WeightsError
+from ..io_utils import atomic_write
+from .config import Config
+from .decoder import BRDFMapping
+from .encoder import ImageEncoder
+from .fusion import make_fusion
+from .planes import PlaneGenerator, normalized_coords, project, tv_loss
+
+WEIGHTS_FORMAT = "specgen-weights"
+WEIGHTS_VERSION = 1
+REPO_ROOT = Path(__file__).resolve().parents[2]
+DEFAULT_WEIGHTS = REPO_ROOT / "weights" / "specgen_default.pt"
+
+
+class SpecGen(nn.Module):
+    """Image-conditioned spectral BRDF ``r' = f(θh, θd, φd, λ)`` in μ-law space."""
+
+    def __init__(self, cfg: Config):
+        super().__init__()
+        self.cfg = cfg
+        self.encoder = ImageEncoder(cfg)
+        self.generator = PlaneGenerator(cfg)
+        self.fusion = make_fusion(cfg)
+        self.mapping = BRDFMapping(cfg)
+
+    def planes(self, image: torch.Tensor) -> dict[str, torch.Tensor]:
+        """The six planes ``{d1..e3: (B, C, rows, cols)}`` for images ``(B, 3, S, S)``."""
+        return self.generator(self.encoder(image))
+
+    def query(self, planes: dict[str, torch.Tensor], theta_h: torch.Tensor, theta_d: torch.Tensor,
+              phi_d: torch.Tensor, wavelength_nm: torch.Tensor | None = None) -> torch.Tensor:
+        """μ-law reflectance r' ``(B, N)`` at angles (radians) and wavelengths (nm), each ``(B, N)``.
+
+        ``wavelength_nm=None`` evaluates the grey RGB response of §3.3 (λ-averaged spectral features).
+        """
+        u = normalized_coords(theta_h, theta_d, phi_d, wavelength_nm, self.cfg)
+        return self.mapping(self.fusion(project(planes, u)))
+
+    def forward(self, image: torch.Tensor, theta_h: torch.Tensor, theta_d: torch.Tensor,
+                phi_d: torch.Tensor, wavelength_nm: torch.Tensor | None = None) -> torch.Tensor:
+        return self.query(self.planes(image), theta_h, theta_d, phi_d, wavelength_nm)
+
+    @staticmethod
+    def tv_loss(planes: dict[str, torch.Tensor]) -> torch.Tensor:
+        return tv_loss(planes)
+
+
+def count_parameters(model: nn.Module) -> int:
+    return sum(p.numel() for p in model.parameters())
+
+
+def save_weights(model: SpecGen, path: str | Path, meta: dict[str, Any] | None = None,
+                 overwrite: bool = True) -> Path:
+    """Write the weights file atomically: ``{format, version, config, state_dict, meta}``."""
+    payload = {"format": WEIGHTS_FORMAT, "version": WEIGHTS_VERSION, "config": model.cfg.to_dict(),
+               "state_dict": {k: v.detach().clone() for k, v in model.state_dict().items()},
+               "meta": dict(meta or {})}
+    with atomic_write(path, overwrite=overwrite) as tmp:
+        torch.save(payload, tmp)
+    return Path(path)
+
+
+def load_weights(path: str | Path | None = None, expect: Config | None = None) -> SpecGen:
+    """Load a SpecGen model in eval mode from ``path`` (default: the shipped weights).
+
+    Raises :class:`WeightsError` when the file is missing, unreadable, not a SpecGen weights file,
+    of another version, or when its tensors do not fit its config (or ``expect``).
+    """
+    path = Path(path) if path is not None else DEFAULT_WEIGHTS
+    if not path.is_file():
+        raise WeightsError(f"{path}: weights file not found")
+    try:
+        payload = torch.load(path, map_location="cpu", weights_only=True)
+    except Exception as exc:  # torch raises many types for corrupt pickles/zips
+        raise WeightsError(f"{path}: not a readable weights file ({type(exc).__name__})") from None
+    if not isinstance(payload, dict) or payload.get("format") != WEIGHTS_FORMAT:
+        raise WeightsError(f"{path}: not a SpecGen weights file")
+    if payload.get("version") != WEIGHTS_VERSION:
+        raise WeightsError(f"{path}: unsupported weights version {payload.get('version')!r}")
+    try:
+        cfg = Config.from_dict(payload["config"])
+    except Exception as exc:
+        raise WeightsError(f"{path}: bad model config in weights ({exc})") from None
+    if expect is not None and cfg != expect:
+        raise WeightsError(f"{path}: weights were trained for a different model configuration")
+    model = SpecGen(cfg)
+    try:
+        model.load_state_dict(payload["state_dict"], strict=True)
+    except (RuntimeError, KeyError, TypeError) as exc:
+        first = str(exc).strip().splitlines()[0] if str(exc).strip() else type(exc).__name__
+        raise WeightsError(f"{path}: weights do not match their configuration ({first})") from None
+    model.meta = payload.get("meta", {})
+    return model.eval()
