@@ -19,6 +19,7 @@ COMMAND_MODULES = [
     "cli_brdf",
     "cli_corpus",
     "cli_eval",
+    "cli_model",
 ]
 
 EXIT_USER_ERROR = 2

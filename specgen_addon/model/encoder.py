@@ -2,6 +2,8 @@
 
 from __future__ import annotations
 
+import math
+
 import torch
 from torch import nn
 
@@ -32,6 +34,6 @@ class ImageEncoder(nn.Module):
         self.register_buffer("coords", torch.stack([xs, ys])[None], persistent=False)
 
     def forward(self, image: torch.Tensor) -> torch.Tensor:
-        x = torch.log1p(16.0 * image.clamp_min(0.0)) / torch.log(torch.tensor(17.0))
+        x = torch.log1p(16.0 * image.clamp_min(0.0)) / math.log(17.0)
         x = torch.cat([x, self.coords.expand(x.shape[0], -1, -1, -1)], dim=1)
         return torch.relu(self.fc(self.convs(x).flatten(1)))

@@ -1,0 +1,143 @@
+"""CLI commands of the network: ``train``, ``infer``, ``evaluate``, ``export-onnx``."""
+
+from __future__ import annotations
+
+import argparse
+import json
+import time
+from pathlib import Path
+
+from .errors import OutputExistsError, SpecGenError
+from .progress import progress_bar
+
+
+def add_parser(sub: argparse._SubParsersAction) -> argparse.ArgumentParser:
+    p = sub.add_parser("train", help="train SpecGen on the corpus (+ RGB BRDFs) from a config file",
+                       description="Joint spectral + RGB training (paper §3.3) on CPU. Writes OUT/"
+                                   "specgen.pt, checkpoint.pt, history.csv and loss_curve.png.")
+    p.add_argument("--config", type=Path, default=None,
+                   help="JSON/TOML with 'model' and 'train' sections (default: configs/default.json)")
+    p.add_argument("--out", type=Path, required=True, help="output directory")
+    p.add_argument("--brdf-dir", type=Path, action="append", default=[],
+                   help="extra directory of MERL .binary / RGL .bsdf files (repeatable)")
+    p.add_argument("--steps", type=int, default=None, help="override the number of steps")
+    p.add_argument("--max-minutes", type=float, default=None, help="stop (and save) after this long")
+    p.add_argument("--seed", type=int, default=None, help="override the seed")
+    p.add_argument("--resume", action="store_true", help="continue OUT/checkpoint.pt")
+    p.add_argument("--quiet", action="store_true", help="no progress bar")
+    p.set_defaults(func=run_train)
+
+    p = sub.add_parser("infer", help="generate the spectral BRDF of the material in a sphere image",
+                       description="Writes the full tabulated spectral BRDF (90×90×180×Λ, .npz).")
+    p.add_argument("image", type=Path, help="image of a material sphere (EXR, PNG, JPEG)")
+    p.add_argument("-o", "--output", type=Path, required=True, help="output table (.npz)")
+    p.add_argument("--weights", type=Path, default=None, help="weights (.pt); default: shipped")
+    p.add_argument("--backend", choices=("torch", "onnx"), default="torch")
+    p.add_argument("--bands", type=int, default=21, help="wavelength bands (default 21)")
+    p.add_argument("--range", type=float, nargs=2, default=(380.0, 780.0), metavar=("START", "END"),
+                   help="wavelength range in nm (default 380 780)")
+    p.add_argument("--rgb", action="store_true", help="also write OUTPUT_rgb.npz (RGB projection, D65)")
+    p.add_argument("--overwrite", action="store_true", help="replace existing outputs")
+    p.add_argument("--quiet", action="store_true", help="no progress bar")
+    p.set_defaults(func=run_infer)
+
+    p = sub.add_parser("evaluate", help="PSNR/SSIM of SpecGen on the held-out test materials",
+                       description="Renders each test material's sphere under a distant light at 20 "
+                                   "wavelengths from the predicted and the true BRDF; prints per-"
+                                   "material and mean PSNR/SSIM.")
+    p.add_argument("--weights", type=Path, default=None, help="weights (.pt); default: shipped")
+    p.add_argument("--limit", type=int, default=None, help="only the first N test materials")
+    p.add_argument("--json", type=Path, default=None, help="also write the results as JSON")
+    p.add_argument("--backend", choices=("torch", "onnx"), default="torch")
+    p.add_argument("--quiet", action="store_true", help="no progress bar")
+    p.set_defaults(func=run_evaluate)
+
+    p = sub.add_parser("export-onnx", help="export weights to ONNX graphs for onnxruntime",
+                       description="Writes <stem>.tables.onnx and <stem>.head.onnx beside the weights.")
+    p.add_argument("--weights", type=Path, default=None, help="weights (.pt); default: shipped")
+    p.set_defaults(func=run_export)
+    return p
+
+
+def run_train(args: argparse.Namespace) -> int:
+    import dataclasses
+
+    from .model import DEFAULT_WEIGHTS, count_parameters, load_weights
+    from .train import build_material_sets
+    from .train.loop import load_config, plot_history, train
+
+    cfg_path = args.config or DEFAULT_WEIGHTS.parents[1] / "configs" / "default.json"
+    mcfg, tcfg = load_config(cfg_path)
+    over = {k: v for k, v in (("steps", args.steps), ("max_minutes", args.max_minutes),
+                              ("seed", args.seed)) if v is not None}
+    if args.brdf_dir:
+        over["brdf_dirs"] = list(tcfg.brdf_dirs) + [str(d) for d in args.brdf_dir]
+    tcfg = dataclasses.replace(tcfg, **over)
+    out: Path = args.out
+    if (out / "specgen.pt").exists() and not args.resume:
+        raise OutputExistsError(f"{out}/specgen.pt: exists (pass --resume to continue that run)")
+    out.mkdir(parents=True, exist_ok=True)
+    cache = Path(".cache") / "train-data"
+    t0 = time.perf_counter()
+    spectral, rgb, val = build_material_sets(mcfg, tcfg, cache_dir=cache, log=print,
+                                             progress=not args.quiet)
+    prep = time.perf_counter() - t0
+    print(f"materials: {len(spectral)} spectral, {len(rgb)} RGB, {len(val)} validation "
+          f"(inputs ready in {prep:.0f} s)")
+    res = train(mcfg, tcfg, spectral, rgb, val, out, resume=args.resume, show_progress=not args.quiet,
+                meta={"config_file": str(cfg_path), "data_prep_seconds": round(prep, 1)})
+    plot_history(res.history, out / "loss_curve.png",
+                 title=f"SpecGen training: seed {tcfg.seed}, {res.steps} steps, {res.wall_seconds / 60:.1f} min")
+    n = count_parameters(load_weights(res.weights))
+    note = " (stopped by --max-minutes)" if res.stopped_early else ""
+    print(f"{res.weights}: {n:,} parameters, {res.steps} steps in {res.wall_seconds:.0f} s{note}; "
+          f"final validation μ-law MSE {res.history[-1].get('val', float('nan')):.4g}")
+    return 0
+
+
+def run_infer(args: argparse.Namespace) -> int:
+    from .infer import generate_brdf
+    from .spectra import wavelength_grid
+
+    out: Path = args.output
+    if out.suffix != ".npz":
+        raise SpecGenError(f"{out}: the output table uses the .npz suffix")
+    rgb_out = out.with_name(out.stem + "_rgb.npz")
+    for p in [out] + ([rgb_out] if args.rgb else []):
+        if p.exists() and not args.overwrite:
+            raise OutputExistsError(f"{p}: already exists (pass --overwrite to replace it)")
+    wl = wavelength_grid(args.range[0], args.range[1], args.bands)
+    t0 = time.perf_counter()
+    with progress_bar("infer", enabled=not args.quiet) as update:
+        table = generate_brdf(args.image, weights=args.weights, wavelengths_nm=wl, backend=args.backend,
+                              progress=update)
+    dt = time.perf_counter() - t0
+    table.save(out, overwrite=args.overwrite)
+    print(f"{out}: spectral BRDF {table.values.shape} ({wl[0]:g}–{wl[-1]:g} nm) in {dt:.1f} s")
+    if args.rgb:
+        table.to_rgb().save(rgb_out, overwrite=args.overwrite)
+        print(f"{rgb_out}: RGB projection (D65, linear sRGB)")
+    return 0
+
+
+def run_evaluate(args: argparse.Namespace) -> int:
+    from .train.evaluate import evaluate_test_split, format_results
+
+    with progress_bar("evaluate", enabled=not args.quiet) as update:
+        res = evaluate_test_split(weights=args.weights, limit=args.limit, backend=args.backend,
+                                  progress=update)
+    print(format_results(res))
+    if args.json:
+        from .io_utils import atomic_write
+
+        with atomic_write(args.json, overwrite=True) as tmp:
+            tmp.write_text(json.dumps(res, indent=1))
+    return 0
+
+
+def run_export(args: argparse.Namespace) -> int:
+    from .model.export_onnx import export_onnx
+
+    for p in export_onnx(args.weights):
+        print(f"{p}: {p.stat().st_size / 1e6:.1f} MB")
+    return 0

@@ -1,0 +1,239 @@
+"""Inference: one sphere image -> the full tabulated spectral BRDF (90 × 90 × 180 × Λ).
+
+:func:`generate_brdf` is the entry point used by the CLI and the Blender add-on. Two backends run
+the same computation (:mod:`specgen_addon.model.fast`): ``"torch"`` and ``"onnx"`` (onnxruntime,
+for a stock Blender without torch). The grid is filled in blocks of θh × θd rows so memory stays
+bounded (a few tens of MB besides the output), two blocks at a time on two worker threads.
+"""
+
+from __future__ import annotations
+
+import math
+import threading
+from concurrent.futures import ThreadPoolExecutor
+from pathlib import Path
+from typing import Callable
+
+import numpy as np
+
+from .errors import Cancelled, ImageInputError, SpecGenError, WeightsError
+from .spectra import DEFAULT_WAVELENGTHS_NM
+from .table import GRID_SHAPE, N_PHI_D, N_THETA_D, N_THETA_H, BRDFTable
+
+BACKENDS = ("torch", "onnx")
+#: θd rows per block: 10 × 180 × Λ points (~38 k at 21 bands) keep temporaries cache-sized.
+BLOCK_THETA_D = 10
+
+ProgressFn = Callable[[float], None]
+CancelFn = Callable[[], bool]
+
+
+def network_input(image, image_size: int) -> np.ndarray:
+    """Image (path, or array H×W×3/4 linear RGB) -> network input ``(1, 3, S, S)`` float32.
+
+    Paths go through :func:`specgen_addon.input_image.load_sphere_image` (finds and crops the
+    sphere, rejects images without one); arrays are checked the same way.
+    """
+    from . import input_image
+
+    if isinstance(image, (str, Path)):
+        arr = input_image.load_sphere_image(image)
+    else:
+        arr = input_image.prepare_sphere_array(np.asarray(image))
+    return resample_square(arr, image_size)[None]
+
+
+def resample_square(arr: np.ndarray, size: int) -> np.ndarray:
+    """Area-resample a square H×W×3 linear image to ``(3, size, size)`` float32."""
+    import torch
+    import torch.nn.functional as F
+
+    arr = np.asarray(arr, dtype=np.float32)
+    if arr.ndim != 3 or arr.shape[2] != 3:
+        raise ImageInputError(f"expected an H×W×3 RGB image, got shape {arr.shape}")
+    t = torch.from_numpy(np.ascontiguousarray(arr.transpose(2, 0, 1)))[None]
+    if t.shape[-1] != size or t.shape[-2] != size:
+        t = F.interpolate(t, size=(size, size), mode="bilinear", align_corners=False, antialias=True)
+    return t[0].numpy()
+
+
+# ---------------------------------------------------------------------------------- backends
+_MODEL_CACHE: dict[tuple, object] = {}
+_LOCK = threading.Lock()
+
+
+def _weights_path(weights) -> Path:
+    from .model import DEFAULT_WEIGHTS
+
+    return Path(weights) if weights is not None else DEFAULT_WEIGHTS
+
+
+def onnx_paths(weights_pt: Path) -> tuple[Path, Path]:
+    """The two ONNX graphs exported beside a ``.pt`` weights file: tables and head."""
+    stem = weights_pt.with_suffix("")
+    return Path(f"{stem}.tables.onnx"), Path(f"{stem}.head.onnx")
+
+
+class _TorchBackend:
+    def __init__(self, weights: Path):
+        import torch
+
+        from .model import load_weights
+        from .model.fast import GridHead, GridTables
+
+        self.torch = torch
+        self.model = load_weights(weights)
+        self.cfg = self.model.cfg
+        self.tables = GridTables(self.model).eval()
+        self.head = GridHead(self.model).eval()
+
+    def make_tables(self, x: np.ndarray, u_lambda: np.ndarray) -> tuple[np.ndarray, ...]:
+        with self.torch.no_grad():
+            out = self.tables(self.torch.from_numpy(x), self.torch.from_numpy(u_lambda))
+        return tuple(t.contiguous() for t in out)
+
+    def run_head(self, blocks) -> np.ndarray:
+        with self.torch.no_grad():
+            return self.head.forward_inplace(*blocks)
+
+    def slice(self, t, sl0, sl1=None):
+        return t[sl0] if sl1 is None else t[sl0, sl1]
+
+
+class _OnnxBackend:
+    def __init__(self, weights: Path):
+        try:
+            import onnxruntime as ort
+        except ImportError as exc:  # pragma: no cover - listed in requirements / manifest wheels
+            raise SpecGenError("the onnx backend needs the onnxruntime package") from exc
+        import json
+
+        tables_path, head_path = onnx_paths(weights)
+        for p in (tables_path, head_path):
+            if not p.is_file():
+                raise WeightsError(f"{p}: ONNX graph not found (run `python -m specgen_addon export-onnx`)")
+        opts = ort.SessionOptions()
+        opts.intra_op_num_threads = 1
+        opts.inter_op_num_threads = 1
+        try:
+            self.tables = ort.InferenceSession(str(tables_path), opts, providers=["CPUExecutionProvider"])
+            self.head = ort.InferenceSession(str(head_path), opts, providers=["CPUExecutionProvider"])
+        except Exception as exc:
+            raise WeightsError(f"{tables_path.parent}: unreadable ONNX graph ({type(exc).__name__})") from None
+        meta = self.tables.get_modelmeta().custom_metadata_map
+        try:
+            from .model import Config
+
+            self.cfg = Config.from_dict(json.loads(meta["specgen_config"]))
+        except Exception:
+            raise WeightsError(f"{tables_path}: ONNX graph carries no SpecGen config") from None
+
+    def make_tables(self, x: np.ndarray, u_lambda: np.ndarray) -> tuple[np.ndarray, ...]:
+        return tuple(self.tables.run(None, {"image": x, "u_lambda": u_lambda}))
+
+    def run_head(self, blocks) -> np.ndarray:
+        names = ("t1", "t2", "t3", "t4", "t5", "t6")
+        feeds = {n: np.ascontiguousarray(b) for n, b in zip(names, blocks)}
+        return self.head.run(None, feeds)[0]
+
+    def slice(self, t, sl0, sl1=None):
+        return t[sl0] if sl1 is None else t[sl0, sl1]
+
+
+def get_backend(weights=None, backend: str = "torch"):
+    """A (cached) backend for a weights file; raises :class:`WeightsError` for bad files."""
+    if backend not in BACKENDS:
+        raise SpecGenError(f"unknown backend {backend!r} (choose from {', '.join(BACKENDS)})")
+    path = _weights_path(weights)
+    if not path.is_file():
+        raise WeightsError(f"{path}: weights file not found")
+    key = (backend, str(path.resolve()), path.stat().st_mtime_ns)
+    with _LOCK:
+        if key not in _MODEL_CACHE:
+            _MODEL_CACHE[key] = _TorchBackend(path) if backend == "torch" else _OnnxBackend(path)
+        return _MODEL_CACHE[key]
+
+
+# ---------------------------------------------------------------------------------- generation
+def generate_brdf(image, weights=None, wavelengths_nm=None, backend: str = "torch",
+                  progress: ProgressFn | None = None, cancel: CancelFn | None = None) -> BRDFTable:
+    """Generate the spectral BRDF of the material in ``image`` on the MERL grid.
+
+    Parameters
+    ----------
+    image
+        Path to an image of a material sphere (EXR/PNG/JPEG) or an H×W×3/4 linear RGB array.
+    weights
+        ``.pt`` weights file; ``None`` loads the shipped default. The onnx backend uses the two
+        graphs exported beside it (``<stem>.tables.onnx``, ``<stem>.head.onnx``).
+    wavelengths_nm
+        Band centres in nm inside the model's range (default: 380–780 nm, 21 bands).
+    backend
+        ``"torch"`` or ``"onnx"``.
+    progress, cancel
+        ``progress(fraction)`` after each block; ``cancel()`` returning True raises
+        :class:`~specgen_addon.errors.Cancelled` (no table is returned).
+
+    Returns
+    -------
+    BRDFTable
+        ``f_r`` in sr⁻¹, shape (90, 90, 180, Λ), float32.
+    """
+    be = get_backend(weights, backend)
+    cfg = be.cfg
+    wl = np.asarray(DEFAULT_WAVELENGTHS_NM if wavelengths_nm is None else wavelengths_nm, dtype=np.float64)
+    if wl.ndim != 1 or wl.size == 0 or np.any(np.diff(wl) <= 0):
+        raise SpecGenError("wavelengths must be a non-empty increasing list (nm)")
+    if wl[0] < cfg.lambda_min_nm - 1e-6 or wl[-1] > cfg.lambda_max_nm + 1e-6:
+        raise SpecGenError(f"wavelengths {wl[0]:g}–{wl[-1]:g} nm fall outside the model's "
+                           f"{cfg.lambda_min_nm:g}–{cfg.lambda_max_nm:g} nm")
+    x = network_input(image, cfg.image_size).astype(np.float32)
+    u_lambda = (2.0 * (wl - cfg.lambda_min_nm) / (cfg.lambda_max_nm - cfg.lambda_min_nm) - 1.0).astype(np.float32)
+    tables = be.make_tables(x, u_lambda)
+    rp = evaluate_grid(be, tables, wl.size, progress=progress, cancel=cancel)
+    values = np.expm1(np.clip(rp, 0.0, None) * math.log1p(cfg.mu)) / cfg.mu
+    src = "image" if not isinstance(image, (str, Path)) else str(image)
+    meta = {"source": "specgen", "input_image": src, "backend": backend,
+            "weights": str(_weights_path(weights)), "description": "SpecGen prediction"}
+    return BRDFTable(values.astype(np.float32), wl, metadata=meta)
+
+
+def evaluate_grid(be, tables, n_lambda: int, progress: ProgressFn | None = None,
+                  cancel: CancelFn | None = None, workers: int = 2) -> np.ndarray:
+    """r' (μ-law) on the full grid ``(90, 90, 180, Λ)``, block by block on ``workers`` threads."""
+    t1, t2, t3, t4, t5, t6 = tables
+    out = np.empty(GRID_SHAPE + (n_lambda,), dtype=np.float32)
+    blocks = [(i, j) for i in range(N_THETA_H) for j in range(0, N_THETA_D, BLOCK_THETA_D)]
+    done = [0]
+    lock = threading.Lock()
+    stop = threading.Event()
+
+    def work(ij: tuple[int, int]) -> None:
+        if stop.is_set():
+            return
+        i, j = ij
+        si, sj = slice(i, i + 1), slice(j, j + BLOCK_THETA_D)
+        r = be.run_head((t1[si, sj], t2[si], t3[sj], t4[si], t5[sj], t6))
+        out[si, sj] = np.asarray(r)
+        with lock:
+            done[0] += 1
+
+    torch_threads = None
+    if isinstance(be, _TorchBackend):
+        torch_threads = be.torch.get_num_threads()
+        be.torch.set_num_threads(1)   # parallel over blocks instead: no OpenMP barriers per op
+    try:
+        with ThreadPoolExecutor(max_workers=workers) as pool:
+            rows_per_tick = len(blocks) // N_THETA_H
+            for start in range(0, len(blocks), rows_per_tick * 2):
+                if cancel is not None and cancel():
+                    stop.set()
+                    raise Cancelled("BRDF generation cancelled")
+                list(pool.map(work, blocks[start:start + rows_per_tick * 2]))
+                if progress is not None:
+                    progress(done[0] / len(blocks))
+    finally:
+        if torch_threads is not None:
+            be.torch.set_num_threads(torch_threads)
+    assert N_PHI_D == out.shape[2]
+    return out

@@ -1,0 +1,180 @@
+"""Training samples for SpecGen (paper §3.3, §4.2): target points and input images per material.
+
+A *training material* is any BRDF object of the project's protocol (``eval(wi, wo, λ)`` and/or
+``eval_rgb(wi, wo)``) plus its pre-rendered input images (several lightings: augmentation).
+Targets are drawn on the fly, deterministically from a seeded generator:
+
+* angles uniform in the MERL index space (``√θh``, ``θd``, ``φd`` uniform), i.e. the table's own
+  sampling density, with configurations below the horizon masked out of the loss;
+* spectral materials: evaluated on a fixed band grid (nm), each angle keeping a few random bands;
+  target ``r' = μ(f_r)``;
+* RGB materials: target ``g' = μ(mean_c f_r,c)`` (μ-law of the channel mean, §3.3).
+"""
+
+from __future__ import annotations
+
+import hashlib
+import math
+from dataclasses import dataclass, field
+from pathlib import Path
+from typing import Any, Callable, Sequence
+
+import numpy as np
+
+from ..errors import SpecGenError
+from ..rusinkiewicz import io_from_half_diff
+from ..table import mu_law_encode
+
+BRDF_SUFFIXES = (".binary", ".bsdf")
+
+
+@dataclass
+class TrainingMaterial:
+    """One material: a BRDF, whether it is supervised spectrally or in RGB, and a stable name."""
+
+    name: str
+    brdf: Any
+    spectral: bool
+    split: str = "train"
+
+
+@dataclass
+class Batch:
+    """Points of several materials: angles (radians), wavelengths (nm, spectral only), targets r'.
+
+    Arrays are ``(B, N)``; ``valid`` masks points below the horizon; ``images`` ``(B, 3, S, S)``.
+    """
+
+    images: np.ndarray
+    theta_h: np.ndarray
+    theta_d: np.ndarray
+    phi_d: np.ndarray
+    wavelength_nm: np.ndarray | None
+    target: np.ndarray
+    valid: np.ndarray
+
+
+def sample_angles(rng: np.random.Generator, n: int) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """``n`` Rusinkiewicz angles (radians) uniform in MERL index space (√-warped θh)."""
+    u = rng.random((3, n))
+    return u[0] ** 2 * (math.pi / 2), u[1] * (math.pi / 2), u[2] * math.pi
+
+
+def material_targets(mat: TrainingMaterial, theta_h: np.ndarray, theta_d: np.ndarray, phi_d: np.ndarray,
+                     wavelengths_nm: np.ndarray | None, mu: float = 255.0) -> tuple[np.ndarray, np.ndarray]:
+    """μ-law targets ``(n, L)`` at angles × wavelengths (nm), and the above-horizon mask ``(n,)``.
+
+    For an RGB material (``wavelengths_nm=None``) the single column is the μ-law of the channel
+    mean of the RGB BRDF (§3.3).
+    """
+    wi, wo = io_from_half_diff(theta_h, theta_d, phi_d)
+    valid = (wi[:, 2] > 1e-6) & (wo[:, 2] > 1e-6)
+    if wavelengths_nm is None:
+        fr = np.asarray(mat.brdf.eval_rgb(wi, wo), dtype=np.float64).mean(axis=1, keepdims=True)
+    else:
+        fr = np.asarray(mat.brdf.eval(wi, wo, wavelengths_nm), dtype=np.float64)
+    fr = np.where(np.isfinite(fr), np.maximum(fr, 0.0), 0.0)
+    return mu_law_encode(fr, mu), valid
+
+
+def make_batch(materials: Sequence[TrainingMaterial], images: Sequence[np.ndarray], rng: np.random.Generator,
+               n_angles: int, n_wavelengths: int, spectral: bool,
+               wavelength_grid_nm: np.ndarray, mu: float = 255.0) -> Batch:
+    """Sample ``n_angles`` angles per material; spectral materials are evaluated on
+    ``wavelength_grid_nm`` and each angle keeps ``n_wavelengths`` of those bands at random."""
+    ths, tds, pds, lams, tgts, vals = [], [], [], [], [], []
+    grid = np.asarray(wavelength_grid_nm, dtype=np.float64)
+    for mat in materials:
+        th, td, pd = sample_angles(rng, n_angles)
+        tgt, valid = material_targets(mat, th, td, pd, grid if spectral else None, mu)
+        n_l = n_wavelengths if spectral else 1
+        if spectral:
+            cols = rng.integers(0, grid.size, size=(n_angles, n_l))
+            tgt = np.take_along_axis(tgt, cols, axis=1)
+            lams.append(grid[cols].ravel())
+        ths.append(np.repeat(th, n_l))
+        tds.append(np.repeat(td, n_l))
+        pds.append(np.repeat(pd, n_l))
+        tgts.append(tgt.ravel())
+        vals.append(np.repeat(valid, n_l))
+    f32 = lambda xs: np.stack(xs).astype(np.float32)  # noqa: E731
+    return Batch(images=np.stack(images).astype(np.float32), theta_h=f32(ths), theta_d=f32(tds),
+                 phi_d=f32(pds), wavelength_nm=f32(lams) if spectral else None, target=f32(tgts),
+                 valid=np.stack(vals))
+
+
+def find_brdf_files(dirs: Sequence[str | Path]) -> list[Path]:
+    """MERL ``.binary`` and RGL ``.bsdf`` files in the given directories (sorted, non-recursive)."""
+    files: list[Path] = []
+    for d in dirs:
+        d = Path(d)
+        if not d.is_dir():
+            raise SpecGenError(f"{d}: BRDF directory not found")
+        files += sorted(p for p in d.iterdir() if p.suffix.lower() in BRDF_SUFFIXES)
+    return files
+
+
+def load_file_materials(files: Sequence[Path], cache_dir: Path,
+                        progress: Callable[[str], None] | None = None) -> list[TrainingMaterial]:
+    """Load measured BRDF files as materials; RGL files are tabulated once (cached) for speed.
+
+    RGB files supervise the RGB branch; spectral RGL files the spectral branch.
+    """
+    from ..formats import detect_format, load_brdf
+    from ..table import BRDFTable
+
+    out = []
+    for path in files:
+        brdf = load_brdf(path)
+        if detect_format(path) == "rgl":
+            key = hashlib.sha1(f"{path.resolve()}:{path.stat().st_size}:{path.stat().st_mtime_ns}"
+                               .encode()).hexdigest()[:16]
+            cached = cache_dir / f"table_{path.stem}_{key}.npz"
+            if cached.is_file():
+                brdf = BRDFTable.load(cached)
+            else:
+                if progress:
+                    progress(f"tabulating {path.name}")
+                spectral = bool(getattr(brdf, "is_spectral", False))
+                table = BRDFTable.tabulate(
+                    (lambda th, td, pd, b=brdf: _eval_hd_native(b, th, td, pd)),
+                    wavelengths=getattr(brdf, "wavelengths", None) if spectral else None,
+                    metadata={"source": str(path)})
+                cache_dir.mkdir(parents=True, exist_ok=True)
+                table.save(cached, overwrite=True)
+                brdf = table
+        out.append(TrainingMaterial(name=path.stem, brdf=brdf, spectral=bool(brdf.is_spectral)))
+    return out
+
+
+def _eval_hd_native(brdf: Any, theta_h: np.ndarray, theta_d: np.ndarray, phi_d: np.ndarray) -> np.ndarray:
+    wi, wo = io_from_half_diff(theta_h, theta_d, phi_d)
+    if getattr(brdf, "is_spectral", False):
+        return brdf.eval(wi, wo, brdf.wavelengths)
+    return brdf.eval_rgb(wi, wo)
+
+
+@dataclass
+class InputImageCache:
+    """Pre-rendered network inputs ``(K, 3, S, S)`` per material, cached on disk by content key."""
+
+    cache_dir: Path
+    render: Callable[[Any, int], np.ndarray]
+    key_extra: str = ""
+    _mem: dict = field(default_factory=dict)
+
+    def get(self, mat: TrainingMaterial, n_variants: int) -> np.ndarray:
+        key = hashlib.sha1(f"{mat.name}|{mat.split}|{n_variants}|{self.key_extra}".encode()).hexdigest()[:20]
+        if key in self._mem:
+            return self._mem[key]
+        path = self.cache_dir / f"input_{key}.npy"
+        if path.is_file():
+            arr = np.load(path)
+        else:
+            arr = np.stack([self.render(mat.brdf, k) for k in range(n_variants)]).astype(np.float32)
+            self.cache_dir.mkdir(parents=True, exist_ok=True)
+            tmp = path.with_suffix(".tmp.npy")
+            np.save(tmp, arr)
+            tmp.replace(path)
+        self._mem[key] = arr
+        return arr

@@ -1,0 +1,343 @@
+"""Joint RGB + spectral training of SpecGen (paper §3.3, §4.2) on CPU.
+
+Each step draws a few spectral materials and a few RGB materials (seeded by ``(seed, step)``, so a
+resumed run continues exactly as an uninterrupted one), renders nothing (input images are
+pre-rendered and cached) and minimises
+
+``L = L_spec + w_rgb · L_RGB + α · L_TV``
+
+with ``L_spec`` the MSE of μ-law reflectance at (θh, θd, φd, λ) points, ``L_RGB`` the MSE against
+the μ-law of the RGB channel mean using λ-averaged spectral features, and ``L_TV`` the planes'
+total variation (paper: α = 2). Adam (β = 0.9, 0.999) with a step-decayed learning rate, as the
+paper halves it every four epochs. Bit-for-bit deterministic on CPU for a fixed seed and thread
+count.
+"""
+
+from __future__ import annotations
+
+import csv
+import dataclasses
+import json
+import math
+import time
+from dataclasses import dataclass, field
+from pathlib import Path
+from typing import Any, Callable, Sequence
+
+import numpy as np
+import torch
+
+from ..errors import SpecGenError
+from ..io_utils import atomic_write
+from ..model import Config, SpecGen, count_parameters, save_weights
+from ..spectra import wavelength_grid
+from .data import Batch, TrainingMaterial, make_batch
+
+#: Band grid (nm) the spectral targets are evaluated on: 10 nm steps over the visible range.
+TARGET_WAVELENGTHS_NM = wavelength_grid(380.0, 780.0, 41)
+
+
+@dataclass
+class TrainConfig:
+    """Training knobs (the model's sizes live in :class:`~specgen_addon.model.Config`)."""
+
+    seed: int = 0
+    steps: int = 6000
+    max_minutes: float | None = None
+    lr: float = 2e-3
+    lr_decay_every: int = 1500
+    lr_decay: float = 0.5
+    spectral_materials_per_step: int = 6
+    rgb_materials_per_step: int = 2
+    angles_per_material: int = 512
+    wavelengths_per_angle: int = 8
+    tv_weight: float = 2.0
+    rgb_weight: float = 1.0
+    corpus_size: int = 200
+    corpus_seed: int = 0
+    input_variants: int = 4
+    use_shared_rgl: bool = True
+    brdf_dirs: list[str] = field(default_factory=list)
+    checkpoint_every: int = 250
+    val_every: int = 250
+    val_materials: int = 8
+    threads: int = 2
+
+    @classmethod
+    def from_dict(cls, d: dict[str, Any]) -> "TrainConfig":
+        names = {f.name for f in dataclasses.fields(cls)}
+        unknown = set(d) - names
+        if unknown:
+            raise SpecGenError(f"unknown training config keys: {sorted(unknown)}")
+        return cls(**d)
+
+
+def load_config(path: str | Path) -> tuple[Config, TrainConfig]:
+    """Read ``{"model": {...}, "train": {...}}`` from a JSON or TOML file."""
+    path = Path(path)
+    if not path.is_file():
+        raise SpecGenError(f"{path}: config file not found")
+    try:
+        if path.suffix.lower() == ".toml":
+            import tomllib
+
+            d = tomllib.loads(path.read_text())
+        else:
+            d = json.loads(path.read_text())
+    except (ValueError, UnicodeDecodeError) as exc:
+        raise SpecGenError(f"{path}: cannot parse config ({exc})") from None
+    unknown = set(d) - {"model", "train"}
+    if unknown:
+        raise SpecGenError(f"{path}: unknown sections {sorted(unknown)} (expected model, train)")
+    return Config.from_dict(d.get("model", {})), TrainConfig.from_dict(d.get("train", {}))
+
+
+@dataclass
+class MaterialSet:
+    """Materials with their pre-rendered inputs ``(K, 3, S, S)`` (K lighting variants)."""
+
+    materials: list[TrainingMaterial]
+    images: list[np.ndarray]
+
+    def __len__(self) -> int:
+        return len(self.materials)
+
+
+@dataclass
+class TrainResult:
+    weights: Path
+    steps: int
+    wall_seconds: float
+    history: list[dict[str, float]]
+    stopped_early: bool
+
+
+def lr_at(tcfg: TrainConfig, step: int) -> float:
+    """Step-decayed learning rate: ``lr · decay^(step // decay_every)``."""
+    return tcfg.lr * tcfg.lr_decay ** (step // max(1, tcfg.lr_decay_every))
+
+
+def _draw(rng: np.random.Generator, mset: MaterialSet, k: int) -> tuple[list[TrainingMaterial], list[np.ndarray]]:
+    idx = rng.choice(len(mset), size=min(k, len(mset)), replace=False)
+    mats, imgs = [], []
+    for i in np.sort(idx):
+        mats.append(mset.materials[i])
+        imgs.append(mset.images[i][rng.integers(0, mset.images[i].shape[0])])
+    return mats, imgs
+
+
+def _tensors(b: Batch) -> dict[str, torch.Tensor]:
+    t = {k: torch.from_numpy(getattr(b, k)) for k in ("images", "theta_h", "theta_d", "phi_d", "target")}
+    t["valid"] = torch.from_numpy(b.valid.astype(np.float32))
+    t["wavelength_nm"] = None if b.wavelength_nm is None else torch.from_numpy(b.wavelength_nm)
+    return t
+
+
+def _masked_mse(pred: torch.Tensor, target: torch.Tensor, valid: torch.Tensor) -> torch.Tensor:
+    return ((pred - target) ** 2 * valid).sum() / valid.sum().clamp_min(1.0)
+
+
+def group_loss(model: SpecGen, b: Batch) -> tuple[torch.Tensor, torch.Tensor]:
+    """(MSE in μ-law space, TV of the generated planes) for one batch group."""
+    t = _tensors(b)
+    planes = model.planes(t["images"])
+    pred = model.query(planes, t["theta_h"], t["theta_d"], t["phi_d"], t["wavelength_nm"])
+    return _masked_mse(pred, t["target"], t["valid"]), model.tv_loss(planes)
+
+
+def make_step_batches(tcfg: TrainConfig, mcfg: Config, spectral: MaterialSet, rgb: MaterialSet,
+                      step: int) -> tuple[Batch | None, Batch | None]:
+    """The spectral and RGB batches of ``step``: a pure function of ``(seed, step)``."""
+    rng = np.random.default_rng([tcfg.seed, step])
+    out: list[Batch | None] = []
+    for mset, k, is_spec in ((spectral, tcfg.spectral_materials_per_step, True),
+                             (rgb, tcfg.rgb_materials_per_step, False)):
+        if len(mset) == 0 or k <= 0:
+            out.append(None)
+            continue
+        mats, imgs = _draw(rng, mset, k)
+        out.append(make_batch(mats, imgs, rng, tcfg.angles_per_material, tcfg.wavelengths_per_angle,
+                              is_spec, TARGET_WAVELENGTHS_NM, mcfg.mu))
+    return out[0], out[1]
+
+
+def _validation_batch(tcfg: TrainConfig, mcfg: Config, val: MaterialSet) -> Batch | None:
+    if len(val) == 0:
+        return None
+    rng = np.random.default_rng([tcfg.seed, 1_000_003])
+    mats = val.materials[: tcfg.val_materials]
+    imgs = [val.images[i][0] for i in range(len(mats))]
+    return make_batch(mats, imgs, rng, tcfg.angles_per_material, tcfg.wavelengths_per_angle, True,
+                      TARGET_WAVELENGTHS_NM, mcfg.mu)
+
+
+def train(mcfg: Config, tcfg: TrainConfig, spectral: MaterialSet, rgb: MaterialSet, val: MaterialSet,
+          out_dir: str | Path, resume: bool = False, show_progress: bool = True,
+          meta: dict[str, Any] | None = None,
+          on_step: Callable[[int, dict[str, float]], None] | None = None) -> TrainResult:
+    """Train SpecGen; writes ``checkpoint.pt``, ``history.csv`` and ``specgen.pt`` into ``out_dir``.
+
+    With ``resume`` an existing checkpoint in ``out_dir`` is continued (same configs required).
+    ``max_minutes`` stops early at a step boundary (the weights then say how many steps ran).
+    """
+    if len(spectral) == 0 and len(rgb) == 0:
+        raise SpecGenError("no training materials")
+    out = Path(out_dir)
+    out.mkdir(parents=True, exist_ok=True)
+    torch.set_num_threads(tcfg.threads)
+    torch.use_deterministic_algorithms(True)
+    torch.manual_seed(tcfg.seed)
+    model = SpecGen(mcfg)
+    opt = torch.optim.Adam(model.parameters(), lr=tcfg.lr, betas=(0.9, 0.999))
+    history: list[dict[str, float]] = []
+    start_step, elapsed0 = 0, 0.0
+    ckpt_path = out / "checkpoint.pt"
+    if resume and ckpt_path.is_file():
+        ck = torch.load(ckpt_path, map_location="cpu", weights_only=True)
+        if ck["model_config"] != mcfg.to_dict() or ck["train_config"] != _tdict(tcfg, ignore_budget=True):
+            raise SpecGenError(f"{ckpt_path}: checkpoint was made with a different configuration")
+        model.load_state_dict(ck["model"])
+        opt.load_state_dict(ck["optimizer"])
+        start_step, elapsed0, history = ck["step"], ck["elapsed"], ck["history"]
+    val_batch = _validation_batch(tcfg, mcfg, val)
+
+    def checkpoint(step: int, elapsed: float) -> None:
+        payload = {"model": model.state_dict(), "optimizer": opt.state_dict(), "step": step,
+                   "elapsed": elapsed, "history": history, "model_config": mcfg.to_dict(),
+                   "train_config": _tdict(tcfg, ignore_budget=True)}
+        with atomic_write(ckpt_path, overwrite=True) as tmp:
+            torch.save(payload, tmp)
+        _write_history(out / "history.csv", history)
+
+    bar = None
+    if show_progress:
+        from tqdm import tqdm
+
+        bar = tqdm(total=tcfg.steps, initial=start_step, desc="train", unit="step", dynamic_ncols=True,
+                   mininterval=2.0)
+    t0 = time.perf_counter()
+    step = start_step
+    stopped = False
+    while step < tcfg.steps:
+        elapsed = elapsed0 + time.perf_counter() - t0
+        if tcfg.max_minutes is not None and elapsed > 60.0 * tcfg.max_minutes:
+            stopped = True
+            break
+        for g in opt.param_groups:
+            g["lr"] = lr_at(tcfg, step)
+        b_spec, b_rgb = make_step_batches(tcfg, mcfg, spectral, rgb, step)
+        model.train()
+        opt.zero_grad(set_to_none=True)
+        loss = torch.zeros(())
+        rec: dict[str, float] = {"step": step + 1, "lr": lr_at(tcfg, step)}
+        tv_terms = []
+        if b_spec is not None:
+            l_spec, tv = group_loss(model, b_spec)
+            loss = loss + l_spec
+            tv_terms.append(tv)
+            rec["spec"] = float(l_spec.detach())
+        if b_rgb is not None:
+            l_rgb, tv = group_loss(model, b_rgb)
+            loss = loss + tcfg.rgb_weight * l_rgb
+            tv_terms.append(tv)
+            rec["rgb"] = float(l_rgb.detach())
+        l_tv = torch.stack(tv_terms).mean()
+        loss = loss + tcfg.tv_weight * l_tv
+        loss.backward()
+        opt.step()
+        step += 1
+        rec["tv"] = float(l_tv.detach())
+        rec["loss"] = float(loss.detach())
+        if val_batch is not None and (step % tcfg.val_every == 0 or step == tcfg.steps):
+            rec["val"] = evaluate_batch(model, val_batch)
+        rec["elapsed"] = elapsed0 + time.perf_counter() - t0
+        history.append(rec)
+        if on_step is not None:
+            on_step(step, rec)
+        if bar is not None:
+            bar.update(1)
+            post = {k: f"{rec[k]:.4g}" for k in ("loss", "spec", "rgb", "tv") if k in rec}
+            if "val" in rec:
+                post["val"] = f"{rec['val']:.4g}"
+            bar.set_postfix(post, refresh=False)
+        if step % tcfg.checkpoint_every == 0:
+            checkpoint(step, rec["elapsed"])
+    if bar is not None:
+        bar.close()
+    wall = elapsed0 + time.perf_counter() - t0
+    if val_batch is not None and history and "val" not in history[-1]:
+        history[-1]["val"] = evaluate_batch(model, val_batch)
+    checkpoint(step, wall)
+    info = {"steps": step, "planned_steps": tcfg.steps, "wall_seconds": round(wall, 1),
+            "seed": tcfg.seed, "parameters": count_parameters(model), "train_config": _tdict(tcfg),
+            "final_val_mse": history[-1].get("val") if history else None, **(meta or {})}
+    weights = save_weights(model, out / "specgen.pt", meta=info)
+    return TrainResult(weights, step, wall, history, stopped)
+
+
+@torch.no_grad()
+def evaluate_batch(model: SpecGen, b: Batch) -> float:
+    """Masked μ-law MSE of ``model`` on a batch (eval mode, no gradients)."""
+    was = model.training
+    model.eval()
+    t = _tensors(b)
+    pred = model(t["images"], t["theta_h"], t["theta_d"], t["phi_d"], t["wavelength_nm"])
+    model.train(was)
+    return float(_masked_mse(pred, t["target"], t["valid"]))
+
+
+def _tdict(tcfg: TrainConfig, ignore_budget: bool = False) -> dict[str, Any]:
+    d = dataclasses.asdict(tcfg)
+    if ignore_budget:  # a resumed run may extend its budget or change what it logs
+        for k in ("steps", "max_minutes", "threads", "checkpoint_every", "val_every"):
+            d.pop(k)
+    return d
+
+
+def _write_history(path: Path, history: Sequence[dict[str, float]]) -> None:
+    keys = ["step", "lr", "loss", "spec", "rgb", "tv", "val", "elapsed"]
+    with atomic_write(path, overwrite=True) as tmp:
+        with open(tmp, "w", newline="") as fh:
+            w = csv.DictWriter(fh, fieldnames=keys, extrasaction="ignore")
+            w.writeheader()
+            for rec in history:
+                w.writerow({k: rec.get(k, "") for k in keys})
+
+
+def plot_history(history: Sequence[dict[str, float]], path: str | Path, title: str = "") -> Path:
+    """Loss curve PNG: training losses (smoothed) and validation MSE against steps (log scale)."""
+    import matplotlib
+
+    matplotlib.use("Agg")
+    import matplotlib.pyplot as plt
+
+    steps = np.array([r["step"] for r in history])
+    fig, ax = plt.subplots(figsize=(7, 4), dpi=110)
+    for key, label in (("spec", "L_spec (train)"), ("rgb", "L_RGB (train)"), ("tv", "L_TV (train)")):
+        vals = np.array([r.get(key, np.nan) for r in history], dtype=float)
+        if np.all(np.isnan(vals)):
+            continue
+        k = max(1, len(vals) // 100)
+        smooth = np.convolve(np.nan_to_num(vals), np.ones(k) / k, mode="valid")
+        ax.plot(steps[k - 1:], smooth, label=label, lw=1.2)
+    vs = [(r["step"], r["val"]) for r in history if "val" in r]
+    if vs:
+        ax.plot(*zip(*vs), "o-", ms=3, label="L_spec (validation)")
+    ax.set_yscale("log")
+    ax.set_xlabel("step")
+    ax.set_ylabel("MSE in μ-law space")
+    ax.grid(alpha=0.3, which="both")
+    ax.legend()
+    if title:
+        ax.set_title(title, fontsize=9)
+    fig.tight_layout()
+    path = Path(path)
+    fig.savefig(path)
+    plt.close(fig)
+    return path
+
+
+def seconds_per_step_estimate(history: Sequence[dict[str, float]]) -> float:
+    if len(history) < 2:
+        return math.nan
+    return (history[-1]["elapsed"] - history[0]["elapsed"]) / (len(history) - 1)

@@ -1,0 +1,130 @@
+"""Training: targets as the paper defines them, overfitting, determinism, resume, configs."""
+
+from __future__ import annotations
+
+import dataclasses
+import json
+import math
+
+import numpy as np
+import pytest
+import torch
+
+from specgen_addon.errors import SpecGenError
+from specgen_addon.model import Config, load_weights
+from specgen_addon.rusinkiewicz import io_from_half_diff
+from specgen_addon.table import mu_law_encode
+from specgen_addon.train.data import TrainingMaterial, make_batch, material_targets, sample_angles
+from specgen_addon.train.loop import MaterialSet, TrainConfig, load_config, lr_at, train
+from specgen_standins import RampMaterial
+
+SMALL = dict(image_size=32, encoder_channels=(8, 16), latent_dim=32, decoder_seed_hw=(4, 4),
+             decoder_channels=(16, 16), head_channels=8, res_theta_h=12, res_theta_d=12, res_phi_d=12,
+             res_lambda=6, feature_dim=16, aff_map_hw=(4, 4), mlp_hidden=(16, 16))
+FAST = dict(angles_per_material=128, wavelengths_per_angle=4, spectral_materials_per_step=2,
+            rgb_materials_per_step=1, val_every=5, checkpoint_every=3, threads=1, tv_weight=0.1)
+
+
+def sets(n: int = 3):
+    mats = [RampMaterial(a=0.1 + 0.1 * i, b=0.3, alpha=0.1 + 0.1 * i) for i in range(n)]
+    tm = [TrainingMaterial(f"m{i}", m, True) for i, m in enumerate(mats)]
+    imgs = [m.image(32)[None] for m in mats]
+    rgb = [TrainingMaterial(f"m{i}/rgb", m, False) for i, m in enumerate(mats)]
+    return MaterialSet(tm, imgs), MaterialSet(rgb, imgs), MaterialSet(tm[:1], imgs[:1])
+
+
+def test_spectral_targets_are_mu_law_of_the_brdf():
+    mat = RampMaterial()
+    th, td, pd = sample_angles(np.random.default_rng(0), 50)
+    lam = np.array([400.0, 550.0, 700.0])
+    tgt, valid = material_targets(TrainingMaterial("m", mat, True), th, td, pd, lam)
+    wi, wo = io_from_half_diff(th, td, pd)
+    assert np.allclose(tgt, mu_law_encode(mat.eval(wi, wo, lam)))
+    assert np.array_equal(valid, (wi[:, 2] > 1e-6) & (wo[:, 2] > 1e-6))
+
+
+def test_rgb_targets_are_mu_law_of_the_channel_mean():
+    """§3.3: g' is the μ-law of the RGB BRDF averaged over channels (not the mean of μ-laws)."""
+
+    class Coloured:
+        def eval_rgb(self, wi, wo):
+            return np.tile([[0.9, 0.1, 0.02]], (len(wi), 1))
+
+    th, td, pd = sample_angles(np.random.default_rng(1), 10)
+    tgt, _ = material_targets(TrainingMaterial("c", Coloured(), False), th, td, pd, None)
+    assert np.allclose(tgt, mu_law_encode(np.array(1.02 / 3)))
+    assert not np.allclose(tgt, np.mean(mu_law_encode(np.array([0.9, 0.1, 0.02]))))
+
+
+def test_angles_are_uniform_in_merl_index_space():
+    th, td, pd = sample_angles(np.random.default_rng(2), 200_000)
+    u = np.sqrt(th / (math.pi / 2))
+    hist, _ = np.histogram(u, bins=10, range=(0, 1))
+    assert np.all(np.abs(hist / 20_000 - 1) < 0.05)
+    assert td.max() <= math.pi / 2 and pd.max() <= math.pi
+
+
+def test_batch_holds_several_materials_with_per_point_wavelengths():
+    spec, _, _ = sets()
+    b = make_batch(spec.materials, [im[0] for im in spec.images], np.random.default_rng(0), 64, 4, True,
+                   np.linspace(380, 780, 41))
+    assert b.images.shape == (3, 3, 32, 32)
+    assert b.target.shape == b.wavelength_nm.shape == b.valid.shape == (3, 256)
+    assert len(np.unique(b.wavelength_nm)) > 4
+
+
+def test_learning_rate_decays_in_steps():
+    t = TrainConfig(lr=1e-3, lr_decay_every=10, lr_decay=0.5)
+    assert lr_at(t, 0) == lr_at(t, 9) == 1e-3
+    assert lr_at(t, 10) == 5e-4 and lr_at(t, 25) == 2.5e-4
+
+
+@pytest.mark.slow
+def test_tiny_overfit_reduces_the_loss_tenfold(tmp_path):
+    spec, _, _ = sets(1)
+    tcfg = TrainConfig(**{**FAST, "steps": 300, "lr": 3e-3, "lr_decay_every": 200, "tv_weight": 0.0,
+                          "rgb_weight": 0.0, "val_every": 10 ** 6, "checkpoint_every": 10 ** 6,
+                          "spectral_materials_per_step": 1, "angles_per_material": 256})
+    res = train(Config(**SMALL), tcfg, spec, MaterialSet([], []), MaterialSet([], []), tmp_path,
+                show_progress=False)
+    first = np.mean([r["spec"] for r in res.history[:5]])
+    last = np.mean([r["spec"] for r in res.history[-20:]])
+    assert last < first / 10, (first, last)
+
+
+def test_training_is_bit_for_bit_deterministic_and_resumable(tmp_path):
+    spec, rgb, val = sets()
+    tcfg = TrainConfig(**{**FAST, "steps": 6})
+    a = train(Config(**SMALL), tcfg, spec, rgb, val, tmp_path / "a", show_progress=False)
+    b = train(Config(**SMALL), tcfg, spec, rgb, val, tmp_path / "b", show_progress=False)
+    # c: stop after 3 steps (as if interrupted), then resume to 6
+    train(Config(**SMALL), dataclasses.replace(tcfg, steps=3), spec, rgb, val, tmp_path / "c",
+          show_progress=False)
+    c = train(Config(**SMALL), tcfg, spec, rgb, val, tmp_path / "c", resume=True, show_progress=False)
+    sa, sb, sc = (load_weights(r.weights).state_dict() for r in (a, b, c))
+    for k in sa:
+        assert torch.equal(sa[k], sb[k]), k
+        assert torch.equal(sa[k], sc[k]), k
+    assert [r["loss"] for r in a.history] == [r["loss"] for r in c.history]
+    assert (tmp_path / "a" / "history.csv").read_text().count("\n") == 7
+
+
+def test_resume_refuses_a_different_configuration(tmp_path):
+    spec, rgb, val = sets()
+    tcfg = TrainConfig(**{**FAST, "steps": 3})
+    train(Config(**SMALL), tcfg, spec, rgb, val, tmp_path, show_progress=False)
+    with pytest.raises(SpecGenError, match="different configuration"):
+        train(Config(**SMALL), dataclasses.replace(tcfg, lr=1.0), spec, rgb, val, tmp_path, resume=True,
+              show_progress=False)
+
+
+def test_config_files_load_and_reject_unknown_keys(tmp_path, repo_dir):
+    mcfg, tcfg = load_config(repo_dir / "configs" / "default.json")
+    assert mcfg == Config.from_dict(json.loads((repo_dir / "configs" / "default.json").read_text())["model"])
+    assert tcfg.tv_weight >= 0
+    (tmp_path / "c.toml").write_text('[model]\nfeature_dim = 16\naff_map_hw = [4, 4]\n[train]\nsteps = 7\n')
+    m, t = load_config(tmp_path / "c.toml")
+    assert m.feature_dim == 16 and t.steps == 7
+    (tmp_path / "bad.json").write_text('{"train": {"stepz": 3}}')
+    with pytest.raises(SpecGenError, match="stepz"):
+        load_config(tmp_path / "bad.json")
