@@ -1,21 +1,30 @@
 """Bake a spectral BRDF table and a scene's lighting into the textures the OSL shader reads.
 
-Three files, all float32 OpenEXR, no ``bpy`` here (the Blender side only fills in
-:class:`SceneLights` from the scene):
+No ``bpy`` here; the Blender side fills :class:`SceneLights` from the scene.
 
-* **BRDF atlas** (:func:`bake_atlas`): the MERL-grid table ``f_r(θh, θd, φd, λ)`` (sr⁻¹) laid out
-  as one 90×90 tile per ``φd`` sample (x = √-warped ``θh`` index, y = ``θd`` index), tiles in
-  row-major order, ``4·G`` channels ``b000, b001, …`` holding the bands in groups of four. The
-  shader does the table's trilinear interpolation (:meth:`specgen_addon.table.BRDFTable.eval_hd`)
-  with two bilinear lookups per group of four bands (one per neighbouring ``φd`` tile).
-* **Light table** (:func:`bake_light_table`): one row per light (sun or point) with its position
-  or direction and its spectral irradiance / intensity per group, plus one row holding the
-  environment's RGB → spectrum matrix (Mallett & Yuksel 2019 basis × D65, as the reference
-  renderer uplifts environment texels).
-* **Environment** (:func:`bake_environment`): the equirect radiance (RGB) with its importance
-  sampling density in the alpha channel, and a list of directions drawn from that density.
+**Spectral basis.** Rendering is linear in the BRDF and in the light, so the spectral render need
+not carry every wavelength through Cycles. The table's spectra are factored as
+``f_r(θh, θd, φd, λ) ≈ Σ_k c_k(θh, θd, φd) B_k(λ)`` (principal components of the Λ-column
+matrix of all table entries, :func:`spectral_basis`), and lights and environment texels are RGB
+uplifted linearly as ``E(λ) = Σ_c rgb_c U_c(λ)`` (Mallett & Yuksel 2019 basis × D65, the
+reference renderer's convention). Then the spectral radiance is
 
-Wavelengths are nanometres, angles radians, directions are Blender world vectors (z up).
+    L(λ) = Σ_c Σ_k U_c(λ) B_k(λ) I_ck,   I_ck = Σ_lights c_k(ω_l) rgb_lc (n·ω_l)⁺ V + ∫ env …
+
+and Cycles only renders the ``3K`` images ``I_ck``: four coefficients (one RGBA lookup group,
+two bilinear taps for the trilinear interpolation) per Cycles render, RGB each, out through four
+colour passes. ``K`` is the smallest multiple of four whose truncation error is below a tolerance
+(exact when ``K ≥ Λ``), so 21 bands usually need one or two renders instead of Λ/3.
+
+Files (float32 OpenEXR):
+
+* **coefficient atlas** (:func:`bake_atlas`): one 90×90 tile per ``φd`` sample (x = √-warped
+  ``θh`` index, y = ``θd`` index, MERL index maths), tiles row-major, one tiled RGBA file per group
+  of four coefficients;
+* **environment** (:func:`bake_environment`): the equirect radiance (RGB) with its sampling
+  density in alpha, and a list of directions drawn from that density.
+
+Wavelengths are nanometres, angles radians, directions Blender world vectors (z up).
 """
 
 from __future__ import annotations
@@ -23,29 +32,31 @@ from __future__ import annotations
 import os
 from dataclasses import dataclass, field
 from pathlib import Path
-from typing import Callable, Sequence
+from typing import Callable
 
 import numpy as np
 
 from ..specgen_addon.errors import Cancelled, SpecGenError
 from ..specgen_addon.io_utils import atomic_write
-from ..specgen_addon.table import N_PHI_D, N_THETA_D, N_THETA_H, grid_angles
+from ..specgen_addon.table import N_PHI_D, N_THETA_D, N_THETA_H
 
-BANDS_PER_GROUP = 4
-#: Bands one Cycles render carries: 4 colour passes (Emission, Diffuse/Glossy/Transmission Color)
-#: × 3 channels, i.e. three groups of four.
-GROUPS_PER_RENDER = 3
-BANDS_PER_RENDER = BANDS_PER_GROUP * GROUPS_PER_RENDER
-LIGHT_SUN = 0.0
-LIGHT_POINT = 1.0
+COEFFS_PER_RENDER = 4   # one RGBA lookup group per Cycles render
+CHANNELS_PER_RENDER = 3 * COEFFS_PER_RENDER  # RGB × 4 coefficients = 4 colour passes
+DEFAULT_TOLERANCE = 1e-3
+MAX_LIGHTS = 4  # lights the shader takes as sockets (Light0… Light3)
 ENV_LIST_WIDTH = 256
 
 
 def _write_exr(path: Path, channels: dict[str, np.ndarray], overwrite: bool = True,
-               attributes: dict[str, str] | None = None) -> Path:
+               attributes: dict[str, str] | None = None, tiled: bool = False) -> Path:
     import OpenEXR
 
     header = {"compression": OpenEXR.ZIP_COMPRESSION, "type": OpenEXR.scanlineimage}
+    if tiled:  # OIIO's texture cache reads tiles directly instead of re-tiling scanlines
+        tiles = OpenEXR.TileDescription()
+        tiles.xSize = tiles.ySize = 64
+        tiles.mode = OpenEXR.ONE_LEVEL
+        header.update(type=OpenEXR.tiledimage, tiles=tiles, compression=OpenEXR.NO_COMPRESSION)
     header.update(attributes or {})
     with atomic_write(path, overwrite=overwrite) as tmp:
         with OpenEXR.File(header, {k: np.ascontiguousarray(v, dtype=np.float32)
@@ -54,34 +65,41 @@ def _write_exr(path: Path, channels: dict[str, np.ndarray], overwrite: bool = Tr
     return Path(path)
 
 
-def n_groups(n_bands: int) -> int:
-    """Groups of four bands needed for ``n_bands``."""
-    return -(-int(n_bands) // BANDS_PER_GROUP)
-
-
-def n_renders(n_bands: int) -> int:
-    """Cycles renders needed for ``n_bands`` (12 bands per render)."""
-    return -(-n_groups(n_bands) // GROUPS_PER_RENDER)
-
-
-def band_channel(index: int) -> str:
-    """Atlas channel name of band ``index`` (sorts in band order, as EXR stores channels)."""
-    return f"b{index:03d}"
+def group_path(base: Path, group: int) -> Path:
+    """File of coefficient group ``group`` of the atlas ``base`` (``a.exr`` -> ``a.g00.exr``)."""
+    base = Path(base)
+    return base.with_name(f"{base.stem}.g{group:02d}{base.suffix or '.exr'}")
 
 
 @dataclass
 class AtlasInfo:
-    """What :func:`bake_atlas` wrote: file, tile layout and the bands (nm) in channel order."""
+    """What :func:`bake_atlas` wrote.
+
+    ``basis`` (K, Λ) holds the spectral basis ``B_k(λ)`` at ``wavelengths_nm``; group file ``g``
+    holds coefficients ``4g … 4g+3`` in R, G, B, A. ``rel_error`` is the largest per-band RMS
+    truncation error relative to that band's peak (0 when exact).
+    """
 
     path: Path
     wavelengths_nm: np.ndarray
+    basis: np.ndarray
     n_phi_d: int
     tiles_x: int
     tiles_y: int
+    rel_error: float = 0.0
 
     @property
-    def n_groups(self) -> int:
-        return n_groups(self.wavelengths_nm.size)
+    def n_coeffs(self) -> int:
+        return int(self.basis.shape[0])
+
+    @property
+    def n_renders(self) -> int:
+        """Cycles renders of a spectral stack: one per group of four coefficients."""
+        return self.n_coeffs // COEFFS_PER_RENDER
+
+    @property
+    def group_paths(self) -> list[Path]:
+        return [group_path(self.path, g) for g in range(self.n_renders)]
 
 
 def atlas_layout(n_phi_d: int) -> tuple[int, int]:
@@ -112,22 +130,64 @@ def resample_phi_d(values: np.ndarray, n_phi_d: int) -> np.ndarray:
     return (1 - t) * values[:, :, k0] + t * values[:, :, k1]
 
 
+def spectral_basis(values: np.ndarray, tolerance: float = DEFAULT_TOLERANCE,
+                   max_coeffs: int | None = None) -> tuple[np.ndarray, float]:
+    """Principal spectral basis of table entries ``values`` (…, Λ): ``(B (K, Λ), rel_error)``.
+
+    ``B``'s rows are orthonormal eigenvectors of the Gram matrix ``MᵀM`` (uncentred PCA / SVD of
+    the entries-by-bands matrix ``M``), so coefficients are ``c = M Bᵀ`` and ``M ≈ c B``. ``K`` is
+    the smallest multiple of four whose worst per-band RMS residual, relative to the band's peak,
+    is ≤ ``tolerance``; at ``K ≥ Λ`` the basis is complete and the factorisation exact (rows past
+    Λ are zero).
+    """
+    lam = values.shape[-1]
+    m = values.reshape(-1, lam)
+    gram = np.zeros((lam, lam))
+    for start in range(0, m.shape[0], 1 << 18):
+        chunk = m[start:start + (1 << 18)].astype(np.float64)
+        gram += chunk.T @ chunk
+    eig, vec = np.linalg.eigh(gram)
+    order = np.argsort(eig)[::-1]
+    vec = vec[:, order]
+    n = m.shape[0]
+    peak = np.maximum(np.max(m, axis=0).astype(np.float64), 1e-30)
+    full = -(-lam // COEFFS_PER_RENDER) * COEFFS_PER_RENDER
+    limit = full if max_coeffs is None else min(full, max(COEFFS_PER_RENDER, max_coeffs))
+    k = COEFFS_PER_RENDER
+    while True:
+        kk = min(k, lam)
+        v = vec[:, :kk]
+        # residual energy per band: diag(G) − diag(G V Vᵀ)
+        resid = np.clip(np.diag(gram) - np.einsum("bk,bk->b", gram @ v, v), 0.0, None)
+        rel = float(np.max(np.sqrt(resid / n) / peak)) if kk < lam else 0.0
+        if rel <= tolerance or k >= limit:
+            break
+        k += COEFFS_PER_RENDER
+    basis = np.zeros((k, lam))
+    basis[:kk] = vec[:, :kk].T
+    return basis, rel
+
+
 def bake_atlas(table, path: str | os.PathLike, wavelengths_nm: np.ndarray | None = None,
-               n_phi_d: int = N_PHI_D, overwrite: bool = True,
+               n_phi_d: int = N_PHI_D, tolerance: float = DEFAULT_TOLERANCE,
+               max_coeffs: int | None = None, overwrite: bool = True,
                progress: Callable[[float], None] | None = None,
                cancel: Callable[[], bool] | None = None) -> AtlasInfo:
-    """Write the per-wavelength lookup atlas of a spectral :class:`~specgen_addon.table.BRDFTable`.
+    """Write the coefficient atlas of a spectral :class:`~specgen_addon.table.BRDFTable`.
 
     Parameters
     ----------
     table
         Spectral BRDF table (values in sr⁻¹ on the MERL grid).
     path
-        Target ``.exr``.
+        Base name ``….exr``; group ``g`` goes to :func:`group_path` (tiled float32 RGBA EXR).
     wavelengths_nm
-        Bands to bake (nm); the table is interpolated linearly in λ. Defaults to the table's own.
+        Bands (nm) the render will output; the table is interpolated linearly in λ. Defaults to
+        the table's own.
     n_phi_d
         φd samples kept (lookup resolution): 180 is the full MERL grid.
+    tolerance, max_coeffs
+        Spectral basis truncation (see :func:`spectral_basis`); ``tolerance=0`` keeps it exact.
     """
     if not getattr(table, "is_spectral", False):
         raise SpecGenError("the Blender bake needs a spectral BRDF table (wavelengths in nm)")
@@ -136,32 +196,35 @@ def bake_atlas(table, path: str | os.PathLike, wavelengths_nm: np.ndarray | None
     if wavelengths_nm is not None:
         weights = table.wavelength_weights(wl).astype(np.float32)       # (C, Λ)
         values = np.tensordot(values, weights, axes=([3], [0]))
-    values = resample_phi_d(np.maximum(values, 0.0), n_phi_d)           # (90, 90, P, Λ)
+    values = resample_phi_d(np.maximum(values, 0.0), n_phi_d).astype(np.float32)  # (90, 90, P, Λ)
+    basis, rel = spectral_basis(values, tolerance, max_coeffs)
+    if progress is not None:
+        progress(0.2)
     tiles_x, tiles_y = atlas_layout(n_phi_d)
-    g = n_groups(wl.size)
-    channels: dict[str, np.ndarray] = {}
-    for band in range(g * BANDS_PER_GROUP):
+    info = AtlasInfo(Path(path), wl, basis, n_phi_d, tiles_x, tiles_y, rel)
+    shape = (tiles_y * N_THETA_D, tiles_x * N_THETA_H)
+    for g, target in enumerate(info.group_paths):
         if cancel is not None and cancel():
             raise Cancelled("bake cancelled")
-        plane = np.zeros((tiles_y * N_THETA_D, tiles_x * N_THETA_H), np.float32)
-        if band < wl.size:
-            # tile k sits at column k % tiles_x, row k // tiles_x; inside it x = θh index, y = θd.
-            tiles = values[:, :, :, band].transpose(2, 1, 0)             # (P, θd, θh)
-            plane[:] = tiles.reshape(tiles_y, tiles_x, N_THETA_D, N_THETA_H) \
-                .transpose(0, 2, 1, 3).reshape(plane.shape)
-        channels[band_channel(band)] = plane
+        coeffs = values @ basis[COEFFS_PER_RENDER * g:COEFFS_PER_RENDER * (g + 1)].T.astype(np.float32)
+        channels = {}
+        for c, name in enumerate("RGBA"):
+            # tile k at column k % tiles_x, row k // tiles_x; inside it x = θh index, y = θd.
+            tiles = coeffs[:, :, :, c].transpose(2, 1, 0)                # (P, θd, θh)
+            channels[name] = tiles.reshape(tiles_y, tiles_x, N_THETA_D, N_THETA_H) \
+                .transpose(0, 2, 1, 3).reshape(shape)
+        attrs = {"specgenCoefficients": f"{COEFFS_PER_RENDER * g}-{COEFFS_PER_RENDER * g + 3}",
+                 "specgenPhiD": str(n_phi_d)}
+        _write_exr(target, channels, overwrite=overwrite, attributes=attrs, tiled=True)
         if progress is not None:
-            progress(0.9 * (band + 1) / (g * BANDS_PER_GROUP))
-    attrs = {"specgenWavelengthsNm": ",".join(f"{w:g}" for w in wl), "specgenPhiD": str(n_phi_d)}
-    _write_exr(Path(path), channels, overwrite=overwrite, attributes=attrs)
-    if progress is not None:
-        progress(1.0)
-    return AtlasInfo(Path(path), wl, n_phi_d, tiles_x, tiles_y)
+            progress(0.2 + 0.8 * (g + 1) / info.n_renders)
+    return info
 
 
 def atlas_lookup_reference(atlas: np.ndarray, info: AtlasInfo, theta_h: np.ndarray,
                            theta_d: np.ndarray, phi_d: np.ndarray) -> np.ndarray:
-    """NumPy twin of the shader's lookup (two bilinear taps per band), for tests: (N, Λ)."""
+    """NumPy twin of the shader's lookup on :func:`read_atlas` (two bilinear taps), projected back
+    onto the bands with the basis: ``f_r`` (N, Λ)."""
     from ..specgen_addon.table import phi_d_index, theta_d_index, theta_h_index
 
     x = np.clip(theta_h_index(np.ravel(theta_h)), 0, N_THETA_H - 1)
@@ -183,82 +246,72 @@ def atlas_lookup_reference(atlas: np.ndarray, info: AtlasInfo, theta_h: np.ndarr
         d = atlas[oy + y0 + 1, ox + x0 + 1]
         return (1 - ty) * ((1 - tx) * a + tx * b) + ty * ((1 - tx) * c + tx * d)
 
-    return ((1 - tk) * bilinear(k0) + tk * bilinear(k1))[:, :info.wavelengths_nm.size]
+    coeffs = (1 - tk) * bilinear(k0) + tk * bilinear(k1)
+    return coeffs @ info.basis
 
 
-def read_atlas(path: str | os.PathLike) -> np.ndarray:
-    """Atlas planes stacked (H, W, 4G), band order (for tests and checks)."""
+def read_atlas(info: AtlasInfo) -> np.ndarray:
+    """All coefficient planes stacked (H, W, K) (for tests and checks)."""
     import OpenEXR
 
-    with OpenEXR.File(str(path), separate_channels=True) as exr:
-        ch = exr.parts[0].channels
-        return np.stack([np.asarray(ch[k].pixels) for k in sorted(ch)], axis=-1)
+    planes = []
+    for p in info.group_paths:
+        with OpenEXR.File(str(p), separate_channels=True) as exr:
+            ch = exr.parts[0].channels
+            planes += [np.asarray(ch[c].pixels) for c in "RGBA"]
+    return np.stack(planes, axis=-1)
+
+
+def assemble_spectrum(images: np.ndarray, basis: np.ndarray, uplift: np.ndarray) -> np.ndarray:
+    """Spectral radiance (H, W, Λ) from rendered coefficient images ``I_ck``.
+
+    ``images`` (H, W, K, 3): coefficient k lit by the R, G, B parts of the lighting; ``basis``
+    (K, Λ) = ``B_k(λ)``; ``uplift`` (3, Λ) = ``U_c(λ)``. ``L(λ) = Σ_c Σ_k U_c(λ) B_k(λ) I_ck``.
+    """
+    return np.einsum("hwkc,cl,kl->hwl", images, uplift, basis, optimize=True).astype(np.float32)
 
 
 # ---------------------------------------------------------------------------------- lighting
 @dataclass
 class Light:
-    """A light the shader loops over.
+    """A light the shader evaluates.
 
-    ``kind`` is ``"sun"`` (``vector`` = world direction towards the light, ``spectrum`` = irradiance
-    E(λ) in W·m⁻²·nm⁻¹ on a surface facing it) or ``"point"`` (``vector`` = world position,
-    ``spectrum`` = radiant intensity I(λ) in W·sr⁻¹·nm⁻¹).
+    ``kind`` is ``"sun"`` (``vector`` = world direction towards the light, ``rgb`` = linear-sRGB
+    irradiance on a surface facing it, W·m⁻²) or ``"point"`` (``vector`` = world position,
+    ``rgb`` = radiant intensity, W·sr⁻¹). Spectra follow as ``rgb @ U`` (module docstring).
     """
 
     kind: str
     vector: tuple[float, float, float]
-    spectrum: np.ndarray
+    rgb: tuple[float, float, float]
 
 
 @dataclass
 class EnvironmentLight:
     """An equirect environment: linear-sRGB radiance (H, W, 3), row 0 at the zenith, Blender's
-    mapping (``u = −atan2(y, x)/2π + ½``, ``v = asin(z)/π + ½``), uplifted to spectra with ``basis``
-    (3, Λ): ``L(λ) = rgb @ basis``."""
+    mapping (``u = −atan2(y, x)/2π + ½``, ``v = asin(z)/π + ½``)."""
 
     rgb: np.ndarray
-    basis: np.ndarray
     n_list: int = 4096
     seed: int = 0
 
 
 @dataclass
 class SceneLights:
-    """Everything the shader needs to light one scene at the baked bands."""
+    """Everything the shader needs to light one scene."""
 
-    wavelengths_nm: np.ndarray
     lights: list[Light] = field(default_factory=list)
     environment: EnvironmentLight | None = None
 
 
-def bake_light_table(scene: SceneLights, path: str | os.PathLike) -> Path:
-    """Write the light table: row per light, then the environment's uplift row.
-
-    Pixel 0 of a light row is ``(kind, x, y, z)``; pixel ``1 + g`` its spectrum for bands
-    ``4g … 4g+3``. In the environment row (index ``len(lights)``) pixel ``1 + 3g + c`` holds row
-    ``c`` (R, G, B) of the uplift matrix for group ``g``.
-    """
-    wl = np.asarray(scene.wavelengths_nm, dtype=np.float64)
-    g = n_groups(wl.size)
-    padded = g * BANDS_PER_GROUP
-    width = 1 + 3 * g
-    rows = len(scene.lights) + 1
-    pixels = np.zeros((rows, width, 4), np.float32)
-    for r, light in enumerate(scene.lights):
-        if light.kind not in ("sun", "point"):
-            raise SpecGenError(f"unsupported light kind {light.kind!r} (sun and point are supported)")
-        spectrum = np.zeros(padded)
-        spectrum[:wl.size] = np.asarray(light.spectrum, dtype=np.float64)
-        pixels[r, 0] = (LIGHT_SUN if light.kind == "sun" else LIGHT_POINT, *light.vector)
-        pixels[r, 1:1 + g] = spectrum.reshape(g, BANDS_PER_GROUP)
-    if scene.environment is not None:
-        basis = np.zeros((3, padded))
-        basis[:, :wl.size] = scene.environment.basis
-        for grp in range(g):
-            for c in range(3):
-                pixels[-1, 1 + 3 * grp + c] = basis[c, BANDS_PER_GROUP * grp:BANDS_PER_GROUP * (grp + 1)]
-    channels = {name: pixels[..., i] for i, name in enumerate("RGBA")}
-    return _write_exr(Path(path), channels)
+def light_socket_values(light: Light | None) -> dict[str, object]:
+    """Socket values of one shader light slot: ``Kind`` (0 off, 1 sun, 2 point), ``Vec``, ``Color``."""
+    if light is None:
+        return {"Kind": 0, "Vec": (0.0, 0.0, 0.0), "Color": (0.0, 0.0, 0.0, 1.0)}
+    if light.kind not in ("sun", "point"):
+        raise SpecGenError(f"unsupported light kind {light.kind!r} (sun and point are supported)")
+    return {"Kind": 1 if light.kind == "sun" else 2, "Vec": tuple(float(c) for c in light.vector),
+            "Color": (*(float(c) for c in light.rgb), 1.0)}
 
 
 def environment_density(rgb: np.ndarray) -> np.ndarray:

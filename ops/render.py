@@ -128,12 +128,17 @@ def make_material(name: str, atlas: bake.AtlasInfo) -> bpy.types.Material:
     node.name = node.label = SCRIPT_NODE_NAME
     compile_script_node(node)
     tree.links.new(node.outputs["BSDF"], out.inputs["Surface"])
-    node.inputs["Atlas"].default_value = str(atlas.path)
+    node.inputs["Atlas"].default_value = str(atlas.group_paths[0])
     node.inputs["PhiD"].default_value = int(atlas.n_phi_d)
+    node.inputs["TilesX"].default_value = int(atlas.tiles_x)
+    node.inputs["TilesY"].default_value = int(atlas.tiles_y)
     mat.cycles.emission_sampling = "NONE"  # the emission is reflected light, not a light source
     mat[MATERIAL_TAG] = True
     mat["specgen_wavelengths_nm"] = [float(w) for w in atlas.wavelengths_nm]
     mat["specgen_atlas"] = str(atlas.path)
+    mat["specgen_atlas_groups"] = [str(p) for p in atlas.group_paths]
+    mat["specgen_basis"] = [float(x) for x in atlas.basis.ravel()]
+    mat["specgen_basis_error"] = float(atlas.rel_error)
     return mat
 
 
@@ -191,18 +196,15 @@ def world_environment(scene: bpy.types.Scene, max_width: int = 512) -> np.ndarra
     return None if not np.any(rgb > 0) else rgb
 
 
-def scene_lights(scene: bpy.types.Scene, wavelengths_nm: np.ndarray,
-                 warn: Callable[[str], None] = print) -> bake.SceneLights:
-    """Sun and point lights plus the world environment of ``scene`` as spectra at the bands.
+def scene_lights(scene: bpy.types.Scene, warn: Callable[[str], None] = print) -> bake.SceneLights:
+    """Sun and point lights plus the world environment of ``scene``, in linear sRGB.
 
-    Light colours (linear sRGB) are uplifted with the same basis as environment texels (Mallett &
-    Yuksel 2019 × D65), so a white sun of strength E is D65 irradiance E, as in the reference
-    renderer. A point light of power P (W) has radiant intensity P/4π.
+    Spectra follow from the RGB with the environment's uplift basis (Mallett & Yuksel 2019 × D65),
+    so a white sun of strength E is D65 irradiance E, as in the reference renderer. A point light
+    of power P (W) has radiant intensity P/4π.
     """
     from mathutils import Vector
 
-    wl = np.asarray(wavelengths_nm, dtype=np.float64)
-    basis = _uplift(wl)
     lights: list[bake.Light] = []
     depsgraph = bpy.context.evaluated_depsgraph_get()  # fresh matrix_world of just-moved objects
     for obj in scene.objects:
@@ -213,15 +215,14 @@ def scene_lights(scene: bpy.types.Scene, wavelengths_nm: np.ndarray,
         rgb = np.asarray(data.color[:3], dtype=np.float64)
         if data.type == "SUN":
             d = (matrix.to_3x3() @ Vector((0.0, 0.0, 1.0))).normalized()
-            lights.append(bake.Light("sun", tuple(d), float(data.energy) * (rgb @ basis)))
+            lights.append(bake.Light("sun", tuple(d), tuple(float(data.energy) * rgb)))
         elif data.type == "POINT":
-            pos = matrix.translation
-            lights.append(bake.Light("point", tuple(pos), float(data.energy) / (4 * math.pi) * (rgb @ basis)))
+            lights.append(bake.Light("point", tuple(matrix.translation),
+                                     tuple(float(data.energy) / (4 * math.pi) * rgb)))
         else:
             warn(f"SpecGen: {data.type.lower()} light {obj.name!r} is ignored (sun and point only)")
     env_rgb = world_environment(scene)
-    env = None if env_rgb is None else bake.EnvironmentLight(env_rgb, basis)
-    return bake.SceneLights(wl, lights, env)
+    return bake.SceneLights(lights, None if env_rgb is None else bake.EnvironmentLight(env_rgb))
 
 
 # ------------------------------------------------------------------------------ scene state
@@ -342,6 +343,8 @@ class SpectralRenderJob:
     warn: Callable[[str], None] = print
     spectral: np.ndarray | None = field(default=None, init=False)
     wavelengths_nm: np.ndarray | None = field(default=None, init=False)
+    basis: np.ndarray | None = field(default=None, init=False)
+    coefficient_images: np.ndarray | None = field(default=None, init=False)
     timings: dict = field(default_factory=dict, init=False)
     _cancelled: bool = field(default=False, init=False)
 
@@ -370,36 +373,44 @@ class SpectralRenderJob:
         mats = specgen_materials(self.scene)
         if not mats:
             raise SpecGenError("no render-visible object uses a SpecGen material (Apply one first)")
-        wls = {tuple(m["specgen_wavelengths_nm"]) for m in mats}
-        if len(wls) != 1:
-            raise SpecGenError("SpecGen materials in the scene were baked for different band sets")
-        self.wavelengths_nm = np.asarray(next(iter(wls)), dtype=np.float64)
+        keys = {(tuple(m["specgen_wavelengths_nm"]), tuple(m["specgen_basis"])) for m in mats}
+        if len(keys) != 1:
+            # One spectral basis per render: the passes hold coefficients of that basis.
+            raise SpecGenError("SpecGen materials in the scene have different bands or spectral "
+                               "bases; generate them with the same settings")
+        wl, basis = next(iter(keys))
+        self.wavelengths_nm = np.asarray(wl, dtype=np.float64)
+        self.basis = np.asarray(basis, dtype=np.float64).reshape(-1, self.wavelengths_nm.size)
         for m in mats:
-            if not Path(m["specgen_atlas"]).is_file():
-                raise SpecGenError(f"material {m.name!r}: baked atlas {m['specgen_atlas']} is missing")
+            for p in m["specgen_atlas_groups"]:
+                if not Path(p).is_file():
+                    raise SpecGenError(f"material {m.name!r}: baked lookup {p} is missing (Apply again)")
         return mats
 
     def steps(self) -> Iterator[float]:
-        """Generator: bake lighting, one Cycles render per 12 bands, assemble, write."""
+        """Generator: bake lighting, one Cycles render per four basis coefficients, assemble, write."""
         t0 = time.perf_counter()
         mats = self._preflight()
         wl = self.wavelengths_nm
-        renders = bake.n_renders(wl.size)
+        renders = self.basis.shape[0] // bake.COEFFS_PER_RENDER
         ensure_oslquery()
         work = Path(tempfile.mkdtemp(prefix="specgen_render_"))
         try:
-            lights = scene_lights(self.scene, wl, self.warn)
+            lights = scene_lights(self.scene, self.warn)
             if not lights.lights and lights.environment is None:
                 raise SpecGenError("the scene has no sun, point light or world lighting")
-            table = bake.bake_light_table(lights, work / "lights.exr")
+            if len(lights.lights) > bake.MAX_LIGHTS:
+                self.warn(f"SpecGen: only the first {bake.MAX_LIGHTS} of {len(lights.lights)} lights are used")
+            slots = (lights.lights + [None] * bake.MAX_LIGHTS)[:bake.MAX_LIGHTS]
             env_map = env_list = ""
             if lights.environment is not None:
                 m, l = bake.bake_environment(lights.environment, work / "env.exr", work / "env_list.exr")
                 env_map, env_list = str(m), str(l)
             for mat in mats:
                 node = mat.node_tree.nodes[SCRIPT_NODE_NAME]
-                node.inputs["LightTable"].default_value = str(table)
-                node.inputs["NumLights"].default_value = len(lights.lights)
+                for i, light in enumerate(slots):
+                    for key, value in bake.light_socket_values(light).items():
+                        node.inputs[f"Light{i}{key}"].default_value = value
                 node.inputs["EnvMap"].default_value = env_map
                 node.inputs["EnvList"].default_value = env_list
                 node.inputs["EnvSamples"].default_value = self.env_samples if env_map else 0
@@ -408,28 +419,26 @@ class SpectralRenderJob:
             self.timings["bake_s"] = time.perf_counter() - t0
             yield 0.02
             h, w = self.resolution[1], self.resolution[0]
-            stack = np.zeros((h, w, renders * bake.BANDS_PER_RENDER), np.float32)
+            images = np.zeros((h, w, renders * bake.COEFFS_PER_RENDER, 3), np.float32)
             t_render = 0.0
             for r in range(renders):
                 self._check()
                 out_dir = work / f"r{r}"
                 out_dir.mkdir()
-                groups = min(bake.GROUPS_PER_RENDER, bake.n_groups(wl.size) - r * bake.GROUPS_PER_RENDER)
                 for mat in mats:
                     node = mat.node_tree.nodes[SCRIPT_NODE_NAME]
-                    node.inputs["GroupOffset"].default_value = r * bake.GROUPS_PER_RENDER
-                    node.inputs["NumGroups"].default_value = groups
+                    node.inputs["Atlas"].default_value = list(mat["specgen_atlas_groups"])[r]
                 t = time.perf_counter()
                 with _SceneState(self.scene, self.samples, self.resolution, out_dir):
                     bpy.ops.render.render(write_still=False, scene=self.scene.name)
                 t_render += time.perf_counter() - t
                 for i in range(len(PASSES)):
-                    band0 = r * bake.BANDS_PER_RENDER + 3 * i
-                    stack[:, :, band0:band0 + 3] = _read_pass(_find_output(out_dir, i))
+                    images[:, :, r * bake.COEFFS_PER_RENDER + i] = _read_pass(_find_output(out_dir, i))
                 yield 0.02 + 0.93 * (r + 1) / renders
             self._check()
             self.timings["cycles_s"] = t_render
-            self.spectral = stack[:, :, :wl.size]
+            self.coefficient_images = images
+            self.spectral = bake.assemble_spectrum(images, self.basis, _uplift(wl))
             outs = self._outputs()
             if outs is not None:
                 from ..specgen_addon.spectral_exr import (linear_srgb_preview, write_preview_png,
@@ -437,6 +446,7 @@ class SpectralRenderJob:
 
                 rgb = linear_srgb_preview(self.spectral, wl)
                 attrs = {"specgenRenderer": "SpecGen OSL/Cycles", "specgenSamples": str(self.samples),
+                         "specgenBasisCoefficients": str(self.basis.shape[0]),
                          **{k: str(v) for k, v in self.attributes.items()}}
                 write_spectral_exr(outs[0], self.spectral, wl, overwrite=self.overwrite, rgb=rgb,
                                    attributes=attrs)

@@ -1,0 +1,107 @@
+"""Benchmark: the full spectral stack (SpecGen OSL, per-band Cycles) vs one plain RGB Cycles render.
+
+Same scene (unit sphere, orthographic camera, one sun), same resolution and samples. Prints the wall
+time of the spectral job (all bands: light bake, Cycles renders, assembly, EXR + PNG written) and of
+its Cycles renders alone, next to one RGB render of a Principled BSDF sphere, and their ratio.
+Target: ratio ≤ 3. Run: ``.venv/bin/python bench/render.py [--resolution 256 --samples 16 --bands 21]``.
+"""
+
+from __future__ import annotations
+
+import argparse
+import platform
+import statistics
+import sys
+import tempfile
+import time
+from pathlib import Path
+
+REPO = Path(__file__).resolve().parents[1]
+sys.path.insert(0, str(REPO))
+
+
+def main(argv: list[str] | None = None) -> int:
+    ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    ap.add_argument("--resolution", type=int, default=256)
+    ap.add_argument("--samples", type=int, default=16)
+    ap.add_argument("--bands", type=int, default=21)
+    ap.add_argument("--repeats", type=int, default=3)
+    ap.add_argument("--env", default=None, help="light by this studio-light world instead of a sun")
+    args = ap.parse_args(argv)
+
+    import batch
+
+    pkg = batch.load_package()
+    import bpy
+    import numpy as np
+    from importlib import import_module
+
+    render = import_module(f"{pkg.__name__}.ops.render")
+    bake = import_module(f"{pkg.__name__}.ops.bake")
+    scene_mod = import_module(f"{pkg.__name__}.ops.scene")
+    from specgen_addon.render.analytic import GGXReflector
+    from specgen_addon.rusinkiewicz import io_from_half_diff
+    from specgen_addon.table import BRDFTable
+
+    wl = np.linspace(380.0, 780.0, args.bands)
+    brdf = GGXReflector(alpha=0.2, f0=0.04, kd=0.5)
+    table = BRDFTable.tabulate(lambda th, td, pd: brdf.eval(*io_from_half_diff(th, td, pd), wl), wl)
+    work = Path(tempfile.mkdtemp(prefix="specgen_bench_"))
+    atlas = bake.bake_atlas(table, work / "atlas.exr")
+
+    bpy.ops.wm.read_factory_settings(use_empty=True)
+    sc = bpy.context.scene
+    sc.render.engine = "CYCLES"
+    sc.cycles.device = "CPU"
+    scene_mod.add_camera(sc)
+    obj = scene_mod.add_mesh(sc, "sphere")
+    if args.env:
+        from specgen_addon.lighting import find_hdri
+
+        scene_mod.set_world_environment(sc, find_hdri(args.env), 1.0)
+    else:
+        scene_mod.add_sun(sc, (0.3, 0.5, 0.8), np.pi)
+    res = args.resolution
+    sc.render.resolution_x = sc.render.resolution_y = res
+    sc.render.resolution_percentage = 100
+    sc.cycles.samples = args.samples
+    sc.cycles.use_denoising = False
+
+    # Plain RGB render: Principled BSDF, Cycles defaults (SVM), same samples/resolution.
+    plain = bpy.data.materials.new("plain")
+    obj.data.materials.append(plain)
+    sc.render.filepath = str(work / "rgb.png")
+    rgb_times = []
+    for _ in range(args.repeats + 1):
+        t = time.perf_counter()
+        bpy.ops.render.render(write_still=False)
+        rgb_times.append(time.perf_counter() - t)
+    rgb_times = rgb_times[1:]  # first run pays one-off kernel/BVH warm-up
+
+    mat = render.make_material("SpecGen bench", atlas)
+    obj.data.materials[0] = mat
+    job_times, cycles_times = [], []
+    for i in range(args.repeats + 1):
+        job = render.SpectralRenderJob(sc, work / f"stack{i}.exr", samples=args.samples,
+                                       resolution=(res, res), overwrite=True)
+        t = time.perf_counter()
+        job.run()
+        job_times.append(time.perf_counter() - t)
+        cycles_times.append(job.timings["cycles_s"])
+    job_times, cycles_times = job_times[1:], cycles_times[1:]  # drop the OSL JIT/texture warm-up
+
+    rgb = statistics.median(rgb_times)
+    full = statistics.median(job_times)
+    cyc = statistics.median(cycles_times)
+    print(f"machine: {platform.machine()}, {__import__('os').cpu_count()} cores, {platform.python_version()}, "
+          f"bpy {bpy.app.version_string}")
+    print(f"scene: unit sphere, {'env ' + args.env if args.env else 'one sun'}, {res}x{res}, "
+          f"{args.samples} spp, {args.bands} bands ({bake.n_renders(args.bands)} Cycles renders)")
+    print(f"plain RGB Cycles render (Principled): {rgb:.3f} s  (median of {args.repeats})")
+    print(f"spectral stack, Cycles renders only:  {cyc:.3f} s  -> ratio {cyc / rgb:.2f}x")
+    print(f"spectral stack, full job (+bake/EXR): {full:.3f} s  -> ratio {full / rgb:.2f}x  (target <= 3x)")
+    return 0
+
+
+if __name__ == "__main__":
+    sys.exit(main())
