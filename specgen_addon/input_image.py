@@ -1,0 +1,336 @@
+"""The image SpecGen consumes: a sphere of the material, rendered canonically or loaded from a file.
+
+Canonical input (:func:`render_input`), fixed so that every training and test image is comparable:
+
+* geometry: unit sphere inscribed in a 128×128 frame, orthographic camera looking down −z
+  (:func:`specgen_addon.render.sphere_geometry`); background 0;
+* lighting: the ``studio`` environment map of the bpy wheel (unit mean luminance, rotation 0,
+  Mallett 2019 uplifting) plus a D65 distant key light of irradiance π from the upper left front,
+  direction ∝ (−1, 1, 1);
+* spectral BRDFs are rendered at the default 21 bands (380–780 nm) and projected to linear sRGB
+  through the CIE 1931 CMFs (white-balanced to D65); RGB-only BRDFs through ``eval_rgb``;
+* exposure: radiance × :data:`EXPOSURE` (0.5, a white Lambertian peaks near 1); the linear EXR
+  stores exactly that; the PNG is its sRGB encoding of the values clipped to [0, 1] (no other
+  tone curve), 8 bits.
+
+Training variants (:func:`render_training_input`) keep geometry and key light and change the
+environment map (among :data:`specgen_addon.lighting.TRAIN_ENVS`), its rotation and the exposure.
+
+User images (:func:`load_sphere_image`): EXR (linear) or PNG/JPEG (8/16-bit, sRGB-decoded), RGB or
+RGBA. The sphere is found from the alpha channel when there is one, else as a circle fitted (RANSAC)
+to the outline of the thresholded foreground; it is cropped to its bounding square, resampled to
+the canonical size and its background set to 0.
+"""
+
+from __future__ import annotations
+
+import functools
+from pathlib import Path
+
+import numpy as np
+
+from . import spectra
+from .errors import ImageInputError, SpecGenError
+from .io_utils import atomic_write
+
+CANONICAL_SIZE = 128
+EXPOSURE = 0.5
+CANONICAL_ENV = "studio"
+KEY_LIGHT_DIRECTION = (-1.0, 1.0, 1.0)
+KEY_LIGHT_IRRADIANCE = float(np.pi)
+#: Smallest sphere radius (pixels) accepted in a user image.
+MIN_SPHERE_RADIUS_PX = 8
+
+
+def input_sampling():
+    """Environment sampling of input renders: 56 directions per pixel (half the evaluation's);
+    the inputs are 128² RGB images and their noise is far below their quantisation."""
+    from .render import EnvSampling
+
+    return EnvSampling().scaled(0.5)
+
+
+def _key_light():
+    from .render import DistantLight
+
+    return DistantLight(KEY_LIGHT_DIRECTION, KEY_LIGHT_IRRADIANCE, spectra.DEFAULT_ILLUMINANT)
+
+
+@functools.lru_cache(maxsize=6)
+def _scene(env_name: str, rotation_rad: float, size: int):
+    """Prepared scenes are reused across materials (their samples do not depend on the BRDF)."""
+    from . import lighting
+    from .render import Scene, sphere_geometry
+
+    env = lighting.load_environment(env_name, rotation_rad=rotation_rad)
+    return Scene(sphere_geometry(size), [_key_light()], env, sampling=input_sampling())
+
+
+def _is_rgb_only(brdf) -> bool:
+    return not hasattr(brdf, "eval") or getattr(brdf, "is_spectral", True) is False
+
+
+def _render(brdf, env_name: str, rotation_rad: float, exposure: float, size: int) -> np.ndarray:
+    scene = _scene(env_name, float(rotation_rad), int(size))
+    if _is_rgb_only(brdf):
+        rgb = scene.render_rgb(brdf).rgb
+    else:
+        rgb = scene.render_spectral(brdf, spectra.DEFAULT_WAVELENGTHS_NM).rgb
+    rgb = np.clip(rgb, 0.0, None) * exposure  # negative values only from sRGB gamut clipping
+    return rgb.astype(np.float32)
+
+
+def render_input(brdf, size: int = CANONICAL_SIZE) -> np.ndarray:
+    """Canonical input image of ``brdf``: linear sRGB (size, size, 3) float32 (module docstring)."""
+    return _render(brdf, CANONICAL_ENV, 0.0, EXPOSURE, size)
+
+
+def training_variant(variant: int) -> tuple[str, float, float]:
+    """(environment name, rotation in radians, exposure) of training lighting ``variant``.
+
+    Variant 0 is the canonical lighting; others cycle through the training maps with a golden-angle
+    rotation (8 distinct per map) and an exposure of 2^u, u ∈ [−0.5, 0.5] drawn from ``variant``.
+    """
+    from . import lighting
+
+    if variant < 0:
+        raise SpecGenError(f"training variant must be ≥ 0, got {variant}")
+    if variant == 0:
+        return CANONICAL_ENV, 0.0, EXPOSURE
+    envs = lighting.TRAIN_ENVS
+    name = envs[variant % len(envs)]
+    rotation = float(np.mod((variant // len(envs)) % 8 * 2.399963229728653 + 0.7 * variant, 2 * np.pi))
+    u = np.random.default_rng(variant).uniform(-0.5, 0.5)
+    return name, round(rotation, 6), float(EXPOSURE * 2.0 ** u)
+
+
+def render_training_input(brdf, variant: int, size: int = CANONICAL_SIZE) -> np.ndarray:
+    """Input image of ``brdf`` under training lighting ``variant`` (0 = canonical), linear sRGB."""
+    name, rotation, exposure = training_variant(variant)
+    return _render(brdf, name, rotation, exposure, size)
+
+
+# -- saving ---------------------------------------------------------------------------------------
+
+def write_exr_rgb(path: str | Path, rgb: np.ndarray, overwrite: bool = False) -> None:
+    """Write linear RGB (H, W, 3) as a float32 OpenEXR file, atomically."""
+    import OpenEXR
+
+    rgb = np.ascontiguousarray(rgb, dtype=np.float32)
+    header = {"compression": OpenEXR.ZIP_COMPRESSION, "type": OpenEXR.scanlineimage}
+    with atomic_write(path, overwrite=overwrite) as tmp:
+        with OpenEXR.File(header, {"RGB": rgb}) as f:
+            f.write(str(tmp))
+
+
+def write_png_srgb(path: str | Path, rgb: np.ndarray, overwrite: bool = False) -> None:
+    """Write linear RGB clipped to [0, 1], sRGB-encoded, as an 8-bit PNG, atomically."""
+    from PIL import Image
+
+    enc = spectra.srgb_encode(np.clip(rgb, 0.0, 1.0))
+    img = Image.fromarray(np.round(enc * 255.0).astype(np.uint8), mode="RGB")
+    with atomic_write(path, overwrite=overwrite) as tmp:
+        img.save(tmp, format="PNG")
+
+
+def save_input(rgb: np.ndarray, path: str | Path, overwrite: bool = False) -> list[Path]:
+    """Save an input image as linear EXR *and* 8-bit sRGB PNG beside each other.
+
+    ``path`` ends in .exr or .png; the sibling with the other suffix is written too. Both targets
+    are checked before anything is written.
+    """
+    path = Path(path)
+    if path.suffix.lower() not in (".exr", ".png"):
+        raise SpecGenError(f"{path}: output must end in .exr or .png")
+    exr, png = path.with_suffix(".exr"), path.with_suffix(".png")
+    if not overwrite:
+        for p in (exr, png):
+            if p.exists():
+                from .errors import OutputExistsError
+
+                raise OutputExistsError(f"{p}: already exists (pass overwrite to replace it)")
+    write_exr_rgb(exr, rgb, overwrite=overwrite)
+    write_png_srgb(png, rgb, overwrite=overwrite)
+    return [exr, png]
+
+
+# -- loading user images --------------------------------------------------------------------------
+
+def read_image(path: str | Path) -> np.ndarray:
+    """Read an image as float (H, W, C): EXR values as stored (linear); 8/16-bit PNG/JPEG/TIFF
+    normalised to [0, 1] and sRGB-decoded (alpha kept linear)."""
+    path = Path(path)
+    if not path.is_file():
+        raise ImageInputError(f"{path}: no such image file")
+    if path.suffix.lower() == ".exr":
+        import OpenEXR
+
+        try:
+            with OpenEXR.File(str(path)) as f:
+                channels = f.channels()
+                if len(channels) == 1 and next(iter(channels)) in ("RGB", "RGBA"):
+                    return np.asarray(next(iter(channels.values())).pixels, np.float32)
+                names = [n for n in ("R", "G", "B", "A") if n in channels]
+                if names[:3] != ["R", "G", "B"]:
+                    raise ImageInputError(f"{path}: EXR needs R, G, B channels, has "
+                                          f"{', '.join(sorted(channels))} ({len(channels)} channels)")
+                return np.stack([np.asarray(channels[n].pixels, np.float32) for n in names], -1)
+        except ImageInputError:
+            raise
+        except Exception as exc:
+            raise ImageInputError(f"{path}: cannot read EXR ({exc})") from exc
+    from PIL import Image, UnidentifiedImageError
+
+    try:
+        with Image.open(path) as im:
+            mode = im.mode
+            arr = np.asarray(im)
+    except (UnidentifiedImageError, OSError) as exc:
+        raise ImageInputError(f"{path}: cannot read image ({exc})") from exc
+    if arr.dtype == np.uint8:
+        arr = arr.astype(np.float32) / 255.0
+    elif arr.dtype in (np.uint16, np.int32) or mode.startswith("I;16"):
+        arr = arr.astype(np.float32) / 65535.0
+    else:
+        arr = arr.astype(np.float32)
+    if arr.ndim == 2:
+        arr = arr[..., None]
+    if arr.shape[-1] in (3, 4):
+        arr[..., :3] = spectra.srgb_decode(arr[..., :3]).astype(np.float32)
+    return arr
+
+
+def _read_png16_rgb(path: Path) -> np.ndarray | None:
+    """Pillow reads 16-bit RGB(A) PNGs as 8-bit; OpenImageIO keeps all 16 bits."""
+    try:
+        import OpenImageIO as oiio
+    except ImportError:  # pragma: no cover - OpenImageIO is a pinned requirement
+        return None
+    inp = oiio.ImageInput.open(str(path))
+    if inp is None:
+        return None
+    try:
+        spec = inp.spec()
+        if spec.format != oiio.UINT16:
+            return None
+        data = inp.read_image(0, 0, 0, spec.nchannels, "float")
+    finally:
+        inp.close()
+    arr = np.asarray(data, np.float32).reshape(spec.height, spec.width, spec.nchannels)
+    if arr.shape[-1] in (3, 4):
+        arr[..., :3] = spectra.srgb_decode(arr[..., :3]).astype(np.float32)
+    return arr
+
+
+def load_sphere_image(path: str | Path, size: int = CANONICAL_SIZE) -> np.ndarray:
+    """A user's sphere image as the canonical input: linear sRGB (size, size, 3) float32.
+
+    Raises :class:`~specgen_addon.errors.ImageInputError` if the file is unreadable, has other than
+    3 (RGB) or 4 (RGBA) channels, holds NaN/Inf, or shows no sphere.
+    """
+    path = Path(path)
+    arr = None
+    if path.suffix.lower() == ".png":
+        arr = _read_png16_rgb(path) if path.is_file() else None
+    if arr is None:
+        arr = read_image(path)
+    try:
+        return prepare_sphere_array(arr, size)
+    except ImageInputError as exc:
+        raise ImageInputError(f"{path}: {exc}") from None
+
+
+def prepare_sphere_array(arr: np.ndarray, size: int = CANONICAL_SIZE) -> np.ndarray:
+    """Find, crop and resample the sphere of a linear RGB/RGBA array (H, W, 3|4) to (size, size, 3)."""
+    arr = np.asarray(arr, dtype=np.float64)
+    if arr.ndim != 3 or arr.shape[-1] not in (3, 4):
+        channels = arr.shape[-1] if arr.ndim == 3 else 1
+        raise ImageInputError(f"expected an RGB or RGBA image, got {channels} channel(s) "
+                              f"(shape {arr.shape})")
+    if not np.all(np.isfinite(arr)):
+        raise ImageInputError("image holds NaN or Inf values")
+    rgb = np.clip(arr[..., :3], 0.0, None)
+    if arr.shape[-1] == 4:
+        mask = arr[..., 3] > 0.5
+        if mask.sum() < np.pi * MIN_SPHERE_RADIUS_PX ** 2 * 0.5:
+            raise ImageInputError("the alpha channel covers no sphere")
+        cx, cy, r = _circle_of_mask(mask, fit_outline=False)
+    else:
+        cx, cy, r = _circle_of_mask(_foreground(rgb), fit_outline=True)
+    return _resample_circle(rgb, cx, cy, r, size)
+
+
+def _foreground(rgb: np.ndarray) -> np.ndarray:
+    from scipy import ndimage
+
+    lum = rgb @ np.array([0.2126, 0.7152, 0.0722])
+    top = np.percentile(lum, 99.5)
+    if not top > 0:
+        raise ImageInputError("image is blank: no sphere found")
+    if np.mean(lum == 0) >= 0.1:
+        fg = lum > 0  # a render on an exactly black background: every lit pixel is the object
+    else:
+        fg = ndimage.binary_opening(lum > max(0.02 * top, 1e-6), iterations=1)
+    labels, count = ndimage.label(fg)
+    if count == 0:
+        raise ImageInputError("no sphere found (no foreground above the threshold)")
+    sizes = ndimage.sum(fg, labels, index=np.arange(1, count + 1))
+    largest = labels == (1 + int(np.argmax(sizes)))
+    return ndimage.binary_fill_holes(largest)
+
+
+def _circle_of_mask(mask: np.ndarray, fit_outline: bool) -> tuple[float, float, float]:
+    """(cx, cy, r) in pixel units (pixel centres at integer + 0.5) of the sphere in ``mask``."""
+    from scipy import ndimage
+
+    area = float(mask.sum())
+    ys, xs = np.nonzero(mask)
+    if area < np.pi * MIN_SPHERE_RADIUS_PX ** 2 * 0.5:
+        raise ImageInputError("no sphere found (foreground too small)")
+    cx, cy, r = xs.mean() + 0.5, ys.mean() + 0.5, np.sqrt(area / np.pi)
+    if fit_outline:
+        from skimage.measure import CircleModel, ransac
+
+        edge = mask & ~ndimage.binary_erosion(mask)
+        ey, ex = np.nonzero(edge)
+        pts = np.stack([ex + 0.5, ey + 0.5], -1).astype(np.float64)
+        if len(pts) >= 10:
+            model, inliers = ransac(pts, CircleModel, min_samples=3, residual_threshold=1.5,
+                                    max_trials=200, rng=0)
+            if model is not None and inliers is not None and inliers.mean() > 0.5:
+                fx, fy, fr = (float(v) for v in model.params)
+                # the outline passes through edge-pixel centres, half a pixel inside the silhouette
+                cx, cy, r = fx, fy, fr + 0.5
+    h, w = mask.shape
+    # the disc must be mostly filled and mostly inside the frame
+    yy, xx = np.mgrid[0:h, 0:w]
+    disc = (xx + 0.5 - cx) ** 2 + (yy + 0.5 - cy) ** 2 < r * r
+    inside = disc.sum() / max(np.pi * r * r, 1.0)
+    filled = (disc & mask).sum() / max(disc.sum(), 1)
+    if r < MIN_SPHERE_RADIUS_PX or inside < 0.8 or filled < 0.7:
+        raise ImageInputError(f"no sphere found (best circle: centre ({cx:.0f}, {cy:.0f}), radius "
+                              f"{r:.0f} px, {filled:.0%} filled, {inside:.0%} inside the frame)")
+    # crop to the whole-pixel bounding square (a sphere already framed exactly stays untouched)
+    x0, x1, y0, y1 = (round(cx - r), round(cx + r), round(cy - r), round(cy + r))
+    side = max(x1 - x0, y1 - y0)
+    return (x0 + x1) / 2.0, (y0 + y1) / 2.0, side / 2.0
+
+
+def _resample_circle(rgb: np.ndarray, cx: float, cy: float, r: float, size: int) -> np.ndarray:
+    """Bilinear resample of the square around the circle onto the canonical pixel grid (area
+    pre-filter when shrinking), background outside the unit disc set to 0."""
+    from scipy import ndimage
+
+    scale = 2.0 * r / size  # source pixels per output pixel
+    src = rgb
+    if scale > 1.0:
+        src = ndimage.gaussian_filter(rgb, sigma=(0.5 * scale, 0.5 * scale, 0), mode="nearest")
+    from .render.geometry import pixel_grid
+
+    x, y = pixel_grid(size)
+    sx = cx + x * r - 0.5           # source column coordinate (pixel centres at integers)
+    sy = cy - y * r - 0.5
+    out = np.stack([ndimage.map_coordinates(src[..., c], [sy, sx], order=1, mode="nearest")
+                    for c in range(3)], -1)
+    out[x * x + y * y >= 1.0] = 0.0
+    return out.astype(np.float32)
