@@ -20,6 +20,7 @@ COMMAND_MODULES = [
     "cli_corpus",
     "cli_eval",
     "cli_model",
+    "cli_render",
 ]
 
 EXIT_USER_ERROR = 2

@@ -26,6 +26,7 @@ from __future__ import annotations
 
 import functools
 from pathlib import Path
+from typing import Callable
 
 import numpy as np
 
@@ -70,19 +71,21 @@ def _is_rgb_only(brdf) -> bool:
     return not hasattr(brdf, "eval") or getattr(brdf, "is_spectral", True) is False
 
 
-def _render(brdf, env_name: str, rotation_rad: float, exposure: float, size: int) -> np.ndarray:
+def _render(brdf, env_name: str, rotation_rad: float, exposure: float, size: int,
+            progress=None) -> np.ndarray:
     scene = _scene(env_name, float(rotation_rad), int(size))
     if _is_rgb_only(brdf):
-        rgb = scene.render_rgb(brdf).rgb
+        rgb = scene.render_rgb(brdf, progress=progress).rgb
     else:
-        rgb = scene.render_spectral(brdf, spectra.DEFAULT_WAVELENGTHS_NM).rgb
+        rgb = scene.render_spectral(brdf, spectra.DEFAULT_WAVELENGTHS_NM, progress=progress).rgb
     rgb = np.clip(rgb, 0.0, None) * exposure  # negative values only from sRGB gamut clipping
     return rgb.astype(np.float32)
 
 
-def render_input(brdf, size: int = CANONICAL_SIZE) -> np.ndarray:
+def render_input(brdf, size: int = CANONICAL_SIZE,
+                 progress: Callable[[float], None] | None = None) -> np.ndarray:
     """Canonical input image of ``brdf``: linear sRGB (size, size, 3) float32 (module docstring)."""
-    return _render(brdf, CANONICAL_ENV, 0.0, EXPOSURE, size)
+    return _render(brdf, CANONICAL_ENV, 0.0, EXPOSURE, size, progress)
 
 
 def training_variant(variant: int) -> tuple[str, float, float]:
@@ -133,12 +136,11 @@ def write_png_srgb(path: str | Path, rgb: np.ndarray, overwrite: bool = False) -
         img.save(tmp, format="PNG")
 
 
-def save_input(rgb: np.ndarray, path: str | Path, overwrite: bool = False) -> list[Path]:
-    """Save an input image as linear EXR *and* 8-bit sRGB PNG beside each other.
+def output_paths(path: str | Path, overwrite: bool = False) -> tuple[Path, Path]:
+    """(.exr, .png) paths of an input image saved at ``path``; raises if either exists and
+    ``overwrite`` is false (so a command can check before doing any work)."""
+    from .errors import OutputExistsError
 
-    ``path`` ends in .exr or .png; the sibling with the other suffix is written too. Both targets
-    are checked before anything is written.
-    """
     path = Path(path)
     if path.suffix.lower() not in (".exr", ".png"):
         raise SpecGenError(f"{path}: output must end in .exr or .png")
@@ -146,9 +148,17 @@ def save_input(rgb: np.ndarray, path: str | Path, overwrite: bool = False) -> li
     if not overwrite:
         for p in (exr, png):
             if p.exists():
-                from .errors import OutputExistsError
+                raise OutputExistsError(f"{p}: already exists (pass --overwrite to replace it)")
+    return exr, png
 
-                raise OutputExistsError(f"{p}: already exists (pass overwrite to replace it)")
+
+def save_input(rgb: np.ndarray, path: str | Path, overwrite: bool = False) -> list[Path]:
+    """Save an input image as linear EXR *and* 8-bit sRGB PNG beside each other.
+
+    ``path`` ends in .exr or .png; the sibling with the other suffix is written too. Both targets
+    are checked before anything is written.
+    """
+    exr, png = output_paths(path, overwrite)
     write_exr_rgb(exr, rgb, overwrite=overwrite)
     write_png_srgb(png, rgb, overwrite=overwrite)
     return [exr, png]
