@@ -304,13 +304,16 @@ def _circle_of_mask(mask: np.ndarray, fit_outline: bool) -> tuple[float, float, 
         edge = mask & ~ndimage.binary_erosion(mask)
         ey, ex = np.nonzero(edge)
         pts = np.stack([ex + 0.5, ey + 0.5], -1).astype(np.float64)
+        model, inliers = (None, None)
         if len(pts) >= 10:
             model, inliers = ransac(pts, CircleModel, min_samples=3, residual_threshold=1.5,
                                     max_trials=200, rng=0)
-            if model is not None and inliers is not None and inliers.mean() > 0.5:
-                fx, fy, fr = (float(v) for v in model.params)
-                # the outline passes through edge-pixel centres, half a pixel inside the silhouette
-                cx, cy, r = fx, fy, fr + 0.5
+        if model is None or inliers is None or inliers.mean() <= 0.5:
+            raise ImageInputError("no sphere found (the foreground's outline is not a circle; "
+                                  "give the image an alpha channel masking the sphere)")
+        fx, fy, fr = (float(v) for v in model.params)
+        # the outline passes through edge-pixel centres, half a pixel inside the silhouette
+        cx, cy, r = fx, fy, fr + 0.5
     h, w = mask.shape
     # the disc must be mostly filled and mostly inside the frame
     yy, xx = np.mgrid[0:h, 0:w]
