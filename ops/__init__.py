@@ -1,0 +1,26 @@
+"""Blender side of SpecGen: scene settings, operators, the N-panel, the OSL bake and Cycles driver.
+
+``register``/``unregister`` add and remove exactly the classes and the ``Scene.specgen`` property of
+:mod:`.properties`, :mod:`.operators` and :mod:`.panel`; the numerics live in :mod:`.bake` (bpy-free)
+and the core package.
+"""
+
+from __future__ import annotations
+
+_MODULES = ("properties", "operators", "panel")
+
+
+def _modules():
+    import importlib
+
+    return [importlib.import_module(f"{__name__}.{name}") for name in _MODULES]
+
+
+def register() -> None:
+    for module in _modules():
+        module.register()
+
+
+def unregister() -> None:
+    for module in reversed(_modules()):
+        module.unregister()

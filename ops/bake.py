@@ -361,3 +361,78 @@ def bake_environment(env: EnvironmentLight, map_path: str | os.PathLike,
     _write_exr(Path(list_path), {"R": d[..., 0], "G": d[..., 1], "B": d[..., 2],
                                  "A": np.zeros(d.shape[:2], np.float32)})
     return Path(map_path), Path(list_path)
+
+
+# ---------------------------------------------------------------------------------- pipeline
+def save_atlas_info(info: AtlasInfo, path: str | os.PathLike) -> Path:
+    """Write the atlas description (JSON beside the textures) so a later session can apply it."""
+    import json
+
+    data = {"format": "specgen-atlas", "version": 1, "path": str(info.path),
+            "wavelengths_nm": [float(w) for w in info.wavelengths_nm],
+            "basis": info.basis.tolist(), "n_phi_d": info.n_phi_d, "tiles_x": info.tiles_x,
+            "tiles_y": info.tiles_y, "rel_error": info.rel_error}
+    with atomic_write(path, overwrite=True) as tmp:
+        tmp.write_text(json.dumps(data))
+    return Path(path)
+
+
+def load_atlas_info(path: str | os.PathLike) -> AtlasInfo:
+    """Read :func:`save_atlas_info`'s JSON; SpecGenError if missing, corrupt or incomplete."""
+    import json
+
+    path = Path(path)
+    try:
+        data = json.loads(path.read_text())
+        if data.get("format") != "specgen-atlas":
+            raise ValueError("not a SpecGen atlas description")
+        info = AtlasInfo(Path(data["path"]), np.asarray(data["wavelengths_nm"], float),
+                         np.asarray(data["basis"], float), int(data["n_phi_d"]), int(data["tiles_x"]),
+                         int(data["tiles_y"]), float(data["rel_error"]))
+    except (OSError, ValueError, KeyError, TypeError) as exc:
+        raise SpecGenError(f"{path}: cannot read the baked lookup description ({exc})") from None
+    missing = [str(p) for p in info.group_paths if not p.is_file()]
+    if missing:
+        raise SpecGenError(f"{path}: baked lookup textures are missing ({missing[0]})")
+    return info
+
+
+def choose_backend() -> str:
+    """``"onnx"`` when onnxruntime is importable (a stock Blender ships no torch), else ``"torch"``."""
+    import importlib.util
+
+    return "onnx" if importlib.util.find_spec("onnxruntime") is not None else "torch"
+
+
+def generate_lookup(image, out_dir: str | os.PathLike, wavelengths_nm: np.ndarray,
+                    weights=None, n_phi_d: int = N_PHI_D, tolerance: float = DEFAULT_TOLERANCE,
+                    backend: str | None = None, name: str = "brdf",
+                    progress: Callable[[float], None] | None = None,
+                    cancel: Callable[[], bool] | None = None) -> AtlasInfo:
+    """Image of a sphere → spectral BRDF table (``<name>.npz``) → coefficient atlas + JSON.
+
+    Runs without bpy (the Generate operator calls it on a worker thread). Progress: 0–0.8 network,
+    0.8–1 bake.
+    """
+    from ..specgen_addon.errors import WeightsError
+    from ..specgen_addon.infer import generate_brdf
+
+    out = Path(out_dir)
+    out.mkdir(parents=True, exist_ok=True)
+    sub = (lambda lo, hi: (lambda f: progress(lo + (hi - lo) * f))) if progress else (lambda lo, hi: None)
+    chosen = backend or choose_backend()
+    try:
+        table = generate_brdf(image, weights=weights, wavelengths_nm=wavelengths_nm, backend=chosen,
+                              progress=sub(0.0, 0.8), cancel=cancel)
+    except WeightsError:
+        import importlib.util
+
+        if backend is not None or chosen != "onnx" or importlib.util.find_spec("torch") is None:
+            raise
+        table = generate_brdf(image, weights=weights, wavelengths_nm=wavelengths_nm, backend="torch",
+                              progress=sub(0.0, 0.8), cancel=cancel)
+    table.save(out / f"{name}.npz", overwrite=True)
+    info = bake_atlas(table, out / f"{name}_lookup.exr", n_phi_d=n_phi_d, tolerance=tolerance,
+                      progress=sub(0.8, 1.0), cancel=cancel)
+    save_atlas_info(info, out / f"{name}_lookup.json")
+    return info

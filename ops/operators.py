@@ -1,0 +1,280 @@
+"""Operators of the SpecGen panel: Generate BRDF, Apply to selected objects, Render spectral stack.
+
+The two long steps are modal: they show progress in the status bar and the window-manager progress
+indicator, Esc cancels, and the UI keeps running. *Generate* runs the network and the bake on a
+worker thread (bpy-free numerics); *Render* advances :class:`ops.render.SpectralRenderJob` one Cycles
+render per timer tick. Both also have a blocking ``execute`` (used headless, e.g. by tests and
+scripts). Failures reach the user through ``self.report`` as one line, never a traceback.
+"""
+
+from __future__ import annotations
+
+import os
+import threading
+from pathlib import Path
+
+import bpy
+import numpy as np
+
+from ..specgen_addon.errors import Cancelled, SpecGenError
+from ..specgen_addon.spectra import wavelength_grid
+from . import bake
+from .properties import output_dir
+
+TIMER_STEP_S = 0.1
+
+
+def _image_input(settings):
+    """The input image as a path (preferred: the core decodes files itself) or a linear array."""
+    img = settings.image
+    if img is not None:
+        path = bpy.path.abspath(img.filepath) if img.filepath else ""
+        if path and os.path.isfile(path) and not img.is_dirty:
+            return path
+        w, h = img.size
+        if w == 0 or h == 0:
+            raise SpecGenError(f"image {img.name!r} has no pixels")
+        px = np.empty(w * h * 4, np.float32)
+        img.pixels.foreach_get(px)
+        rgb = px.reshape(h, w, 4)[::-1, :, :3].astype(np.float64)
+        if not img.is_float and img.colorspace_settings.name.lower().startswith("srgb"):
+            from ..specgen_addon.spectra import srgb_decode
+
+            rgb = srgb_decode(rgb)
+        return rgb
+    if settings.image_path:
+        path = bpy.path.abspath(settings.image_path)
+        if not os.path.isfile(path):
+            raise SpecGenError(f"{path}: input image not found")
+        return path
+    raise SpecGenError("choose an input image (datablock or file) first")
+
+
+def _wavelengths(settings) -> np.ndarray:
+    return wavelength_grid(settings.wl_min, settings.wl_max, settings.bands)
+
+
+def _set_status(context, text: str | None) -> None:
+    workspace = getattr(context, "workspace", None)
+    if workspace is not None:
+        workspace.status_text_set(text)
+    for window in context.window_manager.windows:
+        for area in window.screen.areas:
+            if area.type == "VIEW_3D":
+                area.tag_redraw()
+
+
+class _Modal:
+    """Timer, progress indicator and status text shared by the modal operators."""
+
+    _timer = None
+    label = "SpecGen"
+
+    def _start(self, context) -> None:
+        wm = context.window_manager
+        self._timer = wm.event_timer_add(TIMER_STEP_S, window=context.window)
+        wm.progress_begin(0, 100)
+        wm.modal_handler_add(self)
+        context.scene.specgen.running = self.label
+        self._progress(context, 0.0)
+
+    def _progress(self, context, fraction: float) -> None:
+        context.scene.specgen.progress = fraction
+        context.window_manager.progress_update(int(100 * fraction))
+        _set_status(context, f"{self.label}: {100 * fraction:.0f}%  (Esc to cancel)")
+
+    def _finish(self, context) -> None:
+        wm = context.window_manager
+        if self._timer is not None:
+            wm.event_timer_remove(self._timer)
+            self._timer = None
+        wm.progress_end()
+        context.scene.specgen.running = ""
+        _set_status(context, None)
+
+
+class SPECGEN_OT_generate_brdf(_Modal, bpy.types.Operator):
+    """Predict the spectral BRDF of the material in the input image and bake its lookup textures"""
+
+    bl_idname = "specgen.generate_brdf"
+    bl_label = "Generate BRDF"
+    bl_options = {"REGISTER"}
+    label = "Generating BRDF"
+
+    def _job_args(self, context) -> dict:
+        s = context.scene.specgen
+        weights = bpy.path.abspath(s.weights_path) if s.weights_path else None
+        return dict(image=_image_input(s), out_dir=output_dir(s), wavelengths_nm=_wavelengths(s),
+                    weights=weights, n_phi_d=int(s.lookup_resolution), tolerance=s.basis_tolerance)
+
+    def _done(self, context, info: bake.AtlasInfo) -> None:
+        s = context.scene.specgen
+        s.atlas_json = str(Path(info.path).with_name(Path(info.path).stem + ".json"))
+        self.report({"INFO"}, f"SpecGen: BRDF generated, {info.n_coeffs} spectral basis "
+                              f"coefficients (max error {info.rel_error:.1e})")
+
+    def execute(self, context):
+        try:
+            info = bake.generate_lookup(**self._job_args(context))
+        except SpecGenError as exc:
+            self.report({"ERROR"}, str(exc))
+            return {"CANCELLED"}
+        self._done(context, info)
+        return {"FINISHED"}
+
+    def invoke(self, context, event):
+        try:
+            args = self._job_args(context)
+        except SpecGenError as exc:
+            self.report({"ERROR"}, str(exc))
+            return {"CANCELLED"}
+        self._fraction = 0.0
+        self._cancel = threading.Event()
+        self._result: list = []
+
+        def work() -> None:
+            try:
+                self._result.append(bake.generate_lookup(
+                    **args, progress=lambda f: setattr(self, "_fraction", f),
+                    cancel=self._cancel.is_set))
+            except BaseException as exc:  # handed to the main thread, reported there
+                self._result.append(exc)
+
+        self._thread = threading.Thread(target=work, name="specgen-generate", daemon=True)
+        self._thread.start()
+        self._start(context)
+        return {"RUNNING_MODAL"}
+
+    def modal(self, context, event):
+        if event.type == "ESC":
+            self._cancel.set()
+        if event.type != "TIMER":
+            return {"PASS_THROUGH"}
+        self._progress(context, self._fraction)
+        if self._thread.is_alive():
+            return {"RUNNING_MODAL"}
+        self._finish(context)
+        result = self._result[0] if self._result else SpecGenError("generation stopped unexpectedly")
+        if isinstance(result, Cancelled):
+            self.report({"WARNING"}, "SpecGen: generation cancelled")
+            return {"CANCELLED"}
+        if isinstance(result, SpecGenError):
+            self.report({"ERROR"}, str(result))
+            return {"CANCELLED"}
+        if isinstance(result, BaseException):
+            self.report({"ERROR"}, f"SpecGen: {type(result).__name__}: {result}")
+            return {"CANCELLED"}
+        self._done(context, result)
+        return {"FINISHED"}
+
+
+class SPECGEN_OT_apply(bpy.types.Operator):
+    """Give the selected objects a material that renders the generated spectral BRDF"""
+
+    bl_idname = "specgen.apply"
+    bl_label = "Apply to Selected"
+    bl_options = {"REGISTER", "UNDO"}
+
+    @classmethod
+    def poll(cls, context):
+        return bool(context.scene.specgen.atlas_json)
+
+    def execute(self, context):
+        from .render import make_material
+
+        s = context.scene.specgen
+        try:
+            info = bake.load_atlas_info(s.atlas_json)
+            targets = [o for o in context.selected_objects if o.type in {"MESH", "CURVE", "SURFACE", "META", "FONT"}]
+            if not targets:
+                raise SpecGenError("select at least one mesh object")
+            mat = make_material(f"SpecGen {Path(info.path).stem}", info)
+        except SpecGenError as exc:
+            self.report({"ERROR"}, str(exc))
+            return {"CANCELLED"}
+        for obj in targets:
+            if obj.material_slots:
+                for slot in obj.material_slots:
+                    slot.material = mat
+            else:
+                obj.data.materials.append(mat)
+        self.report({"INFO"}, f"SpecGen: material applied to {len(targets)} object(s)")
+        return {"FINISHED"}
+
+
+class SPECGEN_OT_render_stack(_Modal, bpy.types.Operator):
+    """Render the scene's SpecGen materials per band with Cycles into a spectral OpenEXR"""
+
+    bl_idname = "specgen.render_stack"
+    bl_label = "Render Spectral Stack"
+    bl_options = {"REGISTER"}
+    label = "Rendering spectral stack"
+
+    filename: bpy.props.StringProperty(name="File Name", default="spectral.exr",
+                                       options={"SKIP_SAVE"})
+
+    def _job(self, context):
+        from .render import SpectralRenderJob
+
+        s = context.scene.specgen
+        folder = Path(output_dir(s))
+        folder.mkdir(parents=True, exist_ok=True)
+        return SpectralRenderJob(context.scene, folder / self.filename, samples=s.samples,
+                                 resolution=(s.resolution, s.resolution), overwrite=s.overwrite,
+                                 env_samples=s.env_samples,
+                                 warn=lambda msg: self.report({"WARNING"}, msg))
+
+    def execute(self, context):
+        try:
+            job = self._job(context)
+            job.run()
+        except (SpecGenError, OSError) as exc:
+            self.report({"ERROR"}, str(exc))
+            return {"CANCELLED"}
+        self.report({"INFO"}, f"SpecGen: wrote {job.output}")
+        return {"FINISHED"}
+
+    def invoke(self, context, event):
+        try:
+            self._job_obj = self._job(context)
+        except (SpecGenError, OSError) as exc:
+            self.report({"ERROR"}, str(exc))
+            return {"CANCELLED"}
+        self._steps = self._job_obj.steps()
+        self._start(context)
+        return {"RUNNING_MODAL"}
+
+    def modal(self, context, event):
+        if event.type == "ESC":
+            self._job_obj.cancel()
+            self._steps.close()  # runs the job's cleanup; nothing was written
+            self._finish(context)
+            self.report({"WARNING"}, "SpecGen: render cancelled, nothing written")
+            return {"CANCELLED"}
+        if event.type != "TIMER":
+            return {"PASS_THROUGH"}
+        try:
+            fraction = next(self._steps)  # at most one Cycles render
+        except StopIteration:
+            self._finish(context)
+            self.report({"INFO"}, f"SpecGen: wrote {self._job_obj.output}")
+            return {"FINISHED"}
+        except (SpecGenError, OSError) as exc:
+            self._finish(context)
+            self.report({"ERROR"}, str(exc))
+            return {"CANCELLED"}
+        self._progress(context, fraction)
+        return {"RUNNING_MODAL"}
+
+
+CLASSES = (SPECGEN_OT_generate_brdf, SPECGEN_OT_apply, SPECGEN_OT_render_stack)
+
+
+def register() -> None:
+    for cls in CLASSES:
+        bpy.utils.register_class(cls)
+
+
+def unregister() -> None:
+    for cls in reversed(CLASSES):
+        bpy.utils.unregister_class(cls)

@@ -1,0 +1,68 @@
+"""The "SpecGen" tab of the 3D viewport sidebar (N-panel)."""
+
+from __future__ import annotations
+
+import bpy
+
+
+class SPECGEN_PT_main(bpy.types.Panel):
+    """Input image, spectral sampling, render settings and the three actions."""
+
+    bl_idname = "SPECGEN_PT_main"
+    bl_label = "SpecGen"
+    bl_space_type = "VIEW_3D"
+    bl_region_type = "UI"
+    bl_category = "SpecGen"
+
+    def draw(self, context):
+        s = context.scene.specgen
+        layout = self.layout
+        layout.use_property_split = True
+        layout.use_property_decorate = False
+
+        col = layout.column(heading="Input")
+        col.template_ID(s, "image", open="image.open")
+        if s.image is None:
+            col.prop(s, "image_path")
+        col.prop(s, "weights_path")
+
+        col = layout.column(heading="Spectrum", align=True)
+        col.prop(s, "wl_min", text="Wavelengths (nm)")
+        col.prop(s, "wl_max", text="To")
+        col.prop(s, "bands")
+        col = layout.column()
+        col.prop(s, "lookup_resolution")
+        col.prop(s, "basis_tolerance")
+
+        col = layout.column(heading="Render", align=True)
+        col.prop(s, "samples")
+        col.prop(s, "resolution")
+        col.prop(s, "env_samples")
+        col = layout.column()
+        col.prop(s, "output_dir")
+        col.prop(s, "overwrite")
+
+        layout.use_property_split = False
+        col = layout.column(align=True)
+        col.scale_y = 1.3
+        col.enabled = not s.running
+        col.operator("specgen.generate_brdf", icon="MATERIAL")
+        col.operator("specgen.apply", icon="CHECKMARK")
+        col.operator("specgen.render_stack", icon="RENDER_STILL")
+        if s.running:
+            layout.progress(factor=s.progress, type="BAR", text=f"{s.running}… (Esc cancels)")
+        elif s.atlas_json:
+            layout.label(text=f"Baked: {bpy.path.basename(s.atlas_json)}", icon="INFO")
+
+
+CLASSES = (SPECGEN_PT_main,)
+
+
+def register() -> None:
+    for cls in CLASSES:
+        bpy.utils.register_class(cls)
+
+
+def unregister() -> None:
+    for cls in reversed(CLASSES):
+        bpy.utils.unregister_class(cls)

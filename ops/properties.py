@@ -1,0 +1,84 @@
+"""Scene settings of the SpecGen panel (``scene.specgen``)."""
+
+from __future__ import annotations
+
+import os
+import tempfile
+
+import bpy
+from bpy.props import (BoolProperty, EnumProperty, FloatProperty, IntProperty, PointerProperty,
+                       StringProperty)
+
+from ..specgen_addon.spectra import DEFAULT_BAND_COUNT, DEFAULT_RANGE_NM
+
+LOOKUP_RESOLUTIONS = (
+    ("180", "Full (180 φd)", "The whole MERL grid: 90 θh × 90 θd × 180 φd"),
+    ("90", "Half (90 φd)", "Every second φd sample (smaller textures, slightly smoother)"),
+    ("45", "Quarter (45 φd)", "Every fourth φd sample (previews)"),
+)
+
+
+def _update_range(self, context) -> None:
+    if self.wl_max <= self.wl_min:
+        self.wl_max = self.wl_min + 1.0
+
+
+class SpecGenSettings(bpy.types.PropertyGroup):
+    """Inputs, spectral sampling and render settings of one scene."""
+
+    image: PointerProperty(name="Image", type=bpy.types.Image,
+                           description="Photo of a sphere of the material (image datablock)")
+    image_path: StringProperty(name="Image File", subtype="FILE_PATH",
+                               description="Photo of a sphere of the material (used if no datablock is set)")
+    weights_path: StringProperty(name="Weights", subtype="FILE_PATH",
+                                 description="Network weights (.pt with its .onnx graphs); empty = the shipped default")
+    wl_min: FloatProperty(name="From", default=DEFAULT_RANGE_NM[0], min=360.0, max=1000.0,
+                          precision=0, description="Shortest wavelength (nm)", update=_update_range)
+    wl_max: FloatProperty(name="To", default=DEFAULT_RANGE_NM[1], min=360.0, max=1000.0,
+                          precision=0, description="Longest wavelength (nm)", update=_update_range)
+    bands: IntProperty(name="Bands", default=DEFAULT_BAND_COUNT, min=1, max=128,
+                       description="Number of wavelength bands in the spectral output")
+    lookup_resolution: EnumProperty(name="Lookup", items=LOOKUP_RESOLUTIONS, default="180",
+                                    description="Resolution of the baked BRDF lookup textures")
+    basis_tolerance: FloatProperty(name="Basis Tolerance", default=1e-3, min=0.0, max=0.1,
+                                   precision=4, description="Relative error allowed when the "
+                                   "spectra are compressed to a basis (0 = exact, more renders)")
+    samples: IntProperty(name="Samples", default=16, min=1, max=4096,
+                         description="Cycles samples per pixel of each spectral render")
+    resolution: IntProperty(name="Resolution", default=256, min=8, max=8192,
+                            description="Width and height of the spectral render (pixels)")
+    env_samples: IntProperty(name="Env Samples", default=2, min=0, max=64,
+                             description="Environment directions the shader samples per Cycles sample")
+    output_dir: StringProperty(name="Output", subtype="DIR_PATH", default="//specgen/",
+                               description="Folder for baked lookups and spectral EXR renders")
+    overwrite: BoolProperty(name="Overwrite", default=False,
+                            description="Replace existing output files")
+    # State written by the operators (not shown as settings).
+    atlas_json: StringProperty(name="Baked Lookup", default="", options={"HIDDEN"})
+    progress: FloatProperty(name="Progress", default=0.0, min=0.0, max=1.0, subtype="FACTOR",
+                            options={"HIDDEN"})
+    running: StringProperty(name="Running", default="", options={"HIDDEN"})
+
+
+def output_dir(settings: SpecGenSettings) -> str:
+    """The output folder as an absolute path (a temp folder if the .blend is unsaved and the
+    setting is relative)."""
+    raw = settings.output_dir or "//specgen/"
+    if raw.startswith("//") and not bpy.data.filepath:
+        return os.path.join(tempfile.gettempdir(), "specgen", raw[2:])
+    return bpy.path.abspath(raw)
+
+
+CLASSES = (SpecGenSettings,)
+
+
+def register() -> None:
+    for cls in CLASSES:
+        bpy.utils.register_class(cls)
+    bpy.types.Scene.specgen = PointerProperty(type=SpecGenSettings)
+
+
+def unregister() -> None:
+    del bpy.types.Scene.specgen
+    for cls in reversed(CLASSES):
+        bpy.utils.unregister_class(cls)
