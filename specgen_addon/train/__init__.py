@@ -25,13 +25,19 @@ from .loop import MaterialSet, TrainConfig
 SHARED_RGL_DIR = Path(__file__).resolve().parents[3] / "shared" / "data" / "rgl"
 
 
-def training_input(brdf, variant: int, image_size: int) -> np.ndarray:
-    """Network input ``(3, S, S)``: the canonical sphere render under training lighting ``variant``."""
+def render_input_variant(brdf, variant: int) -> np.ndarray:
+    """Canonical sphere render ``(128, 128, 3)`` of ``brdf`` under training lighting ``variant``."""
+    from .. import input_image
+
+    return input_image.render_training_input(brdf, variant)
+
+
+def network_inputs(images: list[np.ndarray], image_size: int) -> np.ndarray:
+    """Renders -> network inputs ``(K, 3, S, S)`` exactly as inference prepares a user image."""
     from .. import input_image
     from ..infer import resample_square
 
-    rgb = input_image.render_training_input(brdf, variant)
-    return resample_square(input_image.prepare_sphere_array(rgb), image_size)
+    return np.stack([resample_square(input_image.prepare_sphere_array(im), image_size) for im in images])
 
 
 def build_material_sets(mcfg: Config, tcfg: TrainConfig, cache_dir: str | Path,
@@ -53,21 +59,23 @@ def build_material_sets(mcfg: Config, tcfg: TrainConfig, cache_dir: str | Path,
         (spectral if mat.spectral else rgb).append(mat)
     valset = [TrainingMaterial(m.name, m, True, "val") for m in val]
 
-    key = f"{mcfg.image_size}|corpus{tcfg.corpus_size}/{tcfg.corpus_seed}"
-    cache = InputImageCache(cache_dir, lambda brdf, k: training_input(brdf, k, mcfg.image_size), key)
+    cache = InputImageCache(cache_dir, render_input_variant)
     everything = spectral + [m for m in rgb if not m.name.endswith("/rgb")] + valset
-    images: dict[str, np.ndarray] = {}
+    todo = cache.missing(everything, tcfg.input_variants)
+    if todo:
+        log(f"rendering {len(todo)} input images ({tcfg.input_variants} lightings per material) "
+            f"into {cache_dir}")
     bar = None
-    if progress:
+    if progress and todo:
         from tqdm import tqdm
 
-        bar = tqdm(total=len(everything), desc="input renders", unit="mat")
-    for mat in everything:
-        images[mat.name] = cache.get(mat, tcfg.input_variants)
-        if bar is not None:
-            bar.update(1)
+        bar = tqdm(total=len(todo), desc="input renders", unit="img")
+    cache.fill(everything, tcfg.input_variants, workers=max(1, tcfg.threads),
+               progress=(lambda f: bar.update(round(f * len(todo)) - bar.n)) if bar else None)
     if bar is not None:
         bar.close()
+    images = {m.name: network_inputs(cache.load(m, tcfg.input_variants), mcfg.image_size)
+              for m in everything}
 
     def imgs(mats: list[TrainingMaterial]) -> list[np.ndarray]:
         # An RGB version sees the same input images as its spectral original.
@@ -77,4 +85,4 @@ def build_material_sets(mcfg: Config, tcfg: TrainConfig, cache_dir: str | Path,
             MaterialSet(valset, imgs(valset)))
 
 
-__all__ = ["MaterialSet", "TrainConfig", "build_material_sets", "training_input"]
+__all__ = ["MaterialSet", "TrainConfig", "build_material_sets", "network_inputs", "render_input_variant"]

@@ -15,6 +15,7 @@ from __future__ import annotations
 
 import hashlib
 import math
+import os
 from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Any, Callable, Sequence
@@ -154,27 +155,64 @@ def _eval_hd_native(brdf: Any, theta_h: np.ndarray, theta_d: np.ndarray, phi_d: 
     return brdf.eval_rgb(wi, wo)
 
 
+def material_key(mat: TrainingMaterial) -> str:
+    """Stable content key of a material for the render cache (parameters or source file)."""
+    brdf = mat.brdf
+    if hasattr(brdf, "to_dict"):
+        ident = repr(sorted(brdf.to_dict().items()))
+    else:
+        ident = repr(getattr(brdf, "metadata", {}).get("source", mat.name))
+    return hashlib.sha1(f"{mat.name}|{ident}".encode()).hexdigest()[:16]
+
+
 @dataclass
 class InputImageCache:
-    """Pre-rendered network inputs ``(K, 3, S, S)`` per material, cached on disk by content key."""
+    """Input renders ``(H, W, 3)`` per (material, lighting variant), cached as ``.npy`` files.
+
+    ``render(brdf, variant)`` makes one image; renders are model-independent (the network's
+    resampling happens on load), so every training run and ablation arm shares them.
+    """
 
     cache_dir: Path
     render: Callable[[Any, int], np.ndarray]
-    key_extra: str = ""
-    _mem: dict = field(default_factory=dict)
+    tag: str = ""
 
-    def get(self, mat: TrainingMaterial, n_variants: int) -> np.ndarray:
-        key = hashlib.sha1(f"{mat.name}|{mat.split}|{n_variants}|{self.key_extra}".encode()).hexdigest()[:20]
-        if key in self._mem:
-            return self._mem[key]
-        path = self.cache_dir / f"input_{key}.npy"
-        if path.is_file():
-            arr = np.load(path)
-        else:
-            arr = np.stack([self.render(mat.brdf, k) for k in range(n_variants)]).astype(np.float32)
-            self.cache_dir.mkdir(parents=True, exist_ok=True)
-            tmp = path.with_suffix(".tmp.npy")
-            np.save(tmp, arr)
-            tmp.replace(path)
-        self._mem[key] = arr
-        return arr
+    def path(self, mat: TrainingMaterial, variant: int) -> Path:
+        return self.cache_dir / f"input_{mat.name.replace('/', '_')}_{material_key(mat)}{self.tag}_v{variant}.npy"
+
+    def missing(self, mats: Sequence[TrainingMaterial], n_variants: int) -> list[tuple[TrainingMaterial, int]]:
+        return [(m, v) for v in range(n_variants) for m in mats if not self.path(m, v).is_file()]
+
+    def make(self, mat: TrainingMaterial, variant: int) -> None:
+        arr = np.asarray(self.render(mat.brdf, variant), dtype=np.float32)
+        self.cache_dir.mkdir(parents=True, exist_ok=True)
+        path = self.path(mat, variant)
+        tmp = path.with_name(path.stem + f".{os.getpid()}.tmp.npy")
+        np.save(tmp, arr)
+        tmp.replace(path)
+
+    def fill(self, mats: Sequence[TrainingMaterial], n_variants: int, workers: int = 2,
+             progress: Callable[[float], None] | None = None) -> None:
+        """Render what is missing, variant-major (lighting scenes are reused), on ``workers`` processes."""
+        todo = self.missing(mats, n_variants)
+        if not todo:
+            return
+        if workers <= 1:
+            for i, (m, v) in enumerate(todo):
+                self.make(m, v)
+                if progress:
+                    progress((i + 1) / len(todo))
+            return
+        import multiprocessing as mp
+
+        ctx = mp.get_context("fork")
+        with ctx.Pool(workers) as pool:
+            for i, _ in enumerate(pool.imap(self._make_task, todo, chunksize=1)):
+                if progress:
+                    progress((i + 1) / len(todo))
+
+    def _make_task(self, task: tuple[TrainingMaterial, int]) -> None:
+        self.make(*task)
+
+    def load(self, mat: TrainingMaterial, n_variants: int) -> list[np.ndarray]:
+        return [np.load(self.path(mat, v)) for v in range(n_variants)]

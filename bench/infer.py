@@ -1,0 +1,63 @@
+"""Benchmark: seconds and peak memory to generate the full spectral BRDF table from one image.
+
+Usage: ``python bench/infer.py [IMAGE] [--weights W] [--backend torch|onnx] [--bands 21] [--repeat 3]``
+
+Prints the machine, the wall time of :func:`specgen_addon.infer.generate_brdf` for the full
+90 × 90 × 180 × Λ table (1.458 M angle points × Λ bands), and the process' peak resident memory
+(``getrusage`` ru_maxrss) above the level after the weights were loaded.
+"""
+
+from __future__ import annotations
+
+import argparse
+import os
+import platform
+import resource
+import sys
+import time
+from pathlib import Path
+
+REPO = Path(__file__).resolve().parents[1]
+sys.path.insert(0, str(REPO))
+
+
+def rss_mb() -> float:
+    return resource.getrusage(resource.RUSAGE_SELF).ru_maxrss / 1024.0
+
+
+def main() -> int:
+    ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    ap.add_argument("image", nargs="?", type=Path, default=REPO / "examples" / "sphere.png")
+    ap.add_argument("--weights", type=Path, default=None)
+    ap.add_argument("--backend", choices=("torch", "onnx"), default="torch")
+    ap.add_argument("--bands", type=int, default=21)
+    ap.add_argument("--repeat", type=int, default=3)
+    args = ap.parse_args()
+
+    import numpy as np
+
+    from specgen_addon import infer
+    from specgen_addon.model import count_parameters, load_weights
+    from specgen_addon.spectra import wavelength_grid
+
+    wl = wavelength_grid(380.0, 780.0, args.bands)
+    infer.get_backend(args.weights, args.backend)          # load once: not part of the timing
+    params = count_parameters(load_weights(args.weights))
+    base = rss_mb()
+    times = []
+    for _ in range(args.repeat):
+        t0 = time.perf_counter()
+        table = infer.generate_brdf(args.image, weights=args.weights, wavelengths_nm=wl, backend=args.backend)
+        times.append(time.perf_counter() - t0)
+    n_eval = table.values.size
+    print(f"machine: {platform.machine()}, {os.cpu_count()} cores, {platform.python_version()}, "
+          f"load average {os.getloadavg()[0]:.2f}")
+    print(f"model: {params:,} parameters; backend {args.backend}")
+    print(f"table: {table.values.shape} = {n_eval / 1e6:.1f} M evaluations ({table.values.nbytes / 1e6:.0f} MB)")
+    print(f"time: best {min(times):.2f} s, median {float(np.median(times)):.2f} s over {args.repeat} runs")
+    print(f"peak RSS: {rss_mb():.0f} MB total, {rss_mb() - base:.0f} MB above the loaded model")
+    return 0
+
+
+if __name__ == "__main__":
+    sys.exit(main())

@@ -1,0 +1,119 @@
+"""Inference: the fast grid path is exact, tables come out right, bad inputs are refused."""
+
+from __future__ import annotations
+
+import numpy as np
+import pytest
+import torch
+
+from specgen_addon import infer
+from specgen_addon.errors import Cancelled, ImageInputError, SpecGenError, WeightsError
+from specgen_addon.model import Config, SpecGen, save_weights
+from specgen_addon.model.fast import GridHead, GridTables, lambda_coords
+from specgen_addon.table import grid_angles
+
+SMALL = dict(image_size=32, encoder_channels=(8, 16), latent_dim=32, decoder_seed_hw=(4, 4),
+             decoder_channels=(16, 8), head_channels=8, res_theta_h=8, res_theta_d=8, res_phi_d=12,
+             res_lambda=6, feature_dim=16, aff_map_hw=(4, 4), mlp_hidden=(16, 16))
+BANDS = np.array([400.0, 515.0, 690.0])
+
+
+@pytest.fixture(scope="module")
+def sphere_image() -> np.ndarray:
+    """A canonical input render (64², linear sRGB) of a closed-form spectral material."""
+    from specgen_addon.input_image import render_input
+    from specgen_standins import RampMaterial
+
+    return render_input(RampMaterial(), size=64)
+
+
+def small_weights(tmp_path, **kw):
+    torch.manual_seed(0)
+    model = SpecGen(Config(**{**SMALL, **kw}))
+    if model.cfg.fusion == "aff":  # a lively AFF statistic: softmax weights vary between points
+        torch.nn.init.normal_(model.fusion.branch_convs.weight, std=0.5)
+        torch.nn.init.normal_(model.fusion.expand.weight, std=2.0)
+    return save_weights(model, tmp_path / f"w_{kw.get('fusion', 'aff')}.pt"), model
+
+
+@pytest.mark.parametrize("fusion", ["aff", "hadamard"])
+def test_fast_grid_equals_naive_per_query_evaluation(tmp_path, fusion):
+    path, model = small_weights(tmp_path, fusion=fusion)
+    be = infer.get_backend(path, "torch")
+    x = np.random.default_rng(0).random((1, 3, 32, 32)).astype(np.float32)
+    u_lam = lambda_coords(model, BANDS).numpy()
+    rp = infer.evaluate_grid(be, be.make_tables(x, u_lam), BANDS.size)
+    assert rp.shape == (90, 90, 180, 3)
+
+    th, td, pd = grid_angles()
+    idx = np.random.default_rng(1).integers(0, [90, 90, 180, 3], size=(2000, 4))
+    q = lambda a: torch.tensor(a, dtype=torch.float32)[None]  # noqa: E731
+    with torch.no_grad():
+        planes = model.eval().planes(torch.from_numpy(x))
+        naive = model.query(planes, q(th[idx[:, 0]]), q(td[idx[:, 1]]), q(pd[idx[:, 2]]),
+                            q(BANDS[idx[:, 3]]))[0].numpy()
+    fast = rp[idx[:, 0], idx[:, 1], idx[:, 2], idx[:, 3]]
+    assert np.abs(fast - naive).max() < 1e-5
+
+
+def test_inplace_head_equals_the_exportable_head(tmp_path):
+    _, model = small_weights(tmp_path)
+    tables = GridTables(model)(torch.rand(1, 3, 32, 32), lambda_coords(model, BANDS))
+    head = GridHead(model)
+    blocks = (tables[0][3:5, 10:17], tables[1][3:5], tables[2][10:17], tables[3][3:5], tables[4][10:17],
+              tables[5])
+    with torch.no_grad():
+        a, b = head(*blocks), head.forward_inplace(*blocks)
+    assert a.shape == (2, 7, 180, 3)
+    assert torch.allclose(a, b, atol=1e-6)
+
+
+def test_generate_brdf_writes_a_full_spectral_table(tmp_path, sphere_image):
+    path, _ = small_weights(tmp_path)
+    ticks = []
+    table = infer.generate_brdf(sphere_image, weights=path, wavelengths_nm=BANDS, progress=ticks.append)
+    assert table.values.shape == (90, 90, 180, 3) and table.is_spectral
+    assert np.array_equal(table.wavelengths, BANDS)
+    assert np.all(table.values >= 0) and np.all(np.isfinite(table.values))
+    assert ticks[-1] == pytest.approx(1.0) and ticks == sorted(ticks)
+    out = table.save(tmp_path / "brdf.npz")
+    assert out.is_file()
+
+
+def test_generate_brdf_can_be_cancelled(tmp_path, sphere_image):
+    path, _ = small_weights(tmp_path)
+    with pytest.raises(Cancelled):
+        infer.generate_brdf(sphere_image, weights=path, wavelengths_nm=BANDS, cancel=lambda: True)
+
+
+def test_wavelengths_outside_the_model_range_are_refused(tmp_path, sphere_image):
+    path, _ = small_weights(tmp_path)
+    with pytest.raises(SpecGenError, match="outside the model's 380–780 nm"):
+        infer.generate_brdf(sphere_image, weights=path, wavelengths_nm=[350.0, 500.0])
+
+
+def test_images_without_a_sphere_or_with_wrong_channels_are_refused(tmp_path):
+    path, _ = small_weights(tmp_path)
+    with pytest.raises(ImageInputError):
+        infer.generate_brdf(np.zeros((64, 64, 3), np.float32), weights=path)
+    with pytest.raises(ImageInputError):
+        infer.generate_brdf(np.ones((64, 64, 2), np.float32), weights=path)
+    with pytest.raises(ImageInputError):
+        infer.generate_brdf(np.full((64, 64, 3), np.nan, np.float32), weights=path)
+
+
+def test_bad_weights_file_gives_a_weights_error(tmp_path, sphere_image):
+    bad = tmp_path / "bad.pt"
+    bad.write_bytes(b"\x00" * 100)
+    with pytest.raises(WeightsError, match="bad.pt"):
+        infer.generate_brdf(sphere_image, weights=bad)
+    with pytest.raises(WeightsError, match="not found"):
+        infer.generate_brdf(sphere_image, weights=tmp_path / "none.pt")
+
+
+def test_shipped_default_weights_load():
+    from specgen_addon.model import DEFAULT_WEIGHTS, load_weights
+
+    model = load_weights()
+    assert DEFAULT_WEIGHTS.stat().st_size < 20e6
+    assert model.meta.get("steps", 0) > 0

@@ -1,0 +1,70 @@
+"""ONNX export: onnxruntime reproduces the torch model (the Blender path runs without torch)."""
+
+from __future__ import annotations
+
+import numpy as np
+import pytest
+import torch
+
+from specgen_addon import infer
+from specgen_addon.errors import WeightsError
+from specgen_addon.model import Config, SpecGen, save_weights
+from specgen_addon.model.export_onnx import export_onnx
+
+pytest.importorskip("onnxruntime")
+
+SMALL = dict(image_size=32, encoder_channels=(8, 16), latent_dim=32, decoder_seed_hw=(4, 4),
+             decoder_channels=(16, 8), head_channels=8, res_theta_h=8, res_theta_d=8, res_phi_d=12,
+             res_lambda=6, feature_dim=16, aff_map_hw=(4, 4), mlp_hidden=(16, 16))
+
+
+@pytest.fixture(scope="module")
+def exported(tmp_path_factory):
+    d = tmp_path_factory.mktemp("onnx")
+    torch.manual_seed(0)
+    model = SpecGen(Config(**SMALL))
+    torch.nn.init.normal_(model.fusion.branch_convs.weight, std=0.5)
+    torch.nn.init.normal_(model.fusion.expand.weight, std=2.0)
+    weights = save_weights(model, d / "w.pt")
+    return weights, export_onnx(weights)
+
+
+def test_export_writes_two_graphs_beside_the_weights(exported):
+    weights, (tables, head) = exported
+    assert tables == weights.with_name("w.tables.onnx") and head == weights.with_name("w.head.onnx")
+    import onnx
+
+    for p in (tables, head):
+        onnx.checker.check_model(onnx.load(str(p)))
+
+
+def test_onnx_and_torch_tables_agree(exported):
+    weights, _ = exported
+    x = np.random.default_rng(0).random((1, 3, 32, 32)).astype(np.float32)
+    u = np.linspace(-1, 1, 7).astype(np.float32)       # another band count than at export
+    a = infer.get_backend(weights, "onnx").make_tables(x, u)
+    b = infer.get_backend(weights, "torch").make_tables(x, u)
+    for ta, tb in zip(a, b):
+        assert ta.shape == tuple(tb.shape)
+        assert np.abs(ta - tb.numpy()).max() < 1e-4
+
+
+def test_onnx_and_torch_generate_the_same_brdf(exported):
+    from specgen_addon.input_image import render_input
+    from specgen_standins import RampMaterial
+
+    weights, _ = exported
+    image = render_input(RampMaterial(alpha=0.08), size=64)
+    bands = np.array([420.0, 560.0, 660.0, 760.0])
+    a = infer.generate_brdf(image, weights=weights, wavelengths_nm=bands, backend="onnx")
+    b = infer.generate_brdf(image, weights=weights, wavelengths_nm=bands, backend="torch")
+    ra = np.log1p(255 * a.values) / np.log1p(255)   # compare in the network's μ-law space
+    rb = np.log1p(255 * b.values) / np.log1p(255)
+    assert np.abs(ra - rb).max() < 1e-4
+
+
+def test_onnx_backend_without_exported_graphs_says_how_to_make_them(tmp_path):
+    torch.manual_seed(0)
+    weights = save_weights(SpecGen(Config(**SMALL)), tmp_path / "lonely.pt")
+    with pytest.raises(WeightsError, match="export-onnx"):
+        infer.get_backend(weights, "onnx")
