@@ -18,13 +18,15 @@ environment map (among :data:`specgen_addon.lighting.TRAIN_ENVS`), its rotation 
 
 User images (:func:`load_sphere_image`): EXR (linear) or PNG/JPEG (8/16-bit, sRGB-decoded), RGB or
 RGBA. The sphere is found from the alpha channel when there is one, else as a circle fitted (RANSAC)
-to the outline of the thresholded foreground; it is cropped to its bounding square, resampled to
-the canonical size and its background set to 0.
+to the outline of the foreground (pixels whose colour departs from the border's median colour by
+more than a threshold; on an exactly black background, every non-zero pixel). It is cropped to
+its bounding square, resampled to the canonical size and its background set to 0.
 """
 
 from __future__ import annotations
 
 import functools
+import warnings
 from pathlib import Path
 from typing import Callable
 
@@ -271,19 +273,28 @@ def prepare_sphere_array(arr: np.ndarray, size: int = CANONICAL_SIZE) -> np.ndar
 
 
 def _foreground(rgb: np.ndarray) -> np.ndarray:
+    """Pixels that differ from the background, whose colour is the median of the image border."""
     from scipy import ndimage
 
     lum = rgb @ np.array([0.2126, 0.7152, 0.0722])
-    top = np.percentile(lum, 99.5)
-    if not top > 0:
+    if not np.percentile(lum, 99.5) > 0:
         raise ImageInputError("image is blank: no sphere found")
     if np.mean(lum == 0) >= 0.1:
         fg = lum > 0  # a render on an exactly black background: every lit pixel is the object
     else:
-        fg = ndimage.binary_opening(lum > max(0.02 * top, 1e-6), iterations=1)
+        border = np.concatenate([rgb[:2].reshape(-1, 3), rgb[-2:].reshape(-1, 3),
+                                 rgb[:, :2].reshape(-1, 3), rgb[:, -2:].reshape(-1, 3)])
+        background = np.median(border, axis=0)
+        dist = np.abs(rgb - background).max(axis=-1)
+        border_dist = np.abs(border - background).max(axis=-1)
+        spread = np.percentile(dist, 99.5)
+        if not spread > 0:
+            raise ImageInputError("image is blank (a single colour): no sphere found")
+        threshold = max(0.05 * spread, 4.0 * float(np.percentile(border_dist, 90)), 1e-6)
+        fg = ndimage.binary_opening(dist > threshold, iterations=1)
     labels, count = ndimage.label(fg)
     if count == 0:
-        raise ImageInputError("no sphere found (no foreground above the threshold)")
+        raise ImageInputError("no sphere found (nothing stands out from the background)")
     sizes = ndimage.sum(fg, labels, index=np.arange(1, count + 1))
     largest = labels == (1 + int(np.argmax(sizes)))
     return ndimage.binary_fill_holes(largest)
@@ -306,8 +317,10 @@ def _circle_of_mask(mask: np.ndarray, fit_outline: bool) -> tuple[float, float, 
         pts = np.stack([ex + 0.5, ey + 0.5], -1).astype(np.float64)
         model, inliers = (None, None)
         if len(pts) >= 10:
-            model, inliers = ransac(pts, CircleModel, min_samples=3, residual_threshold=1.5,
-                                    max_trials=200, rng=0)
+            with warnings.catch_warnings():  # degenerate triples (collinear edge points) warn
+                warnings.simplefilter("ignore")
+                model, inliers = ransac(pts, CircleModel, min_samples=3, residual_threshold=1.5,
+                                        max_trials=200, rng=0)
         if model is None or inliers is None or inliers.mean() <= 0.5:
             raise ImageInputError("no sphere found (the foreground's outline is not a circle; "
                                   "give the image an alpha channel masking the sphere)")
