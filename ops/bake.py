@@ -11,10 +11,13 @@ reference renderer's convention). Then the spectral radiance is
 
     L(λ) = Σ_c Σ_k U_c(λ) B_k(λ) I_ck,   I_ck = Σ_lights c_k(ω_l) rgb_lc (n·ω_l)⁺ V + ∫ env …
 
-and Cycles only renders the ``3K`` images ``I_ck``: four coefficients (one RGBA lookup group,
-two bilinear taps for the trilinear interpolation) per Cycles render, RGB each, out through four
-colour passes. ``K`` is the smallest multiple of four whose truncation error is below a tolerance
-(exact when ``K ≥ Λ``), so 21 bands usually need one or two renders instead of Λ/3.
+and Cycles only renders the images ``I_ck``: four coefficient slots (one RGBA lookup group, two
+bilinear taps for the trilinear interpolation) per Cycles render, RGB each, out through four colour
+passes. Cycles drops or clamps negative closure weights (only Emission keeps them), so the signed
+coefficients are stored shifted, ``c_k + o_k ≥ 0``, and slot 0 holds the constant 1 whose image
+``I_c1`` removes the shift afterwards: ``I_ck = I'_ck − o_k I_c1`` (exact, linear). ``K`` is the
+smallest of 3, 7, 11, … (filling whole renders) whose truncation error is below a tolerance, or Λ
+(exact), so 21 bands usually need one or two renders instead of Λ/3.
 
 Files (float32 OpenEXR):
 
@@ -40,8 +43,7 @@ from ..specgen_addon.errors import Cancelled, SpecGenError
 from ..specgen_addon.io_utils import atomic_write
 from ..specgen_addon.table import N_PHI_D, N_THETA_D, N_THETA_H
 
-COEFFS_PER_RENDER = 4   # one RGBA lookup group per Cycles render
-CHANNELS_PER_RENDER = 3 * COEFFS_PER_RENDER  # RGB × 4 coefficients = 4 colour passes
+COEFFS_PER_RENDER = 4   # coefficient slots per Cycles render: one RGBA lookup group, 4 passes
 DEFAULT_TOLERANCE = 1e-3
 MAX_LIGHTS = 4  # lights the shader takes as sockets (Light0… Light3)
 ENV_LIST_WIDTH = 256
@@ -75,14 +77,16 @@ def group_path(base: Path, group: int) -> Path:
 class AtlasInfo:
     """What :func:`bake_atlas` wrote.
 
-    ``basis`` (K, Λ) holds the spectral basis ``B_k(λ)`` at ``wavelengths_nm``; group file ``g``
-    holds coefficients ``4g … 4g+3`` in R, G, B, A. ``rel_error`` is the largest per-band RMS
+    ``basis`` (K, Λ) holds the spectral basis ``B_k(λ)`` at ``wavelengths_nm`` and ``offsets`` (K,)
+    the shifts ``o_k``. Slot 0 is the constant 1, slot ``k + 1`` holds ``c_k + o_k``; group file
+    ``g`` holds slots ``4g … 4g+3`` in R, G, B, A. ``rel_error`` is the largest per-band RMS
     truncation error relative to that band's peak (0 when exact).
     """
 
     path: Path
     wavelengths_nm: np.ndarray
     basis: np.ndarray
+    offsets: np.ndarray
     n_phi_d: int
     tiles_x: int
     tiles_y: int
@@ -93,9 +97,13 @@ class AtlasInfo:
         return int(self.basis.shape[0])
 
     @property
+    def n_slots(self) -> int:
+        return self.n_coeffs + 1
+
+    @property
     def n_renders(self) -> int:
-        """Cycles renders of a spectral stack: one per group of four coefficients."""
-        return self.n_coeffs // COEFFS_PER_RENDER
+        """Cycles renders of a spectral stack: one per group of four slots."""
+        return -(-self.n_slots // COEFFS_PER_RENDER)
 
     @property
     def group_paths(self) -> list[Path]:
@@ -136,9 +144,9 @@ def spectral_basis(values: np.ndarray, tolerance: float = DEFAULT_TOLERANCE,
 
     ``B``'s rows are orthonormal eigenvectors of the Gram matrix ``MᵀM`` (uncentred PCA / SVD of
     the entries-by-bands matrix ``M``), so coefficients are ``c = M Bᵀ`` and ``M ≈ c B``. ``K`` is
-    the smallest multiple of four whose worst per-band RMS residual, relative to the band's peak,
-    is ≤ ``tolerance``; at ``K ≥ Λ`` the basis is complete and the factorisation exact (rows past
-    Λ are zero).
+    the smallest of 3, 7, 11, … (with the constant slot, whole groups of four) whose worst per-band
+    RMS residual, relative to the band's peak, is ≤ ``tolerance``, capped at Λ where the basis is
+    complete and the factorisation exact; ``max_coeffs`` caps K.
     """
     lam = values.shape[-1]
     m = values.reshape(-1, lam)
@@ -147,25 +155,20 @@ def spectral_basis(values: np.ndarray, tolerance: float = DEFAULT_TOLERANCE,
         chunk = m[start:start + (1 << 18)].astype(np.float64)
         gram += chunk.T @ chunk
     eig, vec = np.linalg.eigh(gram)
-    order = np.argsort(eig)[::-1]
-    vec = vec[:, order]
+    vec = vec[:, np.argsort(eig)[::-1]]
     n = m.shape[0]
     peak = np.maximum(np.max(m, axis=0).astype(np.float64), 1e-30)
-    full = -(-lam // COEFFS_PER_RENDER) * COEFFS_PER_RENDER
-    limit = full if max_coeffs is None else min(full, max(COEFFS_PER_RENDER, max_coeffs))
-    k = COEFFS_PER_RENDER
+    limit = lam if max_coeffs is None else max(1, min(lam, max_coeffs))
+    k = COEFFS_PER_RENDER - 1
     while True:
-        kk = min(k, lam)
-        v = vec[:, :kk]
+        k = min(k, limit)
+        v = vec[:, :k]
         # residual energy per band: diag(G) − diag(G V Vᵀ)
         resid = np.clip(np.diag(gram) - np.einsum("bk,bk->b", gram @ v, v), 0.0, None)
-        rel = float(np.max(np.sqrt(resid / n) / peak)) if kk < lam else 0.0
+        rel = float(np.max(np.sqrt(resid / n) / peak)) if k < lam else 0.0
         if rel <= tolerance or k >= limit:
-            break
+            return vec[:, :k].T.copy(), rel
         k += COEFFS_PER_RENDER
-    basis = np.zeros((k, lam))
-    basis[:kk] = vec[:, :kk].T
-    return basis, rel
 
 
 def bake_atlas(table, path: str | os.PathLike, wavelengths_nm: np.ndarray | None = None,
@@ -200,20 +203,30 @@ def bake_atlas(table, path: str | os.PathLike, wavelengths_nm: np.ndarray | None
     basis, rel = spectral_basis(values, tolerance, max_coeffs)
     if progress is not None:
         progress(0.2)
+    # slot 0: the constant 1; slot k+1: c_k + o_k ≥ 0 (Cycles keeps only non-negative weights)
+    coeffs = values @ basis.T.astype(np.float32)                         # (90, 90, P, K)
+    offsets = np.maximum(0.0, -coeffs.min(axis=(0, 1, 2))).astype(np.float64)
+    slots = np.concatenate([np.ones(coeffs.shape[:3] + (1,), np.float32),
+                            coeffs + offsets.astype(np.float32)], axis=-1)
+    del coeffs
     tiles_x, tiles_y = atlas_layout(n_phi_d)
-    info = AtlasInfo(Path(path), wl, basis, n_phi_d, tiles_x, tiles_y, rel)
+    info = AtlasInfo(Path(path), wl, basis, offsets, n_phi_d, tiles_x, tiles_y, rel)
+    info.path.parent.mkdir(parents=True, exist_ok=True)
     shape = (tiles_y * N_THETA_D, tiles_x * N_THETA_H)
     for g, target in enumerate(info.group_paths):
         if cancel is not None and cancel():
             raise Cancelled("bake cancelled")
-        coeffs = values @ basis[COEFFS_PER_RENDER * g:COEFFS_PER_RENDER * (g + 1)].T.astype(np.float32)
         channels = {}
         for c, name in enumerate("RGBA"):
-            # tile k at column k % tiles_x, row k // tiles_x; inside it x = θh index, y = θd.
-            tiles = coeffs[:, :, :, c].transpose(2, 1, 0)                # (P, θd, θh)
-            channels[name] = tiles.reshape(tiles_y, tiles_x, N_THETA_D, N_THETA_H) \
-                .transpose(0, 2, 1, 3).reshape(shape)
-        attrs = {"specgenCoefficients": f"{COEFFS_PER_RENDER * g}-{COEFFS_PER_RENDER * g + 3}",
+            slot = COEFFS_PER_RENDER * g + c
+            plane = np.zeros(shape, np.float32)
+            if slot < slots.shape[-1]:
+                # tile k at column k % tiles_x, row k // tiles_x; inside it x = θh index, y = θd.
+                tiles = slots[:, :, :, slot].transpose(2, 1, 0)         # (P, θd, θh)
+                plane[:] = tiles.reshape(tiles_y, tiles_x, N_THETA_D, N_THETA_H) \
+                    .transpose(0, 2, 1, 3).reshape(shape)
+            channels[name] = plane
+        attrs = {"specgenSlots": f"{COEFFS_PER_RENDER * g}-{COEFFS_PER_RENDER * g + 3}",
                  "specgenPhiD": str(n_phi_d)}
         _write_exr(target, channels, overwrite=overwrite, attributes=attrs, tiled=True)
         if progress is not None:
@@ -246,12 +259,13 @@ def atlas_lookup_reference(atlas: np.ndarray, info: AtlasInfo, theta_h: np.ndarr
         d = atlas[oy + y0 + 1, ox + x0 + 1]
         return (1 - ty) * ((1 - tx) * a + tx * b) + ty * ((1 - tx) * c + tx * d)
 
-    coeffs = (1 - tk) * bilinear(k0) + tk * bilinear(k1)
+    slots = (1 - tk) * bilinear(k0) + tk * bilinear(k1)
+    coeffs = slots[:, 1:info.n_slots] - slots[:, :1] * info.offsets[None]
     return coeffs @ info.basis
 
 
 def read_atlas(info: AtlasInfo) -> np.ndarray:
-    """All coefficient planes stacked (H, W, K) (for tests and checks)."""
+    """All slot planes stacked (H, W, 4 × groups) (for tests and checks)."""
     import OpenEXR
 
     planes = []
@@ -262,13 +276,18 @@ def read_atlas(info: AtlasInfo) -> np.ndarray:
     return np.stack(planes, axis=-1)
 
 
-def assemble_spectrum(images: np.ndarray, basis: np.ndarray, uplift: np.ndarray) -> np.ndarray:
-    """Spectral radiance (H, W, Λ) from rendered coefficient images ``I_ck``.
+def assemble_spectrum(images: np.ndarray, basis: np.ndarray, offsets: np.ndarray,
+                      uplift: np.ndarray) -> np.ndarray:
+    """Spectral radiance (H, W, Λ) from the rendered slot images.
 
-    ``images`` (H, W, K, 3): coefficient k lit by the R, G, B parts of the lighting; ``basis``
-    (K, Λ) = ``B_k(λ)``; ``uplift`` (3, Λ) = ``U_c(λ)``. ``L(λ) = Σ_c Σ_k U_c(λ) B_k(λ) I_ck``.
+    ``images`` (H, W, S ≥ K+1, 3): slot s lit by the R, G, B parts of the lighting (slot 0 = the
+    constant 1); ``basis`` (K, Λ) = ``B_k(λ)``; ``offsets`` (K,) = ``o_k``; ``uplift`` (3, Λ) =
+    ``U_c(λ)``. ``L(λ) = Σ_c Σ_k U_c(λ) B_k(λ) (I'_{c,k+1} − o_k I'_{c,0})``.
     """
-    return np.einsum("hwkc,cl,kl->hwl", images, uplift, basis, optimize=True).astype(np.float32)
+    k = basis.shape[0]
+    coeff = images[:, :, 1:k + 1, :].astype(np.float64) - \
+        np.asarray(offsets, np.float64)[None, None, :, None] * images[:, :, :1, :].astype(np.float64)
+    return np.einsum("hwkc,cl,kl->hwl", coeff, uplift, basis, optimize=True).astype(np.float32)
 
 
 # ---------------------------------------------------------------------------------- lighting
@@ -370,7 +389,7 @@ def save_atlas_info(info: AtlasInfo, path: str | os.PathLike) -> Path:
 
     data = {"format": "specgen-atlas", "version": 1, "path": str(info.path),
             "wavelengths_nm": [float(w) for w in info.wavelengths_nm],
-            "basis": info.basis.tolist(), "n_phi_d": info.n_phi_d, "tiles_x": info.tiles_x,
+            "basis": info.basis.tolist(), "offsets": info.offsets.tolist(), "n_phi_d": info.n_phi_d, "tiles_x": info.tiles_x,
             "tiles_y": info.tiles_y, "rel_error": info.rel_error}
     with atomic_write(path, overwrite=True) as tmp:
         tmp.write_text(json.dumps(data))
@@ -387,7 +406,8 @@ def load_atlas_info(path: str | os.PathLike) -> AtlasInfo:
         if data.get("format") != "specgen-atlas":
             raise ValueError("not a SpecGen atlas description")
         info = AtlasInfo(Path(data["path"]), np.asarray(data["wavelengths_nm"], float),
-                         np.asarray(data["basis"], float), int(data["n_phi_d"]), int(data["tiles_x"]),
+                         np.asarray(data["basis"], float), np.asarray(data["offsets"], float),
+                         int(data["n_phi_d"]), int(data["tiles_x"]),
                          int(data["tiles_y"]), float(data["rel_error"]))
     except (OSError, ValueError, KeyError, TypeError) as exc:
         raise SpecGenError(f"{path}: cannot read the baked lookup description ({exc})") from None

@@ -138,6 +138,7 @@ def make_material(name: str, atlas: bake.AtlasInfo) -> bpy.types.Material:
     mat["specgen_atlas"] = str(atlas.path)
     mat["specgen_atlas_groups"] = [str(p) for p in atlas.group_paths]
     mat["specgen_basis"] = [float(x) for x in atlas.basis.ravel()]
+    mat["specgen_offsets"] = [float(x) for x in atlas.offsets]
     mat["specgen_basis_error"] = float(atlas.rel_error)
     return mat
 
@@ -249,7 +250,9 @@ class _SceneState:
         for attr, value in (("device", "CPU"), ("shading_system", True), ("samples", self.samples),
                             ("max_bounces", 0), ("diffuse_bounces", 0), ("glossy_bounces", 0),
                             ("transmission_bounces", 0), ("transparent_max_bounces", 0),
-                            ("use_denoising", False)):
+                            ("use_denoising", False),
+                            # every pass gets every sample (adaptive stopping looks at Combined only)
+                            ("use_adaptive_sampling", False)):
             self._set(cy, attr, value)
         self._set(sc.render, "resolution_x", self.resolution[0])
         self._set(sc.render, "resolution_y", self.resolution[1])
@@ -344,6 +347,7 @@ class SpectralRenderJob:
     spectral: np.ndarray | None = field(default=None, init=False)
     wavelengths_nm: np.ndarray | None = field(default=None, init=False)
     basis: np.ndarray | None = field(default=None, init=False)
+    offsets: np.ndarray | None = field(default=None, init=False)
     coefficient_images: np.ndarray | None = field(default=None, init=False)
     timings: dict = field(default_factory=dict, init=False)
     _cancelled: bool = field(default=False, init=False)
@@ -373,14 +377,16 @@ class SpectralRenderJob:
         mats = specgen_materials(self.scene)
         if not mats:
             raise SpecGenError("no render-visible object uses a SpecGen material (Apply one first)")
-        keys = {(tuple(m["specgen_wavelengths_nm"]), tuple(m["specgen_basis"])) for m in mats}
+        keys = {(tuple(m["specgen_wavelengths_nm"]), tuple(m["specgen_basis"]),
+                 tuple(m["specgen_offsets"])) for m in mats}
         if len(keys) != 1:
             # One spectral basis per render: the passes hold coefficients of that basis.
             raise SpecGenError("SpecGen materials in the scene have different bands or spectral "
                                "bases; generate them with the same settings")
-        wl, basis = next(iter(keys))
+        wl, basis, offsets = next(iter(keys))
         self.wavelengths_nm = np.asarray(wl, dtype=np.float64)
         self.basis = np.asarray(basis, dtype=np.float64).reshape(-1, self.wavelengths_nm.size)
+        self.offsets = np.asarray(offsets, dtype=np.float64)
         for m in mats:
             for p in m["specgen_atlas_groups"]:
                 if not Path(p).is_file():
@@ -392,7 +398,7 @@ class SpectralRenderJob:
         t0 = time.perf_counter()
         mats = self._preflight()
         wl = self.wavelengths_nm
-        renders = self.basis.shape[0] // bake.COEFFS_PER_RENDER
+        renders = -(-(self.basis.shape[0] + 1) // bake.COEFFS_PER_RENDER)
         ensure_oslquery()
         work = Path(tempfile.mkdtemp(prefix="specgen_render_"))
         try:
@@ -428,6 +434,8 @@ class SpectralRenderJob:
                 for mat in mats:
                     node = mat.node_tree.nodes[SCRIPT_NODE_NAME]
                     node.inputs["Atlas"].default_value = list(mat["specgen_atlas_groups"])[r]
+                    mat.node_tree.update_tag()  # a string-socket edit alone does not re-sync Cycles
+                    mat.update_tag()
                 t = time.perf_counter()
                 with _SceneState(self.scene, self.samples, self.resolution, out_dir):
                     bpy.ops.render.render(write_still=False, scene=self.scene.name)
@@ -438,7 +446,7 @@ class SpectralRenderJob:
             self._check()
             self.timings["cycles_s"] = t_render
             self.coefficient_images = images
-            self.spectral = bake.assemble_spectrum(images, self.basis, _uplift(wl))
+            self.spectral = bake.assemble_spectrum(images, self.basis, self.offsets, _uplift(wl))
             outs = self._outputs()
             if outs is not None:
                 from ..specgen_addon.spectral_exr import (linear_srgb_preview, write_preview_png,

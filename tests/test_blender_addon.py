@@ -1,0 +1,329 @@
+"""The Blender side, headless with the bpy module and real Cycles (no mocks).
+
+The repository is imported as the package ``specgen`` (:func:`batch.load_package`), exactly as an
+installed extension is imported as ``bl_ext.<repo>.specgen``: ``ops`` reaches the core through
+relative imports in both cases.
+"""
+
+from __future__ import annotations
+
+import dataclasses
+import os
+import subprocess
+import sys
+from importlib import import_module
+from pathlib import Path
+
+import numpy as np
+import pytest
+
+bpy = pytest.importorskip("bpy")
+
+import batch  # noqa: E402  (after the bpy skip: batch's package loader is what Blender mimics)
+
+PKG = batch.load_package()
+bake = import_module(f"{PKG.__name__}.ops.bake")
+render = import_module(f"{PKG.__name__}.ops.render")
+scene_mod = import_module(f"{PKG.__name__}.ops.scene")
+core_errors = import_module(f"{PKG.__name__}.specgen_addon.errors")
+
+from specgen_addon.render import DistantLight, Environment, EnvSampling, render_spectral, sphere_geometry  # noqa: E402
+from specgen_addon.rusinkiewicz import io_from_half_diff  # noqa: E402
+from specgen_addon.table import BRDFTable  # noqa: E402
+
+REPO = Path(__file__).resolve().parents[1]
+WL = np.array([410.0, 480.0, 540.0, 600.0, 660.0, 720.0])
+
+
+class _Lobes:
+    """Spectral test BRDF (sr⁻¹): coloured Lambertian + a GGX lobe with its own spectrum; with
+    ``rich`` also a sharper lobe, a grazing (Schlick-like) and a retro-reflective term with three
+    more spectra, so the spectra span five dimensions and need two groups of four basis coefficients."""
+
+    def __init__(self, rich: bool = False):
+        self.rich = rich
+        self.rho = np.interp(WL, [400, 550, 720], [0.15, 0.7, 0.35])
+        self.spec = np.interp(WL, [400, 720], [0.9, 0.2])
+        self.spec2 = np.interp(WL, [400, 600, 720], [0.1, 0.8, 0.3])
+        self.graze = np.interp(WL, [400, 500, 720], [0.6, 0.05, 0.5])
+        self.back = np.interp(WL, [400, 650, 720], [0.05, 0.5, 0.1])
+
+    @staticmethod
+    def _ggx(wi, wo, alpha):
+        h = wi + wo
+        h = h / np.linalg.norm(h, axis=-1, keepdims=True)
+        a2 = alpha ** 2
+        cos_h = np.clip(h[:, 2], 0.0, 1.0)
+        d = a2 / (np.pi * (cos_h ** 2 * (a2 - 1) + 1) ** 2)
+        return d / (4 * np.clip(wi[:, 2], 1e-3, None) * np.clip(wo[:, 2], 1e-3, None)), h
+
+    def eval(self, wi, wo, wavelengths_nm=None):
+        wi, wo = np.atleast_2d(wi), np.atleast_2d(wo)
+        lobe, h = self._ggx(wi, wo, 0.25)
+        f = self.rho[None] / np.pi + 0.1 * lobe[:, None] * self.spec[None]
+        if self.rich:
+            sharp, _ = self._ggx(wi, wo, 0.08)
+            cos_d = np.clip(np.sum(wi * h, -1), 0.0, 1.0)
+            f = f + 0.02 * sharp[:, None] * self.spec2[None] + 0.3 * ((1 - cos_d) ** 5)[:, None] * self.graze[None]
+            back = np.clip(np.sum(wi * wo, -1), 0.0, 1.0) ** 4  # retro-reflection
+            f = f + 0.2 * back[:, None] * self.back[None]
+        above = (wi[:, 2] > 0) & (wo[:, 2] > 0)
+        return np.where(above[:, None], f, 0.0)
+
+
+def _tabulate(brdf) -> BRDFTable:
+    return BRDFTable.tabulate(lambda th, td, pd: brdf.eval(*io_from_half_diff(th, td, pd)), WL)
+
+
+@pytest.fixture(scope="module")
+def table() -> BRDFTable:
+    """Two spectral components: the basis needs one group of four coefficients (one render)."""
+    return _tabulate(_Lobes())
+
+
+@pytest.fixture(scope="module")
+def rich_table() -> BRDFTable:
+    """Five spectral components: two groups (two Cycles renders)."""
+    return _tabulate(_Lobes(rich=True))
+
+
+def _psnr(a: np.ndarray, ref: np.ndarray) -> float:
+    return float(10 * np.log10(ref.max() ** 2 / np.mean((a - ref) ** 2)))
+
+
+def _sphere_scene(atlas, resolution_filter: float = 0.01):
+    bpy.ops.wm.read_factory_settings(use_empty=True)
+    sc = bpy.context.scene
+    scene_mod.add_camera(sc)
+    obj = scene_mod.add_mesh(sc, "sphere")
+    obj.data.materials.append(render.make_material("SpecGen test", atlas))
+    sc.cycles.filter_width = resolution_filter  # sample pixel centres, as the reference does
+    return sc
+
+
+# ------------------------------------------------------------------------- register / compile
+def test_register_unregister_leaves_nothing_behind():
+    before_types = set(dir(bpy.types))
+    before_ops = set(dir(bpy.ops.specgen)) if hasattr(bpy.ops, "specgen") else set()
+    PKG.register()
+    try:
+        assert hasattr(bpy.types.Scene, "specgen")
+        assert {"SPECGEN_PT_main", "SPECGEN_OT_generate_brdf", "SPECGEN_OT_apply",
+                "SPECGEN_OT_render_stack"} <= set(dir(bpy.types))
+        assert bpy.types.SPECGEN_PT_main.bl_category == "SpecGen"
+        assert bpy.context.scene.specgen.bands == 21
+    finally:
+        PKG.unregister()
+    assert set(dir(bpy.types)) == before_types
+    assert not hasattr(bpy.types.Scene, "specgen")
+    assert bpy.types.PropertyGroup.bl_rna_get_subclass_py("SpecGenSettings") is None
+    assert (set(dir(bpy.ops.specgen)) if hasattr(bpy.ops, "specgen") else set()) <= before_ops
+    PKG.register()  # and it can come back
+    PKG.unregister()
+
+
+def test_osl_shader_compiles_with_expected_sockets():
+    bpy.ops.wm.read_factory_settings(use_empty=True)
+    mat = bpy.data.materials.new("osl")
+    node = mat.node_tree.nodes.new("ShaderNodeScript")
+    render.compile_script_node(node)
+    inputs = {s.name: s.type for s in node.inputs}
+    assert inputs["Atlas"] == "STRING" and inputs["EnvMap"] == "STRING" and inputs["EnvList"] == "STRING"
+    assert inputs["TilesX"] == "INT" and inputs["PhiD"] == "INT" and inputs["EnvSamples"] == "INT"
+    for i in range(bake.MAX_LIGHTS):
+        assert inputs[f"Light{i}Kind"] == "INT"
+        assert inputs[f"Light{i}Vec"] == "VECTOR"
+        assert inputs[f"Light{i}Color"] == "RGBA"
+    assert [s.name for s in node.outputs] == ["BSDF"] and node.outputs[0].type == "SHADER"
+
+
+def test_broken_shader_source_is_reported(monkeypatch, tmp_path):
+    bad = tmp_path / "bad.osl"
+    bad.write_text(render.SHADER_PATH.read_text().replace("float th, td, pd, x, y, tk;", "float v;", 1))
+    monkeypatch.setattr(render, "SHADER_PATH", bad)
+    monkeypatch.setattr(render, "SHADER_TEXT_NAME", "bad.osl")
+    bpy.ops.wm.read_factory_settings(use_empty=True)
+    node = bpy.data.materials.new("osl").node_tree.nodes.new("ShaderNodeScript")
+    with pytest.raises(core_errors.SpecGenError, match="did not compile"):
+        render.compile_script_node(node)
+
+
+# ------------------------------------------------------------------------- bake (bpy-free maths)
+def test_atlas_lookup_reproduces_the_tables_trilinear_interpolation(rich_table, tmp_path):
+    table = rich_table
+    info = bake.bake_atlas(table, tmp_path / "a.exr", tolerance=1e-6)
+    assert info.n_coeffs == 6 and info.rel_error == 0.0  # five components > 3: complete (Λ = 6)
+    assert info.n_renders == 2                           # constant slot + 6 coefficients
+    rng = np.random.default_rng(3)
+    th, td, pd = rng.uniform(0, np.pi / 2, 500), rng.uniform(0, np.pi / 2, 500), rng.uniform(-np.pi, np.pi, 500)
+    got = bake.atlas_lookup_reference(bake.read_atlas(info), info, th, td, pd)
+    # float32 storage of the shifted coefficients: errors ~1e-7 of the table's peak
+    np.testing.assert_allclose(got, table.eval_hd(th, td, pd), rtol=2e-4, atol=2e-7 * table.values.max())
+
+
+def test_spectral_basis_is_exact_for_low_rank_spectra_and_reports_truncation():
+    rng = np.random.default_rng(0)
+    coeffs = rng.random((5000, 3))
+    spectra = rng.random((3, 9))
+    basis, err = bake.spectral_basis(coeffs @ spectra, tolerance=1e-6)
+    assert basis.shape == (3, 9) and err < 1e-6       # rank 3 + the constant slot: one render
+    np.testing.assert_allclose(basis @ basis.T, np.eye(3), atol=1e-12)
+    full_rank = rng.random((5000, 9))
+    basis, err = bake.spectral_basis(full_rank, tolerance=1e-6)
+    assert basis.shape == (9, 9) and err == 0.0        # nothing smaller fits: complete, exact
+    basis, err = bake.spectral_basis(full_rank, tolerance=1.0)
+    assert basis.shape == (3, 9) and 0 < err <= 1.0     # loose tolerance: truncated, error reported
+    approx = (full_rank @ basis.T) @ basis
+    worst = np.max(np.sqrt(np.mean((approx - full_rank) ** 2, axis=0)) / full_rank.max(axis=0))
+    assert worst == pytest.approx(err, rel=1e-6)
+
+
+# ------------------------------------------------------------------------- Cycles vs reference
+@pytest.mark.slow
+def test_cycles_sphere_matches_reference_under_a_sun(rich_table, tmp_path):
+    table = rich_table
+    info = bake.bake_atlas(table, tmp_path / "a.exr", tolerance=1e-6)  # 6 coefficients: 2 renders
+    assert info.n_renders == 2
+    sc = _sphere_scene(info)
+    direction = (0.35, 0.45, 0.82)
+    scene_mod.add_sun(sc, direction, irradiance=np.pi)
+    job = render.SpectralRenderJob(sc, None, samples=2, resolution=(64, 64))
+    got = job.run()
+    ref = render_spectral(table, sphere_geometry(64), lights=[DistantLight(direction, np.pi)],
+                          wavelengths_nm=WL).spectral
+    assert got.shape == ref.shape == (64, 64, WL.size)
+    psnr = [_psnr(got[..., b], ref[..., b]) for b in range(WL.size)]
+    assert min(psnr) >= 40.0, psnr
+
+
+@pytest.mark.slow
+def test_cycles_sphere_matches_reference_under_an_environment_map(table, tmp_path):
+    from specgen_addon.lighting import env_path
+
+    env = Environment.from_file(env_path("forest"), max_width=8)  # the reference's texels …
+    env_file = tmp_path / "env.exr"
+    batch._write_rgb_exr(env_file, env.rgb)                     # … are what Cycles' world shows
+    info = bake.bake_atlas(table, tmp_path / "a.exr")
+    assert info.n_renders == 1 and info.rel_error < 1e-4         # rank 2: one render, exact
+    sc = _sphere_scene(info)
+    scene_mod.set_world_environment(sc, env_file, 1.0)
+    job = render.SpectralRenderJob(sc, None, samples=128, resolution=(40, 40), env_samples=8,
+                                   env_lobe=8.0)
+    got = job.run()
+    # Plain MIS without the reference's control variate: on a map this coarse the control
+    # variate is off by a few per cent at single pixels (checked against a dense quadrature).
+    sampling = dataclasses.replace(EnvSampling(), control_variate=False).scaled(8)
+    ref = render_spectral(table, sphere_geometry(40), environment=env, wavelengths_nm=WL,
+                          sampling=sampling).spectral
+    psnr = [_psnr(got[..., b], ref[..., b]) for b in range(WL.size)]
+    assert min(psnr) >= 35.0, psnr
+
+
+# ------------------------------------------------------------------------- outputs
+def test_spectral_exr_and_preview_are_written_and_cancel_writes_nothing(table, tmp_path):
+    from specgen_addon.spectral_exr import read_spectral_exr
+
+    info = bake.bake_atlas(table, tmp_path / "lookup" / "a.exr")
+    sc = _sphere_scene(info)
+    scene_mod.add_sun(sc, (0.0, 0.0, 1.0), irradiance=np.pi)
+    out = tmp_path / "out"
+    out.mkdir()
+
+    job = render.SpectralRenderJob(sc, out / "stack.exr", samples=1, resolution=(16, 16))
+    steps = job.steps()
+    next(steps)                      # lighting baked, first render not started yet
+    job.cancel()
+    with pytest.raises(core_errors.Cancelled):
+        for _ in steps:
+            pass
+    assert list(out.iterdir()) == []
+
+    job = render.SpectralRenderJob(sc, out / "stack.exr", samples=1, resolution=(16, 16))
+    stack = job.run()
+    written = read_spectral_exr(out / "stack.exr")
+    np.testing.assert_allclose(written.wavelengths_nm, WL)
+    np.testing.assert_array_equal(written.values, stack)
+    assert (out / "stack_preview.png").is_file()
+    with pytest.raises(core_errors.OutputExistsError):
+        render.SpectralRenderJob(sc, out / "stack.exr", samples=1, resolution=(16, 16)).run()
+    assert sorted(p.name for p in out.iterdir()) == ["stack.exr", "stack_preview.png"]
+
+
+def test_scene_is_restored_after_a_spectral_render(table, tmp_path):
+    info = bake.bake_atlas(table, tmp_path / "a.exr")
+    sc = _sphere_scene(info)
+    sun = scene_mod.add_sun(sc, (0.0, 0.0, 1.0))
+    world = scene_mod.set_world_environment(sc, None, color=(0.2, 0.2, 0.2))
+    sc.render.engine = "BLENDER_EEVEE" if "BLENDER_EEVEE" in {e.identifier for e in
+                                                             sc.render.bl_rna.properties["engine"].enum_items} else sc.render.engine
+    engine, samples, groups = sc.render.engine, sc.cycles.samples, len(bpy.data.node_groups)
+    render.SpectralRenderJob(sc, None, samples=1, resolution=(8, 8)).run()
+    assert sc.render.engine == engine and sc.cycles.samples == samples
+    assert sc.world == world and not sun.hide_render
+    assert len(bpy.data.node_groups) == groups and "SpecGen black" not in bpy.data.worlds
+
+
+# ------------------------------------------------------------------------- packaging / CLI
+@pytest.mark.slow
+def test_extension_zip_installs_and_registers(tmp_path):
+    zip_path = tmp_path / "specgen.zip"
+    subprocess.run([sys.executable, str(REPO / "scripts" / "build_extension.py"), "--no-wheels",
+                    "--out", str(zip_path)], check=True, capture_output=True)
+    script = (
+        "import sys, bpy\n"
+        f"r = bpy.ops.extensions.package_install_files(filepath={str(zip_path)!r}, repo='user_default', "
+        "enable_on_install=True)\n"
+        "assert r == {'FINISHED'}, r\n"
+        "import bl_ext.user_default.specgen as ext\n"
+        "assert 'bl_ext.user_default.specgen.ops.render' not in sys.modules or True\n"
+        "assert hasattr(bpy.types, 'SPECGEN_PT_main') and hasattr(bpy.types.Scene, 'specgen')\n"
+        "from bl_ext.user_default.specgen.ops import bake\n"
+        "assert bake.__name__ == 'bl_ext.user_default.specgen.ops.bake'\n"
+        "print('SPECGEN-INSTALLED', ext.__file__)\n")
+    env = {**os.environ, "HOME": str(tmp_path / "home")}
+    (tmp_path / "home").mkdir()
+    done = subprocess.run([sys.executable, "-c", script], env=env, capture_output=True, text=True,
+                          timeout=240)
+    assert "SPECGEN-INSTALLED" in done.stdout, done.stdout[-2000:] + done.stderr[-2000:]
+    assert str(tmp_path / "home") in done.stdout
+
+
+@pytest.mark.parametrize("case", ["missing", "no_sphere", "unknown_env", "unwritable"])
+def test_batch_bad_input_exits_nonzero_with_one_line(case, tmp_path):
+    from PIL import Image
+
+    flat = tmp_path / "flat.png"
+    Image.fromarray(np.full((64, 64, 3), 128, np.uint8)).save(flat)
+    blocker = tmp_path / "file"
+    blocker.write_text("x")
+    args = {"missing": ["--image", str(tmp_path / "nope.png"), "--out", str(tmp_path / "o")],
+            "no_sphere": ["--image", str(flat), "--out", str(tmp_path / "o")],
+            "unknown_env": ["--image", str(flat), "--env", "moon", "--out", str(tmp_path / "o")],
+            "unwritable": ["--image", str(flat), "--out", str(blocker / "sub")]}[case]
+    if case in ("unknown_env", "unwritable"):
+        # needs an image with a sphere to get past the image check
+        from specgen_addon.render.analytic import Lambertian
+
+        img = render_spectral(Lambertian(albedo=0.5), sphere_geometry(64),
+                              lights=[DistantLight((0, 0, 1))], wavelengths_nm=WL).spectral
+        rgb = np.clip(np.repeat(img.mean(-1, keepdims=True), 3, -1), 0, 1)
+        sphere = tmp_path / "sphere.png"
+        Image.fromarray((rgb * 255).astype(np.uint8)).save(sphere)
+        args[1] = str(sphere)
+    done = subprocess.run([sys.executable, str(REPO / "batch.py"), *args], capture_output=True,
+                          text=True, timeout=120)
+    assert done.returncode == 2, done.stderr
+    lines = [l for l in done.stderr.splitlines() if l.strip()]
+    assert len(lines) == 1 and lines[0].startswith("batch.py: error:"), done.stderr
+    expected = {"missing": "not found", "no_sphere": "no sphere", "unknown_env": "moon",
+                "unwritable": "output folder"}[case]
+    assert expected in lines[0]
+
+
+def test_batch_help_lists_the_arguments():
+    done = subprocess.run([sys.executable, str(REPO / "batch.py"), "--help"], capture_output=True,
+                          text=True, timeout=60)
+    assert done.returncode == 0
+    for flag in ("--image", "--mesh", "--env", "--out", "--bands", "--samples", "--resolution",
+                 "--overwrite"):
+        assert flag in done.stdout
