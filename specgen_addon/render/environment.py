@@ -94,7 +94,7 @@ def direction_to_uv(d: np.ndarray, rotation_rad: float = 0.0) -> tuple[np.ndarra
     """World directions (…, 3) → equirect (u, v) in [0, 1], v = 0 at the bottom (nadir)."""
     phi = np.arctan2(d[..., 2], d[..., 0]) - rotation_rad
     u = np.mod(phi / (2.0 * np.pi) + 0.5, 1.0)
-    v = np.arcsin(np.clip(d[..., 1], -1.0, 1.0)) / np.pi + 0.5
+    v = np.arcsin(np.minimum(np.maximum(d[..., 1], -1.0), 1.0)) / np.pi + 0.5
     return u, v
 
 
@@ -104,6 +104,28 @@ def uv_to_direction(u: np.ndarray, v: np.ndarray, rotation_rad: float = 0.0) -> 
     el = (v - 0.5) * np.pi
     c = np.cos(el)
     return np.stack([c * np.cos(phi), np.sin(el), c * np.sin(phi)], axis=-1)
+
+
+def _texel_directions(h: int, w: int, rotation_rad: float) -> np.ndarray:
+    """World directions (h, w, 3) of the texel centres of an h×w equirect map."""
+    uu, vv = np.meshgrid((np.arange(w) + 0.5) / w, 1.0 - (np.arange(h) + 0.5) / h)
+    return uv_to_direction(uu, vv, rotation_rad)
+
+
+def _bilinear_equirect(table: np.ndarray, d: np.ndarray, rotation_rad: float) -> np.ndarray:
+    """Bilinear lookup of an equirect table (h, w, C) at directions (…, 3); u wraps, v clamps."""
+    h, w = table.shape[:2]
+    u, v = direction_to_uv(d, rotation_rad)
+    fx, fy = u * w - 0.5, (1.0 - v) * h - 0.5
+    x0, y0 = np.floor(fx), np.floor(fy)
+    tx, ty = (fx - x0)[..., None], (fy - y0)[..., None]
+    x0 = x0.astype(np.int64) % w
+    x1 = (x0 + 1) % w
+    y1 = np.clip(y0.astype(np.int64) + 1, 0, h - 1)
+    y0 = np.clip(y0.astype(np.int64), 0, h - 1)
+    top = table[y0, x0] * (1 - tx) + table[y0, x1] * tx
+    bottom = table[y1, x0] * (1 - tx) + table[y1, x1] * tx
+    return top * (1 - ty) + bottom * ty
 
 
 @dataclass
@@ -127,7 +149,7 @@ class Environment:
     uplift: str = MALLETT2019
     name: str = "environment"
     _pdf: tuple | None = field(default=None, init=False, repr=False)
-    _quad: dict = field(default_factory=dict, init=False, repr=False)
+    _irradiance: np.ndarray | None = field(default=None, init=False, repr=False)
 
     def __post_init__(self) -> None:
         rgb = np.asarray(self.rgb, dtype=np.float32)
@@ -193,32 +215,30 @@ class Environment:
         """(3, Λ) uplifting matrix of this environment (see :func:`uplift_basis`)."""
         return uplift_basis(wavelengths_nm, self.uplift)
 
-    def irradiance_rgb(self, normals: np.ndarray, max_width: int = 128) -> np.ndarray:
-        """Irradiance ``E(n) = ∫ L(ω) (n·ω)⁺ dω`` (…, 3) for world normals (…, 3), by quadrature
-        over the map box-filtered to at most ``max_width`` columns (texel solid angles exact)."""
-        key = max_width
-        if key not in self._quad:
+    def irradiance_rgb(self, normals: np.ndarray) -> np.ndarray:
+        """Irradiance ``E(n) = ∫ L(ω) (n·ω)⁺ dω`` (…, 3) for world normals (…, 3).
+
+        ``E`` is smooth in ``n``, so it is tabulated once per environment on a 128×64 equirect grid
+        of normals (quadrature over the map box-filtered to 128×64 texels, exact texel solid
+        angles) and interpolated bilinearly.
+        """
+        if self._irradiance is None:
             rgb = self.rgb
-            while rgb.shape[1] > max_width and rgb.shape[0] % 2 == 0 and rgb.shape[1] % 2 == 0:
+            while rgb.shape[1] > 128 and rgb.shape[0] % 2 == 0 and rgb.shape[1] % 2 == 0:
                 h, w = rgb.shape[0] // 2, rgb.shape[1] // 2
                 rgb = rgb.reshape(h, 2, w, 2, 3).mean(axis=(1, 3))
             h, w = rgb.shape[:2]
-            v = 1.0 - (np.arange(h) + 0.5) / h
-            u = (np.arange(w) + 0.5) / w
-            uu, vv = np.meshgrid(u, v)
-            dirs = uv_to_direction(uu, vv, self.rotation_rad).reshape(-1, 3)
+            dirs = _texel_directions(h, w, self.rotation_rad).reshape(-1, 3)
             # exact solid angle of a texel row: (2π/W)·(sin el_top − sin el_bottom)
-            edges = (1.0 - np.arange(h + 1) / h - 0.5) * np.pi
+            edges = (0.5 - np.arange(h + 1) / h) * np.pi
             d_omega = (2.0 * np.pi / w) * (np.sin(edges[:-1]) - np.sin(edges[1:]))
-            weighted = rgb.astype(np.float64) * d_omega[:, None, None]
-            self._quad[key] = (dirs, weighted.reshape(-1, 3))
-        dirs, weighted = self._quad[key]
-        flat = np.asarray(normals, dtype=np.float64).reshape(-1, 3)
-        out = np.empty((flat.shape[0], 3))
-        for start in range(0, flat.shape[0], 1024):
-            cos = np.clip(flat[start:start + 1024] @ dirs.T, 0.0, None)
-            out[start:start + 1024] = cos @ weighted
-        return out.reshape(*np.shape(normals)[:-1], 3)
+            weighted = (rgb.astype(np.float64) * d_omega[:, None, None]).reshape(-1, 3)
+            grid = _texel_directions(64, 128, self.rotation_rad).reshape(-1, 3)
+            table = np.empty((grid.shape[0], 3))
+            for start in range(0, grid.shape[0], 1024):
+                table[start:start + 1024] = np.maximum(grid[start:start + 1024] @ dirs.T, 0.0) @ weighted
+            self._irradiance = table.reshape(64, 128, 3)
+        return _bilinear_equirect(self._irradiance, np.asarray(normals, dtype=np.float64), self.rotation_rad)
 
     # -- sampling -----------------------------------------------------------------------------
     def _distribution(self) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
@@ -254,7 +274,7 @@ class Environment:
         p = self._distribution()[0]
         h, w = p.shape
         row, col = self._texel_index(d)
-        cos_el = np.sqrt(np.clip(1.0 - d[..., 1] ** 2, 0.0, None))
+        cos_el = np.sqrt(np.maximum(1.0 - d[..., 1] ** 2, 0.0))
         return p[row, col] * (h * w) / (2.0 * np.pi ** 2 * np.maximum(cos_el, 1e-9))
 
     def sample(self, xi: np.ndarray) -> np.ndarray:
@@ -264,13 +284,13 @@ class Environment:
         x1, x2 = xi[..., 0].ravel(), xi[..., 1].ravel()
         row = np.clip(np.searchsorted(cdf_row, x1, side="right") - 1, 0, h - 1)
         lo, hi = cdf_row[row], cdf_row[row + 1]
-        fv = np.clip((x1 - lo) / np.maximum(hi - lo, 1e-300), 0.0, 1.0 - 1e-9)
+        fv = np.minimum(np.maximum((x1 - lo) / np.maximum(hi - lo, 1e-300), 0.0), 1.0 - 1e-9)
         # Conditional column CDFs searched at once: row r's CDF is offset by r (monotone overall).
         flat = (cdf_col + np.arange(h)[:, None]).ravel()
         pos = np.searchsorted(flat, x2 + row, side="right") - 1
         col = np.clip(pos - row * (w + 1), 0, w - 1)
         lo, hi = cdf_col[row, col], cdf_col[row, col + 1]
-        fu = np.clip((x2 - lo) / np.maximum(hi - lo, 1e-300), 0.0, 1.0 - 1e-9)
+        fu = np.minimum(np.maximum((x2 - lo) / np.maximum(hi - lo, 1e-300), 0.0), 1.0 - 1e-9)
         u = (col + fu) / w
         v = 1.0 - (row + fv) / h
         return uv_to_direction(u, v, self.rotation_rad).reshape(*xi.shape[:-1], 3)

@@ -105,12 +105,12 @@ def _local_to_world(local: np.ndarray, t: np.ndarray, b: np.ndarray, n: np.ndarr
 def _cosine_dirs(xi: np.ndarray) -> np.ndarray:
     r = np.sqrt(xi[..., 0])
     phi = 2.0 * np.pi * xi[..., 1]
-    return np.stack([r * np.cos(phi), r * np.sin(phi), np.sqrt(np.clip(1.0 - xi[..., 0], 0, None))], -1)
+    return np.stack([r * np.cos(phi), r * np.sin(phi), np.sqrt(np.maximum(1.0 - xi[..., 0], 0.0))], -1)
 
 
 def _lobe_dirs(xi: np.ndarray, exponent: float) -> np.ndarray:
-    cos_a = np.power(np.clip(xi[..., 0], 1e-300, 1.0), 1.0 / (exponent + 1.0))
-    sin_a = np.sqrt(np.clip(1.0 - cos_a * cos_a, 0.0, None))
+    cos_a = np.power(np.maximum(xi[..., 0], 1e-300), 1.0 / (exponent + 1.0))
+    sin_a = np.sqrt(np.maximum(1.0 - cos_a * cos_a, 0.0))
     phi = 2.0 * np.pi * xi[..., 1]
     return np.stack([sin_a * np.cos(phi), sin_a * np.sin(phi), cos_a], -1)
 
@@ -130,7 +130,7 @@ class EnvSampler:
         """Samples for pixels with world normals ``n`` (P, 3), frame (t, b), camera direction ``wo``."""
         p = n.shape[0]
         wo_w = np.broadcast_to(wo, n.shape)
-        refl = 2.0 * np.sum(n * wo_w, -1, keepdims=True) * n - wo_w
+        refl = 2.0 * np.einsum("pk,pk->p", n, wo_w)[:, None] * n - wo_w
         rt, rb = shading_frame(refl)
         dirs = []
         for k, (kind, exponent, _) in enumerate(self.strategies):
@@ -143,17 +143,19 @@ class EnvSampler:
                 dirs.append(_local_to_world(_lobe_dirs(xi, exponent), rt[:, None], rb[:, None],
                                             refl[:, None]))
         d = np.concatenate(dirs, axis=1)                       # (P, S, 3) world directions
-        d /= np.linalg.norm(d, axis=-1, keepdims=True)
-        cos_i = np.sum(d * n[:, None], -1)
+        d /= np.sqrt(np.einsum("psk,psk->ps", d, d))[..., None]
+        local = np.einsum("psk,pjk->psj", d, np.stack([t, b, n], axis=1))  # shading frame
+        cos_i = local[..., 2]
+        cos_r = np.maximum(np.einsum("psk,pk->ps", d, refl), 1e-300)
+        log_cos_r = np.log(cos_r)
         terms = []                                             # a_j = n_j p_j(x)
         for kind, exponent, count in self.strategies:
             if kind == "env":
                 terms.append(count * self.env.pdf(d))
             elif kind == "cos":
-                terms.append(count * np.clip(cos_i, 0, None) / np.pi)
+                terms.append(count * np.maximum(cos_i, 0.0) / np.pi)
             else:
-                c = np.clip(np.sum(d * refl[:, None], -1), 0.0, None)
-                terms.append(count * (exponent + 1.0) / (2.0 * np.pi) * np.power(c, exponent))
+                terms.append(count * (exponent + 1.0) / (2.0 * np.pi) * np.exp(exponent * log_cos_r))
         if self.sampling.heuristic == "balance":
             inv_q = 1.0 / np.maximum(np.sum(terms, axis=0), 1e-300)
         else:
@@ -162,7 +164,7 @@ class EnvSampler:
             inv_q = own / np.maximum(np.sum(np.square(terms), axis=0), 1e-300)
         valid = (cos_i > 0) & (inv_q > 0)
         pix = np.broadcast_to(np.arange(p)[:, None], cos_i.shape)[valid]
-        wi_l = np.stack([np.sum(d * t[:, None], -1), np.sum(d * b[:, None], -1), cos_i], -1)[valid]
+        wi_l = local[valid]
         weight = self.env.radiance_rgb(d[valid]) * (cos_i[valid] * inv_q[valid])[:, None]
         irradiance = self.env.irradiance_rgb(n) if self.sampling.control_variate else np.zeros((p, 3))
         return SampleBlock(pix.astype(np.int32), wi_l, weight, irradiance)
