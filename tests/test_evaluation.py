@@ -120,3 +120,32 @@ def test_targets_table_marks_missed_targets():
     assert lines[2].endswith("| met |") and "+9.00 dB" in lines[2]
     assert lines[3].endswith("| **missed** |")
     assert lines[4].endswith("| not measured |")
+
+
+# -- smoke run of the command --------------------------------------------------------------------
+
+@pytest.mark.slow
+def test_paper_tables_smoke_run_writes_every_table_and_resumes(tmp_path, monkeypatch):
+    """`paper-tables --smoke` end to end in a temp dir, then again: the rerun recomputes nothing."""
+    from specgen_addon.cli import main
+    from specgen_addon.model import DEFAULT_WEIGHTS
+
+    if not DEFAULT_WEIGHTS.is_file():
+        pytest.skip(f"shipped weights {DEFAULT_WEIGHTS} not present")
+    monkeypatch.setenv("SPECGEN_CACHE_DIR", str(tmp_path / "cache"))
+    docs = tmp_path / "docs"
+    docs.mkdir()
+    out = docs / "results.md"
+    assert main(["paper-tables", "--out", str(out), "--smoke", "--quiet"]) == 0
+    text = out.read_text()
+    for heading in ("## (a)", "## (b)", "## (c)", "## (e)", "## Real data", "## Targets"):
+        assert heading in text
+    assert "(d)" in text and "Hadamard" in text
+    for png in ("psnr_per_wavelength.png", "gt_vs_specgen_wavelengths.png", "spectral_curves.png"):
+        assert (docs / "img" / png).read_bytes()[:8] == b"\x89PNG\r\n\x1a\n"
+    cells = sorted((docs / ".cache").rglob("cells/**/*.json"))
+    assert cells
+    stamps = {p: p.stat().st_mtime_ns for p in cells}
+    assert main(["paper-tables", "--out", str(out), "--smoke", "--quiet"]) == 0
+    assert {p: p.stat().st_mtime_ns for p in cells} == stamps
+    assert out.read_text().split("## Protocol")[1] == text.split("## Protocol")[1]

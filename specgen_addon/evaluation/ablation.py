@@ -27,7 +27,6 @@ from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Any, Callable
 
-from ..errors import SpecGenError
 from .cache import read_json, write_json
 
 
@@ -46,9 +45,11 @@ ARMS = (
     Arm("joint-hadamard", "Joint RGB + spectral (Hadamard)", "hadamard", True),
 )
 ARMS_BY_NAME = {a.name: a for a in ARMS}
-#: Default wall-clock budget per arm (minutes, on an idle 2-core machine) when none is given.
-DEFAULT_BUDGET_MINUTES = 4.5
+#: Default step budget of every arm (≈ 4–5 min per arm on an idle 2-core machine).
+DEFAULT_STEPS = 400
 SMOKE_STEPS = 3
+#: The smoke run trains on a tiny prefix of the corpus with one input lighting per material.
+SMOKE_TRAIN = {"corpus_size": 12, "input_variants": 1, "val_every": 10 ** 9, "val_materials": 2}
 SEED = 0
 
 
@@ -110,31 +111,39 @@ class ArmResult:
     seed: int
 
 
-def _default_model_dict() -> dict[str, Any]:
-    """The shipped model's configuration (falls back to the Config defaults without weights)."""
-    from ..model import DEFAULT_WEIGHTS, Config
+REPO_ROOT = Path(__file__).resolve().parents[2]
+#: The shipped model's training configuration (``python -m specgen_addon train`` default).
+DEFAULT_CONFIG = REPO_ROOT / "configs" / "default.json"
 
-    if DEFAULT_WEIGHTS.is_file():
-        try:
-            from ..model import load_weights
 
-            return load_weights(DEFAULT_WEIGHTS).cfg.to_dict()
-        except SpecGenError:
-            pass
-    return Config().to_dict()
+def _default_configs() -> tuple[dict[str, Any], dict[str, Any]]:
+    """(model, train) dicts of the shipped model's config file (Config/TrainConfig defaults without it)."""
+    from ..model import Config
+    from ..train.loop import TrainConfig, load_config
+
+    if DEFAULT_CONFIG.is_file():
+        mcfg, tcfg = load_config(DEFAULT_CONFIG)
+    else:
+        mcfg, tcfg = Config(), TrainConfig()
+    return mcfg.to_dict(), dataclasses.asdict(tcfg)
 
 
 def ablation_settings(smoke: bool = False, steps: int | None = None, budget_minutes: float | None = None,
                       cache_dir: Path | None = None, log: Callable[[str], None] = print) -> AblationSettings:
-    """Settings of the ablation: an explicit step count, the smoke budget, or minutes → steps."""
-    model = _default_model_dict()
-    if steps is not None:
-        return AblationSettings(steps=int(steps), model=model, budget_note="(step budget given)")
+    """Settings of the ablation: an explicit step count, the smoke budget, minutes → steps, or
+    :data:`DEFAULT_STEPS`."""
+    model, train_d = _default_configs()
     if smoke:
-        return AblationSettings(steps=SMOKE_STEPS, model=model, train={"val_every": 10 ** 9},
-                                budget_note="(smoke budget)")
-    minutes = DEFAULT_BUDGET_MINUTES if budget_minutes is None else float(budget_minutes)
-    probe = AblationSettings(steps=1, model=model)
+        train_d = {**train_d, **SMOKE_TRAIN}
+    if steps is not None:
+        return AblationSettings(steps=int(steps), model=model, train=train_d, budget_note="(step budget given)")
+    if smoke:
+        return AblationSettings(steps=SMOKE_STEPS, model=model, train=train_d, budget_note="(smoke budget)")
+    if budget_minutes is None:
+        return AblationSettings(steps=DEFAULT_STEPS, model=model, train=train_d,
+                                budget_note="(the default budget, ≈ 4–5 min each on an idle 2-core machine)")
+    minutes = float(budget_minutes)
+    probe = AblationSettings(steps=1, model=model, train=train_d)
     timing_path = None if cache_dir is None else Path(cache_dir) / f"step_timing_{minutes:g}min.json"
     cached = read_json(timing_path) if timing_path is not None else None
     if cached is None:
@@ -142,7 +151,7 @@ def ablation_settings(smoke: bool = False, steps: int | None = None, budget_minu
         cached = {"seconds_per_step": sec, "steps": max(10, int(minutes * 60.0 / sec))}
         if timing_path is not None:
             write_json(timing_path, cached)
-    return AblationSettings(steps=int(cached["steps"]), model=model,
+    return AblationSettings(steps=int(cached["steps"]), model=model, train=train_d,
                             budget_note=f"(≈ {minutes:g} min each: {cached['seconds_per_step']:.2f} s per joint "
                                         "AFF step measured once, then fixed as a step count)")
 
@@ -172,9 +181,13 @@ def time_steps(settings: AblationSettings, n: int = 12, log: Callable[[str], Non
 
 
 def _data_cache() -> Path:
+    """The training command's cache of input renders (shared, so nothing is rendered twice);
+    under ``SPECGEN_CACHE_DIR`` when that is set."""
+    import os
+
     from .cache import cache_root
 
-    return cache_root() / "train-data"
+    return cache_root() / "train-data" if os.environ.get("SPECGEN_CACHE_DIR") else REPO_ROOT / ".cache" / "train-data"
 
 
 def train_arms(settings: AblationSettings, cache_dir: Path, progress: bool = True,

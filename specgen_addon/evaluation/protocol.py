@@ -80,13 +80,30 @@ class EnvChoice:
 
 
 def env_choice() -> EnvChoice:
-    """First training map and first two held-out maps of :mod:`specgen_addon.lighting`."""
-    from .. import lighting
+    """The map of training input variant 1 (every training run with ≥ 2 input variants sees it;
+    variant 0 is the canonical input's own map) and the two held-out maps of
+    :mod:`specgen_addon.lighting` (outdoor, indoor)."""
+    from .. import input_image, lighting
 
-    train, held = list(lighting.TRAIN_ENVS), list(lighting.HELDOUT_ENVS)
-    if not train or len(held) < 2:
-        raise SpecGenError("the evaluation needs one training and two held-out environment maps")
-    return EnvChoice(train[0], (held[0], held[1]))
+    held = list(lighting.HELDOUT_ENVS)
+    if len(held) < 2:
+        raise SpecGenError("the evaluation needs two held-out environment maps")
+    return EnvChoice(input_image.training_variant(1)[0], (held[0], held[1]))
+
+
+def input_under_environment(brdf, env: str) -> np.ndarray:
+    """The sphere input image of ``brdf`` photographed under environment map ``env`` instead of the
+    canonical one: same geometry, key light, exposure and sampling as
+    :func:`specgen_addon.input_image.render_input` (linear sRGB, float32)."""
+    from .. import input_image, lighting
+    from ..render import Scene as RenderScene
+
+    key = DistantLight(input_image.KEY_LIGHT_DIRECTION, input_image.KEY_LIGHT_IRRADIANCE,
+                       spectra.DEFAULT_ILLUMINANT)
+    scene = RenderScene(sphere_geometry(input_image.CANONICAL_SIZE), [key], lighting.load_environment(env),
+                        sampling=input_image.input_sampling())
+    rgb = scene.render_spectral(brdf, spectra.DEFAULT_WAVELENGTHS_NM).rgb
+    return (np.clip(rgb, 0.0, None) * input_image.EXPOSURE).astype(np.float32)
 
 
 def scene_list(envs: EnvChoice) -> dict[str, Scene]:
@@ -191,7 +208,7 @@ def shape_geometry(shape: str, resolution: int) -> tuple[Geometry, str]:
 
 
 def scene_lighting(scene: Scene) -> dict:
-    """Keyword arguments of :func:`specgen_addon.render.render_spectral` for ``scene``'s lighting."""
+    """``lights`` or ``environment`` keyword of a :class:`specgen_addon.render.Scene` for ``scene``."""
     if scene.env is None:
         return {"lights": DISTANT_LIGHTS}
     return {"environment": load_environment(scene.env)}

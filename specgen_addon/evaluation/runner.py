@@ -25,8 +25,8 @@ from . import baselines, plots, protocol, report, tables
 from .cache import read_json, write_json
 
 #: Full configuration (docs/results.md) and the CI smoke configuration.
-FULL = {"resolution": 128, "n_materials": 10, "env_sampling_scale": 1.0, "lut_size": None}
-SMOKE = {"resolution": 64, "n_materials": 2, "env_sampling_scale": 0.25, "lut_size": 5}
+FULL = {"resolution": 128, "n_materials": 10, "env_sampling_scale": 1.0, "lut_size": None, "band_count": 20}
+SMOKE = {"resolution": 64, "n_materials": 2, "env_sampling_scale": 0.25, "lut_size": 5, "band_count": 5}
 #: Real RGL RGB files checked in the real-data table (../shared/data/rgl beside the repo).
 REAL_RGL_DIR = Path(__file__).resolve().parents[3] / "shared" / "data" / "rgl"
 REAL_ROLES = ("env_unseen1", "distant")
@@ -82,8 +82,12 @@ def run_paper_tables(out: Path, img_dir: Path | None = None, smoke: bool = False
                      materials: str | None = None, budget_minutes: float | None = None,
                      ablation_steps: int | None = None, ablation: bool = True,
                      weights: Path | None = None, resolution: int | None = None, fresh: bool = False,
-                     progress: bool = True) -> Path:
-    """Run the whole evaluation and write the markdown report ``out`` (returns its path)."""
+                     progress: bool = True, ablation_only: bool = False) -> Path:
+    """Run the whole evaluation and write the markdown report ``out`` (returns its path).
+
+    ``ablation_only`` trains and scores the ablation arms only (they do not need the shipped
+    weights), filling the cache for a later full run; no report is written then.
+    """
     t_start = time.perf_counter()
     out = Path(out)
     if not out.parent.is_dir():
@@ -96,11 +100,10 @@ def run_paper_tables(out: Path, img_dir: Path | None = None, smoke: bool = False
     from ..model import DEFAULT_WEIGHTS
 
     weights_path = Path(weights) if weights is not None else DEFAULT_WEIGHTS
-    if not weights_path.is_file():
+    if not weights_path.is_file() and not ablation_only:
         raise SpecGenError(f"{weights_path}: SpecGen weights not found (train them or pass --weights)")
-    settings = tables.Settings(resolution=conf["resolution"], n_materials=n_mat or 0, material_names=names,
-                               weights=weights_path, env_sampling_scale=conf["env_sampling_scale"],
-                               lut_size=conf["lut_size"], smoke=smoke)
+    settings = tables.Settings(resolution=conf["resolution"], n_materials=n_mat or 0, material_names=names, env_sampling_scale=conf["env_sampling_scale"],
+                               lut_size=conf["lut_size"], band_count=conf["band_count"], smoke=smoke)
     root = out.parent / ".cache" / "paper-tables"
     cache = root / f"{'smoke' if smoke else 'full'}-{_key(settings.describe())}"
     if fresh:
@@ -126,21 +129,30 @@ def run_paper_tables(out: Path, img_dir: Path | None = None, smoke: bool = False
     # 2. Cells: baselines and SpecGen in every scene, ablation arms under distant light.
     jobs: list[tuple[str, Any, Any]] = []
     for m in mats:
-        jobs.append(("baselines", m, None))
-        jobs.append((specgen_arm, m, weights_path))
+        if not ablation_only:
+            jobs.append(("baselines", m, None))
+            jobs.append((specgen_arm, m, weights_path))
+            jobs.append(("robustness", m, weights_path))
         for name, arm in arms.items():
             jobs.append((arm.key, m, arm.weights))
     bar = _bar(len(jobs), "paper-tables", progress)
     for kind, m, w in jobs:
         bar.set_postfix_str(f"{m.name}: {kind.split('@')[0]}")
         if kind == "baselines":
-            h.run_baselines(m, tables.MAIN_ROLES)
+            h.run_baselines(m, tables.BASELINE_ROLES)
         elif kind == specgen_arm:
             h.run_model(kind, w, m, tables.MAIN_ROLES, keep_images=True)
+        elif kind == "robustness":
+            for role in tables.ROLES_B:
+                env = h.scenes[role].env
+                h.run_model(tables.robustness_arm(specgen_arm, env), w, m, [role], input_env=env)
         else:
             h.run_model(kind, w, m, tables.ROLES_ABLATION)
         bar.update(1)
     bar.close()
+    if ablation_only:
+        log(f"paper-tables: ablation arms trained and scored ({time.perf_counter() - t_start:.0f} s)")
+        return out
 
     # 3. Real data: the RGL RGB files, SpecGen projected to RGB vs the measured BRDF.
     real: dict[str, dict[str, dict]] = {}
@@ -180,7 +192,7 @@ def _bar(total: int, desc: str, enabled: bool):
 
 def make_figures(h: tables.Harness, mats: Sequence[Any], specgen_arm: str, img_dir: Path) -> dict[str, Path]:
     """The three PNGs; returns their paths by role."""
-    wl = protocol.WAVELENGTHS_NM
+    wl = h.wl
     methods = [specgen_arm] + list(h.s.baselines)
     labels = _labels(specgen_arm)
     names = [m.name for m in mats]

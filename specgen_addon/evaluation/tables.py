@@ -11,15 +11,13 @@ from __future__ import annotations
 
 import shutil
 import time
-from dataclasses import dataclass, field
+from dataclasses import dataclass
 from pathlib import Path
 from typing import Any, Callable, Sequence
 
 import numpy as np
 
-from .. import spectra
-from ..errors import SpecGenError
-from ..render import EnvSampling, RenderResult, render_rgb, render_spectral
+from ..render import EnvSampling, RenderResult, Scene
 from . import baselines, protocol
 from .cache import read_json, write_json
 
@@ -29,8 +27,15 @@ ROLES_A = ("env_unseen1", "distant")
 ROLES_B = ("env_seen", "env_unseen1", "env_unseen2")
 ROLES_E = ("shape_env", "shape_distant")
 ROLES_ABLATION = ("distant",)
-#: Roles the main model and the baselines are scored on.
-MAIN_ROLES = ("distant", "env_seen", "env_unseen1", "env_unseen2", "shape_env", "shape_distant")
+#: Roles the baselines are scored on (every scene).
+BASELINE_ROLES = ("distant", "env_seen", "env_unseen1", "env_unseen2", "shape_env", "shape_distant")
+#: Roles SpecGen from the canonical input is scored on; table (b) uses inputs under each map.
+MAIN_ROLES = ("distant", "env_unseen1", "shape_env", "shape_distant")
+
+
+def robustness_arm(specgen_arm: str, env: str) -> str:
+    """Arm name of SpecGen fed the sphere photographed under ``env`` (table (b))."""
+    return f"{specgen_arm}+input-{env}"
 #: Role whose images are kept for the figures.
 FIGURE_ROLE = "env_unseen1"
 
@@ -43,11 +48,17 @@ class Settings:
     n_materials: int = 10
     material_names: list[str] | None = None
     baselines: tuple[str, ...] = baselines.METHODS
-    weights: Path | None = None
     env_sampling_scale: float = 1.0
     figure_materials: int = 2
     lut_size: int | None = None  # face-table size of tabulated baselines (None: their default)
+    band_count: int = len(protocol.WAVELENGTHS_NM)  # fewer bands only for the smoke run
     smoke: bool = False
+
+    @property
+    def wavelengths_nm(self) -> np.ndarray:
+        """The evaluation bands: :data:`protocol.WAVELENGTHS_NM`, or as many bands over its range."""
+        w = protocol.WAVELENGTHS_NM
+        return w if self.band_count == w.size else np.linspace(w[0], w[-1], self.band_count)
 
     def sampling(self) -> EnvSampling:
         base = EnvSampling()
@@ -58,7 +69,7 @@ class Settings:
                 "material_names": self.material_names, "baselines": list(self.baselines),
                 "lut_size": self.lut_size,
                 "env_samples_per_pixel": self.sampling().total,
-                "wavelengths_nm": [float(w) for w in protocol.WAVELENGTHS_NM]}
+                "wavelengths_nm": [float(w) for w in self.wavelengths_nm]}
 
 
 def score(gt: np.ndarray, pred: np.ndarray, mask: np.ndarray) -> dict[str, Any]:
@@ -80,8 +91,8 @@ class Harness:
         self.envs = protocol.env_choice()
         self.scenes = protocol.scene_list(self.envs)
         self._geom: dict[str, tuple[Any, str]] = {}
-        self._lighting: dict[str, dict] = {}
-        self.wl = protocol.WAVELENGTHS_NM
+        self._scene: dict[str, Scene] = {}
+        self.wl = settings.wavelengths_nm
 
     # -- bookkeeping -------------------------------------------------------------------------
     def cell_path(self, arm: str, material: str, role: str) -> Path:
@@ -95,15 +106,16 @@ class Harness:
             self._geom[shape] = protocol.shape_geometry(shape, self.s.resolution)
         return self._geom[shape]
 
-    def lighting(self, role: str) -> dict:
-        if role not in self._lighting:
-            self._lighting[role] = protocol.scene_lighting(self.scenes[role])
-        return self._lighting[role]
+    def scene(self, role: str) -> Scene:
+        """The prepared renderer scene of ``role`` (its samples are shared by every BRDF)."""
+        if role not in self._scene:
+            geom, _ = self.geometry(self.scenes[role].shape)
+            self._scene[role] = Scene(geom, sampling=self.s.sampling(),
+                                      **protocol.scene_lighting(self.scenes[role]))
+        return self._scene[role]
 
     def _render(self, brdf: Any, role: str) -> RenderResult:
-        geom, _ = self.geometry(self.scenes[role].shape)
-        return render_spectral(brdf, geom, wavelengths_nm=self.wl, sampling=self.s.sampling(),
-                               **self.lighting(role))
+        return self.scene(role).render_spectral(brdf, self.wl)
 
     # -- ground truth ------------------------------------------------------------------------
     def ground_truth(self, material: Any, role: str) -> RenderResult:
@@ -141,13 +153,23 @@ class Harness:
                 write_json(self.cell_path(method, material.name, role), cell)
 
     def run_model(self, arm: str, weights: Path | None, material: Any, roles: Sequence[str],
-                  keep_images: bool = False) -> None:
-        """Generate the spectral BRDF from the canonical sphere input and score it in ``roles``."""
+                  keep_images: bool = False, input_env: str | None = None) -> None:
+        """Generate the spectral BRDF from the sphere input and score it in ``roles``.
+
+        The input is the canonical sphere image, or with ``input_env`` the sphere photographed under
+        that environment map instead of the canonical one (robustness, table (b)).
+        """
         todo = [r for r in roles if self.cell(arm, material.name, r) is None]
         if not todo:
             return
         t0 = time.perf_counter()
-        table = generate_from_sphere(material, weights, self.wl)
+        if input_env is None:
+            table = generate_from_sphere(material, weights, self.wl)
+        else:
+            from .. import infer
+
+            table = infer.generate_brdf(protocol.input_under_environment(material, input_env),
+                                        weights=weights, wavelengths_nm=self.wl)
         t_gen = time.perf_counter() - t0
         for role in todo:
             gt = self.ground_truth(material, role)
@@ -173,14 +195,13 @@ class Harness:
 
         measured = load_brdf(path)
         t0 = time.perf_counter()
-        rgb_table = project_table_to_rgb(generate_from_sphere(measured, weights, self.wl))
+        # Projected back to RGB: each entry's spectrum seen under D65 → linear sRGB.
+        rgb_table = generate_from_sphere(measured, weights, self.wl).to_rgb("D65")
         t_gen = time.perf_counter() - t0
         for role in todo:
-            geom, _ = self.geometry(self.scenes[role].shape)
-            light = self.lighting(role)
             t1 = time.perf_counter()
-            gt = render_rgb(measured, geom, sampling=self.s.sampling(), **light)
-            pred = render_rgb(rgb_table, geom, sampling=self.s.sampling(), **light)
+            gt = self.scene(role).render_rgb(measured)
+            pred = self.scene(role).render_rgb(rgb_table)
             out[role] = score(gt.rgb, pred.rgb, gt.mask) | {
                 "seconds_generate": t_gen, "seconds_render": time.perf_counter() - t1}
             write_json(self.cell_path(f"real-{arm}", name, role), out[role])
@@ -225,29 +246,6 @@ def generate_from_sphere(brdf: Any, weights: Path | None, wavelengths_nm: np.nda
 
     image = input_image.render_input(brdf)
     return infer.generate_brdf(image, weights=weights, wavelengths_nm=wavelengths_nm)
-
-
-@dataclass
-class _RGBTable:
-    """An RGB view of a spectral table: ``eval_rgb`` = the BRDF spectrum under D65 → linear sRGB."""
-
-    table: Any
-    _proj: np.ndarray = field(init=False)
-
-    def __post_init__(self) -> None:
-        w = self.table.wavelengths
-        # Linear map spectrum → linear sRGB of a reflectance under D65 (white stays white).
-        self._proj = spectra.reflectance_to_linear_srgb(np.eye(len(w)), w)
-
-    def eval_rgb(self, wi: np.ndarray, wo: np.ndarray) -> np.ndarray:
-        return self.table.eval(wi, wo) @ self._proj
-
-
-def project_table_to_rgb(table: Any) -> _RGBTable:
-    """The predicted spectral BRDF projected to linear-sRGB BRDF values (under D65)."""
-    if not getattr(table, "is_spectral", False):
-        raise SpecGenError("projection to RGB needs a spectral table")
-    return _RGBTable(table)
 
 
 def clear_cache(cache_dir: Path) -> None:
