@@ -46,7 +46,10 @@ def build_parser() -> argparse.ArgumentParser:
                     "OpenEXR (Fichet et al. 2021 layout) of a mesh lit by an environment map.",
         epilog="Inside Blender pass the arguments after '--': "
                "blender --background --python batch.py -- --image IMG ...")
-    ap.add_argument("--image", required=True, help="photo of a sphere of the material (EXR/PNG/JPEG)")
+    src = ap.add_mutually_exclusive_group(required=True)
+    src.add_argument("--image", help="photo of a sphere of the material (EXR/PNG/JPEG)")
+    src.add_argument("--brdf", help="render this spectral BRDF table (.npz from "
+                     "`python -m specgen_addon`) instead of generating one from an image")
     ap.add_argument("--mesh", default="sphere", help="'sphere', 'suzanne' or a path to an .obj file")
     ap.add_argument("--env", default="studio",
                     help="environment map name from Blender's studio lights (e.g. studio, courtyard)")
@@ -83,15 +86,17 @@ def run(args) -> Path:
     lighting = import_module(f"{pkg.__name__}.specgen_addon.lighting")
     spectra = import_module(f"{pkg.__name__}.specgen_addon.spectra")
 
-    image = Path(args.image)
-    if not image.is_file():
-        raise errors.ImageInputError(f"{image}: input image not found")
+    source = Path(args.image or args.brdf)
+    if not source.is_file():
+        kind = "input image" if args.image else "BRDF table"
+        raise errors.ImageInputError(f"{source}: {kind} not found")
     if args.mesh not in ("sphere", "suzanne") and not Path(args.mesh).is_file():
         raise errors.SpecGenError(f"{args.mesh}: mesh file not found (use sphere, suzanne or an .obj path)")
-    input_image = import_module(f"{pkg.__name__}.specgen_addon.input_image")
-    with warnings.catch_warnings():  # keep a bad image to the one error line
-        warnings.simplefilter("ignore")
-        input_image.load_sphere_image(image)  # no sphere / unreadable -> ImageInputError, early
+    if args.image:
+        input_image = import_module(f"{pkg.__name__}.specgen_addon.input_image")
+        with warnings.catch_warnings():  # keep a bad image to the one error line
+            warnings.simplefilter("ignore")
+            input_image.load_sphere_image(source)  # no sphere / unreadable -> ImageInputError, early
     env = lighting.load_environment(args.env)  # unknown name -> LightingAssetError with the list
     out = Path(args.out)
     try:
@@ -101,7 +106,7 @@ def run(args) -> Path:
     if not os.access(out, os.W_OK):
         raise errors.SpecGenError(f"{out}: output folder is not writable")
     mesh_tag = args.mesh if args.mesh in ("sphere", "suzanne") else Path(args.mesh).stem
-    target = out / f"{image.stem}_{mesh_tag}_{args.env}.exr"
+    target = out / f"{source.stem}_{mesh_tag}_{args.env}.exr"
     for p in (target, target.with_name(target.stem + "_preview.png")):
         if p.exists() and not args.overwrite:
             raise errors.OutputExistsError(f"{p}: already exists (pass --overwrite to replace it)")
@@ -117,9 +122,15 @@ def run(args) -> Path:
             print(f"  generate: {pct}%", flush=True)
         last[0] = pct
 
-    info = bake.generate_lookup(str(image), out / "lookup", wavelengths, weights=args.weights,
-                                backend=args.backend, name=image.stem, progress=progress)
-    print(f"BRDF generated and baked in {time.perf_counter() - t0:.1f} s "
+    if args.image:
+        info = bake.generate_lookup(str(source), out / "lookup", wavelengths, weights=args.weights,
+                                    backend=args.backend, name=source.stem, progress=progress)
+    else:
+        table_mod = import_module(f"{pkg.__name__}.specgen_addon.table")
+        table = table_mod.BRDFTable.load(source)
+        info = bake.bake_atlas(table, out / "lookup" / f"{source.stem}_lookup.exr",
+                               wavelengths_nm=wavelengths, progress=progress)
+    print(f"BRDF ready and baked in {time.perf_counter() - t0:.1f} s "
           f"({info.n_coeffs} basis coefficients, max error {info.rel_error:.1e})", flush=True)
 
     import bpy
@@ -138,13 +149,13 @@ def run(args) -> Path:
     if args.sun:
         scene_mod.add_sun(scene, (-0.5, 0.6, 0.62), float(np.pi))
     obj.data.materials.clear()
-    obj.data.materials.append(render.make_material(f"SpecGen {image.stem}", info))
+    obj.data.materials.append(render.make_material(f"SpecGen {source.stem}", info))
 
     t0 = time.perf_counter()
     job = render.SpectralRenderJob(scene, target, samples=args.samples,
                                    resolution=(args.resolution, args.resolution),
                                    overwrite=args.overwrite, env_samples=args.env_samples,
-                                   attributes={"specgenImage": str(image), "specgenMesh": args.mesh,
+                                   attributes={"specgenSource": str(source), "specgenMesh": args.mesh,
                                                "specgenEnvironment": args.env},
                                    warn=lambda m: print(m, file=sys.stderr))
     job.run(lambda f: None)

@@ -18,6 +18,10 @@ LOOKUP_RESOLUTIONS = (
 )
 
 
+# "//" = relative to the .blend (Blender 4.5+ asks path properties to opt in)
+_PATH = {"PATH_SUPPORTS_BLEND_RELATIVE"} if bpy.app.version >= (4, 5, 0) else set()
+
+
 def _update_range(self, context) -> None:
     if self.wl_max <= self.wl_min:
         self.wl_max = self.wl_min + 1.0
@@ -28,9 +32,9 @@ class SpecGenSettings(bpy.types.PropertyGroup):
 
     image: PointerProperty(name="Image", type=bpy.types.Image,
                            description="Photo of a sphere of the material (image datablock)")
-    image_path: StringProperty(name="Image File", subtype="FILE_PATH",
+    image_path: StringProperty(name="Image File", subtype="FILE_PATH", options=_PATH,
                                description="Photo of a sphere of the material (used if no datablock is set)")
-    weights_path: StringProperty(name="Weights", subtype="FILE_PATH",
+    weights_path: StringProperty(name="Weights", subtype="FILE_PATH", options=_PATH,
                                  description="Network weights (.pt with its .onnx graphs); empty = the shipped default")
     wl_min: FloatProperty(name="From", default=DEFAULT_RANGE_NM[0], min=360.0, max=1000.0,
                           precision=0, description="Shortest wavelength (nm)", update=_update_range)
@@ -49,7 +53,7 @@ class SpecGenSettings(bpy.types.PropertyGroup):
                             description="Width and height of the spectral render (pixels)")
     env_samples: IntProperty(name="Env Samples", default=2, min=0, max=64,
                              description="Environment directions the shader samples per Cycles sample")
-    output_dir: StringProperty(name="Output", subtype="DIR_PATH", default="//specgen/",
+    output_dir: StringProperty(name="Output", subtype="DIR_PATH", default="//specgen/", options=_PATH,
                                description="Folder for baked lookups and spectral EXR renders")
     overwrite: BoolProperty(name="Overwrite", default=False,
                             description="Replace existing output files")

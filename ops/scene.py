@@ -102,7 +102,7 @@ def suzanne(name: str = "SpecGen Suzanne") -> bpy.types.Object:
         poly.use_smooth = True
     obj = bpy.data.objects.new(name, mesh)
     obj.rotation_euler = (0.0, 0.0, 0.0)  # Suzanne faces −Y: towards the camera
-    obj.scale = (0.9, 0.9, 0.9)
+    obj.scale = (0.72, 0.72, 0.72)  # ears (x ±1.36) inside the 2-unit frame
     return obj
 
 

@@ -327,3 +327,29 @@ def test_batch_help_lists_the_arguments():
     for flag in ("--image", "--mesh", "--env", "--out", "--bands", "--samples", "--resolution",
                  "--overwrite"):
         assert flag in done.stdout
+
+
+def test_panel_draws_every_setting_and_the_three_buttons():
+    import importlib.util
+
+    spec = importlib.util.spec_from_file_location("draw_panel", REPO / "scripts" / "draw_panel.py")
+    draw_panel = importlib.util.module_from_spec(spec)
+    sys.modules["draw_panel"] = draw_panel  # dataclasses look their module up
+    spec.loader.exec_module(draw_panel)
+    PKG.register()
+    try:
+        rows = draw_panel.record_panel(bpy.context)
+        s = bpy.context.scene.specgen
+        s.running = "Rendering spectral stack"
+        busy = draw_panel.record_panel(bpy.context)
+    finally:
+        PKG.unregister()
+    props = {r.name for r in rows if r.kind in ("prop", "template")}
+    assert {"image", "image_path", "weights_path", "wl_min", "wl_max", "bands", "lookup_resolution",
+            "samples", "resolution", "output_dir", "overwrite"} <= props
+    buttons = [r.name for r in rows if r.kind == "operator"]
+    assert buttons == ["specgen.generate_brdf", "specgen.apply", "specgen.render_stack"]
+    assert all(r.enabled for r in rows if r.kind == "operator")
+    # while a job runs the buttons are disabled and a progress bar is shown
+    assert not any(r.enabled for r in busy if r.kind == "operator")
+    assert any(r.kind == "progress" for r in busy)
