@@ -300,16 +300,8 @@ def test_batch_bad_input_exits_nonzero_with_one_line(case, tmp_path):
             "no_sphere": ["--image", str(flat), "--out", str(tmp_path / "o")],
             "unknown_env": ["--image", str(flat), "--env", "moon", "--out", str(tmp_path / "o")],
             "unwritable": ["--image", str(flat), "--out", str(blocker / "sub")]}[case]
-    if case in ("unknown_env", "unwritable"):
-        # needs an image with a sphere to get past the image check
-        from specgen_addon.render.analytic import Lambertian
-
-        img = render_spectral(Lambertian(albedo=0.5), sphere_geometry(64),
-                              lights=[DistantLight((0, 0, 1))], wavelengths_nm=WL).spectral
-        rgb = np.clip(np.repeat(img.mean(-1, keepdims=True), 3, -1), 0, 1)
-        sphere = tmp_path / "sphere.png"
-        Image.fromarray((rgb * 255).astype(np.uint8)).save(sphere)
-        args[1] = str(sphere)
+    if case in ("unknown_env", "unwritable"):  # needs a sphere to get past the image check
+        args[1] = str(_sphere_png(tmp_path / "sphere.png"))
     done = subprocess.run([sys.executable, str(REPO / "batch.py"), *args], capture_output=True,
                           text=True, timeout=120)
     assert done.returncode == 2, done.stderr
@@ -353,3 +345,64 @@ def test_panel_draws_every_setting_and_the_three_buttons():
     # while a job runs the buttons are disabled and a progress bar is shown
     assert not any(r.enabled for r in busy if r.kind == "operator")
     assert any(r.kind == "progress" for r in busy)
+
+
+def test_operators_apply_and_render_headless_and_report_errors(table, tmp_path):
+    info = bake.bake_atlas(table, tmp_path / "lookup" / "brdf_lookup.exr")
+    bake.save_atlas_info(info, tmp_path / "lookup" / "brdf_lookup.json")
+    bpy.ops.wm.read_factory_settings(use_empty=True)
+    PKG.register()
+    try:
+        sc = bpy.context.scene
+        scene_mod.add_camera(sc)
+        obj = scene_mod.add_mesh(sc, "sphere")
+        scene_mod.add_sun(sc, (0.0, 0.0, 1.0))
+        s = sc.specgen
+        s.output_dir = str(tmp_path / "out")
+        s.resolution, s.samples = 16, 1
+        with pytest.raises(RuntimeError, match="no render-visible object uses a SpecGen material"):
+            bpy.ops.specgen.render_stack()          # reported through self.report, one line
+        assert not bpy.ops.specgen.apply.poll()     # nothing generated yet
+        s.atlas_json = str(tmp_path / "lookup" / "brdf_lookup.json")
+        bpy.context.view_layer.objects.active = obj
+        obj.select_set(True)
+        assert bpy.ops.specgen.apply() == {"FINISHED"}
+        assert render.is_specgen_material(obj.active_material)
+        assert bpy.ops.specgen.render_stack() == {"FINISHED"}
+        assert (tmp_path / "out" / "spectral.exr").is_file()
+        with pytest.raises(RuntimeError, match="already exists"):
+            bpy.ops.specgen.render_stack()          # never overwritten unless asked
+        s.overwrite = True
+        assert bpy.ops.specgen.render_stack() == {"FINISHED"}
+    finally:
+        PKG.unregister()
+
+
+def _sphere_png(path: Path) -> Path:
+    from PIL import Image
+    from specgen_addon.render.analytic import Lambertian
+
+    img = render_spectral(Lambertian(albedo=0.5), sphere_geometry(64), lights=[DistantLight((0, 0, 1))],
+                          wavelengths_nm=WL).spectral
+    rgb = np.clip(np.repeat(img.mean(-1, keepdims=True), 3, -1), 0, 1)
+    Image.fromarray((rgb * 255).astype(np.uint8)).save(path)
+    return path
+
+
+def test_generate_operator_bakes_a_lookup_from_an_image(tmp_path):
+    from specgen_addon.model import DEFAULT_WEIGHTS
+
+    if not Path(DEFAULT_WEIGHTS).is_file():
+        pytest.skip(f"no shipped weights at {DEFAULT_WEIGHTS} yet")
+    bpy.ops.wm.read_factory_settings(use_empty=True)
+    PKG.register()
+    try:
+        s = bpy.context.scene.specgen
+        s.image_path = str(_sphere_png(tmp_path / "sphere.png"))
+        s.output_dir = str(tmp_path / "out")
+        s.bands = 6
+        assert bpy.ops.specgen.generate_brdf() == {"FINISHED"}
+        info = bake.load_atlas_info(s.atlas_json)
+        assert info.wavelengths_nm.size == 6 and all(p.is_file() for p in info.group_paths)
+    finally:
+        PKG.unregister()
