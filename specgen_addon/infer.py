@@ -21,8 +21,9 @@ from .spectra import DEFAULT_WAVELENGTHS_NM
 from .table import GRID_SHAPE, N_PHI_D, N_THETA_D, N_THETA_H, BRDFTable
 
 BACKENDS = ("torch", "onnx")
-#: θd rows per block: 10 × 180 × Λ points (~38 k at 21 bands) keep temporaries cache-sized.
-BLOCK_THETA_D = 10
+#: θd rows per block: 10 × 180 × Λ points (~38 k at 21 bands) keep torch's temporaries
+#: cache-sized; onnxruntime has more overhead per call and prefers larger blocks.
+BLOCK_THETA_D = {"torch": 10, "onnx": 30}
 
 ProgressFn = Callable[[float], None]
 CancelFn = Callable[[], bool]
@@ -203,7 +204,8 @@ def evaluate_grid(be, tables, n_lambda: int, progress: ProgressFn | None = None,
     """r' (μ-law) on the full grid ``(90, 90, 180, Λ)``, block by block on ``workers`` threads."""
     t1, t2, t3, t4, t5, t6 = tables
     out = np.empty(GRID_SHAPE + (n_lambda,), dtype=np.float32)
-    blocks = [(i, j) for i in range(N_THETA_H) for j in range(0, N_THETA_D, BLOCK_THETA_D)]
+    nd = BLOCK_THETA_D["torch" if isinstance(be, _TorchBackend) else "onnx"]
+    blocks = [(i, j) for i in range(N_THETA_H) for j in range(0, N_THETA_D, nd)]
     done = [0]
     lock = threading.Lock()
     stop = threading.Event()
@@ -212,7 +214,7 @@ def evaluate_grid(be, tables, n_lambda: int, progress: ProgressFn | None = None,
         if stop.is_set():
             return
         i, j = ij
-        si, sj = slice(i, i + 1), slice(j, j + BLOCK_THETA_D)
+        si, sj = slice(i, i + 1), slice(j, j + nd)
         r = be.run_head((t1[si, sj], t2[si], t3[sj], t4[si], t5[sj], t6))
         out[si, sj] = np.asarray(r)
         with lock:

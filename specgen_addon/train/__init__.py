@@ -32,11 +32,25 @@ def render_input_variant(brdf, variant: int) -> np.ndarray:
     return input_image.render_training_input(brdf, variant)
 
 
-def network_inputs(images: list[np.ndarray], image_size: int) -> np.ndarray:
-    """Renders -> network inputs ``(K, 3, S, S)`` exactly as inference prepares a user image."""
+def png_like(image: np.ndarray) -> np.ndarray:
+    """What an 8-bit sRGB PNG of a linear render holds once read back: clipped to [0, 1], quantised."""
+    from ..spectra import srgb_decode, srgb_encode
+
+    q = np.round(srgb_encode(np.clip(image, 0.0, 1.0)) * 255.0) / 255.0
+    return srgb_decode(q).astype(np.float32)
+
+
+def network_inputs(images: list[np.ndarray], image_size: int, png_augment: bool = False) -> np.ndarray:
+    """Renders -> network inputs ``(K, 3, S, S)`` exactly as inference prepares a user image.
+
+    With ``png_augment`` each render also appears as its 8-bit PNG version (highlights clipped),
+    so the network copes with PNG/JPEG inputs as well as linear EXR (2K images).
+    """
     from .. import input_image
     from ..infer import resample_square
 
+    if png_augment:
+        images = list(images) + [png_like(im) for im in images]
     return np.stack([resample_square(input_image.prepare_sphere_array(im), image_size) for im in images])
 
 
@@ -74,7 +88,7 @@ def build_material_sets(mcfg: Config, tcfg: TrainConfig, cache_dir: str | Path,
                progress=(lambda f: bar.update(round(f * len(todo)) - bar.n)) if bar else None)
     if bar is not None:
         bar.close()
-    images = {m.name: network_inputs(cache.load(m, tcfg.input_variants), mcfg.image_size)
+    images = {m.name: network_inputs(cache.load(m, tcfg.input_variants), mcfg.image_size, tcfg.png_augment)
               for m in everything}
 
     def imgs(mats: list[TrainingMaterial]) -> list[np.ndarray]:

@@ -56,6 +56,7 @@ class TrainConfig:
     corpus_size: int = 200
     corpus_seed: int = 0
     input_variants: int = 4
+    png_augment: bool = True
     use_shared_rgl: bool = True
     brdf_dirs: list[str] = field(default_factory=list)
     checkpoint_every: int = 250
