@@ -1,13 +1,14 @@
 """Per-band Cycles driver: render a scene's SpecGen materials into a spectral stack.
 
-Each Cycles render (CPU, OSL) carries twelve bands: the shader (``ops/osl/specgen_brdf.osl``)
-writes three groups of four bands as closure weights, which Cycles stores in the Emission,
+Cycles (CPU, OSL) renders images of spectral-basis coefficients, not bands (see :mod:`ops.bake`):
+each render carries four coefficient slots × RGB lighting, which the shader
+(``ops/osl/specgen_brdf.osl``) writes as closure weights and Cycles stores in the Emission,
 Diffuse Color, Glossy Color and Transmission Color passes; one compositor File Output node per pass
 writes them (a single multi-input File Output node wrote only its first input in Blender 5.0, and
-view-layer AOVs stay empty under OSL). With no Cycles lights, a black world and zero bounces the
-colour passes cost nothing beyond the shader itself, which does the lighting (lights and
-environment baked by :mod:`ops.bake`). The bands are then assembled into a spectral OpenEXR
-(Fichet et al. 2021) plus an RGB preview, written atomically.
+view-layer AOVs stay empty under OSL). With no Cycles lights, a black world and zero bounces those
+passes cost nothing beyond the shader, which does the lighting itself. The slot images are then
+combined with the basis into any number of bands (usually one render for 21 bands) and written as
+a spectral OpenEXR (Fichet et al. 2021) plus an RGB preview, atomically.
 
 The scene is modified only for the duration of a render and restored afterwards
 (:class:`_SceneState`). :class:`SpectralRenderJob` is a generator of progress steps so that a modal
@@ -29,7 +30,6 @@ from typing import Callable, Iterator
 import bpy
 import numpy as np
 
-from ..specgen_addon import spectra
 from ..specgen_addon.errors import Cancelled, OutputExistsError, SpecGenError
 from . import bake
 
@@ -394,7 +394,7 @@ class SpectralRenderJob:
         return mats
 
     def steps(self) -> Iterator[float]:
-        """Generator: bake lighting, one Cycles render per four basis coefficients, assemble, write."""
+        """Generator: bake lighting, one Cycles render per four coefficient slots, assemble, write."""
         t0 = time.perf_counter()
         mats = self._preflight()
         wl = self.wavelengths_nm
