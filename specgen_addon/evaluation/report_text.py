@@ -152,7 +152,10 @@ def compose(h: tables.Harness, mats: Sequence[Any], specgen_arm: str, weights: P
         add(abl_settings.describe_markdown(arms))
         add("")
         role = tables.ROLES_ABLATION[0]
-        add(f"Scored on the sphere under {_lighting(roles[role])} (as the paper's Tables 3–4).")
+        add(f"Scored on the sphere under {_lighting(roles[role])} (as the paper's Tables 3–4), from the "
+            "canonical input; the arms' networks are queried directly at the render's directions "
+            "(`specgen_addon/evaluation/network_brdf.py`: the same function and decoding as the "
+            "generated table, without its grid interpolation).")
         add("")
         add("**(c)** Paper Table 3 (RGL-S vs RGL-C-S+MERL):")
         add("")

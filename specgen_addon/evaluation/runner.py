@@ -147,7 +147,7 @@ def run_paper_tables(out: Path, img_dir: Path | None = None, smoke: bool = False
                 env = h.scenes[role].env
                 h.run_model(tables.robustness_arm(specgen_arm, env), w, m, [role], input_env=env)
         else:
-            h.run_model(kind, w, m, tables.ROLES_ABLATION)
+            h.run_model(kind, w, m, tables.ROLES_ABLATION, direct=True)
         bar.update(1)
     bar.close()
     if ablation_only:

@@ -153,17 +153,24 @@ class Harness:
                 write_json(self.cell_path(method, material.name, role), cell)
 
     def run_model(self, arm: str, weights: Path | None, material: Any, roles: Sequence[str],
-                  keep_images: bool = False, input_env: str | None = None) -> None:
+                  keep_images: bool = False, input_env: str | None = None, direct: bool = False) -> None:
         """Generate the spectral BRDF from the sphere input and score it in ``roles``.
 
         The input is the canonical sphere image, or with ``input_env`` the sphere photographed under
-        that environment map instead of the canonical one (robustness, table (b)).
+        that environment map instead of the canonical one (robustness, table (b)). ``direct``
+        queries the network at the render's directions instead of tabulating it
+        (:class:`.network_brdf.NetworkBRDF`, used for the ablation arms).
         """
         todo = [r for r in roles if self.cell(arm, material.name, r) is None]
         if not todo:
             return
         t0 = time.perf_counter()
-        if input_env is None:
+        if direct:
+            from .. import input_image
+            from .network_brdf import NetworkBRDF
+
+            table = NetworkBRDF(weights, input_image.render_input(material))
+        elif input_env is None:
             table = generate_from_sphere(material, weights, self.wl)
         else:
             from .. import infer
