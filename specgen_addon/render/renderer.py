@@ -16,6 +16,7 @@ BRDFs follow the project protocol: ``eval(wi, wo, λ) -> (N, Λ)`` (spectral) or
 
 from __future__ import annotations
 
+import hashlib
 from dataclasses import dataclass, field
 from typing import Callable, Protocol, Sequence
 
@@ -197,6 +198,36 @@ class Scene:
                 "environment": None if self.environment is None else self.environment.name}
 
 
+#: Prepared scenes of recent one-shot calls, keyed by content (a GT and a prediction rendered one
+#: after the other under the same lighting share the preparation).
+_SCENE_CACHE: dict[str, Scene] = {}
+_SCENE_CACHE_SIZE = 2
+
+
+def _digest(*arrays: np.ndarray) -> str:
+    h = hashlib.sha1()
+    for a in arrays:
+        a = np.ascontiguousarray(a)
+        h.update(str((a.shape, a.dtype.str)).encode())
+        h.update(a.tobytes())
+    return h.hexdigest()
+
+
+def _cached_scene(geometry: Geometry, lights: Sequence[DistantLight], environment: Environment | None,
+                  camera_dir: Sequence[float] | None, sampling: EnvSampling) -> Scene:
+    env_key = None if environment is None else (
+        _digest(environment.rgb), environment.rotation_rad, environment.uplift)
+    key = repr((_digest(geometry.normals, geometry.mask, geometry.view_dir), tuple(lights), env_key,
+                None if camera_dir is None else tuple(np.asarray(camera_dir, float)), sampling))
+    scene = _SCENE_CACHE.pop(key, None)
+    if scene is None:
+        scene = Scene(geometry, lights, environment, camera_dir, sampling)
+    _SCENE_CACHE[key] = scene  # most recent last
+    while len(_SCENE_CACHE) > _SCENE_CACHE_SIZE:
+        _SCENE_CACHE.pop(next(iter(_SCENE_CACHE)))
+    return scene
+
+
 def render_spectral(brdf: SpectralBRDF, geometry: Geometry, *, lights: Sequence[DistantLight] = (),
                     environment: Environment | None = None,
                     wavelengths_nm: np.ndarray = spectra.DEFAULT_WAVELENGTHS_NM,
@@ -204,8 +235,8 @@ def render_spectral(brdf: SpectralBRDF, geometry: Geometry, *, lights: Sequence[
                     sampling: EnvSampling = EnvSampling(),
                     progress: ProgressFn | None = None) -> RenderResult:
     """Spectral image (H, W, Λ) of ``brdf`` on ``geometry`` plus its linear sRGB (one-shot
-    :class:`Scene`; build a Scene yourself to render several BRDFs under the same lighting)."""
-    return Scene(geometry, lights, environment, camera_dir, sampling).render_spectral(
+    :class:`Scene`, reused from the last two calls with identical geometry and lighting)."""
+    return _cached_scene(geometry, lights, environment, camera_dir, sampling).render_spectral(
         brdf, wavelengths_nm, progress)
 
 
@@ -213,5 +244,5 @@ def render_rgb(brdf: RGBBRDF, geometry: Geometry, *, lights: Sequence[DistantLig
                environment: Environment | None = None, camera_dir: Sequence[float] | None = None,
                sampling: EnvSampling = EnvSampling(),
                progress: ProgressFn | None = None) -> RenderResult:
-    """Linear-sRGB image of an RGB BRDF (``eval_rgb``) on ``geometry`` (one-shot :class:`Scene`)."""
-    return Scene(geometry, lights, environment, camera_dir, sampling).render_rgb(brdf, progress)
+    """Linear-sRGB image of an RGB BRDF (``eval_rgb``) on ``geometry`` (see :func:`render_spectral`)."""
+    return _cached_scene(geometry, lights, environment, camera_dir, sampling).render_rgb(brdf, progress)
