@@ -87,13 +87,15 @@ def test_white_furnace_without_control_variate_is_unbiased():
     assert abs(img.rgb[img.mask].mean() - 1.0) < 0.01
 
 
-@pytest.mark.parametrize("control_variate", [True, False])
-def test_glossy_environment_render_matches_brute_force_quadrature(control_variate):
+@pytest.mark.parametrize("control_variate,heuristic", [(True, "balance"), (False, "balance"),
+                                                       (True, "power")])
+def test_glossy_environment_render_matches_brute_force_quadrature(control_variate, heuristic):
     env = _blob_environment()
     brdf = GGXReflector(alpha=0.3, f0=0.5, kd=0.3, kd_rgb=(0.3, 0.2, 0.1))
     res = 16
     img = render_rgb(brdf, sphere_geometry(res), environment=env,
-                     sampling=EnvSampling(control_variate=control_variate).scaled(8))
+                     sampling=EnvSampling(control_variate=control_variate,
+                                         heuristic=heuristic).scaled(8))
     n, mask = _sphere_normals(res)
     pixels = [(8, 8), (4, 10), (11, 5), (6, 3)]
     for i, j in pixels:
