@@ -406,3 +406,26 @@ def test_generate_operator_bakes_a_lookup_from_an_image(tmp_path):
         assert info.wavelengths_nm.size == 6 and all(p.is_file() for p in info.group_paths)
     finally:
         PKG.unregister()
+
+
+@pytest.mark.slow
+def test_batch_renders_a_table_on_an_obj_mesh_into_a_readable_spectral_exr(table, tmp_path):
+    colour = pytest.importorskip("colour")
+    table.save(tmp_path / "brdf.npz")
+    cube = tmp_path / "cube.obj"
+    verts = [(x, y, z) for x in (-1, 1) for y in (-1, 1) for z in (-1, 1)]
+    faces = [(1, 2, 4, 3), (5, 7, 8, 6), (1, 5, 6, 2), (3, 4, 8, 7), (1, 3, 7, 5), (2, 6, 8, 4)]
+    cube.write_text("".join(f"v {x} {y} {z}\n" for x, y, z in verts) +
+                    "".join("f " + " ".join(map(str, f)) + "\n" for f in faces))
+    done = subprocess.run([sys.executable, str(REPO / "batch.py"), "--brdf", str(tmp_path / "brdf.npz"),
+                           "--mesh", str(cube), "--env", "studio", "--sun", "--out", str(tmp_path / "out"),
+                           "--bands", "5", "--wl-min", "420", "--wl-max", "700", "--resolution", "32",
+                           "--samples", "4"], capture_output=True, text=True, timeout=300)
+    assert done.returncode == 0, done.stderr[-2000:]
+    exr = tmp_path / "out" / "brdf_cube_studio.exr"
+    components = colour.read_spectral_image_Fichet2021(exr)
+    wavelengths, values = components["S0"]
+    np.testing.assert_allclose(wavelengths, np.linspace(420, 700, 5))
+    assert values.shape == (32, 32, 5) and np.all(np.isfinite(values))
+    assert values[16, 16].min() > 0 and values[0, 0].max() == 0  # the cube in the middle, black corner
+    assert (tmp_path / "out" / "brdf_cube_studio_preview.png").is_file()
