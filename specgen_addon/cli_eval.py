@@ -28,9 +28,9 @@ def add_parser(subparsers: argparse._SubParsersAction) -> argparse.ArgumentParse
     p.add_argument("--ablation-steps", type=int, default=None,
                    help="exact step count of each ablation arm (overrides --budget-minutes)")
     p.add_argument("--no-ablation", action="store_true", help="skip training the ablation arms")
-    p.add_argument("--ablation-only", action="store_true",
-                   help="only train and score the ablation arms (no shipped weights needed); fills the "
-                        "cache for a later full run and writes no report")
+    p.add_argument("--prepare", action="store_true",
+                   help="only compute what needs no shipped weights (ground-truth renders, baselines, "
+                        "ablation arms) into the cache for a later full run; writes no report")
     p.add_argument("--weights", type=Path, default=None, help="SpecGen weights (default: the shipped ones)")
     p.add_argument("--resolution", type=int, default=None, help="render size in pixels (default 128)")
     p.add_argument("--fresh", action="store_true", help="discard cached results and start over")
@@ -45,5 +45,5 @@ def run(args: argparse.Namespace) -> int:
     run_paper_tables(out=args.out, img_dir=args.img_dir, smoke=args.smoke, materials=args.materials,
                      budget_minutes=args.budget_minutes, ablation_steps=args.ablation_steps,
                      ablation=not args.no_ablation, weights=args.weights, resolution=args.resolution,
-                     fresh=args.fresh, progress=not args.quiet, ablation_only=args.ablation_only)
+                     fresh=args.fresh, progress=not args.quiet, prepare=args.prepare)
     return 0

@@ -82,11 +82,11 @@ def run_paper_tables(out: Path, img_dir: Path | None = None, smoke: bool = False
                      materials: str | None = None, budget_minutes: float | None = None,
                      ablation_steps: int | None = None, ablation: bool = True,
                      weights: Path | None = None, resolution: int | None = None, fresh: bool = False,
-                     progress: bool = True, ablation_only: bool = False) -> Path:
+                     progress: bool = True, prepare: bool = False) -> Path:
     """Run the whole evaluation and write the markdown report ``out`` (returns its path).
 
-    ``ablation_only`` trains and scores the ablation arms only (they do not need the shipped
-    weights), filling the cache for a later full run; no report is written then.
+    ``prepare`` computes only what does not need the shipped weights (ground-truth renders,
+    baseline cells, the ablation arms), filling the cache for a later full run; no report then.
     """
     t_start = time.perf_counter()
     out = Path(out)
@@ -100,7 +100,7 @@ def run_paper_tables(out: Path, img_dir: Path | None = None, smoke: bool = False
     from ..model import DEFAULT_WEIGHTS
 
     weights_path = Path(weights) if weights is not None else DEFAULT_WEIGHTS
-    if not weights_path.is_file() and not ablation_only:
+    if not weights_path.is_file() and not prepare:
         raise SpecGenError(f"{weights_path}: SpecGen weights not found (train them or pass --weights)")
     settings = tables.Settings(resolution=conf["resolution"], n_materials=n_mat or 0, material_names=names, env_sampling_scale=conf["env_sampling_scale"],
                                lut_size=conf["lut_size"], band_count=conf["band_count"], smoke=smoke)
@@ -129,8 +129,8 @@ def run_paper_tables(out: Path, img_dir: Path | None = None, smoke: bool = False
     # 2. Cells: baselines and SpecGen in every scene, ablation arms under distant light.
     jobs: list[tuple[str, Any, Any]] = []
     for m in mats:
-        if not ablation_only:
-            jobs.append(("baselines", m, None))
+        jobs.append(("baselines", m, None))
+        if not prepare:
             jobs.append((specgen_arm, m, weights_path))
             jobs.append(("robustness", m, weights_path))
         for name, arm in arms.items():
@@ -150,8 +150,8 @@ def run_paper_tables(out: Path, img_dir: Path | None = None, smoke: bool = False
             h.run_model(kind, w, m, tables.ROLES_ABLATION, direct=True)
         bar.update(1)
     bar.close()
-    if ablation_only:
-        log(f"paper-tables: ablation arms trained and scored ({time.perf_counter() - t_start:.0f} s)")
+    if prepare:
+        log(f"paper-tables: prepared the weight-independent cells ({time.perf_counter() - t_start:.0f} s)")
         return out
 
     # 3. Real data: the RGL RGB files, SpecGen projected to RGB vs the measured BRDF.

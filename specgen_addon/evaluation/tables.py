@@ -219,17 +219,17 @@ class Harness:
 
     # -- images kept for figures -------------------------------------------------------------
     def figure_material_names(self, materials: Sequence[Any]) -> list[str]:
-        """The first material, then the first of another kind (e.g. a metal), up to the count."""
+        """The first material, then the first of the other family (metal / dielectric), then more
+        in corpus order up to the count."""
+        def family(m: Any) -> str:
+            return "metal" if m.kind.startswith("metal") else "dielectric"
+
         chosen: list[Any] = []
         for m in materials:
-            if len(chosen) >= self.s.figure_materials:
-                break
-            if not chosen or all(m.kind.split(":")[0] != c.kind.split(":")[0] for c in chosen):
+            if len(chosen) < self.s.figure_materials and all(family(m) != family(c) for c in chosen):
                 chosen.append(m)
         for m in materials:
-            if len(chosen) >= self.s.figure_materials:
-                break
-            if m not in chosen:
+            if len(chosen) < self.s.figure_materials and m not in chosen:
                 chosen.append(m)
         return [m.name for m in chosen]
 
