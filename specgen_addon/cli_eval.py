@@ -33,7 +33,9 @@ def add_parser(subparsers: argparse._SubParsersAction) -> argparse.ArgumentParse
                         "ablation arms) into the cache for a later full run; writes no report")
     p.add_argument("--weights", type=Path, default=None, help="SpecGen weights (default: the shipped ones)")
     p.add_argument("--resolution", type=int, default=None, help="render size in pixels (default 128)")
-    p.add_argument("--fresh", action="store_true", help="discard cached results and start over")
+    p.add_argument("--fresh", action="store_true",
+                   help="discard cached renders and scores and start over (trained ablation arms are "
+                        "kept: they are deterministic and keyed by their exact configuration)")
     p.add_argument("--quiet", action="store_true", help="no progress bars")
     p.set_defaults(func=run)
     return p
