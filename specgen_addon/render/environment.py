@@ -106,6 +106,14 @@ def uv_to_direction(u: np.ndarray, v: np.ndarray, rotation_rad: float = 0.0) -> 
     return np.stack([c * np.cos(phi), np.sin(el), c * np.sin(phi)], axis=-1)
 
 
+def _box_downsample(rgb: np.ndarray, max_width: int) -> np.ndarray:
+    """Halve an equirect map (2×2 box) until it is at most ``max_width`` wide (or odd-sized)."""
+    while rgb.shape[1] > max_width and rgb.shape[0] % 2 == 0 and rgb.shape[1] % 2 == 0:
+        h, w = rgb.shape[0] // 2, rgb.shape[1] // 2
+        rgb = rgb.reshape(h, 2, w, 2, 3).mean(axis=(1, 3))
+    return rgb
+
+
 def _texel_directions(h: int, w: int, rotation_rad: float) -> np.ndarray:
     """World directions (h, w, 3) of the texel centres of an h×w equirect map."""
     uu, vv = np.meshgrid((np.arange(w) + 0.5) / w, 1.0 - (np.arange(h) + 0.5) / h)
@@ -172,9 +180,7 @@ class Environment:
         """
         rgb = read_exr_rgb(path)
         if max_width is not None:
-            while rgb.shape[1] > max_width and rgb.shape[0] % 2 == 0 and rgb.shape[1] % 2 == 0:
-                h, w = rgb.shape[0] // 2, rgb.shape[1] // 2
-                rgb = rgb.reshape(h, 2, w, 2, 3).mean(axis=(1, 3))
+            rgb = _box_downsample(rgb, max_width)
         env = cls(rgb, rotation_rad=rotation_rad, uplift=uplift, name=Path(path).stem)
         scale = exposure / env.mean_luminance() if normalise else exposure
         env.rgb = env.rgb * np.float32(scale)
@@ -223,10 +229,7 @@ class Environment:
         angles) and interpolated bilinearly.
         """
         if self._irradiance is None:
-            rgb = self.rgb
-            while rgb.shape[1] > 128 and rgb.shape[0] % 2 == 0 and rgb.shape[1] % 2 == 0:
-                h, w = rgb.shape[0] // 2, rgb.shape[1] // 2
-                rgb = rgb.reshape(h, 2, w, 2, 3).mean(axis=(1, 3))
+            rgb = _box_downsample(self.rgb, 128)
             h, w = rgb.shape[:2]
             dirs = _texel_directions(h, w, self.rotation_rad).reshape(-1, 3)
             # exact solid angle of a texel row: (2π/W)·(sin el_top − sin el_bottom)
