@@ -11,6 +11,7 @@ augmentation); :data:`HELDOUT_ENVS` are never used in training and serve as unse
 
 from __future__ import annotations
 
+import functools
 import importlib.util
 from pathlib import Path
 
@@ -58,5 +59,14 @@ def env_path(name: str) -> Path:
 
 def load_environment(name: str, exposure: float = 1.0, rotation_rad: float = 0.0) -> Environment:
     """Environment map ``name`` normalised to unit mean luminance, times ``exposure``, rotated about
-    the up axis by ``rotation_rad`` (see :meth:`Environment.from_file`)."""
+    the up axis by ``rotation_rad`` (see :meth:`Environment.from_file`).
+
+    Loaded maps are cached with their sampling and irradiance tables: treat them as read-only
+    (``Environment.with_`` makes a modified copy).
+    """
+    return _load_cached(name, float(exposure), float(rotation_rad))
+
+
+@functools.lru_cache(maxsize=16)
+def _load_cached(name: str, exposure: float, rotation_rad: float) -> Environment:
     return Environment.from_file(env_path(name), exposure=exposure, rotation_rad=rotation_rad)
