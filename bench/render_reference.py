@@ -61,6 +61,22 @@ def pick_materials(count: int):
     return chosen[:count]
 
 
+def sheet_materials(count: int):
+    """A varied handful: plastics of distinct spectra (glossy to rough), a coated one, gold, silver."""
+    corpus = generate_corpus(200, 0)
+    wanted = [lambda m: m.kind == "metal:Au", lambda m: m.kind == "metal:Ag",
+              lambda m: m.kind == "plastic+coat"]
+    chosen = [next(m for m in corpus if w(m)) for w in wanted]
+    sources = set()
+    for m in sorted((m for m in corpus if m.kind == "plastic"), key=lambda m: m.alpha):
+        if len(chosen) >= count:
+            break
+        if m.diffuse.source not in sources and (not sources or m.alpha > 0.2):
+            sources.add(m.diffuse.source)
+            chosen.append(m)
+    return chosen[:count]
+
+
 def timing(materials, resolution: int) -> None:
     env = lighting.load_environment("studio")
     print(f"\n### {resolution}² sphere, {WL.size} bands, `studio` environment, "
@@ -181,7 +197,7 @@ def main() -> None:
     if not args.skip_study:
         doubling(materials, args.study_resolution, args.envs.split(","))
     if args.figure:
-        contact_sheet(materials[:5], args.figure)
+        contact_sheet(sheet_materials(5), args.figure)
 
 
 if __name__ == "__main__":

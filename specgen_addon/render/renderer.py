@@ -61,6 +61,8 @@ class _Block:
     wo_local: np.ndarray            # (P, 3)
     light_wi: list[np.ndarray]      # per light (P, 3) local incident direction
     env: SampleBlock | None
+    has_samples: np.ndarray | None = None      # (P,) bool: pixel has ≥ 1 environment sample
+    segment_starts: np.ndarray | None = None   # first sample row of each such pixel
 
 
 class Scene:
@@ -117,7 +119,14 @@ class Scene:
             if env is not None:  # float32 storage halves memory; BRDFs get float64
                 env = SampleBlock(env.pixel, env.wi_local.astype(np.float32),
                                   env.weight_rgb.astype(np.float32), env.irradiance_rgb)
-            blocks.append(_Block(sel, wo_l, light_wi, env))
+            blk = _Block(sel, wo_l, light_wi, env)
+            if env is not None:
+                counts = np.bincount(env.pixel, minlength=sel.size)
+                if np.any(np.diff(env.pixel) < 0):
+                    raise SpecGenError("internal: environment samples are not grouped by pixel")
+                blk.has_samples = counts > 0
+                blk.segment_starts = (np.cumsum(counts) - counts)[blk.has_samples]
+            blocks.append(blk)
             if progress is not None:
                 progress(0.5 * min(1.0, (start + chunk) / max(ids.size, 1)))
         self._blocks = blocks
@@ -154,9 +163,9 @@ class Scene:
                     fr -= floor
                     irradiance = e.irradiance_rgb if env_to_channels is None else e.irradiance_rgb @ env_to_channels
                     out += floor * irradiance
-                contrib = fr * radiance
-                for c in range(n_channels):
-                    out[:, c] += np.bincount(e.pixel, weights=contrib[:, c], minlength=blk.ids.size)
+                fr *= radiance
+                # samples are grouped by pixel in ascending order: one segmented sum
+                out[blk.has_samples] += np.add.reduceat(fr, blk.segment_starts, axis=0)
             image[blk.ids] = out
             if progress is not None:
                 progress(0.5 + 0.5 * (i + 1) / len(blocks))
