@@ -24,7 +24,7 @@ def add_parser(subparsers: argparse._SubParsersAction) -> argparse.ArgumentParse
     p.add_argument("--budget-minutes", type=float, default=None,
                    help="approximate wall-clock budget of each ablation arm; converted once to a fixed "
                         "step count (runs stay deterministic) from a short timing of the training step "
-                        "(default: a fixed 250 steps per arm)")
+                        "(default: a fixed 500 steps per arm)")
     p.add_argument("--ablation-steps", type=int, default=None,
                    help="exact step count of each ablation arm (overrides --budget-minutes)")
     p.add_argument("--no-ablation", action="store_true", help="skip training the ablation arms")

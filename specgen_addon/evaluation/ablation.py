@@ -45,9 +45,8 @@ ARMS = (
     Arm("joint-hadamard", "Joint RGB + spectral (Hadamard)", "hadamard", True),
 )
 ARMS_BY_NAME = {a.name: a for a in ARMS}
-#: Default step budget of every arm (≈ 3 min per arm on an idle 2-core machine; 1/24 of the
-#: shipped model's 6000 steps).
-DEFAULT_STEPS = 250
+#: Default step budget of every arm (1/6 of the shipped model's 3000 steps).
+DEFAULT_STEPS = 500
 SMOKE_STEPS = 3
 #: The smoke run trains on a tiny prefix of the corpus with one input lighting per material.
 SMOKE_TRAIN = {"corpus_size": 12, "input_variants": 1, "val_every": 10 ** 9, "val_materials": 2}
@@ -142,7 +141,7 @@ def ablation_settings(smoke: bool = False, steps: int | None = None, budget_minu
         return AblationSettings(steps=SMOKE_STEPS, model=model, train=train_d, budget_note="(smoke budget)")
     if budget_minutes is None:
         return AblationSettings(steps=DEFAULT_STEPS, model=model, train=train_d,
-                                budget_note="(the default budget: 1/24 of the shipped model's steps)")
+                                budget_note="(the default budget: 1/6 of the shipped model's steps)")
     minutes = float(budget_minutes)
     probe = AblationSettings(steps=1, model=model, train=train_d)
     timing_path = None if cache_dir is None else Path(cache_dir) / f"step_timing_{minutes:g}min.json"
