@@ -153,7 +153,7 @@ class Scene:
                 lit = wi_l[:, 2] > 0
                 if np.any(lit):
                     out[lit] += evaluate(wi_l[lit], blk.wo_local[lit]) * (spectrum * wi_l[lit, 2:3])
-            if blk.env is not None:
+            if blk.env is not None and blk.segment_starts.size:
                 e = blk.env
                 fr = evaluate(e.wi_local, blk.wo_local[e.pixel])
                 radiance = e.weight_rgb.astype(np.float64)
