@@ -77,7 +77,9 @@ def run_train(args: argparse.Namespace) -> int:
     if (out / "specgen.pt").exists() and not args.resume:
         raise OutputExistsError(f"{out}/specgen.pt: exists (pass --resume to continue that run)")
     out.mkdir(parents=True, exist_ok=True)
-    cache = Path(".cache") / "train-data"
+    from .evaluation.cache import cache_root
+
+    cache = cache_root() / "train-data"
     t0 = time.perf_counter()
     spectral, rgb, val = build_material_sets(mcfg, tcfg, cache_dir=cache, log=print,
                                              progress=not args.quiet)
