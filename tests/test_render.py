@@ -160,7 +160,8 @@ def test_scene_renders_are_deterministic_and_reusable():
     c = render_spectral(GGXReflector(0.2), sphere_geometry(16), lights=[DistantLight((0, 1, 1))],
                         environment=env, wavelengths_nm=WL[::4])
     np.testing.assert_array_equal(a.spectral, b.spectral)
-    np.testing.assert_array_equal(a.spectral, c.spectral)
+    # a fresh Scene draws the same directions (equal up to BLAS summation order)
+    np.testing.assert_allclose(a.spectral, c.spectral, rtol=1e-12, atol=1e-15)
     assert np.all(a.spectral[~a.mask] == 0) and np.all(a.spectral[a.mask] > 0)
 
 
