@@ -31,6 +31,9 @@ def add_parser(subparsers: argparse._SubParsersAction) -> argparse.ArgumentParse
     p.add_argument("--prepare", action="store_true",
                    help="only compute what needs no shipped weights (ground-truth renders, baselines, "
                         "ablation arms) into the cache for a later full run; writes no report")
+    p.add_argument("--report-only", action="store_true",
+                   help="compute nothing: rebuild the report and figures from the cache (e.g. after "
+                        "editing the discussion file beside the report)")
     p.add_argument("--weights", type=Path, default=None, help="SpecGen weights (default: the shipped ones)")
     p.add_argument("--resolution", type=int, default=None, help="render size in pixels (default 128)")
     p.add_argument("--fresh", action="store_true",
@@ -47,5 +50,6 @@ def run(args: argparse.Namespace) -> int:
     run_paper_tables(out=args.out, img_dir=args.img_dir, smoke=args.smoke, materials=args.materials,
                      budget_minutes=args.budget_minutes, ablation_steps=args.ablation_steps,
                      ablation=not args.no_ablation, weights=args.weights, resolution=args.resolution,
-                     fresh=args.fresh, progress=not args.quiet, prepare=args.prepare)
+                     fresh=args.fresh, progress=not args.quiet, prepare=args.prepare,
+                     report_only=args.report_only)
     return 0

@@ -210,3 +210,18 @@ def train_arms(settings: AblationSettings, cache_dir: Path, progress: bool = Tru
         out[name] = ArmResult(name, key, arm.label, arm.fusion, arm.joint, arm_dir / "specgen.pt",
                               int(info["steps"]), float(info["wall_seconds"]), int(info["seed"]))
     return out
+
+
+def save_arms(path: Path, settings: AblationSettings, arms: dict[str, ArmResult]) -> None:
+    """Record which trained arms a run scored (read back by :func:`load_arms` for ``--report-only``)."""
+    write_json(path, {"steps": settings.steps, "seed": settings.seed, "budget_note": settings.budget_note,
+                      "arms": [{**dataclasses.asdict(a), "weights": str(a.weights)} for a in arms.values()]})
+
+
+def load_arms(path: Path) -> tuple[AblationSettings | None, dict[str, ArmResult]]:
+    """The ablation settings and arms recorded by :func:`save_arms` (none when absent)."""
+    data = read_json(path)
+    if data is None:
+        return None, {}
+    arms = {a["name"]: ArmResult(**{**a, "weights": Path(a["weights"])}) for a in data["arms"]}
+    return AblationSettings(steps=data["steps"], seed=data["seed"], budget_note=data["budget_note"]), arms

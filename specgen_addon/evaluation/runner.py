@@ -82,11 +82,13 @@ def run_paper_tables(out: Path, img_dir: Path | None = None, smoke: bool = False
                      materials: str | None = None, budget_minutes: float | None = None,
                      ablation_steps: int | None = None, ablation: bool = True,
                      weights: Path | None = None, resolution: int | None = None, fresh: bool = False,
-                     progress: bool = True, prepare: bool = False) -> Path:
+                     progress: bool = True, prepare: bool = False, report_only: bool = False) -> Path:
     """Run the whole evaluation and write the markdown report ``out`` (returns its path).
 
     ``prepare`` computes only what does not need the shipped weights (ground-truth renders,
     baseline cells, the ablation arms), filling the cache for a later full run; no report then.
+    ``report_only`` computes nothing: it rebuilds the report and figures from the cache (the arms
+    recorded there by the last full run), e.g. after editing the discussion file.
     """
     t_start = time.perf_counter()
     out = Path(out)
@@ -102,8 +104,9 @@ def run_paper_tables(out: Path, img_dir: Path | None = None, smoke: bool = False
     weights_path = Path(weights) if weights is not None else DEFAULT_WEIGHTS
     if not weights_path.is_file() and not prepare:
         raise SpecGenError(f"{weights_path}: SpecGen weights not found (train them or pass --weights)")
-    settings = tables.Settings(resolution=conf["resolution"], n_materials=n_mat or 0, material_names=names, env_sampling_scale=conf["env_sampling_scale"],
-                               lut_size=conf["lut_size"], band_count=conf["band_count"], smoke=smoke)
+    settings = tables.Settings(resolution=conf["resolution"], n_materials=n_mat or 0, material_names=names,
+                               env_sampling_scale=conf["env_sampling_scale"], lut_size=conf["lut_size"],
+                               band_count=conf["band_count"], smoke=smoke)
     root = out.parent / ".cache" / "paper-tables"
     cache = root / f"{'smoke' if smoke else 'full'}-{_key(settings.describe())}"
     if fresh:
@@ -121,14 +124,17 @@ def run_paper_tables(out: Path, img_dir: Path | None = None, smoke: bool = False
     # 1. Ablation arms (equal step budgets, deterministic seeds), trained or loaded from the cache.
     arms: dict[str, abl.ArmResult] = {}
     abl_settings = None
-    if ablation:
+    if report_only:
+        abl_settings, arms = abl.load_arms(cache / "arms.json")
+    elif ablation:
         abl_settings = abl.ablation_settings(smoke=smoke, steps=ablation_steps, budget_minutes=budget_minutes,
                                              cache_dir=root / "ablation", log=log)
         arms = abl.train_arms(abl_settings, root / "ablation", progress=progress, log=log)
+        abl.save_arms(cache / "arms.json", abl_settings, arms)
 
     # 2. Cells: baselines and SpecGen in every scene, ablation arms under distant light.
     jobs: list[tuple[str, Any, Any]] = []
-    for m in mats:
+    for m in ([] if report_only else mats):
         jobs.append(("baselines", m, None))
         if not prepare:
             jobs.append((specgen_arm, m, weights_path))
@@ -151,6 +157,7 @@ def run_paper_tables(out: Path, img_dir: Path | None = None, smoke: bool = False
         bar.update(1)
     bar.close()
     if prepare:
+        record_run(cache, "prepare", time.perf_counter() - t_start)
         log(f"paper-tables: prepared the weight-independent cells ({time.perf_counter() - t_start:.0f} s)")
         return out
 
@@ -160,14 +167,17 @@ def run_paper_tables(out: Path, img_dir: Path | None = None, smoke: bool = False
     if REAL_RGL_DIR.is_dir():
         files = sorted(p for p in REAL_RGL_DIR.glob("*_rgb.bsdf"))
         for path in files:
-            real[path.stem] = h.run_real(path.stem, path, weights_path, REAL_ROLES, specgen_arm)
+            real[path.stem] = ({r: h.cell(f"real-{specgen_arm}", path.stem, r) for r in REAL_ROLES}
+                               if report_only else h.run_real(path.stem, path, weights_path, REAL_ROLES, specgen_arm))
     else:
         real_note = f"(skipped: {REAL_RGL_DIR} not found)"
 
     # 4. Figures and report.
     figures = make_figures(h, mats, specgen_arm, img_dir)
+    runs = (read_json(cache / "runs.json") or []) if report_only else \
+        record_run(cache, "full", time.perf_counter() - t_start)
     text = build_report(h, mats, specgen_arm, weights_path, arms, abl_settings, real, real_note,
-                        figures, out, smoke, time.perf_counter() - t_start)
+                        figures, out, smoke, runs)
     with atomic_write(out, overwrite=True) as tmp:
         tmp.write_text(text, encoding="utf-8")
     log(f"paper-tables: wrote {out} ({time.perf_counter() - t_start:.0f} s)")
@@ -254,9 +264,18 @@ def _labels(specgen_arm: str) -> dict[str, str]:
 
 def build_report(h: tables.Harness, mats: Sequence[Any], specgen_arm: str, weights: Path,
                  arms: dict[str, "abl.ArmResult"], abl_settings: Any, real: dict, real_note: str,
-                 figures: dict[str, Path], out: Path, smoke: bool, seconds: float) -> str:
+                 figures: dict[str, Path], out: Path, smoke: bool, runs: list[dict]) -> str:
     """The markdown of docs/results.md."""
     from .report_text import compose
 
     return compose(h, mats, specgen_arm, weights, arms, abl_settings, real, real_note, figures, out,
-                   smoke, seconds, machine_description(), git_commit())
+                   smoke, runs, machine_description(), git_commit())
+
+
+def record_run(cache: Path, mode: str, seconds: float) -> list[dict]:
+    """Append this run's wall time to ``<cache>/runs.json``; returns every run recorded there."""
+    runs = read_json(cache / "runs.json") or []
+    runs.append({"mode": mode, "seconds": round(float(seconds), 1), "commit": git_commit(),
+                 "date": time.strftime("%Y-%m-%d %H:%M UTC", time.gmtime())})
+    write_json(cache / "runs.json", runs)
+    return runs
