@@ -45,7 +45,9 @@ def main() -> int:
     params = count_parameters(load_weights(args.weights))
     base = rss_mb()
     times = []
+    table = None
     for _ in range(args.repeat):
+        table = None                                       # measure one table's memory, not two
         t0 = time.perf_counter()
         table = infer.generate_brdf(args.image, weights=args.weights, wavelengths_nm=wl, backend=args.backend)
         times.append(time.perf_counter() - t0)

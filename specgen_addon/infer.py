@@ -192,11 +192,16 @@ def generate_brdf(image, weights=None, wavelengths_nm=None, backend: str = "torc
     u_lambda = (2.0 * (wl - cfg.lambda_min_nm) / (cfg.lambda_max_nm - cfg.lambda_min_nm) - 1.0).astype(np.float32)
     tables = be.make_tables(x, u_lambda)
     rp = evaluate_grid(be, tables, wl.size, progress=progress, cancel=cancel)
-    values = np.expm1(np.clip(rp, 0.0, None) * math.log1p(cfg.mu)) / cfg.mu
+    # inverse μ-law in place: the table is 122 MB at 21 bands, temporaries would multiply it
+    np.clip(rp, 0.0, None, out=rp)
+    rp *= np.float32(math.log1p(cfg.mu))
+    np.expm1(rp, out=rp)
+    rp /= np.float32(cfg.mu)
+    values = rp
     src = "image" if not isinstance(image, (str, Path)) else str(image)
     meta = {"source": "specgen", "input_image": src, "backend": backend,
             "weights": str(_weights_path(weights)), "description": "SpecGen prediction"}
-    return BRDFTable(values.astype(np.float32), wl, metadata=meta)
+    return BRDFTable(values, wl, metadata=meta)
 
 
 def evaluate_grid(be, tables, n_lambda: int, progress: ProgressFn | None = None,

@@ -39,6 +39,8 @@ class Config:
     res_theta_d: int = 32
     res_phi_d: int = 48
     res_lambda: int = 16
+    # per-material λ profile added to each spectral plane straight from the latent (see planes.py)
+    spectral_code: bool = True
     lambda_min_nm: float = 380.0
     lambda_max_nm: float = 780.0
     # features and fusion

@@ -33,7 +33,16 @@ class ImageEncoder(nn.Module):
                                 torch.linspace(-1, 1, cfg.image_size), indexing="ij")
         self.register_buffer("coords", torch.stack([xs, ys])[None], persistent=False)
 
+    @staticmethod
+    def compress(image: torch.Tensor) -> torch.Tensor:
+        return torch.log1p(16.0 * image.clamp_min(0.0)) / math.log(17.0)
+
+    @classmethod
+    def colour(cls, image: torch.Tensor) -> torch.Tensor:
+        """Mean log-compressed RGB over the frame ``(B, 3)``: the sphere's overall colour."""
+        return cls.compress(image).mean(dim=(2, 3))
+
     def forward(self, image: torch.Tensor) -> torch.Tensor:
-        x = torch.log1p(16.0 * image.clamp_min(0.0)) / math.log(17.0)
+        x = self.compress(image)
         x = torch.cat([x, self.coords.expand(x.shape[0], -1, -1, -1)], dim=1)
         return torch.relu(self.fc(self.convs(x).flatten(1)))

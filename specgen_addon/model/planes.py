@@ -67,7 +67,12 @@ class PlaneGenerator(nn.Module):
 
     A linear layer makes a small seed map, upsampling 3×3 convs grow it into a shared trunk, and
     one light head per plane resamples the trunk to that plane's texel grid and emits C channels.
-    A learned static plane is added to each (the material-independent part of BRDF structure).
+    A learned static plane is added to each (the material-independent part of BRDF structure),
+    and with ``spectral_code`` a linear map of the latent and the image's mean colour
+    (:meth:`ImageEncoder.colour`) adds a per-material λ profile
+    ``(C, 1, res_lambda)`` to each spectral plane: convolutions are translation-equivariant, so
+    without it the material's spectrum has to be placed along the λ axis by the seed map alone
+    (a first model trained that way predicted nearly the same spectral shape for every material).
     """
 
     def __init__(self, cfg: Config):
@@ -86,12 +91,17 @@ class PlaneGenerator(nn.Module):
             name: nn.Sequential(nn.Conv2d(c_last, cfg.head_channels, 3, padding=1), nn.ReLU(inplace=True),
                                 nn.Conv2d(cfg.head_channels, cfg.feature_dim, 1))
             for name in PLANE_NAMES})
+        self.spectral = None
+        if cfg.spectral_code:
+            self.spectral = nn.Linear(cfg.latent_dim + 3, 3 * cfg.feature_dim * cfg.res_lambda)
+            nn.init.normal_(self.spectral.weight, std=0.002)
+            nn.init.zeros_(self.spectral.bias)
         base_mean = 1.0 if cfg.fusion == "hadamard" else 0.0
         self.static = nn.ParameterDict({
             name: nn.Parameter(base_mean + 0.1 * torch.randn(1, cfg.feature_dim, *shape))
             for name, shape in cfg.plane_shapes.items()})
 
-    def forward(self, latent: torch.Tensor) -> dict[str, torch.Tensor]:
+    def forward(self, latent: torch.Tensor, colour: torch.Tensor | None = None) -> dict[str, torch.Tensor]:
         c0 = self.cfg.decoder_channels[0]
         h0, w0 = self.cfg.decoder_seed_hw
         x = torch.relu(self.seed(latent)).view(-1, c0, h0, w0)
@@ -100,6 +110,14 @@ class PlaneGenerator(nn.Module):
         for name, shape in self.cfg.plane_shapes.items():
             t = F.interpolate(trunk, size=shape, mode="bilinear", align_corners=True)
             planes[name] = self.static[name] + self.heads[name](t)
+        if self.spectral is not None:
+            cfg = self.cfg
+            if colour is None:
+                colour = latent.new_zeros(latent.shape[0], 3)
+            code = self.spectral(torch.cat([latent, colour], dim=1))
+            code = code.view(-1, 3, cfg.feature_dim, 1, cfg.res_lambda)
+            for k, name in enumerate(("e1", "e2", "e3")):
+                planes[name] = planes[name] + code[:, k]
         return planes
 
 

@@ -39,7 +39,7 @@ class SpecGen(nn.Module):
 
     def planes(self, image: torch.Tensor) -> dict[str, torch.Tensor]:
         """The six planes ``{d1..e3: (B, C, rows, cols)}`` for images ``(B, 3, S, S)``."""
-        return self.generator(self.encoder(image))
+        return self.generator(self.encoder(image), self.encoder.colour(image))
 
     def query(self, planes: dict[str, torch.Tensor], theta_h: torch.Tensor, theta_d: torch.Tensor,
               phi_d: torch.Tensor, wavelength_nm: torch.Tensor | None = None) -> torch.Tensor:
@@ -92,7 +92,8 @@ def load_weights(path: str | Path | None = None, expect: Config | None = None) -
     if payload.get("version") != WEIGHTS_VERSION:
         raise WeightsError(f"{path}: unsupported weights version {payload.get('version')!r}")
     try:
-        cfg = Config.from_dict(payload["config"])
+        # files written before the per-material spectral code existed did not have one
+        cfg = Config.from_dict({"spectral_code": False, **payload["config"]})
     except Exception as exc:
         raise WeightsError(f"{path}: bad model config in weights ({exc})") from None
     if expect is not None and cfg != expect:

@@ -57,6 +57,7 @@ class TrainConfig:
     corpus_seed: int = 0
     input_variants: int = 4
     png_augment: bool = True
+    canonical_fraction: float = 0.75
     use_shared_rgl: bool = True
     brdf_dirs: list[str] = field(default_factory=list)
     checkpoint_every: int = 250
@@ -118,12 +119,25 @@ def lr_at(tcfg: TrainConfig, step: int) -> float:
     return tcfg.lr * tcfg.lr_decay ** (step // max(1, tcfg.lr_decay_every))
 
 
-def _draw(rng: np.random.Generator, mset: MaterialSet, k: int) -> tuple[list[TrainingMaterial], list[np.ndarray]]:
+def _draw(rng: np.random.Generator, mset: MaterialSet, k: int, canonical_fraction: float,
+          n_variants: int) -> tuple[list[TrainingMaterial], list[np.ndarray]]:
+    """``k`` materials and one input image each: the canonical lighting with probability
+    ``canonical_fraction`` (its linear or PNG version), else any of the material's images.
+
+    Coloured environment maps shift the sphere's colour, which a single image cannot tell apart
+    from the material's own; mostly canonical inputs keep the colour → spectrum mapping sharp.
+    """
     idx = rng.choice(len(mset), size=min(k, len(mset)), replace=False)
     mats, imgs = [], []
     for i in np.sort(idx):
+        stack = mset.images[i]
+        canonical = np.arange(0, stack.shape[0], max(1, n_variants))   # variant 0 (and its PNG)
+        if rng.random() < canonical_fraction:
+            j = canonical[rng.integers(0, canonical.size)]
+        else:
+            j = rng.integers(0, stack.shape[0])
         mats.append(mset.materials[i])
-        imgs.append(mset.images[i][rng.integers(0, mset.images[i].shape[0])])
+        imgs.append(stack[j])
     return mats, imgs
 
 
@@ -156,7 +170,7 @@ def make_step_batches(tcfg: TrainConfig, mcfg: Config, spectral: MaterialSet, rg
         if len(mset) == 0 or k <= 0:
             out.append(None)
             continue
-        mats, imgs = _draw(rng, mset, k)
+        mats, imgs = _draw(rng, mset, k, tcfg.canonical_fraction, tcfg.input_variants)
         out.append(make_batch(mats, imgs, rng, tcfg.angles_per_material, tcfg.wavelengths_per_angle,
                               is_spec, TARGET_WAVELENGTHS_NM, mcfg.mu))
     return out[0], out[1]
