@@ -227,9 +227,9 @@ def test_recorded_arms_round_trip(tmp_path):
 
     arm = ablation.ArmResult("joint-aff", "joint-aff-abc", "Joint (AFF)", "aff", True, Path("w/specgen.pt"),
                              500, 221.5, 0)
-    settings = ablation.AblationSettings(steps=500, seed=0, budget_note="(note)")
-    ablation.save_arms(tmp_path / "arms.json", settings, {"joint-aff": arm})
+    settings = ablation.AblationSettings(steps=500, seeds=(0, 1), budget_note="(note)")
+    ablation.save_arms(tmp_path / "arms.json", settings, {"joint-aff/seed0": arm})
     loaded_settings, loaded = ablation.load_arms(tmp_path / "arms.json")
-    assert loaded == {"joint-aff": arm}
-    assert (loaded_settings.steps, loaded_settings.seed, loaded_settings.budget_note) == (500, 0, "(note)")
+    assert loaded == {"joint-aff/seed0": arm}
+    assert (loaded_settings.steps, loaded_settings.seeds, loaded_settings.budget_note) == (500, (0, 1), "(note)")
     assert ablation.load_arms(tmp_path / "missing.json") == (None, {})

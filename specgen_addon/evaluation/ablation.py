@@ -12,9 +12,10 @@ arm                           fusion    data
 ``joint-hadamard``            Hadamard  + RGB materials
 ============================  ========  ===========================================
 
-Every arm gets the same budget: the same number of steps, the same seed, and therefore the same
-spectral batches (a step's batches are a pure function of ``(seed, step)`` and the spectral draw
-comes first); joint arms add an RGB batch to each step. A budget given in minutes is converted
+Every arm gets the same budget: the same number of steps and the same seeds, and therefore the
+same spectral batches (a step's batches are a pure function of ``(seed, step)`` and the spectral
+draw comes first); joint arms add an RGB batch to each step. Each arm is trained once per seed
+(:data:`SEEDS`) and the tables report the mean over seeds, with the per-seed values beside it. A budget given in minutes is converted
 once to a step count from a short timing of the joint AFF step and the count is cached, so reruns
 and resumes train exactly the same steps (wall-clock budgets would not be deterministic).
 """
@@ -45,12 +46,13 @@ ARMS = (
     Arm("joint-hadamard", "Joint RGB + spectral (Hadamard)", "hadamard", True),
 )
 ARMS_BY_NAME = {a.name: a for a in ARMS}
-#: Default step budget of every arm (1/6 of the shipped model's 3000 steps).
+#: Default step budget of every arm (a tenth of the shipped model's 5000 steps).
 DEFAULT_STEPS = 500
 SMOKE_STEPS = 3
 #: The smoke run trains on a tiny prefix of the corpus with one input lighting per material.
 SMOKE_TRAIN = {"corpus_size": 12, "input_variants": 1, "val_every": 10 ** 9, "val_materials": 2}
-SEED = 0
+#: Seeds every arm is trained with (the smoke run uses the first only).
+SEEDS = (0, 1)
 
 
 @dataclass
@@ -58,29 +60,29 @@ class AblationSettings:
     """Budget and configuration shared by every arm."""
 
     steps: int
-    seed: int = SEED
+    seeds: tuple[int, ...] = SEEDS
     arms: tuple[str, ...] = tuple(a.name for a in ARMS)
     model: dict[str, Any] = field(default_factory=dict)        # Config fields (fusion set per arm)
     train: dict[str, Any] = field(default_factory=dict)        # TrainConfig fields shared by all arms
     budget_note: str = ""
 
-    def configs(self, arm: Arm):
-        """(model Config, TrainConfig) of ``arm``."""
+    def configs(self, arm: Arm, seed: int):
+        """(model Config, TrainConfig) of ``arm`` trained with ``seed``."""
         from ..model import Config
         from ..train.loop import TrainConfig
 
         mcfg = Config.from_dict({**self.model, "fusion": arm.fusion})
-        t = {**self.train, "seed": self.seed, "steps": self.steps,
+        t = {**self.train, "seed": seed, "steps": self.steps,
              "lr_decay_every": max(1, self.steps // 4), "max_minutes": None}
         if not arm.joint:
             t.update(rgb_materials_per_step=0, use_shared_rgl=False)
         return mcfg, TrainConfig.from_dict(t)
 
-    def key(self, arm: Arm) -> str:
+    def key(self, arm: Arm, seed: int) -> str:
         import hashlib
         import json
 
-        mcfg, tcfg = self.configs(arm)
+        mcfg, tcfg = self.configs(arm, seed)
         blob = json.dumps({"m": mcfg.to_dict(), "t": dataclasses.asdict(tcfg)}, sort_keys=True, default=str)
         return f"{arm.name}-{hashlib.sha1(blob.encode()).hexdigest()[:10]}"
 
@@ -90,8 +92,9 @@ class AblationSettings:
         rows = [[r.label, r.fusion.upper() if r.fusion == "aff" else "Hadamard",
                  "corpus spectral + RGB" if r.joint else "corpus spectral", str(r.steps), str(r.seed),
                  f"{r.wall_seconds / 60:.1f} min"] for r in results.values()]
+        seeds = ", ".join(str(x) for x in self.seeds)
         text = (f"Ablation arms: same network as the shipped model (fusion swapped), each trained for "
-                f"**{self.steps} steps** with seed {self.seed} {self.budget_note}; learning rate halved "
+                f"**{self.steps} steps** with each of the seeds {seeds} {self.budget_note}; learning rate halved "
                 f"every {max(1, self.steps // 4)} steps (four times per run, as the paper's schedule). "
                 "Wall times are as measured (the machine was shared, so they vary; the step budget does not).\n\n")
         return text + report.md_table(["Arm", "Fusion", "Training data", "Steps", "Seed", "Wall time"], rows,
@@ -138,10 +141,12 @@ def ablation_settings(smoke: bool = False, steps: int | None = None, budget_minu
     if steps is not None:
         return AblationSettings(steps=int(steps), model=model, train=train_d, budget_note="(step budget given)")
     if smoke:
-        return AblationSettings(steps=SMOKE_STEPS, model=model, train=train_d, budget_note="(smoke budget)")
+        return AblationSettings(steps=SMOKE_STEPS, seeds=SEEDS[:1], model=model, train=train_d,
+                                budget_note="(smoke budget)")
     if budget_minutes is None:
         return AblationSettings(steps=DEFAULT_STEPS, model=model, train=train_d,
-                                budget_note="(the default budget: 1/6 of the shipped model's steps)")
+                                budget_note=f"(the default budget; the shipped model's config trains "
+                                            f"{train_d.get('steps')} steps)")
     minutes = float(budget_minutes)
     probe = AblationSettings(steps=1, model=model, train=train_d)
     timing_path = None if cache_dir is None else Path(cache_dir) / f"step_timing_{minutes:g}min.json"
@@ -170,7 +175,7 @@ def time_steps(settings: AblationSettings, n: int = 12, log: Callable[[str], Non
 
     arm = ARMS_BY_NAME["joint-aff"]
     probe = dataclasses.replace(settings, steps=n + 2)
-    mcfg, tcfg = probe.configs(arm)
+    mcfg, tcfg = probe.configs(arm, probe.seeds[0])
     tcfg = dataclasses.replace(tcfg, val_every=10 ** 9, checkpoint_every=10 ** 9)
     spectral, rgb, val = _material_sets(tcfg, mcfg, _data_cache(), log)
     stamps: list[float] = []
@@ -189,33 +194,35 @@ def _data_cache() -> Path:
 
 def train_arms(settings: AblationSettings, cache_dir: Path, progress: bool = True,
                log: Callable[[str], None] = print) -> dict[str, ArmResult]:
-    """Train (or resume, or load) every arm; returns results by arm name."""
+    """Train (or resume, or load) every arm with every seed; results by ``"<arm>/seed<k>"``."""
     from ..train.loop import train
 
     out: dict[str, ArmResult] = {}
-    for name in settings.arms:
-        arm = ARMS_BY_NAME[name]
-        key = settings.key(arm)
-        arm_dir = Path(cache_dir) / key
-        info_path = arm_dir / "arm.json"
-        info = read_json(info_path)
-        if info is None or not (arm_dir / "specgen.pt").is_file():
-            mcfg, tcfg = settings.configs(arm)
-            log(f"ablation: training {arm.label} for {settings.steps} steps (seed {settings.seed})")
-            spectral, rgb, val = _material_sets(tcfg, mcfg, _data_cache(), log)
-            res = train(mcfg, tcfg, spectral, rgb, val, arm_dir, resume=True, show_progress=progress,
-                        meta={"ablation_arm": arm.name})
-            info = {"steps": res.steps, "wall_seconds": res.wall_seconds, "seed": settings.seed}
-            write_json(info_path, info)
-        out[name] = ArmResult(name, key, arm.label, arm.fusion, arm.joint, arm_dir / "specgen.pt",
-                              int(info["steps"]), float(info["wall_seconds"]), int(info["seed"]))
+    for seed in settings.seeds:
+        for name in settings.arms:
+            arm = ARMS_BY_NAME[name]
+            key = settings.key(arm, seed)
+            arm_dir = Path(cache_dir) / key
+            info_path = arm_dir / "arm.json"
+            info = read_json(info_path)
+            if info is None or not (arm_dir / "specgen.pt").is_file():
+                mcfg, tcfg = settings.configs(arm, seed)
+                log(f"ablation: training {arm.label} for {settings.steps} steps (seed {seed})")
+                spectral, rgb, val = _material_sets(tcfg, mcfg, _data_cache(), log)
+                res = train(mcfg, tcfg, spectral, rgb, val, arm_dir, resume=True, show_progress=progress,
+                            meta={"ablation_arm": arm.name})
+                info = {"steps": res.steps, "wall_seconds": res.wall_seconds, "seed": seed}
+                write_json(info_path, info)
+            out[f"{name}/seed{seed}"] = ArmResult(name, key, arm.label, arm.fusion, arm.joint,
+                                                  arm_dir / "specgen.pt", int(info["steps"]),
+                                                  float(info["wall_seconds"]), int(info["seed"]))
     return out
 
 
 def save_arms(path: Path, settings: AblationSettings, arms: dict[str, ArmResult]) -> None:
     """Record which trained arms a run scored (read back by :func:`load_arms` for ``--report-only``)."""
-    write_json(path, {"steps": settings.steps, "seed": settings.seed, "budget_note": settings.budget_note,
-                      "arms": [{**dataclasses.asdict(a), "weights": str(a.weights)} for a in arms.values()]})
+    write_json(path, {"steps": settings.steps, "seeds": list(settings.seeds), "budget_note": settings.budget_note,
+                      "arms": {k: {**dataclasses.asdict(a), "weights": str(a.weights)} for k, a in arms.items()}})
 
 
 def load_arms(path: Path) -> tuple[AblationSettings | None, dict[str, ArmResult]]:
@@ -223,5 +230,5 @@ def load_arms(path: Path) -> tuple[AblationSettings | None, dict[str, ArmResult]
     data = read_json(path)
     if data is None:
         return None, {}
-    arms = {a["name"]: ArmResult(**{**a, "weights": Path(a["weights"])}) for a in data["arms"]}
-    return AblationSettings(steps=data["steps"], seed=data["seed"], budget_note=data["budget_note"]), arms
+    arms = {k: ArmResult(**{**a, "weights": Path(a["weights"])}) for k, a in data["arms"].items()}
+    return AblationSettings(steps=data["steps"], seeds=tuple(data["seeds"]), budget_note=data["budget_note"]), arms

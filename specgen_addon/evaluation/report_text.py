@@ -101,18 +101,31 @@ def compose(h: tables.Harness, mats: Sequence[Any], specgen_arm: str, weights: P
         trows.append(("… the same, without the materials whose spectrum was drawn from Otsu 2018's basis",
                       report.psnr_gap(get, not_otsu, tables.ROLES_E, specgen_arm, baselines.OTSU2018), 0.0,
                       "> 0 dB"))
-    ak = {a.name: a.key for a in arms.values()}
+    # Ablation arms by name, one trained network per seed; cells of an arm = mean over its seeds.
+    seeds_of: dict[str, list[Any]] = {}
+    for a in arms.values():
+        seeds_of.setdefault(a.name, []).append(a)
+    arm_labels = {n: rs[0].label for n, rs in seeds_of.items()}
+
+    def get_arm(name: str, mat: str, role: str):
+        if name not in seeds_of:
+            return None
+        cells = [get(a.key, mat, role) for a in seeds_of[name]]
+        return report.mean_cell(cells) if all(c is not None for c in cells) else None
+
+    n_seeds = max((len(v) for v in seeds_of.values()), default=0)
+    over = f", mean over {n_seeds} seeds" if n_seeds > 1 else ""
     for col in ("joint", "spectral"):
-        if f"{col}-aff" in ak and f"{col}-hadamard" in ak:
-            trows.append((f"AFF beats Hadamard ({'joint' if col == 'joint' else 'spectral-only'} training)",
-                          report.psnr_gap(get, names, tables.ROLES_ABLATION, ak[f"{col}-aff"],
-                                          ak[f"{col}-hadamard"]), 0.0, "> 0 dB"))
+        if f"{col}-aff" in seeds_of and f"{col}-hadamard" in seeds_of:
+            trows.append((f"AFF beats Hadamard ({'joint' if col == 'joint' else 'spectral-only'} training{over})",
+                          report.psnr_gap(get_arm, names, tables.ROLES_ABLATION, f"{col}-aff",
+                                          f"{col}-hadamard"), 0.0, "> 0 dB"))
     for fusion in ("aff", "hadamard"):
-        if f"joint-{fusion}" in ak and f"spectral-{fusion}" in ak:
+        if f"joint-{fusion}" in seeds_of and f"spectral-{fusion}" in seeds_of:
             trows.append((f"Joint training at least as good as spectral-only "
-                          f"({'AFF' if fusion == 'aff' else 'Hadamard'})",
-                          report.psnr_gap(get, names, tables.ROLES_ABLATION, ak[f"joint-{fusion}"],
-                                          ak[f"spectral-{fusion}"]), 0.0, "≥ +0 dB"))
+                          f"({'AFF' if fusion == 'aff' else 'Hadamard'}{over})",
+                          report.psnr_gap(get_arm, names, tables.ROLES_ABLATION, f"joint-{fusion}",
+                                          f"spectral-{fusion}"), 0.0, "≥ +0 dB"))
     add(report.targets_table(trows))
     add("")
     add("Why a target is missed, and what the numbers mean, is discussed at the end (section *Discussion*).")
@@ -168,19 +181,28 @@ def compose(h: tables.Harness, mats: Sequence[Any], specgen_arm: str, weights: P
             "(`specgen_addon/evaluation/network_brdf.py`: the same function and decoding as the "
             "generated table, without its grid interpolation).")
         add("")
-        add("**(c)** Paper Table 3 (RGL-S vs RGL-C-S+MERL):")
+        add(f"**(c)** Paper Table 3 (RGL-S vs RGL-C-S+MERL){over}:")
         add("")
-        ordered = [ak[n] for n in ("spectral-aff", "joint-aff") if n in ak]
-        add(report.arms_table(get, names, role, ordered, {a.key: a.label for a in arms.values()}))
+        ordered = [n for n in ("spectral-aff", "joint-aff") if n in seeds_of]
+        add(report.arms_table(get_arm, names, role, ordered, arm_labels))
         add("")
-        add("**(d)** Paper Table 4 (mean over the test materials):")
+        add(f"**(d)** Paper Table 4 (mean over the test materials{over}):")
         add("")
-        grid = {"Hadamard (K-Planes)": {}, "AFF (ours)": {}}
-        for a in arms.values():
-            row = "AFF (ours)" if a.fusion == "aff" else "Hadamard (K-Planes)"
-            grid[row]["Spectral only" if not a.joint else "Joint RGB + spectral"] = a.key
-        add(report.grid_table(get, names, role, grid, ["Spectral only", "Joint RGB + spectral"]))
+        grid: dict[str, dict[str, str]] = {"Hadamard (K-Planes)": {}, "AFF (ours)": {}}
+        for name, rs in seeds_of.items():
+            row = "AFF (ours)" if rs[0].fusion == "aff" else "Hadamard (K-Planes)"
+            grid[row]["Spectral only" if not rs[0].joint else "Joint RGB + spectral"] = name
+        add(report.grid_table(get_arm, names, role, grid, ["Spectral only", "Joint RGB + spectral"]))
         add("")
+        if n_seeds > 1:
+            add("Per seed (mean over the test materials), to show how much one training run varies:")
+            add("")
+            seeds = sorted({a.seed for a in arms.values()})
+            rows = [[arm_labels[n]] + [report.fmt(report.mean_cell(
+                        [get(a.key, m, role) for a in rs if a.seed == sd for m in names])) for sd in seeds]
+                    for n, rs in seeds_of.items()]
+            add(report.md_table(["Arm"] + [f"seed {sd} PSNR / SSIM" for sd in seeds], rows))
+            add("")
         add(f"For reference, the shipped SpecGen model (larger budget) in the same scene: "
             f"{report.fmt(report.mean_cell([get(specgen_arm, n, role) for n in names]))}.")
     add("")
