@@ -18,7 +18,7 @@ import numpy as np
 
 from .errors import Cancelled, ImageInputError, SpecGenError, WeightsError
 from .spectra import DEFAULT_WAVELENGTHS_NM
-from .table import GRID_SHAPE, N_PHI_D, N_THETA_D, N_THETA_H, BRDFTable
+from .table import GRID_SHAPE, N_THETA_D, N_THETA_H, BRDFTable
 
 BACKENDS = ("torch", "onnx")
 #: θd rows per block: 10 × 180 × Λ points (~38 k at 21 bands) keep torch's temporaries
@@ -242,5 +242,4 @@ def evaluate_grid(be, tables, n_lambda: int, progress: ProgressFn | None = None,
     finally:
         if torch_threads is not None:
             be.torch.set_num_threads(torch_threads)
-    assert N_PHI_D == out.shape[2]
     return out

@@ -17,8 +17,6 @@ table rows -> r') are plain modules, so the same code runs in torch and, exporte
 
 from __future__ import annotations
 
-import math
-
 import torch
 import torch.nn.functional as F
 from torch import nn
@@ -167,7 +165,3 @@ def _piecewise_logits(fusion) -> tuple[torch.Tensor, torch.Tensor, torch.Tensor,
     _, bias = fusion.gap_functionals()
     return kinks.float(), p_seg.float(), q_seg.float(), bias.detach()
 
-
-def mu_law_decode_torch(rp: torch.Tensor, mu: float) -> torch.Tensor:
-    """Inverse μ-law, clamped to non-negative reflectance (sr⁻¹)."""
-    return torch.expm1(rp.clamp_min(0.0) * math.log1p(mu)) / mu

@@ -64,11 +64,16 @@ def count_parameters(model: nn.Module) -> int:
 
 
 def save_weights(model: SpecGen, path: str | Path, meta: dict[str, Any] | None = None,
-                 overwrite: bool = True) -> Path:
-    """Write the weights file atomically: ``{format, version, config, state_dict, meta}``."""
+                 overwrite: bool = True, half: bool = False) -> Path:
+    """Write the weights file atomically: ``{format, version, config, state_dict, meta}``.
+
+    ``half`` stores the tensors as float16 (half the size; loaded back as float32).
+    """
+    state = {k: v.detach().clone() for k, v in model.state_dict().items()}
+    if half:
+        state = {k: (v.half() if v.is_floating_point() else v) for k, v in state.items()}
     payload = {"format": WEIGHTS_FORMAT, "version": WEIGHTS_VERSION, "config": model.cfg.to_dict(),
-               "state_dict": {k: v.detach().clone() for k, v in model.state_dict().items()},
-               "meta": dict(meta or {})}
+               "state_dict": state, "meta": dict(meta or {})}
     with atomic_write(path, overwrite=overwrite) as tmp:
         torch.save(payload, tmp)
     return Path(path)

@@ -18,7 +18,6 @@ from __future__ import annotations
 import csv
 import dataclasses
 import json
-import math
 import time
 from dataclasses import dataclass, field
 from pathlib import Path
@@ -351,8 +350,3 @@ def plot_history(history: Sequence[dict[str, float]], path: str | Path, title: s
     plt.close(fig)
     return path
 
-
-def seconds_per_step_estimate(history: Sequence[dict[str, float]]) -> float:
-    if len(history) < 2:
-        return math.nan
-    return (history[-1]["elapsed"] - history[0]["elapsed"]) / (len(history) - 1)
