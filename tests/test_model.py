@@ -198,3 +198,14 @@ def test_mismatched_weights_raise_a_clear_error(tmp_path):
         load_weights(tmp_path / "other.pt")
     with pytest.raises(WeightsError, match="different model configuration"):
         load_weights(tmp_path / "w.pt", expect=Config())
+
+
+def test_half_precision_weights_load_as_float32_close_to_the_original(tmp_path):
+    model = small_model()
+    small = save_weights(model, tmp_path / "h.pt", half=True)
+    full = save_weights(model, tmp_path / "f.pt")
+    assert small.stat().st_size < 0.7 * full.stat().st_size
+    loaded = load_weights(small)
+    for (k, a), (_, b) in zip(model.state_dict().items(), loaded.state_dict().items()):
+        assert b.dtype == a.dtype
+        assert torch.allclose(a, b, rtol=1e-3, atol=1e-4), k
