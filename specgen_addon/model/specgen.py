@@ -22,8 +22,7 @@ from .planes import PlaneGenerator, normalized_coords, project, tv_loss
 
 WEIGHTS_FORMAT = "specgen-weights"
 WEIGHTS_VERSION = 1
-REPO_ROOT = Path(__file__).resolve().parents[2]
-DEFAULT_WEIGHTS = REPO_ROOT / "weights" / "specgen_default.pt"
+from . import DEFAULT_WEIGHTS  # noqa: E402  (one definition, torch-free)
 
 
 class SpecGen(nn.Module):
