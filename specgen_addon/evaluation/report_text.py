@@ -74,7 +74,8 @@ def compose(h: tables.Harness, mats: Sequence[Any], specgen_arm: str, weights: P
     add(f"- **Shapes**: the analytic sphere; for shape transfer, {geom_label}, {h.s.resolution}² "
         "(no shadowing or interreflection in either render, so the comparison isolates the BRDF).")
     add("- **SpecGen**: the material's canonical sphere input image (`specgen_addon.input_image`) → "
-        f"`generate_brdf` with weights `{_rel(weights, out.parent)}` → 90×90×180×{len(h.wl)} "
+        f"`generate_brdf` with weights `{_rel(weights, out.parent)}` (SHA-1 `{specgen_arm.split('@')[-1]}…`) "
+        f"→ 90×90×180×{len(h.wl)} "
         "table → rendered in the scene.")
     add("- **Baselines** (the analogue of the paper's MST++/HD-Net): the linear-sRGB render of the *same* scene "
         "(the ground-truth spectral image through the CIE 1931 CMFs) uplifted pixel by pixel with colour-science: "
