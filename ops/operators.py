@@ -270,11 +270,4 @@ class SPECGEN_OT_render_stack(_Modal, bpy.types.Operator):
 CLASSES = (SPECGEN_OT_generate_brdf, SPECGEN_OT_apply, SPECGEN_OT_render_stack)
 
 
-def register() -> None:
-    for cls in CLASSES:
-        bpy.utils.register_class(cls)
-
-
-def unregister() -> None:
-    for cls in reversed(CLASSES):
-        bpy.utils.unregister_class(cls)
+register, unregister = bpy.utils.register_classes_factory(CLASSES)
