@@ -19,8 +19,6 @@ Usage: ``.venv/bin/python bench/corpus.py [--repeat N] [--figure docs/img/corpus
 from __future__ import annotations
 
 import argparse
-import os
-import platform
 import subprocess
 import sys
 import tempfile
@@ -28,6 +26,7 @@ import time
 from pathlib import Path
 
 import numpy as np
+from machine import describe_machine  # bench/machine.py, beside this script
 
 REPO = Path(__file__).resolve().parents[1]
 sys.path.insert(0, str(REPO))
@@ -44,16 +43,6 @@ from specgen_addon.corpus import generate_corpus, save_manifest
 save_manifest({out!r}, generate_corpus(200, seed=0), seed=0, overwrite=True)
 print(time.perf_counter() - t0)
 """
-
-
-def machine() -> str:
-    mem = ""
-    try:
-        mem = f", {os.sysconf('SC_PHYS_PAGES') * os.sysconf('SC_PAGE_SIZE') / 2**30:.0f} GB"
-    except (ValueError, OSError, AttributeError):
-        pass
-    return (f"{platform.machine()}, {os.cpu_count()} cores{mem}, CPU only; Python "
-            f"{platform.python_version()}, numpy {np.__version__}")
 
 
 def best_of(repeat: int, fn) -> float:
@@ -130,7 +119,7 @@ def main() -> None:
     args = parser.parse_args()
     if args.figure:
         draw_figure(args.figure)
-    print(f"machine: {machine()}")
+    print(f"machine: {describe_machine()}")
     with tempfile.TemporaryDirectory() as tmp:
         out = str(Path(tmp) / "manifest.json")
         colds = [float(subprocess.run([sys.executable, "-c", COLD_SCRIPT.format(repo=str(REPO), out=out)],

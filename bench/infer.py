@@ -10,12 +10,12 @@ Prints the machine, the wall time of :func:`specgen_addon.infer.generate_brdf` f
 from __future__ import annotations
 
 import argparse
-import os
-import platform
 import resource
 import sys
 import time
 from pathlib import Path
+
+from machine import describe_machine  # bench/machine.py, beside this script
 
 REPO = Path(__file__).resolve().parents[1]
 sys.path.insert(0, str(REPO))
@@ -52,8 +52,7 @@ def main() -> int:
         table = infer.generate_brdf(args.image, weights=args.weights, wavelengths_nm=wl, backend=args.backend)
         times.append(time.perf_counter() - t0)
     n_eval = table.values.size
-    print(f"machine: {platform.machine()}, {os.cpu_count()} cores, {platform.python_version()}, "
-          f"load average {os.getloadavg()[0]:.2f}")
+    print(f"machine: {describe_machine()}")
     print(f"model: {params:,} parameters; backend {args.backend}")
     print(f"table: {table.values.shape} = {n_eval / 1e6:.1f} M evaluations ({table.values.nbytes / 1e6:.0f} MB)")
     print(f"time: best {min(times):.2f} s, median {float(np.median(times)):.2f} s over {args.repeat} runs")

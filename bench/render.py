@@ -9,12 +9,13 @@ Target: ratio ≤ 3. Run: ``.venv/bin/python bench/render.py [--resolution 256 -
 from __future__ import annotations
 
 import argparse
-import platform
 import statistics
 import sys
 import tempfile
 import time
 from pathlib import Path
+
+from machine import describe_machine  # bench/machine.py, beside this script
 
 REPO = Path(__file__).resolve().parents[1]
 sys.path.insert(0, str(REPO))
@@ -97,8 +98,7 @@ def main(argv: list[str] | None = None) -> int:
     rgb = statistics.median(rgb_times)
     full = statistics.median(job_times)
     cyc = statistics.median(cycles_times)
-    print(f"machine: {platform.machine()}, {__import__('os').cpu_count()} cores, {platform.python_version()}, "
-          f"bpy {bpy.app.version_string}")
+    print(f"machine: {describe_machine()}; bpy {bpy.app.version_string}")
     print(f"scene: unit sphere, {'env ' + args.env if args.env else 'one sun'}, {res}x{res}, "
           f"{args.samples} spp, {args.bands} bands; material {material.name}")
     print(f"spectral basis: {atlas.n_coeffs} coefficients (tolerance {args.tolerance:g}, max error "

@@ -18,13 +18,12 @@ from __future__ import annotations
 
 import argparse
 import dataclasses
-import os
-import platform
 import sys
 import time
 from pathlib import Path
 
 import numpy as np
+from machine import describe_machine  # bench/machine.py, beside this script
 
 sys.path.insert(0, str(Path(__file__).resolve().parents[1]))
 
@@ -33,13 +32,6 @@ from specgen_addon.corpus import Reflectance, generate_corpus  # noqa: E402
 from specgen_addon.render import EnvSampling, Scene, sphere_geometry  # noqa: E402
 
 WL = spectra.DEFAULT_WAVELENGTHS_NM
-
-
-def machine() -> str:
-    mem = os.sysconf("SC_PAGE_SIZE") * os.sysconf("SC_PHYS_PAGES") / 2 ** 30
-    load = os.getloadavg()[0]
-    return (f"{os.cpu_count()}-core {platform.machine()}, {mem:.0f} GB, CPU only, "
-            f"Python {platform.python_version()}; load average at start {load:.1f}")
 
 
 def perturbed(m):
@@ -190,7 +182,7 @@ def main() -> None:
     ap.add_argument("--skip-study", action="store_true", help="timings only")
     ap.add_argument("--figure", type=Path, help="also draw the contact sheet (PNG)")
     args = ap.parse_args()
-    print(f"machine: {machine()}")
+    print(f"machine: {describe_machine()}")
     print(f"command: python bench/render_reference.py {' '.join(sys.argv[1:])}")
     materials = pick_materials(args.materials)
     timing(materials, args.resolution)

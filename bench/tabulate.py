@@ -11,14 +11,13 @@ default 21-band grid), since the real spectral files are not available here.
 from __future__ import annotations
 
 import argparse
-import os
-import platform
 import sys
 import tempfile
 import time
 from pathlib import Path
 
 import numpy as np
+from machine import describe_machine  # bench/machine.py, beside this script
 
 REPO = Path(__file__).resolve().parents[1]
 sys.path.insert(0, str(REPO))
@@ -27,17 +26,6 @@ from specgen_addon.formats.rgl import read_rgl, read_tensor_file, tabulate_rgl, 
 from specgen_addon.spectra import DEFAULT_WAVELENGTHS_NM  # noqa: E402
 
 TARGET_SECONDS = 5.0
-
-
-def machine() -> str:
-    mem = ""
-    try:
-        pages = os.sysconf("SC_PHYS_PAGES") * os.sysconf("SC_PAGE_SIZE")
-        mem = f", {pages / 2**30:.0f} GB"
-    except (ValueError, OSError, AttributeError):
-        pass
-    return (f"{platform.machine()}, {os.cpu_count()} cores{mem}, CPU only; Python "
-            f"{platform.python_version()}, numpy {np.__version__}")
 
 
 def time_tabulation(path: Path, repeat: int, wavelengths=None) -> float:
@@ -74,7 +62,7 @@ def main() -> int:
     if not files:
         print("no RGL files given and none found in ../shared/data/rgl", file=sys.stderr)
         return 2
-    print(f"machine: {machine()}")
+    print(f"machine: {describe_machine()}")
     print(f"grid: 90 x 90 x 180 = {90 * 90 * 180} direction pairs; best of {args.repeat}")
     missed = False
     rows = [(p.name, p, None) for p in files]

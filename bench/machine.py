@@ -1,0 +1,20 @@
+"""One description of the benchmarking machine, printed by every script in bench/."""
+
+from __future__ import annotations
+
+import os
+import platform
+
+import numpy as np
+
+
+def describe_machine() -> str:
+    """Architecture, cores, memory, Python/numpy versions and the current load average."""
+    mem = ""
+    try:
+        mem = f", {os.sysconf('SC_PHYS_PAGES') * os.sysconf('SC_PAGE_SIZE') / 2**30:.0f} GB"
+    except (ValueError, OSError, AttributeError):
+        pass
+    return (f"{platform.machine()}, {os.cpu_count()} cores{mem}, CPU only; Python "
+            f"{platform.python_version()}, numpy {np.__version__}; "
+            f"load average {os.getloadavg()[0]:.2f}")
