@@ -113,13 +113,6 @@ def spectral_to_xyz(values: np.ndarray, wavelengths_nm: np.ndarray) -> np.ndarra
     return values @ (c / ysum)
 
 
-def reflectance_to_xyz(reflectance: np.ndarray, wavelengths_nm: np.ndarray,
-                       illuminant: str = DEFAULT_ILLUMINANT) -> np.ndarray:
-    """XYZ of a reflectance (or BRDF) spectrum seen under ``illuminant`` (unit luminance)."""
-    return spectral_to_xyz(np.asarray(reflectance) * illuminant_spd(illuminant, wavelengths_nm),
-                           wavelengths_nm)
-
-
 @functools.lru_cache(maxsize=1)
 def _xyz_to_srgb_matrix() -> np.ndarray:
     import colour
@@ -130,11 +123,6 @@ def _xyz_to_srgb_matrix() -> np.ndarray:
 def xyz_to_linear_srgb(xyz: np.ndarray) -> np.ndarray:
     """CIE XYZ → linear sRGB (D65 white, no adaptation: our illuminant default is D65)."""
     return np.asarray(xyz) @ _xyz_to_srgb_matrix().T
-
-
-def linear_srgb_to_xyz(rgb: np.ndarray) -> np.ndarray:
-    """Linear sRGB → CIE XYZ."""
-    return np.asarray(rgb) @ np.linalg.inv(_xyz_to_srgb_matrix()).T
 
 
 @functools.lru_cache(maxsize=64)
