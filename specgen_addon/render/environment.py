@@ -90,6 +90,28 @@ def read_exr_rgb(path: str | Path) -> np.ndarray:
     return rgb
 
 
+def read_hdr_rgb(path: str | Path) -> np.ndarray:
+    """Read a Radiance ``.hdr`` (RGBE) file as float32 (H, W, 3), row 0 on top, via OpenImageIO
+    (bundled with Blender, so this also works inside a stock Blender)."""
+    path = Path(path)
+    if not path.is_file():
+        raise SpecGenError(f"{path}: environment map not found")
+    try:
+        import OpenImageIO as oiio
+    except ImportError:
+        raise SpecGenError(f"{path}: reading .hdr files needs OpenImageIO (bundled with Blender)") from None
+    inp = oiio.ImageInput.open(str(path))
+    if inp is None:
+        raise SpecGenError(f"{path}: cannot read Radiance HDR ({oiio.geterror().strip() or 'unreadable'})")
+    try:
+        px = inp.read_image(oiio.FLOAT)
+    finally:
+        inp.close()
+    if px is None or px.ndim != 3 or px.shape[2] < 3:
+        raise SpecGenError(f"{path}: Radiance HDR has no RGB pixels")
+    return np.ascontiguousarray(px[..., :3], dtype=np.float32)
+
+
 def direction_to_uv(d: np.ndarray, rotation_rad: float = 0.0) -> tuple[np.ndarray, np.ndarray]:
     """World directions (…, 3) → equirect (u, v) in [0, 1], v = 0 at the bottom (nadir)."""
     phi = np.arctan2(d[..., 2], d[..., 0]) - rotation_rad
@@ -172,13 +194,13 @@ class Environment:
     def from_file(cls, path: str | Path, exposure: float = 1.0, rotation_rad: float = 0.0,
                   normalise: bool = True, uplift: str = MALLETT2019,
                   max_width: int | None = 512) -> "Environment":
-        """Load an equirect EXR.
+        """Load an equirect EXR (or Radiance ``.hdr``).
 
         ``normalise`` scales the map to unit mean luminance over the sphere (solid-angle weighted),
         so different maps light a white Lambertian at comparable levels; ``exposure`` multiplies
         after that. ``max_width`` box-downsamples large maps (by powers of two) for speed.
         """
-        rgb = read_exr_rgb(path)
+        rgb = read_hdr_rgb(path) if Path(path).suffix.lower() == ".hdr" else read_exr_rgb(path)
         if max_width is not None:
             rgb = _box_downsample(rgb, max_width)
         env = cls(rgb, rotation_rad=rotation_rad, uplift=uplift, name=Path(path).stem)

@@ -1,0 +1,265 @@
+"""Photo-consistent refinement: analysis by synthesis after the network.
+
+The network's table ``f`` is a prior. The photo is the measurement. Rendering is linear in the
+BRDF (:mod:`.operator`), so a small correction (:mod:`.basis`) — a spectral × angular tint of the
+specular lobe, a separate tint of the diffuse body and an added Lambertian term — enters the photo
+linearly and is found by regularised non-negative least squares (:mod:`.solve`):
+
+    minimise ‖A θ − photo‖² / σ² + ρ ‖θ − θ0‖²_D + smoothness,   θ ≥ 0,
+
+with ``θ0`` the identity (the network's own table), ``σ`` one percent of the photo's level and the
+prior weighted by each coefficient's own data sensitivity ``D`` (so a coefficient the photo barely
+sees stays with the network). Clipped pixels (PNG/JPEG at full scale) are left out of the fit.
+
+The result is checked by rendering it with the reference renderer under the same lighting:
+self-reproduction PSNR and ΔE2000 (:mod:`.report`). If the refined table reproduces the photo worse
+than the network's did, the network's table is returned unchanged. Everything is numpy: it runs
+inside a stock Blender (no torch, scipy or colour-science needed; ΔE2000 is reported where
+colour-science is installed).
+"""
+
+from __future__ import annotations
+
+import math
+import time
+from dataclasses import dataclass, field
+from typing import Callable
+
+import numpy as np
+
+from ..errors import Cancelled, SpecGenError
+from ..table import BRDFTable
+from .basis import CorrectionBasis
+from .operator import PhotoOperator
+from .report import Reproduction, photo_scale, reproduction
+from .solve import difference_operator, nonneg_ridge
+
+__all__ = ["RefineOptions", "RefineResult", "refine_brdf", "render_under", "CorrectionBasis",
+           "PhotoOperator", "Reproduction"]
+
+ProgressFn = Callable[[float], None]
+CancelFn = Callable[[], bool]
+
+#: Self-reproduction below this (dB) means the lighting does not explain the photo: warn.
+WARN_PSNR_DB = 30.0
+#: Photo values at or above this fraction of the maximum 8-bit level count as clipped.
+CLIP_LEVEL = 0.995
+
+
+@dataclass(frozen=True)
+class RefineOptions:
+    """Knobs of the refinement (defaults are the shipped behaviour).
+
+    ``noise`` is σ as a fraction of the photo's level; ``prior`` the pull towards the network
+    (relative to each coefficient's data weight); ``smooth`` the smoothness between neighbouring
+    knots; ``clip_level`` marks saturated pixels (``None``: never, for linear EXR photos).
+    """
+
+    basis: CorrectionBasis = field(default_factory=CorrectionBasis)
+    noise: float = 0.01
+    prior: float = 1e-3
+    smooth: float = 1.0
+    clip_level: float | None = CLIP_LEVEL
+    energy_check: bool = True
+
+
+@dataclass
+class RefineResult:
+    """The refined table, how well it and the network reproduce the photo, and what was found."""
+
+    table: BRDFTable
+    before: Reproduction
+    after: Reproduction
+    coefficients: dict
+    seconds: float
+    clipped_fraction: float
+    warnings: list[str] = field(default_factory=list)
+    rendered: np.ndarray | None = None       # (H, W, 3) refined render under the input lighting
+    improved: bool = True
+
+    def summary(self) -> str:
+        return (f"self-reproduction {self.before.text()} → {self.after.text()} "
+                f"in {self.seconds:.1f} s")
+
+
+def diffuse_floor_of(table: BRDFTable) -> np.ndarray:
+    """The renderer's control-variate floor ``c(λ)`` of a table (its Lambertian part), (Λ,)."""
+    from ..render.sampling import diffuse_floor
+
+    return diffuse_floor(lambda wi, wo: table.eval(wi, wo))
+
+
+def render_under(table: BRDFTable, scene, exposure: float) -> np.ndarray:
+    """Photo (H, W, 3) of ``table`` under a prepared scene: the reference renderer, as the input."""
+    res = scene.render_spectral(table, table.wavelengths)
+    return np.clip(res.rgb, 0.0, None) * exposure
+
+
+def _smoothness(basis: CorrectionBasis) -> np.ndarray:
+    shape = basis.shape
+    return np.concatenate([difference_operator(shape, ax) for ax in range(3)], axis=0)
+
+
+def refine_brdf(table: BRDFTable, photo: np.ndarray, lighting=None, options: RefineOptions = RefineOptions(),
+                progress: ProgressFn | None = None, cancel: CancelFn | None = None) -> RefineResult:
+    """Refine the network's spectral ``table`` so that, under ``lighting``, it reproduces ``photo``.
+
+    Parameters
+    ----------
+    table
+        Spectral BRDF table (sr⁻¹) from the network; not modified.
+    photo
+        The input photo as the network saw it before any gain: linear sRGB (S, S, 3) on the
+        canonical sphere crop (:func:`specgen_addon.input_image.load_sphere_image`).
+    lighting
+        :class:`~specgen_addon.input_lighting.InputLighting` (default: canonical).
+    options
+        :class:`RefineOptions`.
+    progress, cancel
+        ``progress(fraction)``; ``cancel()`` returning True raises :class:`Cancelled`.
+    """
+    from ..input_lighting import InputLighting
+
+    t0 = time.perf_counter()
+    if not table.is_spectral:
+        raise SpecGenError("refinement needs a spectral table (the network's output)")
+    lighting = lighting or InputLighting()
+    photo = np.asarray(photo, dtype=np.float64)
+    if photo.ndim != 3 or photo.shape[2] != 3 or photo.shape[0] != photo.shape[1]:
+        raise SpecGenError(f"photo must be a square S×S×3 sphere crop, got {photo.shape}")
+    if not np.all(np.isfinite(photo)):
+        raise SpecGenError("photo holds NaN or Inf values")
+
+    def report(lo: float, hi: float) -> ProgressFn | None:
+        return None if progress is None else (lambda f: progress(lo + (hi - lo) * min(max(f, 0.0), 1.0)))
+
+    def check_cancel() -> None:
+        if cancel is not None and cancel():
+            raise Cancelled("refinement cancelled")
+
+    wl = table.wavelengths
+    basis = options.basis
+    scene = lighting.scene(photo.shape[0])
+    exposure = lighting.image_exposure
+    op = PhotoOperator(scene, wl, exposure, progress=report(0.0, 0.1), cancel=cancel)
+    b = op.observe(photo)                                           # (P, 3)
+    warnings: list[str] = []
+    level = photo_scale(b)
+    clipped = np.zeros(b.shape[0], dtype=bool)
+    if options.clip_level is not None:
+        clipped = np.any(b >= options.clip_level, axis=1)
+    clipped_fraction = float(clipped.mean()) if clipped.size else 0.0
+    if clipped_fraction > 0.25:
+        warnings.append(f"{100 * clipped_fraction:.0f}% of the sphere is clipped at full scale; "
+                        f"those pixels carry no brightness information")
+    if not np.any(b > 0):
+        warnings.append("the photo is black: there is nothing to reproduce")
+
+    floor = diffuse_floor_of(table)
+    s_hats = basis.spectral_hats(wl)
+    a_lobe = op.lobe_design(table.values, floor, basis, progress=report(0.1, 0.6), cancel=cancel)
+    check_cancel()
+    a_body = op.lambert_design(floor, s_hats)                          # y: tint of the body
+    a_lamb = op.lambert_design(np.full(wl.size, 1.0 / np.pi), s_hats)  # z: added Lambertian
+    p = b.shape[0]
+    design = np.concatenate([a_lobe.reshape(p, 3, -1), a_body, a_lamb], axis=2)   # (P, 3, K)
+    n_lobe, nl = basis.n_lobe, s_hats.shape[1]
+    theta0 = np.concatenate([np.ones(n_lobe), np.ones(nl), np.zeros(nl)])
+
+    keep = ~clipped
+    a = design[keep].reshape(-1, theta0.size)
+    y = b[keep].reshape(-1)
+    sigma = options.noise * level
+    gram = a.T @ a / sigma ** 2
+    rhs = a.T @ y / sigma ** 2
+    # prior: each coefficient pulled to θ0 in proportion to its own data weight (plus a floor, so
+    # coefficients the photo cannot see stay exactly at the network's value)
+    diag = np.diag(gram).copy()
+    ridge = options.prior * (diag + 1e-6 * max(diag.max(), 1.0))
+    gram[np.diag_indices_from(gram)] += ridge
+    rhs += ridge * theta0
+    # smoothness between neighbouring knots of the lobe correction, and of the two body spectra
+    smooth = _smoothness(basis)
+    scale_s = options.smooth * max(float(np.median(diag[:n_lobe])), 1e-12)
+    gram[:n_lobe, :n_lobe] += scale_s * smooth.T @ smooth
+    theta = nonneg_ridge(gram, rhs)
+    check_cancel()
+    if progress is not None:
+        progress(0.65)
+
+    x = theta[:n_lobe]
+    yb = theta[n_lobe:n_lobe + nl]
+    zl = theta[n_lobe + nl:]
+    refined = apply_correction(table, floor, x, yb, zl, basis)
+    if options.energy_check:
+        warnings.extend(_energy_warnings(table, refined))
+    check_cancel()
+
+    before_img = render_under(table, scene, exposure)
+    if progress is not None:
+        progress(0.8)
+    after_img = render_under(refined, scene, exposure)
+    if progress is not None:
+        progress(0.98)
+    keep_img = op.observe(photo)
+    m_before = reproduction(keep_img, op.observe(before_img))
+    m_after = reproduction(keep_img, op.observe(after_img))
+    improved = m_after.psnr_db >= m_before.psnr_db
+    if not improved:
+        warnings.append(f"refinement did not improve on the network ({m_after.psnr_db:.1f} dB vs "
+                        f"{m_before.psnr_db:.1f} dB); the network's table is kept")
+        refined, after_img, m_after = table, before_img, m_before
+    if m_after.psnr_db < WARN_PSNR_DB:
+        warnings.append(f"the chosen lighting does not explain this photo: self-reproduction reaches only "
+                        f"{m_after.psnr_db:.1f} dB (check the input lighting, exposure and image)")
+    coeffs = {"lobe": x.reshape(basis.shape).tolist(), "body_tint": yb.tolist(),
+              "lambert": zl.tolist(), "floor": floor.tolist()}
+    meta = dict(refined.metadata)
+    if improved:
+        meta.update({"refined": True, "refine_lighting": lighting.label,
+                     "refine_psnr_db": round(m_after.psnr_db, 3),
+                     "refine_delta_e2000": None if m_after.delta_e2000 is None else round(m_after.delta_e2000, 4)})
+        refined.metadata = meta
+    if progress is not None:
+        progress(1.0)
+    return RefineResult(refined, m_before, m_after, coeffs, time.perf_counter() - t0, clipped_fraction,
+                        warnings, after_img, improved)
+
+
+def apply_correction(table: BRDFTable, floor: np.ndarray, x: np.ndarray, body_tint: np.ndarray,
+                     lambert: np.ndarray, basis: CorrectionBasis) -> BRDFTable:
+    """``f' = c' + (f − c) Φ`` on the grid (see :mod:`.basis`), clipped at 0; a new table."""
+    wl = table.wavelengths
+    s_hats = basis.spectral_hats(wl)
+    phi = basis.lobe_factor(x, wl).astype(np.float32)                   # (90, 90, Λ)
+    c_new = floor * (s_hats @ body_tint) + (s_hats @ lambert) / np.pi    # (Λ,)
+    values = table.values - floor.astype(np.float32)
+    values *= phi[:, :, None, :]
+    values += c_new.astype(np.float32)
+    np.maximum(values, 0.0, out=values)
+    return BRDFTable(values, wl, table.channels, dict(table.metadata))
+
+
+def directional_albedo(table: BRDFTable, theta_i_deg=(0.0, 30.0, 60.0, 75.0), n: int = 48) -> np.ndarray:
+    """Directional albedo ``∫ f cosθo dωo`` (len(θi), Λ) by midpoint quadrature in (cos θo, φo)."""
+    mu = (np.arange(n) + 0.5) / n
+    phi = (np.arange(2 * n) + 0.5) / (2 * n) * 2 * np.pi
+    mm, pp = np.meshgrid(mu, phi, indexing="ij")
+    s = np.sqrt(1 - mm ** 2)
+    wo = np.stack([s * np.cos(pp), s * np.sin(pp), mm], -1).reshape(-1, 3)
+    d_omega = (1.0 / n) * (2 * np.pi / (2 * n))
+    out = []
+    for t in np.radians(theta_i_deg):
+        wi = np.broadcast_to([math.sin(t), 0.0, math.cos(t)], wo.shape)
+        out.append((table.eval(wi, wo) * mm.reshape(-1, 1)).sum(axis=0) * d_omega)
+    return np.array(out)
+
+
+def _energy_warnings(network: BRDFTable, refined: BRDFTable) -> list[str]:
+    """Warn where the refined table reflects more energy than it receives and the network did not."""
+    a_ref = directional_albedo(refined).max()
+    a_net = directional_albedo(network).max()
+    if a_ref > 1.0 + 1e-3 and a_net <= 1.0 + 1e-3:
+        return [f"the refined material reflects up to {a_ref:.2f}× the light it receives (not energy "
+                f"conserving): the photo is brighter than this lighting allows — check the exposure"]
+    return []
