@@ -96,8 +96,9 @@ def render_under(table: BRDFTable, scene, exposure: float) -> np.ndarray:
 
 
 def _smoothness(basis: CorrectionBasis) -> np.ndarray:
+    """Differences between neighbouring θh and θd knots (not across λ: a tint may be saturated)."""
     shape = basis.shape
-    return np.concatenate([difference_operator(shape, ax) for ax in range(3)], axis=0)
+    return np.concatenate([difference_operator(shape, ax) for ax in (0, 1)], axis=0)
 
 
 def refine_brdf(table: BRDFTable, photo: np.ndarray, lighting=None, options: RefineOptions = RefineOptions(),
