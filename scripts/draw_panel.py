@@ -54,7 +54,7 @@ class RecordingLayout:
         rna = data.bl_rna.properties[name]
         value = getattr(data, name)
         if rna.type == "ENUM":
-            value = next(i.name for i in rna.enum_items if i.identifier == value)
+            value = next((i.name for i in rna.enum_items if i.identifier == value), value)
         elif rna.type == "FLOAT":
             value = f"{value:.{max(0, rna.precision)}f}" if rna.subtype != "FACTOR" else f"{value:.2f}"
         elif rna.type == "BOOLEAN":

@@ -59,8 +59,8 @@ class RefineOptions:
 
     basis: CorrectionBasis = field(default_factory=CorrectionBasis)
     noise: float = 0.01
-    prior: float = 1e-3
-    smooth: float = 1.0
+    prior: float = 1e-5
+    smooth: float = 0.01
     clip_level: float | None = CLIP_LEVEL
     energy_check: bool = True
 
