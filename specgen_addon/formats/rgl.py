@@ -37,6 +37,7 @@ import numpy as np
 
 from ..errors import BRDFFormatError, SpecGenError
 from ..io_utils import atomic_write
+from ..limits import bad_values
 from ..rusinkiewicz import io_from_half_diff
 from ..table import BRDFTable, CancelFn, ProgressFn
 
@@ -341,7 +342,11 @@ class RGLBSDF:
         phi_i, theta_i = check("phi_i", 1), check("theta_i", 1).astype(np.float64)
         ndf, sigma, vndf = check("ndf", 2), check("sigma", 2), check("vndf", 4)
         description, jac = check("description", 1, "u"), check("jacobian", 1, "u")
+        check("luminance", 4)
         refl = check("spectra" if spectral else "rgb", 5)
+        reason = bad_values(refl, allow_negative=True)
+        if reason:
+            raise fail(f"field {'spectra' if spectral else 'rgb'!r}: {reason}")
         n_phi, n_theta = phi_i.size, theta_i.size
         if n_phi != 1:
             raise fail(f"anisotropic measurement ({n_phi} φi slices) is not supported; "
@@ -372,7 +377,11 @@ class RGLBSDF:
         if np.any(sigma <= 0):
             raise fail("sigma (projected area) must be positive")
         version = f.get("version")
-        version_str = ".".join(str(int(v)) for v in version) if version is not None else "unknown"
+        try:
+            version_str = ".".join(str(int(v)) for v in np.asarray(version).ravel()) \
+                if version is not None else "unknown"
+        except (ValueError, TypeError, OverflowError):
+            raise fail(f"field 'version' should hold whole numbers, got {np.asarray(version).tolist()}") from None
         text = bytes(description).decode("utf-8", errors="replace").rstrip("\0")
         bsdf = cls(
             path=path, description=text, theta_i=theta_i,

@@ -1,0 +1,178 @@
+"""Clean stops: SIGINT/SIGTERM end a command with exit 130/143 and leave no new files behind.
+
+:func:`stop_on_signals` turns both signals into :class:`Interrupted` (a ``KeyboardInterrupt``, so
+``except Exception`` never swallows it) raised in the main thread, and records the request so
+long loops and per-band renders can also poll :func:`stop_requested` (for code where Blender's own
+signal handling delays Python's). :class:`OutputGuard` snapshots the output folders and, when the
+work fails or is stopped, removes whatever appeared in them (``keep`` names files left on purpose,
+such as a resumable training checkpoint), so the final message can say truthfully what is left.
+:func:`private_tempdir` keeps other libraries' temporary files (Cycles' OSL compiler) in a folder
+removed on every exit path.
+"""
+
+from __future__ import annotations
+
+import contextlib
+import os
+import shutil
+import signal
+import sys
+import tempfile
+import threading
+import traceback
+from pathlib import Path
+from typing import Iterable, Iterator
+
+EXIT_ERROR = 2
+EXIT_SIGINT = 128 + signal.SIGINT    # 130
+EXIT_SIGTERM = 128 + signal.SIGTERM  # 143
+#: Folders with more entries than this are snapshotted at their top level only.
+MAX_SNAPSHOT_ENTRIES = 20_000
+
+_requested: list[int] = []
+
+
+class Interrupted(KeyboardInterrupt):
+    """The user (SIGINT, Ctrl-C) or the system (SIGTERM) asked the command to stop."""
+
+    def __init__(self, signum: int = signal.SIGINT):
+        self.signum = int(signum)
+        super().__init__(signal.Signals(self.signum).name)
+
+    @property
+    def exit_code(self) -> int:
+        return 128 + self.signum
+
+    @property
+    def signal_name(self) -> str:
+        return signal.Signals(self.signum).name
+
+
+def stop_requested() -> bool:
+    """True once SIGINT or SIGTERM arrived under :func:`stop_on_signals` (for polling)."""
+    return bool(_requested)
+
+
+def raise_if_stopped() -> None:
+    """Raise :class:`Interrupted` if a stop was requested (call between long steps)."""
+    if _requested:
+        raise Interrupted(_requested[0])
+
+
+@contextlib.contextmanager
+def stop_on_signals() -> Iterator[None]:
+    """SIGINT and SIGTERM raise :class:`Interrupted` while the block runs (main thread only)."""
+    if threading.current_thread() is not threading.main_thread():
+        yield
+        return
+
+    def handler(signum, frame):
+        first = not _requested
+        _requested.append(signum)
+        if first:
+            raise Interrupted(signum)
+
+    previous = {s: signal.signal(s, handler) for s in (signal.SIGINT, signal.SIGTERM)}
+    try:
+        yield
+    finally:
+        for s, h in previous.items():
+            signal.signal(s, h if h is not None else signal.SIG_DFL)
+        _requested.clear()
+
+
+def as_interrupted(exc: BaseException) -> Interrupted:
+    """A plain ``KeyboardInterrupt`` (Ctrl-C outside :func:`stop_on_signals`) as SIGINT."""
+    return exc if isinstance(exc, Interrupted) else Interrupted(_requested[0] if _requested else signal.SIGINT)
+
+
+def _snapshot(folder: Path) -> set[str]:
+    if not folder.is_dir():
+        return set()
+    seen: set[str] = set()
+    for root, dirs, files in os.walk(folder):
+        for name in dirs + files:
+            seen.add(os.path.relpath(os.path.join(root, name), folder))
+        if len(seen) > MAX_SNAPSHOT_ENTRIES:
+            return {p for p in seen if os.sep not in p}
+    return seen
+
+
+class OutputGuard:
+    """Remove what a failed or stopped command created in its output folders.
+
+    ``folders`` are snapshotted on entry (a missing one is removed whole if it was created);
+    ``keep`` holds paths to leave in place on purpose. After the block, :attr:`removed` and
+    :attr:`kept` list what happened, for the final message.
+    """
+
+    def __init__(self, folders: Iterable[str | os.PathLike], keep: Iterable[str | os.PathLike] = ()):
+        self.folders = [Path(f) for f in folders if f is not None]
+        self.keep = {Path(k).resolve() for k in keep}
+        self.removed: list[Path] = []
+        self.kept: list[Path] = []
+        self._before: dict[Path, set[str] | None] = {}
+
+    def __enter__(self) -> "OutputGuard":
+        for f in self.folders:
+            self._before[f] = _snapshot(f) if f.exists() else None
+        return self
+
+    def __exit__(self, exc_type, exc, tb) -> bool:
+        if exc_type is None:
+            return False
+        for folder, before in self._before.items():
+            self._clean(folder, before)
+        return False
+
+    def _clean(self, folder: Path, before: set[str] | None) -> None:
+        if not folder.is_dir():
+            return
+        # deepest first, so a new folder is empty (bar kept files) when its turn comes
+        for rel in sorted(_snapshot(folder) - (before or set()), key=lambda p: -p.count(os.sep)):
+            path = folder / rel
+            if path.resolve() in self.keep:
+                self.kept.append(path)
+                continue
+            with contextlib.suppress(OSError):
+                if path.is_dir() and not path.is_symlink():
+                    path.rmdir()  # fails (kept) when a kept file is inside
+                else:
+                    path.unlink()
+                self.removed.append(path)
+        if before is None:
+            with contextlib.suppress(OSError):
+                folder.rmdir()
+
+    def left_behind(self) -> str:
+        """One clause for a message: what the stopped command left on purpose, or that it left
+        nothing."""
+        existing = [p for p in self.kept if p.exists()]
+        if existing:
+            return "kept " + ", ".join(str(p) for p in existing)
+        return "nothing partial was left"
+
+
+@contextlib.contextmanager
+def private_tempdir(prefix: str = "specgen_") -> Iterator[Path]:
+    """Point :mod:`tempfile` (and so Cycles' OSL compiler) at a fresh folder; remove it after."""
+    work = Path(tempfile.mkdtemp(prefix=prefix))
+    previous = tempfile.tempdir
+    tempfile.tempdir = str(work)
+    try:
+        yield work
+    finally:
+        tempfile.tempdir = previous
+        shutil.rmtree(work, ignore_errors=True)
+
+
+def verbose_requested(argv: Iterable[str] | None = None) -> bool:
+    """``--verbose`` on the command line, or ``SPECGEN_VERBOSE=1`` (tracebacks to the console)."""
+    return os.environ.get("SPECGEN_VERBOSE", "") not in ("", "0") or \
+        "--verbose" in (sys.argv if argv is None else list(argv))
+
+
+def print_traceback_if(verbose: bool, exc: BaseException) -> None:
+    """The full traceback of ``exc`` on stderr, only when ``verbose`` (never in the one-line message)."""
+    if verbose:
+        traceback.print_exception(type(exc), exc, exc.__traceback__, file=sys.stderr)
