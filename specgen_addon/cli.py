@@ -10,7 +10,7 @@ import argparse
 import importlib
 import sys
 from pathlib import Path
-from typing import Sequence
+from typing import Callable, Sequence
 
 from . import __version__
 from .errors import SpecGenError
@@ -66,38 +66,47 @@ def folders_of(args: argparse.Namespace):
     return output_folders(args)
 
 
-def run_guarded(what: str, work, outputs=([], []), verbose: bool = False,
+def run_guarded(what: str | Callable[[], str], work, outputs=([], []), verbose: bool = False,
                 keep: Sequence[str] = (), prog: str = "error") -> int:
     """Run ``work()`` with SIGINT/SIGTERM as clean stops and new outputs removed on failure.
 
     Returns the exit status: 0, 2 for an error (one line on stderr), 130/143 for SIGINT/SIGTERM
     (one line saying what was stopped and what, if anything, was left).
     """
-    from .interrupts import EXIT_ERROR, OutputGuard, as_interrupted, print_traceback_if, stop_on_signals
+    from .interrupts import (EXIT_ERROR, OutputGuard, as_interrupted, on_hard_stop, print_traceback_if,
+                             stop_on_signals)
 
     folders, files = outputs
     existing = {Path(f) for f in files if Path(f).exists()}
     guard = OutputGuard(folders, keep=keep)
+
+    def remove_new_files() -> None:
+        for f in files:
+            if Path(f) not in existing and Path(f).is_file():
+                Path(f).unlink()
+
+    def stopped(signal_name: str) -> str:
+        return f"cancelled: {what() if callable(what) else what} stopped by {signal_name}; " \
+               f"{guard.left_behind()}"
+
     try:
-        with stop_on_signals():
+        with stop_on_signals(stopped), on_hard_stop(remove_new_files):
             try:
                 with guard:
                     return int(work() or 0)
             finally:
                 if sys.exc_info()[0] is not None:  # failed or stopped: remove new single outputs
-                    for f in files:
-                        if Path(f) not in existing and Path(f).is_file():
-                            Path(f).unlink()
+                    remove_new_files()
     except KeyboardInterrupt as exc:
         stop = as_interrupted(exc)
-        print(f"cancelled: {what} stopped by {stop.signal_name}; {guard.left_behind()}",
-              file=sys.stderr)
+        print(stopped(stop.signal_name), file=sys.stderr)
         return stop.exit_code
     except SpecGenError as exc:
         print_traceback_if(verbose, exc)
         print(f"{prog}: {exc}", file=sys.stderr)
         return EXIT_ERROR
     except MemoryError as exc:
+        what = what() if callable(what) else what
         print_traceback_if(verbose, exc)
         print(f"{prog}: {what}: out of memory (lower the sizes; see docs/errors.md)", file=sys.stderr)
         return EXIT_ERROR
@@ -107,6 +116,7 @@ def run_guarded(what: str, work, outputs=([], []), verbose: bool = False,
         print(f"{prog}: {where}{exc.strerror or exc}", file=sys.stderr)
         return EXIT_ERROR
     except Exception as exc:  # a bug: one line, the traceback only with --verbose
+        what = what() if callable(what) else what
         print_traceback_if(verbose, exc)
         print(f"{prog}: internal error in {what}: {type(exc).__name__}: {exc} "
               "(rerun with --verbose for the traceback)", file=sys.stderr)

@@ -59,23 +59,82 @@ def raise_if_stopped() -> None:
         raise Interrupted(_requested[0])
 
 
+#: Clean-up steps a hard stop runs (newest first): see :func:`on_hard_stop`.
+_cleanups: list = []
+#: Seconds the main thread has to act on a signal before the watcher stops the process itself.
+HARD_STOP_GRACE_S = 1.0
+
+
 @contextlib.contextmanager
-def stop_on_signals() -> Iterator[None]:
-    """SIGINT and SIGTERM raise :class:`Interrupted` while the block runs (main thread only)."""
+def on_hard_stop(cleanup) -> Iterator[None]:
+    """Register ``cleanup()`` for a hard stop while the block runs (see :func:`stop_on_signals`)."""
+    _cleanups.append(cleanup)
+    try:
+        yield
+    finally:
+        with contextlib.suppress(ValueError):
+            _cleanups.remove(cleanup)
+
+
+@contextlib.contextmanager
+def stop_on_signals(message=None) -> Iterator[None]:
+    """SIGINT and SIGTERM raise :class:`Interrupted` while the block runs (main thread only).
+
+    Python runs signal handlers only between bytecodes, and a Cycles render (or any long C call)
+    keeps the main thread away from them for minutes. So a watcher thread is woken by the signal
+    itself (``signal.set_wakeup_fd``); if the main thread has not acted within
+    :data:`HARD_STOP_GRACE_S`, the watcher runs the registered clean-ups (:func:`on_hard_stop`:
+    new outputs and temporary folders removed), prints ``message(signal name)`` and ends the
+    process with 128 + signal number.
+    """
     if threading.current_thread() is not threading.main_thread():
         yield
         return
+    acted = threading.Event()
 
     def handler(signum, frame):
         first = not _requested
         _requested.append(signum)
+        acted.set()
         if first:
             raise Interrupted(signum)
 
     previous = {s: signal.signal(s, handler) for s in (signal.SIGINT, signal.SIGTERM)}
+    read_fd, write_fd = os.pipe()
+    os.set_blocking(write_fd, False)
+    old_wakeup = signal.set_wakeup_fd(write_fd, warn_on_full_buffer=False)
+
+    def watch() -> None:
+        while True:
+            try:
+                data = os.read(read_fd, 1)
+            except OSError:
+                return
+            if not data:
+                return
+            signum = data[0]
+            if signum not in (signal.SIGINT, signal.SIGTERM) or acted.wait(HARD_STOP_GRACE_S):
+                continue
+            for cleanup in reversed(list(_cleanups)):
+                with contextlib.suppress(Exception):
+                    cleanup()
+            name = signal.Signals(signum).name
+            with contextlib.suppress(Exception):
+                sys.stdout.flush()
+                print(message(name) if message else f"cancelled: stopped by {name}", file=sys.stderr,
+                      flush=True)
+            os._exit(128 + signum)
+
+    watcher = threading.Thread(target=watch, name="specgen-signal-watch", daemon=True)
+    watcher.start()
     try:
         yield
     finally:
+        signal.set_wakeup_fd(old_wakeup)
+        os.close(write_fd)
+        watcher.join(timeout=2.0 if not _requested else 0.1)
+        with contextlib.suppress(OSError):
+            os.close(read_fd)
         for s, h in previous.items():
             signal.signal(s, h if h is not None else signal.SIG_DFL)
         _requested.clear()
@@ -116,14 +175,20 @@ class OutputGuard:
     def __enter__(self) -> "OutputGuard":
         for f in self.folders:
             self._before[f] = _snapshot(f) if f.exists() else None
+        _cleanups.append(self.clean)
         return self
 
     def __exit__(self, exc_type, exc, tb) -> bool:
-        if exc_type is None:
-            return False
+        with contextlib.suppress(ValueError):
+            _cleanups.remove(self.clean)
+        if exc_type is not None:
+            self.clean()
+        return False
+
+    def clean(self) -> None:
+        """Remove what appeared in the folders since entry (except ``keep``)."""
         for folder, before in self._before.items():
             self._clean(folder, before)
-        return False
 
     def _clean(self, folder: Path, before: set[str] | None) -> None:
         if not folder.is_dir():
@@ -159,11 +224,16 @@ def private_tempdir(prefix: str = "specgen_") -> Iterator[Path]:
     work = Path(tempfile.mkdtemp(prefix=prefix))
     previous = tempfile.tempdir
     tempfile.tempdir = str(work)
+
+    def remove() -> None:
+        shutil.rmtree(work, ignore_errors=True)
+
     try:
-        yield work
+        with on_hard_stop(remove):
+            yield work
     finally:
         tempfile.tempdir = previous
-        shutil.rmtree(work, ignore_errors=True)
+        remove()
 
 
 def verbose_requested(argv: Iterable[str] | None = None) -> bool:

@@ -89,7 +89,7 @@ def check_input_file(path: str | os.PathLike, what: str = "input file") -> Path:
     """An existing, readable regular file (a folder or an unreadable file is named as such)."""
     path = Path(path)
     if path.is_dir():
-        raise SpecGenError(f"{path}: is a folder, expected a {what}")
+        raise SpecGenError(f"{path}: is a folder, expected a file ({what})")
     if not path.exists():
         raise SpecGenError(f"{path}: {what} not found")
     if not os.access(path, os.R_OK):
