@@ -163,8 +163,8 @@ def clean_exr_pixels(arr: np.ndarray, path: str | Path) -> np.ndarray:
     colour = arr[..., :3]
     nan, inf = int(np.isnan(colour).sum()), int(np.isinf(colour).sum())
     if nan or inf:
-        raise ImageInputError(f"{path}: image holds {nan:,} NaN and {inf:,} infinite values "
-                              f"(of {colour.size:,}); fix or re-export it")
+        raise ImageInputError(f"{path}: image holds NaN or Inf values ({nan:,} NaN, {inf:,} infinite "
+                              f"of {colour.size:,}); fix or re-export it")
     neg = int((colour < 0).sum())
     if neg:
         np.maximum(colour, 0.0, out=colour)

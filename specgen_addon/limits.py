@@ -107,7 +107,7 @@ def check_output_dir(path: str | os.PathLike, create: bool = True) -> Path:
     for parent in [path, *path.parents]:
         if parent.exists():
             if not parent.is_dir():
-                raise SpecGenError(f"{path}: {parent} is a file, not a folder")
+                raise SpecGenError(f"{path}: cannot be the output folder ({parent} is a file)")
             if not os.access(parent, os.W_OK | os.X_OK):
                 raise SpecGenError(f"{path}: folder {parent} is not writable")
             break
