@@ -82,9 +82,10 @@ def _check_value(where: str, annotation: str, value: Any,
             raise SpecGenError(f"{where} must be a finite number, got {value}")
         lo, hi = bounds or (None, None)
         if (lo is not None and value < lo) or (hi is not None and value > hi):
-            rng = f"between {lo:g} and {hi:g}" if lo is not None and hi is not None else \
-                f"at least {lo:g}" if lo is not None else f"at most {hi:g}"
-            raise SpecGenError(f"{where} must be {rng}, got {value:g}")
+            f = (lambda x: f"{x:,}" if isinstance(x, int) else f"{x:g}")
+            rng = f"between {f(lo)} and {f(hi)}" if lo is not None and hi is not None else \
+                f"at least {f(lo)}" if lo is not None else f"at most {f(hi)}"
+            raise SpecGenError(f"{where} must be {rng}, got {f(value)}")
 
 
 def validate_section(cls, data: Any, where: str,

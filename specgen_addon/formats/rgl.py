@@ -335,8 +335,9 @@ class RGLBSDF:
             if a.ndim != ndim or a.dtype.kind != kind:
                 raise fail(f"field {name!r} should be a {ndim}-d {'float' if kind == 'f' else 'uint'} "
                            f"array, got shape {a.shape} dtype {a.dtype}")
-            if kind == "f" and not np.all(np.isfinite(a)):
-                raise fail(f"field {name!r} has non-finite values")
+            reason = bad_values(a, allow_negative=True) if kind == "f" else None
+            if reason:
+                raise fail(f"field {name!r} has non-finite values: {reason}")
             return a
 
         phi_i, theta_i = check("phi_i", 1), check("theta_i", 1).astype(np.float64)
@@ -344,9 +345,6 @@ class RGLBSDF:
         description, jac = check("description", 1, "u"), check("jacobian", 1, "u")
         check("luminance", 4)
         refl = check("spectra" if spectral else "rgb", 5)
-        reason = bad_values(refl, allow_negative=True)
-        if reason:
-            raise fail(f"field {'spectra' if spectral else 'rgb'!r}: {reason}")
         n_phi, n_theta = phi_i.size, theta_i.size
         if n_phi != 1:
             raise fail(f"anisotropic measurement ({n_phi} φi slices) is not supported; "
