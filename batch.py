@@ -136,6 +136,7 @@ def run(args) -> Path:
                                wavelengths_nm=wavelengths, progress=progress)
     print(f"BRDF ready and baked in {time.perf_counter() - t0:.1f} s "
           f"({info.n_coeffs} basis coefficients, max error {info.rel_error:.1e})", flush=True)
+    PHASE[0] = "scene set-up"
 
     import bpy
     import numpy as np

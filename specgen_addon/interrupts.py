@@ -95,6 +95,8 @@ def stop_on_signals(message=None) -> Iterator[None]:
     def handler(signum, frame):
         first = not _requested
         _requested.append(signum)
+        if _inside_blender_python(frame):
+            return  # Blender would swallow the exception; the watcher stops the process instead
         acted.set()
         if first:
             raise Interrupted(signum)
@@ -138,6 +140,25 @@ def stop_on_signals(message=None) -> Iterator[None]:
         for s, h in previous.items():
             signal.signal(s, h if h is not None else signal.SIG_DFL)
         _requested.clear()
+
+
+_OWN_ROOT = str(Path(__file__).resolve().parents[1])
+_BLENDER_SCRIPT_DIRS = tuple(os.sep + os.path.join("scripts", d) + os.sep
+                             for d in ("addons_core", "modules", "startup", "addons"))
+
+
+def _inside_blender_python(frame) -> bool:
+    """True when the interrupted code is Blender's own Python (add-on registration, Cycles' engine
+    callbacks) or an import, reached before any of SpecGen's frames: Blender catches and prints
+    exceptions raised there instead of passing them on (or crashes, inside ``import bpy``)."""
+    while frame is not None:
+        name = frame.f_code.co_filename
+        if any(d in name for d in _BLENDER_SCRIPT_DIRS) or name.startswith("<frozen importlib"):
+            return True  # (an import may run inside bpy's C start-up, where raising crashes it)
+        if name.startswith(_OWN_ROOT) and "site-packages" not in name:
+            return False
+        frame = frame.f_back
+    return False
 
 
 def as_interrupted(exc: BaseException) -> Interrupted:

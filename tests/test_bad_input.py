@@ -581,11 +581,12 @@ def _interrupt(cmd: list[str], tmp_path: Path, needle: str, sig: int, delay: flo
 
 @pytest.mark.slow
 @NEEDS_WEIGHTS
-@pytest.mark.parametrize("sig, phase, needle", [
-    (signal.SIGINT, "spectral render", "BRDF ready"),     # inside a Cycles render
-    (signal.SIGTERM, "BRDF generation", "generate: "),     # inside the network run
+@pytest.mark.parametrize("sig, phase, needle, delay", [
+    (signal.SIGINT, "scene set-up", "BRDF ready", 0.3),      # while Blender sets the scene up
+    (signal.SIGINT, "spectral render", "BRDF ready", 5.0),   # inside the Cycles render (minutes long)
+    (signal.SIGTERM, "BRDF generation", "generate: ", 0.0),  # inside the network run
 ])
-def test_batch_stops_cleanly_on_a_signal(sig, phase, needle, tmp_path):
+def test_batch_stops_cleanly_on_a_signal(sig, phase, needle, delay, tmp_path):
     pytest.importorskip("bpy")
     out = tmp_path / "out"
     out.mkdir()
@@ -594,7 +595,7 @@ def test_batch_stops_cleanly_on_a_signal(sig, phase, needle, tmp_path):
     # a render long enough (~10 s of Cycles) that the signal lands inside it
     code, text = _interrupt([sys.executable, "batch.py", "--image", str(EXAMPLE), "--out", str(out),
                              "--resolution", "256", "--samples", "1024", "--bands", "6"],
-                            tmp_path, needle, sig, delay=1.0)
+                            tmp_path, needle, sig, delay=delay)
     assert code == 128 + sig, text
     assert "Traceback" not in text
     assert f"cancelled: batch.py {phase} stopped by {signal.Signals(sig).name}" in text, text
@@ -619,8 +620,9 @@ with interrupts.stop_on_signals():
         result = bpy.ops.specgen.generate_brdf()
     except RuntimeError as exc:
         result = str(exc)
+    stopped = interrupts.stop_requested()
 print("RESULT", result, flush=True)
-sys.exit(130 if interrupts.stop_requested() else 0)
+sys.exit(130 if stopped else 0)
 """
 
 
