@@ -121,7 +121,7 @@ def _evaluate(a) -> None:
     check_weights_file(a.weights)
     limits.check_number("limit", a.limit)
     if a.json is not None:
-        limits.check_output_file(a.json, overwrite=True)
+        limits.check_output_file(a.json, getattr(a, "overwrite", False))
 
 
 def _export(a) -> None:

@@ -271,6 +271,7 @@ CLI_CASES = {
     "evaluate-limit-0": (lambda w: ["evaluate", "--limit", "0", Q], "--limit"),
     "evaluate-limit-negative": (lambda w: ["evaluate", "--limit", "-1", Q], "--limit"),
     "evaluate-json-folder": (lambda w: ["evaluate", "--json", str(w.out), Q], "is a folder"),
+    "evaluate-json-existing": (lambda w: ["evaluate", "--json", str(_touch(w.out / "r.json")), Q], "already exists"),
     "evaluate-json-folder-missing": (lambda w: ["evaluate", "--json", str(w.root / "no" / "r.json"), Q], "does not exist"),
     "render-input-mat9999": (lambda w: ["render-input", "mat9999", "-o", str(w.out / "i.png"), Q], "standard corpus"),
     "render-input-mat99999999": (lambda w: ["render-input", "mat99999999", "-o", str(w.out / "i.png"), Q], "standard corpus"),
@@ -655,3 +656,23 @@ def test_cli_infer_stops_cleanly_on_sigint(tmp_path):
     assert "Traceback" not in text
     assert "cancelled: infer stopped by SIGINT; nothing partial was left" in text
     assert list(out.iterdir()) == []
+
+
+def test_output_guard_removes_new_files_and_keeps_only_what_it_is_told(tmp_path):
+    from specgen_addon.interrupts import OutputGuard
+
+    out = tmp_path / "run"
+    out.mkdir()
+    (out / "old.txt").write_text("old")
+    guard = OutputGuard([out, tmp_path / "created"], keep=[out / "checkpoint.pt"])
+    with pytest.raises(KeyboardInterrupt):
+        with guard:
+            (out / "checkpoint.pt").write_text("resumable")
+            (out / "sub").mkdir()
+            (out / "sub" / "partial.npz").write_text("partial")
+            (tmp_path / "created").mkdir()
+            (tmp_path / "created" / "x").write_text("x")
+            raise KeyboardInterrupt
+    assert sorted(p.name for p in out.iterdir()) == ["checkpoint.pt", "old.txt"]
+    assert not (tmp_path / "created").exists()
+    assert guard.left_behind() == f"kept {out / 'checkpoint.pt'}"
