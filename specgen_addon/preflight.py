@@ -161,9 +161,12 @@ def _paper_tables(a) -> None:
         elif not [s for s in spec.split(",") if s.strip()]:
             raise SpecGenError("--materials needs a count or comma-separated material names")
         else:
-            for s in spec.split(","):
-                if s.strip():
-                    limits.safe_name(s.strip(), "--materials name")
+            names = [s.strip() for s in spec.split(",") if s.strip()]
+            for s in names:
+                limits.safe_name(s, "--materials name")
+            from .evaluation.protocol import test_materials
+
+            test_materials(None, names)  # unknown names refused before any cache is made
 
 
 CHECKS: dict[str, Callable[[argparse.Namespace], None]] = {

@@ -283,6 +283,7 @@ CLI_CASES = {
     "render-input-negative-table": (lambda w: ["render-input", str(w.npz_neg), "-o", str(w.out / "i.png"), Q], "negative"),
     "paper-tables-resolution-0": (lambda w: ["paper-tables", "--out", str(w.out / "r.md"), "--resolution", "0", Q], "--resolution"),
     "paper-tables-materials-dotdot": (lambda w: ["paper-tables", "--out", str(w.out / "r.md"), "--materials", "../x", Q], "plain file name"),
+    "paper-tables-unknown-material": (lambda w: ["paper-tables", "--out", str(w.out / "r.md"), "--materials", "mat9999", Q], "not test materials"),
     "paper-tables-out-folder-missing": (lambda w: ["paper-tables", "--out", str(w.root / "no" / "r.md"), Q], "does not exist"),
     "paper-tables-ablation-steps-0": (lambda w: ["paper-tables", "--out", str(w.out / "r.md"), "--ablation-steps", "0", Q], "--ablation-steps"),
     "export-onnx-missing-weights": (lambda w: ["export-onnx", "--weights", str(w.root / "w.pt")], "not found"),
