@@ -27,10 +27,24 @@ class ImageNote(UserWarning):
     """An input image was converted (mode, bit depth, size) or cleaned; the text says how."""
 
 
-def image_size(path: str | Path) -> tuple[int, int]:
-    """(width, height) from the file header only."""
+def image_size(path: str | Path) -> tuple[int, int] | None:
+    """(width, height) from the file header only: OpenImageIO (bundled with Blender), else Pillow,
+    else OpenEXR for .exr; None when none of them is importable (the decoder then reads it)."""
     path = Path(path)
     try:
+        try:
+            import OpenImageIO as oiio
+
+            inp = oiio.ImageInput.open(str(path))
+            if inp is None:
+                raise OSError(oiio.geterror() or "unrecognised image file")
+            try:
+                spec = inp.spec()
+                return int(spec.width), int(spec.height)
+            finally:
+                inp.close()
+        except ImportError:
+            pass
         if path.suffix.lower() == ".exr":
             import OpenEXR
 
@@ -42,8 +56,11 @@ def image_size(path: str | Path) -> tuple[int, int]:
         with _unlimited_pil():
             with Image.open(path) as im:
                 return im.size
-    except Exception as exc:  # unreadable header: the decoder will say why, in one line
-        raise ImageInputError(f"{path}: cannot read image ({type(exc).__name__}: {exc})") from None
+    except ImportError:
+        return None
+    except Exception as exc:  # unreadable header: one line naming the file
+        first = (str(exc).strip().splitlines() or [type(exc).__name__])[0]
+        raise ImageInputError(f"{path}: cannot read image ({first})") from None
 
 
 class _unlimited_pil:
@@ -61,9 +78,13 @@ class _unlimited_pil:
         Image.MAX_IMAGE_PIXELS = self.saved
 
 
-def check_image_header(path: str | Path) -> tuple[int, int]:
-    """Refuse an image over the pixel limit (or empty) from its header; returns (width, height)."""
-    w, h = image_size(path)
+def check_image_header(path: str | Path) -> tuple[int, int] | None:
+    """Refuse an image over the pixel limit (or empty) from its header; returns (width, height)
+    (None when no header reader is importable)."""
+    size = image_size(path)
+    if size is None:
+        return None
+    w, h = size
     if w * h > MAX_IMAGE_PIXELS:
         raise ImageInputError(f"{path}: image is {w}×{h} = {w * h / 1e6:.0f} megapixels; the limit "
                               f"is {MAX_IMAGE_PIXELS / 1e6:.0f} megapixels (downscale it first)")
