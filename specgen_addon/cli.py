@@ -74,7 +74,7 @@ def run_guarded(what: str | Callable[[], str], work, outputs=([], []), verbose: 
     (one line saying what was stopped and what, if anything, was left).
     """
     from .interrupts import (EXIT_ERROR, OutputGuard, as_interrupted, on_hard_stop, print_traceback_if,
-                             stop_on_signals)
+                             raise_if_stopped, stop_on_signals)
 
     folders, files = outputs
     existing = {Path(f) for f in files if Path(f).exists()}
@@ -93,7 +93,9 @@ def run_guarded(what: str | Callable[[], str], work, outputs=([], []), verbose: 
         with stop_on_signals(stopped), on_hard_stop(remove_new_files):
             try:
                 with guard:
-                    return int(work() or 0)
+                    code = int(work() or 0)
+                    raise_if_stopped()  # a signal deferred inside Blender's own code
+                    return code
             finally:
                 if sys.exc_info()[0] is not None:  # failed or stopped: remove new single outputs
                     remove_new_files()

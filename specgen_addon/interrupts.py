@@ -150,7 +150,7 @@ _BLENDER_SCRIPT_DIRS = tuple(os.sep + os.path.join("scripts", d) + os.sep
 def _inside_blender_python(frame) -> bool:
     """True when the interrupted code is Blender's own Python (add-on registration, Cycles' engine
     callbacks) or an import, reached before any of SpecGen's frames: Blender catches and prints
-    exceptions raised there instead of passing them on (or crashes, inside ``import bpy``)."""
+    exceptions raised there instead of passing them on (or crashes, while bpy itself is being imported)."""
     while frame is not None:
         name = frame.f_code.co_filename
         if any(d in name for d in _BLENDER_SCRIPT_DIRS) or name.startswith("<frozen importlib"):
