@@ -70,8 +70,10 @@ def check_numbers(values: dict[str, float | int | None]) -> None:
 def check_wavelength_range(wl_min: float, wl_max: float, bands: int) -> None:
     """Band count and range (nm) of a spectral output, as the CLI and batch.py take them."""
     check_number("bands", bands)
-    check_number("wavelength", wl_min, integer=False)
-    check_number("wavelength", wl_max, integer=False)
+    lo, hi = BOUNDS["wavelength"]
+    for wl in (wl_min, wl_max):
+        if not (math.isfinite(wl) and lo <= wl <= hi):
+            raise SpecGenError(f"wavelengths must lie between {lo:g} and {hi:g} nm, got {wl:g}")
     if bands > 1 and not wl_min < wl_max:
         raise SpecGenError(f"the wavelength range must increase, got {wl_min:g}–{wl_max:g} nm")
 

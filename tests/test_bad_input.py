@@ -224,7 +224,7 @@ CLI_CASES = {
     "tabulate-existing-output": (lambda w: ["tabulate", str(w.npz_good), "-o", str(_touch(w.out / "t.npz"))], "already exists"),
     "tabulate-bands-0": (lambda w: ["tabulate", str(w.npz_good), "-o", str(w.out / "t.npz"), "--bands", "0"], "--bands"),
     "tabulate-bands-10000": (lambda w: ["tabulate", str(w.npz_good), "-o", str(w.out / "t.npz"), "--bands", "10000"], "--bands"),
-    "tabulate-wavelength-100": (lambda w: ["tabulate", str(w.npz_good), "-o", str(w.out / "t.npz"), "--wl-min", "100"], "--wavelength"),
+    "tabulate-wavelength-100": (lambda w: ["tabulate", str(w.npz_good), "-o", str(w.out / "t.npz"), "--wl-min", "100"], "between 360 and 1000 nm"),
     "tabulate-output-folder-missing": (lambda w: ["tabulate", str(w.npz_good), "-o", str(w.root / "no" / "t.npz")], "does not exist"),
     "tabulate-output-is-folder": (lambda w: ["tabulate", str(w.npz_good), "-o", str(w.out)], "must end in .npz"),
     "tabulate-output-under-file": (lambda w: ["tabulate", str(w.npz_good), "-o", str(w.blocker / "t.npz")], "does not exist"),
