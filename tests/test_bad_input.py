@@ -679,3 +679,26 @@ def test_output_guard_removes_new_files_and_keeps_only_what_it_is_told(tmp_path)
     assert sorted(p.name for p in out.iterdir()) == ["checkpoint.pt", "old.txt"]
     assert not (tmp_path / "created").exists()
     assert guard.left_behind() == f"kept {out / 'checkpoint.pt'}"
+
+
+@NEEDS_WEIGHTS
+@pytest.mark.parametrize("after_calls", [1, 45])  # in the network run (45 polls), in the bake
+def test_cancelled_generate_leaves_nothing_in_the_lookup_folder(after_calls, tmp_path):
+    """The panel's Esc: Generate's worker polls ``cancel`` between network blocks and bake groups."""
+    pytest.importorskip("bpy")
+    import batch
+    from importlib import import_module
+
+    bake = import_module(f"{batch.load_package().__name__}.ops.bake")
+    errors = import_module(f"{batch.load_package().__name__}.specgen_addon.errors")
+    out = tmp_path / "lookup"
+    calls = []
+
+    def cancel() -> bool:
+        calls.append(1)
+        return len(calls) > after_calls
+
+    with pytest.raises(errors.Cancelled) as info:
+        bake.generate_lookup(str(EXAMPLE), out, np.linspace(400, 700, 4), cancel=cancel)
+    assert ("bake" in str(info.value)) == (after_calls == 45)
+    assert not out.exists()
