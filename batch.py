@@ -66,6 +66,7 @@ def build_parser() -> argparse.ArgumentParser:
     ap.add_argument("--backend", choices=("onnx", "torch"), default=None,
                     help="inference backend (default: onnx if onnxruntime is installed)")
     ap.add_argument("--overwrite", action="store_true", help="replace existing output files")
+    ap.add_argument("--verbose", action="store_true", help="print the traceback of an error")
     from importlib import import_module
 
     import_module(f"{load_package().__name__}.specgen_addon.cli_model").add_refine_arguments(ap)
@@ -88,7 +89,9 @@ def run(args) -> Path:
     errors = import_module(f"{pkg.__name__}.specgen_addon.errors")
     lighting = import_module(f"{pkg.__name__}.specgen_addon.lighting")
     spectra = import_module(f"{pkg.__name__}.specgen_addon.spectra")
+    interrupts = import_module(f"{pkg.__name__}.specgen_addon.interrupts")
 
+    import_module(f"{pkg.__name__}.specgen_addon.preflight").check_batch(args)  # all checks, up front
     source = Path(args.image or args.brdf)
     if not source.is_file():
         kind = "input image" if args.image else "BRDF table"
@@ -127,6 +130,7 @@ def run(args) -> Path:
             print(f"  generate: {pct}%", flush=True)
         last[0] = pct
 
+    PHASE[0] = "BRDF generation"
     if args.image:
         info = bake.generate_lookup(str(source), out / "lookup", wavelengths, weights=args.weights,
                                     backend=args.backend, name=source.stem, progress=progress,
@@ -142,6 +146,7 @@ def run(args) -> Path:
                                wavelengths_nm=wavelengths, progress=progress)
     print(f"BRDF ready and baked in {time.perf_counter() - t0:.1f} s "
           f"({info.n_coeffs} basis coefficients, max error {info.rel_error:.1e})", flush=True)
+    PHASE[0] = "scene set-up"
 
     import bpy
     import numpy as np
@@ -162,13 +167,14 @@ def run(args) -> Path:
     obj.data.materials.append(render.make_material(f"SpecGen {source.stem}", info))
 
     t0 = time.perf_counter()
+    PHASE[0] = "spectral render"
     job = render.SpectralRenderJob(scene, target, samples=args.samples,
                                    resolution=(args.resolution, args.resolution),
                                    overwrite=args.overwrite, env_samples=args.env_samples,
                                    attributes={"specgenSource": str(source), "specgenMesh": args.mesh,
                                                "specgenEnvironment": args.env},
                                    warn=lambda m: print(m, file=sys.stderr))
-    job.run(lambda f: None)
+    job.run(lambda f: interrupts.raise_if_stopped())  # between band renders
     print(f"spectral render ({args.bands} bands, {args.resolution}², {args.samples} spp) in "
           f"{time.perf_counter() - t0:.1f} s", flush=True)
     print(f"wrote {target}")
@@ -186,18 +192,23 @@ def _write_rgb_exr(path: Path, rgb) -> None:
         exr.write(str(path))
 
 
+#: What batch.py is doing, for the one-line message of a stopped run.
+PHASE = ["input checks"]
+
+
 def main(argv: list[str] | None = None) -> int:
+    """Exit 0, 2 with one error line, or 130/143 on SIGINT/SIGTERM; new files removed on failure
+    and temporary files (Cycles' OSL builds) kept in a folder removed on every exit path."""
     args = build_parser().parse_args(_script_argv(argv))
-    try:
-        run(args)
-    except Exception as exc:
-        # SpecGenError from the package (loaded as ``specgen``) or from a plain ``specgen_addon``
-        # import: the user gets its one-line message, anything else stays a traceback.
-        if not any(c.__name__ == "SpecGenError" for c in type(exc).__mro__):
-            raise
-        print(f"batch.py: error: {exc}", file=sys.stderr)
-        return EXIT_BAD_INPUT
-    return 0
+    pkg = load_package()
+    from importlib import import_module
+
+    cli = import_module(f"{pkg.__name__}.specgen_addon.cli")
+    interrupts = import_module(f"{pkg.__name__}.specgen_addon.interrupts")
+    PHASE[0] = "input checks"
+    with interrupts.private_tempdir("specgen_batch_"):
+        return cli.run_guarded(lambda: f"batch.py {PHASE[0]}", lambda: run(args) and 0,
+                               ([Path(args.out)], []), args.verbose, prog="batch.py: error")
 
 
 if __name__ == "__main__":

@@ -39,7 +39,7 @@ from typing import Callable
 
 import numpy as np
 
-from ..specgen_addon.errors import Cancelled, SpecGenError
+from ..specgen_addon.errors import Cancelled, OutputExistsError, SpecGenError
 from ..specgen_addon.io_utils import atomic_write
 from ..specgen_addon.table import N_PHI_D, N_THETA_D, N_THETA_H
 
@@ -429,20 +429,38 @@ def generate_lookup(image, out_dir: str | os.PathLike, wavelengths_nm: np.ndarra
                     weights=None, n_phi_d: int = N_PHI_D, tolerance: float = DEFAULT_TOLERANCE,
                     backend: str | None = None, name: str = "brdf",
                     progress: Callable[[float], None] | None = None,
-                    cancel: Callable[[], bool] | None = None, lighting=None,
-                    refine: bool = True) -> AtlasInfo:
+                    cancel: Callable[[], bool] | None = None, overwrite: bool = True,
+                    lighting=None, refine: bool = True) -> AtlasInfo:
     """Image of a sphere → spectral BRDF table (``<name>.npz``), refined against the photo under
     ``lighting`` unless ``refine`` is False → coefficient atlas + JSON.
 
     Runs without bpy (the Generate operator calls it on a worker thread). Progress: 0–0.8 network
     and refinement (:func:`specgen_addon.pipeline.generate`), 0.8–1 bake. The refinement's report
-    is ``info.refinement``.
+    is ``info.refinement``. Without ``overwrite`` existing outputs of ``name`` are refused up front;
+    whatever fails or is cancelled leaves nothing new in ``out_dir``.
     """
+    from ..specgen_addon.interrupts import OutputGuard
+    from ..specgen_addon.limits import check_output_dir, safe_name
+
+    out = Path(out_dir)
+    safe_name(name, "BRDF name")
+    check_output_dir(out, create=False)
+    if not overwrite:
+        existing = [p for p in (out / f"{name}.npz", out / f"{name}_lookup.json") if p.exists()]
+        existing += sorted(out.glob(f"{name}_lookup.g*.exr"))
+        if existing:
+            raise OutputExistsError(f"{existing[0]}: already exists (turn on Overwrite to replace it)")
+    with OutputGuard([out]):  # failed, cancelled or interrupted: nothing new stays in out_dir
+        out.mkdir(parents=True, exist_ok=True)
+        return _generate_lookup(image, out, wavelengths_nm, weights, n_phi_d, tolerance, backend,
+                                name, progress, cancel, lighting, refine)
+
+
+def _generate_lookup(image, out: Path, wavelengths_nm, weights, n_phi_d, tolerance, backend, name,
+                     progress, cancel, lighting, refine) -> AtlasInfo:
     from ..specgen_addon.errors import WeightsError
     from ..specgen_addon.pipeline import generate
 
-    out = Path(out_dir)
-    out.mkdir(parents=True, exist_ok=True)
     sub = (lambda lo, hi: (lambda f: progress(lo + (hi - lo) * f))) if progress else (lambda lo, hi: None)
     chosen = backend or choose_backend()
     kwargs = dict(lighting=lighting, refine=refine, weights=weights, wavelengths_nm=wavelengths_nm,

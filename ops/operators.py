@@ -16,10 +16,11 @@ from pathlib import Path
 import bpy
 import numpy as np
 
-from ..specgen_addon.errors import Cancelled, SpecGenError
+from ..specgen_addon.errors import SpecGenError
 from ..specgen_addon.spectra import wavelength_grid
 from . import bake
 from .properties import input_lighting, output_dir
+from .reporting import check_generate_settings, check_render_settings, report_exception
 
 TIMER_STEP_S = 0.1
 
@@ -103,10 +104,11 @@ class SPECGEN_OT_generate_brdf(_Modal, bpy.types.Operator):
 
     def _job_args(self, context) -> dict:
         s = context.scene.specgen
+        check_generate_settings(s)
         weights = bpy.path.abspath(s.weights_path) if s.weights_path else None
         return dict(image=_image_input(s), out_dir=output_dir(s), wavelengths_nm=_wavelengths(s),
                     weights=weights, n_phi_d=int(s.lookup_resolution), tolerance=s.basis_tolerance,
-                    lighting=input_lighting(s), refine=s.refine)
+                    lighting=input_lighting(s), refine=s.refine, overwrite=s.overwrite)
 
     def _done(self, context, info: bake.AtlasInfo) -> None:
         s = context.scene.specgen
@@ -121,18 +123,16 @@ class SPECGEN_OT_generate_brdf(_Modal, bpy.types.Operator):
     def execute(self, context):
         try:
             info = bake.generate_lookup(**self._job_args(context))
-        except SpecGenError as exc:
-            self.report({"ERROR"}, str(exc))
-            return {"CANCELLED"}
+        except BaseException as exc:  # Ctrl-C in a headless run included: one sentence, no traceback
+            return report_exception(self, exc, "BRDF generation")
         self._done(context, info)
         return {"FINISHED"}
 
     def invoke(self, context, event):
         try:
             args = self._job_args(context)
-        except SpecGenError as exc:
-            self.report({"ERROR"}, str(exc))
-            return {"CANCELLED"}
+        except Exception as exc:
+            return report_exception(self, exc, "BRDF generation")
         self._fraction = 0.0
         self._cancel = threading.Event()
         self._result: list = []
@@ -160,15 +160,8 @@ class SPECGEN_OT_generate_brdf(_Modal, bpy.types.Operator):
             return {"RUNNING_MODAL"}
         self._finish(context)
         result = self._result[0] if self._result else SpecGenError("generation stopped unexpectedly")
-        if isinstance(result, Cancelled):
-            self.report({"WARNING"}, "SpecGen: generation cancelled")
-            return {"CANCELLED"}
-        if isinstance(result, SpecGenError):
-            self.report({"ERROR"}, str(result))
-            return {"CANCELLED"}
         if isinstance(result, BaseException):
-            self.report({"ERROR"}, f"SpecGen: {type(result).__name__}: {result}")
-            return {"CANCELLED"}
+            return report_exception(self, result, "BRDF generation")
         self._done(context, result)
         return {"FINISHED"}
 
@@ -194,9 +187,8 @@ class SPECGEN_OT_apply(bpy.types.Operator):
             if not targets:
                 raise SpecGenError("select at least one mesh object")
             mat = make_material(f"SpecGen {Path(info.path).stem}", info)
-        except SpecGenError as exc:
-            self.report({"ERROR"}, str(exc))
-            return {"CANCELLED"}
+        except Exception as exc:
+            return report_exception(self, exc, "Apply")
         for obj in targets:
             if obj.material_slots:
                 for slot in obj.material_slots:
@@ -221,9 +213,11 @@ class SPECGEN_OT_render_stack(_Modal, bpy.types.Operator):
     def _job(self, context):
         from .render import SpectralRenderJob
 
+        from ..specgen_addon.limits import check_output_dir
+
         s = context.scene.specgen
-        folder = Path(output_dir(s))
-        folder.mkdir(parents=True, exist_ok=True)
+        check_render_settings(s, self.filename)  # a plain .exr name: never outside the folder
+        folder = check_output_dir(output_dir(s))
         return SpectralRenderJob(context.scene, folder / self.filename, samples=s.samples,
                                  resolution=(s.resolution, s.resolution), overwrite=s.overwrite,
                                  env_samples=s.env_samples,
@@ -233,18 +227,16 @@ class SPECGEN_OT_render_stack(_Modal, bpy.types.Operator):
         try:
             job = self._job(context)
             job.run()
-        except (SpecGenError, OSError) as exc:
-            self.report({"ERROR"}, str(exc))
-            return {"CANCELLED"}
+        except BaseException as exc:  # Ctrl-C in a headless run included
+            return report_exception(self, exc, "Spectral render")
         self.report({"INFO"}, f"SpecGen: wrote {job.output}")
         return {"FINISHED"}
 
     def invoke(self, context, event):
         try:
             self._job_obj = self._job(context)
-        except (SpecGenError, OSError) as exc:
-            self.report({"ERROR"}, str(exc))
-            return {"CANCELLED"}
+        except Exception as exc:
+            return report_exception(self, exc, "Spectral render")
         self._steps = self._job_obj.steps()
         self._start(context)
         return {"RUNNING_MODAL"}
@@ -264,10 +256,9 @@ class SPECGEN_OT_render_stack(_Modal, bpy.types.Operator):
             self._finish(context)
             self.report({"INFO"}, f"SpecGen: wrote {self._job_obj.output}")
             return {"FINISHED"}
-        except (SpecGenError, OSError) as exc:
+        except Exception as exc:
             self._finish(context)
-            self.report({"ERROR"}, str(exc))
-            return {"CANCELLED"}
+            return report_exception(self, exc, "Spectral render")
         self._progress(context, fraction)
         return {"RUNNING_MODAL"}
 

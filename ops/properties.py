@@ -64,9 +64,9 @@ class SpecGenSettings(bpy.types.PropertyGroup):
                                    "spectra are compressed to a basis (0 = exact, more renders)")
     samples: IntProperty(name="Samples", default=16, min=1, max=4096,
                          description="Cycles samples per pixel of each spectral render")
-    resolution: IntProperty(name="Resolution", default=256, min=8, max=8192,
+    resolution: IntProperty(name="Resolution", default=256, min=8, max=4096,
                             description="Width and height of the spectral render (pixels)")
-    env_samples: IntProperty(name="Env Samples", default=2, min=0, max=64,
+    env_samples: IntProperty(name="Env Samples", default=2, min=1, max=64,
                              description="Environment directions the shader samples per Cycles sample")
     output_dir: StringProperty(name="Output", subtype="DIR_PATH", default="//specgen/", options=_PATH,
                                description="Folder for baked lookups and spectral EXR renders")

@@ -31,6 +31,7 @@ import bpy
 import numpy as np
 
 from ..specgen_addon.errors import Cancelled, OutputExistsError, SpecGenError
+from ..specgen_addon.interrupts import private_tempdir
 from . import bake
 
 SHADER_PATH = Path(__file__).resolve().parent / "osl" / "specgen_brdf.osl"
@@ -109,7 +110,8 @@ def compile_script_node(node: bpy.types.Node) -> None:
         text = shader_text()
         if node.script == text:
             node.script = None
-        node.script = text
+        with private_tempdir("specgen_osl_"):  # Cycles leaves its .oso build files behind
+            node.script = text
     finally:
         scene.render.engine = engine
     if "Atlas" not in node.inputs or "BSDF" not in node.outputs:

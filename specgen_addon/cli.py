@@ -9,7 +9,8 @@ from __future__ import annotations
 import argparse
 import importlib
 import sys
-from typing import Sequence
+from pathlib import Path
+from typing import Callable, Sequence
 
 from . import __version__
 from .errors import SpecGenError
@@ -33,6 +34,8 @@ def build_parser() -> argparse.ArgumentParser:
         description="SpecGen: generate a spectral BRDF from one RGB image of a material sphere, "
                     "and the tools around it (formats, corpus, rendering, training, evaluation).")
     parser.add_argument("--version", action="version", version=f"specgen_addon {__version__}")
+    parser.add_argument("--verbose", action="store_true",
+                        help="print the traceback of an error after its one-line message")
     sub = parser.add_subparsers(dest="command", metavar="COMMAND")
     for name in COMMAND_MODULES:
         importlib.import_module(f"{__package__}.{name}").add_parser(sub)
@@ -45,14 +48,81 @@ def main(argv: Sequence[str] | None = None) -> int:
     if not getattr(args, "func", None):
         parser.print_help()
         return EXIT_USER_ERROR
+    # a stopped training run keeps its last checkpoint (named in the message) for --resume
+    keep = [Path(args.out) / n for n in ("checkpoint.pt", "history.csv")] if args.command == "train" else []
+    return run_guarded(args.command, lambda: _run(args), folders_of(args), args.verbose, keep)
+
+
+def _run(args: argparse.Namespace) -> int:
+    from .preflight import check_command
+
+    check_command(args)  # every argument, file, folder and size, before any work
+    return int(args.func(args) or 0)
+
+
+def folders_of(args: argparse.Namespace):
+    from .preflight import output_folders
+
+    return output_folders(args)
+
+
+def run_guarded(what: str | Callable[[], str], work, outputs=([], []), verbose: bool = False,
+                keep: Sequence[str] = (), prog: str = "error") -> int:
+    """Run ``work()`` with SIGINT/SIGTERM as clean stops and new outputs removed on failure.
+
+    Returns the exit status: 0, 2 for an error (one line on stderr), 130/143 for SIGINT/SIGTERM
+    (one line saying what was stopped and what, if anything, was left).
+    """
+    from .interrupts import (EXIT_ERROR, OutputGuard, as_interrupted, on_hard_stop, print_traceback_if,
+                             raise_if_stopped, stop_on_signals)
+
+    folders, files = outputs
+    existing = {Path(f) for f in files if Path(f).exists()}
+    guard = OutputGuard(folders, keep=keep)
+
+    def remove_new_files() -> None:
+        for f in files:
+            if Path(f) not in existing and Path(f).is_file():
+                Path(f).unlink()
+
+    def stopped(signal_name: str) -> str:
+        return f"cancelled: {what() if callable(what) else what} stopped by {signal_name}; " \
+               f"{guard.left_behind()}"
+
     try:
-        return int(args.func(args) or 0)
+        with stop_on_signals(stopped), on_hard_stop(remove_new_files):
+            try:
+                with guard:
+                    code = int(work() or 0)
+                    raise_if_stopped()  # a signal deferred inside Blender's own code
+                    return code
+            finally:
+                if sys.exc_info()[0] is not None:  # failed or stopped: remove new single outputs
+                    remove_new_files()
+    except KeyboardInterrupt as exc:
+        stop = as_interrupted(exc)
+        print(stopped(stop.signal_name), file=sys.stderr)
+        return stop.exit_code
     except SpecGenError as exc:
-        print(f"error: {exc}", file=sys.stderr)
-        return EXIT_USER_ERROR
-    except KeyboardInterrupt:
-        print("cancelled: nothing partial was written", file=sys.stderr)
-        return EXIT_CANCELLED
+        print_traceback_if(verbose, exc)
+        print(f"{prog}: {exc}", file=sys.stderr)
+        return EXIT_ERROR
+    except MemoryError as exc:
+        what = what() if callable(what) else what
+        print_traceback_if(verbose, exc)
+        print(f"{prog}: {what}: out of memory (lower the sizes; see docs/errors.md)", file=sys.stderr)
+        return EXIT_ERROR
+    except OSError as exc:
+        print_traceback_if(verbose, exc)
+        where = f"{exc.filename}: " if exc.filename else ""
+        print(f"{prog}: {where}{exc.strerror or exc}", file=sys.stderr)
+        return EXIT_ERROR
+    except Exception as exc:  # a bug: one line, the traceback only with --verbose
+        what = what() if callable(what) else what
+        print_traceback_if(verbose, exc)
+        print(f"{prog}: internal error in {what}: {type(exc).__name__}: {exc} "
+              "(rerun with --verbose for the traceback)", file=sys.stderr)
+        return EXIT_ERROR
 
 
 if __name__ == "__main__":  # pragma: no cover

@@ -49,6 +49,7 @@ def add_parser(sub: argparse._SubParsersAction) -> argparse.ArgumentParser:
     p.add_argument("--weights", type=Path, default=None, help="weights (.pt); default: shipped")
     p.add_argument("--limit", type=int, default=None, help="only the first N test materials")
     p.add_argument("--json", type=Path, default=None, help="also write the results as JSON")
+    p.add_argument("--overwrite", action="store_true", help="replace an existing --json file")
     p.add_argument("--backend", choices=("torch", "onnx"), default="torch")
     p.add_argument("--quiet", action="store_true", help="no progress bar")
     p.set_defaults(func=run_evaluate)

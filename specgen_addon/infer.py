@@ -219,6 +219,12 @@ def generate_brdf(image, weights=None, wavelengths_nm=None, backend: str = "torc
     np.expm1(rp, out=rp)
     rp /= np.float32(cfg.mu)
     values = rp
+    from .limits import bad_values
+
+    reason = bad_values(values)
+    if reason:
+        raise WeightsError(f"{_weights_path(weights)}: the network produced {reason} "
+                           "(broken weights?)")
     src = "image" if not isinstance(image, (str, Path)) else str(image)
     meta = {"source": "specgen", "input_image": src, "backend": backend,
             "weights": str(_weights_path(weights)), "description": "SpecGen prediction"}

@@ -32,7 +32,7 @@ from typing import Callable
 
 import numpy as np
 
-from . import spectra
+from . import image_checks, spectra
 from .errors import ImageInputError, SpecGenError
 from .io_utils import atomic_write
 
@@ -173,7 +173,8 @@ def read_image(path: str | Path) -> np.ndarray:
     normalised to [0, 1] and sRGB-decoded (alpha kept linear)."""
     path = Path(path)
     if not path.is_file():
-        raise ImageInputError(f"{path}: no such image file")
+        raise ImageInputError(f"{path}: {'is a folder, not an image file' if path.is_dir() else 'no such image file'}")
+    image_checks.check_image_header(path)  # pixel limit, before any decoding
     if path.suffix.lower() == ".exr":
         import OpenEXR
 
@@ -181,12 +182,14 @@ def read_image(path: str | Path) -> np.ndarray:
             with OpenEXR.File(str(path)) as f:
                 channels = f.channels()
                 if len(channels) == 1 and next(iter(channels)) in ("RGB", "RGBA"):
-                    return np.asarray(next(iter(channels.values())).pixels, np.float32)
-                names = [n for n in ("R", "G", "B", "A") if n in channels]
-                if names[:3] != ["R", "G", "B"]:
-                    raise ImageInputError(f"{path}: EXR needs R, G, B channels, has "
-                                          f"{', '.join(sorted(channels))} ({len(channels)} channels)")
-                return np.stack([np.asarray(channels[n].pixels, np.float32) for n in names], -1)
+                    arr = np.asarray(next(iter(channels.values())).pixels, np.float32)
+                else:
+                    names = [n for n in ("R", "G", "B", "A") if n in channels]
+                    if names[:3] != ["R", "G", "B"]:
+                        raise ImageInputError(f"{path}: EXR needs R, G, B channels, has "
+                                              f"{', '.join(sorted(channels))} ({len(channels)} channels)")
+                    arr = np.stack([np.asarray(channels[n].pixels, np.float32) for n in names], -1)
+                return image_checks.clean_exr_pixels(image_checks.downsample_linear(arr), path)
         except ImageInputError:
             raise
         except Exception as exc:
@@ -194,22 +197,10 @@ def read_image(path: str | Path) -> np.ndarray:
     from PIL import Image, UnidentifiedImageError
 
     try:
-        with Image.open(path) as im:
-            mode = im.mode
-            arr = np.asarray(im)
+        with Image.open(path) as im:  # header only: the limit is checked before decoding
+            return image_checks.pil_to_linear(im, path)
     except (UnidentifiedImageError, OSError) as exc:
-        raise ImageInputError(f"{path}: cannot read image ({exc})") from exc
-    if arr.dtype == np.uint8:
-        arr = arr.astype(np.float32) / 255.0
-    elif arr.dtype in (np.uint16, np.int32) or mode.startswith("I;16"):
-        arr = arr.astype(np.float32) / 65535.0
-    else:
-        arr = arr.astype(np.float32)
-    if arr.ndim == 2:
-        arr = arr[..., None]
-    if arr.shape[-1] in (3, 4):
-        arr[..., :3] = spectra.srgb_decode(arr[..., :3]).astype(np.float32)
-    return arr
+        raise ImageInputError(f"{path}: cannot read image ({exc})") from None
 
 
 def _read_png16_rgb(path: Path) -> np.ndarray | None:
@@ -223,8 +214,9 @@ def _read_png16_rgb(path: Path) -> np.ndarray | None:
         return None
     try:
         spec = inp.spec()
-        if spec.format != oiio.UINT16:
-            return None
+        if spec.format != oiio.UINT16 or spec.nchannels not in (3, 4) \
+                or spec.width * spec.height > image_checks.MAX_WORK_SIDE ** 2:
+            return None  # gray, gray+alpha and large 16-bit images: read_image converts them
         data = inp.read_image(0, 0, 0, spec.nchannels, "float")
     finally:
         inp.close()
@@ -242,6 +234,8 @@ def load_sphere_image(path: str | Path, size: int = CANONICAL_SIZE) -> np.ndarra
     """
     path = Path(path)
     arr = None
+    if path.is_file():
+        image_checks.check_image_header(path)
     if path.suffix.lower() == ".png":
         arr = _read_png16_rgb(path) if path.is_file() else None
     if arr is None:
@@ -262,24 +256,36 @@ def prepare_sphere_array(arr: np.ndarray, size: int = CANONICAL_SIZE) -> np.ndar
     if not np.all(np.isfinite(arr)):
         raise ImageInputError("image holds NaN or Inf values")
     rgb = np.clip(arr[..., :3], 0.0, None)
-    if arr.shape[-1] == 4:
+    if arr.shape[-1] == 4 and not np.all(arr[..., 3] > 0.5):  # an all-opaque alpha masks nothing
         mask = arr[..., 3] > 0.5
         if mask.sum() < np.pi * MIN_SPHERE_RADIUS_PX ** 2 * 0.5:
             raise ImageInputError("the alpha channel covers no sphere")
         cx, cy, r = _circle_of_mask(mask, fit_outline=False)
     else:
-        cx, cy, r = _circle_of_mask(_foreground(rgb), fit_outline=True)
+        try:
+            cx, cy, r = _circle_of_mask(_foreground(rgb), fit_outline=True)
+        except ImageInputError as exc:
+            try:  # JPEG noise around a black background: ignore the darkest 1 % of the range
+                cx, cy, r = _circle_of_mask(_foreground(rgb, noise_floor=0.01), fit_outline=True)
+            except ImageInputError:
+                raise exc from None
     return _resample_circle(rgb, cx, cy, r, size)
 
 
-def _foreground(rgb: np.ndarray) -> np.ndarray:
-    """Pixels that differ from the background, whose colour is the median of the image border."""
+def _foreground(rgb: np.ndarray, noise_floor: float = 0.0) -> np.ndarray:
+    """Pixels that differ from the background, whose colour is the median of the image border.
+
+    ``noise_floor`` (a fraction of the bright end of the luminance) treats darker pixels of a
+    black background as background, e.g. compression noise of a JPEG.
+    """
     from scipy import ndimage
 
     lum = rgb @ np.array([0.2126, 0.7152, 0.0722])
     if not np.percentile(lum, 99.5) > 0:
         raise ImageInputError("image is blank: no sphere found")
-    if np.mean(lum == 0) >= 0.1:
+    if noise_floor > 0:
+        fg = ndimage.binary_opening(lum > noise_floor * np.percentile(lum, 99.5), iterations=1)
+    elif np.mean(lum == 0) >= 0.1:
         fg = lum > 0  # a render on an exactly black background: every lit pixel is the object
     else:
         border = np.concatenate([rgb[:2].reshape(-1, 3), rgb[-2:].reshape(-1, 3),

@@ -8,7 +8,7 @@ import tempfile
 from pathlib import Path
 from typing import Iterator
 
-from .errors import OutputExistsError, SpecGenError
+from .limits import check_output_file
 
 
 def _current_umask() -> int:
@@ -25,14 +25,8 @@ def atomic_write(path: str | os.PathLike, overwrite: bool = False) -> Iterator[P
     image libraries) behave the same. On any exception the temporary file is removed, so a failed
     or cancelled write never leaves a half-written output.
     """
-    target = Path(path)
-    if target.exists() and not overwrite:
-        raise OutputExistsError(f"{target}: already exists (pass overwrite to replace it)")
+    target = check_output_file(path, overwrite)  # folder exists, writable; no silent overwrite
     parent = target.parent if str(target.parent) else Path(".")
-    if not parent.is_dir():
-        raise SpecGenError(f"{target}: output directory {parent} does not exist")
-    if not os.access(parent, os.W_OK):
-        raise SpecGenError(f"{target}: output directory {parent} is not writable")
     fd, tmp_name = tempfile.mkstemp(prefix=f".{target.stem}.", suffix="".join(target.suffixes) or ".tmp",
                                     dir=parent)
     os.close(fd)

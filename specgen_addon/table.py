@@ -227,6 +227,8 @@ class BRDFTable:
     def load(cls, path: str | Path) -> "BRDFTable":
         """Read a table written by :meth:`save`; raises :class:`BRDFFormatError` on bad files."""
         path = Path(path)
+        if path.is_dir():
+            raise BRDFFormatError(path, "is a folder, expected a SpecGen table (.npz)")
         if not path.is_file():
             raise BRDFFormatError(path, "no such file")
         try:
@@ -234,12 +236,21 @@ class BRDFTable:
                 header = json.loads(bytes(z["header"]).decode())
                 values = z["values"]
                 wavelengths = z["wavelengths"]
-        except (OSError, ValueError, KeyError, EOFError, zipfile.BadZipFile) as exc:
+        except PermissionError:
+            raise BRDFFormatError(path, "cannot read file (permission denied)") from None
+        except (OSError, ValueError, KeyError, EOFError, zipfile.BadZipFile, AttributeError) as exc:
             raise BRDFFormatError(path, f"not a readable SpecGen table ({type(exc).__name__}: {exc})") from None
+        if not isinstance(header, dict):
+            raise BRDFFormatError(path, "not a SpecGen BRDF table (bad header)")
         if header.get("format") != TABLE_FORMAT:
             raise BRDFFormatError(path, "not a SpecGen BRDF table")
         if header.get("version") != TABLE_FORMAT_VERSION:
             raise BRDFFormatError(path, f"unsupported table version {header.get('version')}")
+        from .limits import bad_values
+
+        reason = bad_values(values) if values.dtype.kind == "f" else f"values of type {values.dtype}"
+        if reason:
+            raise BRDFFormatError(path, f"invalid BRDF values: {reason}")
         try:
             return cls(values, wavelengths if wavelengths.size else None,
                        tuple(header.get("channels", ())), header.get("metadata", {}))

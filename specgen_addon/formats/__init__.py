@@ -17,10 +17,15 @@ NPZ_MAGIC = b"PK\x03\x04"
 def detect_format(path: str | Path) -> str:
     """Return ``"rgl"``, ``"merl"`` or ``"table"``; raise :class:`BRDFFormatError` otherwise."""
     path = Path(path)
+    if path.is_dir():
+        raise BRDFFormatError(path, "is a folder, expected a BRDF file")
     if not path.is_file():
         raise BRDFFormatError(path, "no such file")
-    with open(path, "rb") as fh:
-        head = fh.read(12)
+    try:
+        with open(path, "rb") as fh:
+            head = fh.read(12)
+    except OSError as exc:
+        raise BRDFFormatError(path, f"cannot read file ({exc.strerror or exc})") from None
     if head.startswith(RGL_MAGIC[:11]):
         return "rgl"
     if head.startswith(NPZ_MAGIC):

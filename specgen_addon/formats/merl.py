@@ -15,6 +15,7 @@ import numpy as np
 
 from ..errors import BRDFFormatError
 from ..io_utils import atomic_write
+from ..limits import bad_values
 from ..table import GRID_SHAPE, BRDFTable
 
 #: Per-channel factors from stored numbers to f_r (sr⁻¹), as in MERL's reference reader.
@@ -55,7 +56,10 @@ def read_merl(path: str | Path) -> MERLData:
     path = Path(path)
     if not path.is_file():
         raise BRDFFormatError(path, "no such file")
-    data = path.read_bytes()
+    try:
+        data = path.read_bytes()
+    except OSError as exc:
+        raise BRDFFormatError(path, f"cannot read file ({exc.strerror or exc})") from None
     if len(data) < _HEADER_BYTES:
         raise BRDFFormatError(path, f"truncated MERL file: {len(data)} bytes, header needs 12")
     dims = tuple(int(d) for d in np.frombuffer(data[:_HEADER_BYTES], dtype="<i4"))
@@ -66,9 +70,15 @@ def read_merl(path: str | Path) -> MERLData:
         kind = "truncated" if len(data) < expected else "oversized"
         raise BRDFFormatError(path, f"{kind} MERL file: {len(data)} bytes, expected {expected}")
     raw = np.frombuffer(data[_HEADER_BYTES:], dtype="<f8").reshape((3,) + GRID_SHAPE).copy()
-    if not np.all(np.isfinite(raw)):
-        raise BRDFFormatError(path, "corrupt MERL file: non-finite values")
-    return MERLData(raw)
+    # negative entries are MERL's "no measurement" marker; NaN, Inf and values that overflow
+    # float32 tables once scaled are corruption
+    reason = bad_values(raw * MERL_SCALE[:, None, None, None], allow_negative=True)
+    if reason:
+        raise BRDFFormatError(path, f"corrupt MERL file: {reason}")
+    data = MERLData(raw)
+    if not data.valid.any():
+        raise BRDFFormatError(path, "MERL file holds no valid measurement (every entry is negative)")
+    return data
 
 
 def write_merl(path: str | Path, data: MERLData | BRDFTable, overwrite: bool = False) -> Path:

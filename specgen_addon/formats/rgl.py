@@ -37,6 +37,7 @@ import numpy as np
 
 from ..errors import BRDFFormatError, SpecGenError
 from ..io_utils import atomic_write
+from ..limits import bad_values
 from ..rusinkiewicz import io_from_half_diff
 from ..table import BRDFTable, CancelFn, ProgressFn
 
@@ -334,13 +335,15 @@ class RGLBSDF:
             if a.ndim != ndim or a.dtype.kind != kind:
                 raise fail(f"field {name!r} should be a {ndim}-d {'float' if kind == 'f' else 'uint'} "
                            f"array, got shape {a.shape} dtype {a.dtype}")
-            if kind == "f" and not np.all(np.isfinite(a)):
-                raise fail(f"field {name!r} has non-finite values")
+            reason = bad_values(a, allow_negative=True) if kind == "f" else None
+            if reason:
+                raise fail(f"field {name!r} has non-finite values: {reason}")
             return a
 
         phi_i, theta_i = check("phi_i", 1), check("theta_i", 1).astype(np.float64)
         ndf, sigma, vndf = check("ndf", 2), check("sigma", 2), check("vndf", 4)
         description, jac = check("description", 1, "u"), check("jacobian", 1, "u")
+        check("luminance", 4)
         refl = check("spectra" if spectral else "rgb", 5)
         n_phi, n_theta = phi_i.size, theta_i.size
         if n_phi != 1:
@@ -372,7 +375,11 @@ class RGLBSDF:
         if np.any(sigma <= 0):
             raise fail("sigma (projected area) must be positive")
         version = f.get("version")
-        version_str = ".".join(str(int(v)) for v in version) if version is not None else "unknown"
+        try:
+            version_str = ".".join(str(int(v)) for v in np.asarray(version).ravel()) \
+                if version is not None else "unknown"
+        except (ValueError, TypeError, OverflowError):
+            raise fail(f"field 'version' should hold whole numbers, got {np.asarray(version).tolist()}") from None
         text = bytes(description).decode("utf-8", errors="replace").rstrip("\0")
         bsdf = cls(
             path=path, description=text, theta_i=theta_i,

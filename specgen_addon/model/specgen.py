@@ -6,6 +6,7 @@ turns every way a file can be wrong into :class:`~specgen_addon.errors.WeightsEr
 
 from __future__ import annotations
 
+import os
 from pathlib import Path
 from typing import Any
 
@@ -85,8 +86,12 @@ def load_weights(path: str | Path | None = None, expect: Config | None = None) -
     of another version, or when its tensors do not fit its config (or ``expect``).
     """
     path = Path(path) if path is not None else DEFAULT_WEIGHTS
+    if path.is_dir():
+        raise WeightsError(f"{path}: is a folder, expected a weights file (.pt)")
     if not path.is_file():
         raise WeightsError(f"{path}: weights file not found")
+    if not os.access(path, os.R_OK):
+        raise WeightsError(f"{path}: weights file is not readable (permission denied)")
     try:
         payload = torch.load(path, map_location="cpu", weights_only=True)
     except Exception as exc:  # torch raises many types for corrupt pickles/zips
@@ -108,5 +113,9 @@ def load_weights(path: str | Path | None = None, expect: Config | None = None) -
     except (RuntimeError, KeyError, TypeError) as exc:
         first = str(exc).strip().splitlines()[0] if str(exc).strip() else type(exc).__name__
         raise WeightsError(f"{path}: weights do not match their configuration ({first})") from None
+    bad = sum(int((~torch.isfinite(t)).sum()) for t in payload["state_dict"].values()
+              if torch.is_tensor(t) and t.is_floating_point())
+    if bad:
+        raise WeightsError(f"{path}: {bad:,} NaN or infinite values in the weights")
     model.meta = payload.get("meta", {})
     return model.eval()

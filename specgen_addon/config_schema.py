@@ -1,0 +1,150 @@
+"""Typed schema of the training config file (``{"model": {...}, "train": {...}}``).
+
+Checked before any data preparation: every key must be a field of
+:class:`~specgen_addon.model.Config` or :class:`~specgen_addon.train.loop.TrainConfig`, every
+value of that field's declared type (``"steps": "ten"`` is refused, ``true`` is not an int) and
+inside its bounds (:data:`TRAIN_BOUNDS`; NaN and ±Inf never pass). The message names the file, the
+section, the key, what was expected and what was found. No torch is imported here.
+"""
+
+from __future__ import annotations
+
+import dataclasses
+import json
+import math
+import os
+from pathlib import Path
+from typing import Any
+
+from .errors import SpecGenError
+
+#: (lowest, highest) of numeric training knobs; ``None`` = unbounded on that side.
+TRAIN_BOUNDS: dict[str, tuple[float | None, float | None]] = {
+    "seed": (0, 2**32 - 1), "steps": (1, 10_000_000), "max_minutes": (0.01, 100_000.0),
+    "lr": (1e-8, 1.0), "lr_decay_every": (1, None), "lr_decay": (1e-6, 1.0),
+    "spectral_materials_per_step": (1, 4096), "rgb_materials_per_step": (0, 4096),
+    "angles_per_material": (1, 1 << 20), "wavelengths_per_angle": (1, 512),
+    "tv_weight": (0.0, 1e6), "rgb_weight": (0.0, 1e6), "corpus_size": (1, 100_000),
+    "corpus_seed": (0, 2**32 - 1), "input_variants": (1, 1000), "canonical_fraction": (0.0, 1.0),
+    "checkpoint_every": (1, None), "val_every": (1, None), "val_materials": (0, 10_000),
+    "threads": (1, 256),
+}
+#: Numeric model sizes are at least 1 (and finite); these have other bounds.
+MODEL_BOUNDS: dict[str, tuple[float | None, float | None]] = {
+    "image_size": (8, 1024), "lambda_min_nm": (300.0, 1100.0), "lambda_max_nm": (300.0, 1100.0),
+    "mu": (1e-3, 1e6),
+}
+
+
+def _type_error(where: str, expected: str, value: Any) -> SpecGenError:
+    return SpecGenError(f"{where} must be {expected}, got {json.dumps(value, default=str)} "
+                        f"({type(value).__name__})")
+
+
+def _is_int(v: Any) -> bool:
+    return isinstance(v, int) and not isinstance(v, bool)
+
+
+def _is_number(v: Any) -> bool:
+    return isinstance(v, (int, float)) and not isinstance(v, bool)
+
+
+def _check_value(where: str, annotation: str, value: Any,
+                 bounds: tuple[float | None, float | None] | None) -> None:
+    ann = annotation.replace(" ", "")
+    if ann.endswith("|None"):
+        if value is None:
+            return
+        ann = ann[:-5]
+    if ann == "bool":
+        if not isinstance(value, bool):
+            raise _type_error(where, "true or false", value)
+        return
+    if ann == "str":
+        if not isinstance(value, str):
+            raise _type_error(where, "a string", value)
+        return
+    if ann.startswith(("tuple[", "list[")):
+        item = ann[ann.index("[") + 1:-1].split(",")[0]
+        if not isinstance(value, (list, tuple)) or not value:
+            raise _type_error(where, f"a non-empty list of {item}", value)
+        for i, v in enumerate(value):
+            _check_value(f"{where}[{i}]", item, v, bounds if item != "str" else None)
+        return
+    if ann == "int":
+        if not _is_int(value):
+            raise _type_error(where, "a whole number", value)
+    elif ann == "float":
+        if not _is_number(value):
+            raise _type_error(where, "a number", value)
+    if _is_number(value):
+        if not math.isfinite(value):
+            raise SpecGenError(f"{where} must be a finite number, got {value}")
+        lo, hi = bounds or (None, None)
+        if (lo is not None and value < lo) or (hi is not None and value > hi):
+            f = (lambda x: f"{x:,}" if isinstance(x, int) else f"{x:g}")
+            rng = f"between {f(lo)} and {f(hi)}" if lo is not None and hi is not None else \
+                f"at least {f(lo)}" if lo is not None else f"at most {f(hi)}"
+            raise SpecGenError(f"{where} must be {rng}, got {f(value)}")
+
+
+def validate_section(cls, data: Any, where: str,
+                     bounds: dict[str, tuple[float | None, float | None]],
+                     default_bounds: tuple[float | None, float | None] | None = None) -> None:
+    """Check ``data`` (a JSON object) against dataclass ``cls``'s fields, types and ``bounds``."""
+    if not isinstance(data, dict):
+        raise _type_error(where, "an object of settings", data)
+    fields = {f.name: f for f in dataclasses.fields(cls)}
+    unknown = sorted(set(data) - set(fields))
+    if unknown:
+        raise SpecGenError(f"{where}: unknown key(s) {', '.join(unknown)} "
+                           f"(known: {', '.join(sorted(fields))})")
+    for key, value in data.items():
+        _check_value(f"{where}.{key}", str(fields[key].type), value, bounds.get(key, default_bounds))
+
+
+def read_config_dict(path: str | os.PathLike) -> dict:
+    """The raw config object of a JSON or TOML file; one clear error for a missing, unreadable or
+    unparsable file."""
+    path = Path(path)
+    if path.is_dir():
+        raise SpecGenError(f"{path}: is a folder, expected a config file (.json or .toml)")
+    if not path.is_file():
+        raise SpecGenError(f"{path}: config file not found")
+    try:
+        text = path.read_text(encoding="utf-8")
+    except PermissionError:
+        raise SpecGenError(f"{path}: config file is not readable (permission denied)") from None
+    except (OSError, UnicodeDecodeError) as exc:
+        raise SpecGenError(f"{path}: cannot read config ({exc})") from None
+    try:
+        if path.suffix.lower() == ".toml":
+            import tomllib
+
+            data = tomllib.loads(text)
+        else:
+            data = json.loads(text)  # accepts NaN: refused below as "not finite"
+    except ValueError as exc:
+        raise SpecGenError(f"{path}: cannot parse config ({exc})") from None
+    if not isinstance(data, dict):
+        raise SpecGenError(f"{path}: a config file holds an object with 'model' and 'train' sections")
+    return data
+
+
+def validate_train_config(path: str | os.PathLike, overrides: dict[str, Any] | None = None) -> None:
+    """Refuse a training config file (plus command-line ``overrides`` of train keys) that does not
+    fit the schema, before any data is prepared."""
+    from .model.config import Config
+    from .train.loop import TrainConfig
+
+    data = read_config_dict(path)
+    unknown = sorted(set(data) - {"model", "train"})
+    if unknown:
+        raise SpecGenError(f"{path}: unknown section(s) {', '.join(unknown)} (expected model, train)")
+    validate_section(Config, data.get("model", {}), f"{path}: model", MODEL_BOUNDS, (1, None))
+    train = {**data.get("train", {}), **(overrides or {})}
+    validate_section(TrainConfig, train, f"{path}: train", TRAIN_BOUNDS)
+    try:
+        Config.from_dict(data.get("model", {}))
+    except TypeError as exc:
+        raise SpecGenError(f"{path}: model: {exc}") from None

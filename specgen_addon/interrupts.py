@@ -1,0 +1,269 @@
+"""Clean stops: SIGINT/SIGTERM end a command with exit 130/143 and leave no new files behind.
+
+:func:`stop_on_signals` turns both signals into :class:`Interrupted` (a ``KeyboardInterrupt``, so
+``except Exception`` never swallows it) raised in the main thread, and records the request so
+long loops and per-band renders can also poll :func:`stop_requested` (for code where Blender's own
+signal handling delays Python's). :class:`OutputGuard` snapshots the output folders and, when the
+work fails or is stopped, removes whatever appeared in them (``keep`` names files left on purpose,
+such as a resumable training checkpoint), so the final message can say truthfully what is left.
+:func:`private_tempdir` keeps other libraries' temporary files (Cycles' OSL compiler) in a folder
+removed on every exit path.
+"""
+
+from __future__ import annotations
+
+import contextlib
+import os
+import shutil
+import signal
+import sys
+import tempfile
+import threading
+import traceback
+from pathlib import Path
+from typing import Iterable, Iterator
+
+EXIT_ERROR = 2
+EXIT_SIGINT = 128 + signal.SIGINT    # 130
+EXIT_SIGTERM = 128 + signal.SIGTERM  # 143
+#: Folders with more entries than this are snapshotted at their top level only.
+MAX_SNAPSHOT_ENTRIES = 20_000
+
+_requested: list[int] = []
+
+
+class Interrupted(KeyboardInterrupt):
+    """The user (SIGINT, Ctrl-C) or the system (SIGTERM) asked the command to stop."""
+
+    def __init__(self, signum: int = signal.SIGINT):
+        self.signum = int(signum)
+        super().__init__(signal.Signals(self.signum).name)
+
+    @property
+    def exit_code(self) -> int:
+        return 128 + self.signum
+
+    @property
+    def signal_name(self) -> str:
+        return signal.Signals(self.signum).name
+
+
+def stop_requested() -> bool:
+    """True once SIGINT or SIGTERM arrived under :func:`stop_on_signals` (for polling)."""
+    return bool(_requested)
+
+
+def raise_if_stopped() -> None:
+    """Raise :class:`Interrupted` if a stop was requested (call between long steps)."""
+    if _requested:
+        raise Interrupted(_requested[0])
+
+
+#: Clean-up steps a hard stop runs (newest first): see :func:`on_hard_stop`.
+_cleanups: list = []
+#: Seconds the main thread has to act on a signal before the watcher stops the process itself.
+HARD_STOP_GRACE_S = 1.0
+
+
+@contextlib.contextmanager
+def on_hard_stop(cleanup) -> Iterator[None]:
+    """Register ``cleanup()`` for a hard stop while the block runs (see :func:`stop_on_signals`)."""
+    _cleanups.append(cleanup)
+    try:
+        yield
+    finally:
+        with contextlib.suppress(ValueError):
+            _cleanups.remove(cleanup)
+
+
+@contextlib.contextmanager
+def stop_on_signals(message=None) -> Iterator[None]:
+    """SIGINT and SIGTERM raise :class:`Interrupted` while the block runs (main thread only).
+
+    Python runs signal handlers only between bytecodes, and a Cycles render (or any long C call)
+    keeps the main thread away from them for minutes. So a watcher thread is woken by the signal
+    itself (``signal.set_wakeup_fd``); if the main thread has not acted within
+    :data:`HARD_STOP_GRACE_S`, the watcher runs the registered clean-ups (:func:`on_hard_stop`:
+    new outputs and temporary folders removed), prints ``message(signal name)`` and ends the
+    process with 128 + signal number.
+    """
+    if threading.current_thread() is not threading.main_thread():
+        yield
+        return
+    acted = threading.Event()
+
+    def handler(signum, frame):
+        first = not _requested
+        _requested.append(signum)
+        if _inside_blender_python(frame):
+            return  # Blender would swallow the exception; the watcher stops the process instead
+        acted.set()
+        if first:
+            raise Interrupted(signum)
+
+    previous = {s: signal.signal(s, handler) for s in (signal.SIGINT, signal.SIGTERM)}
+    read_fd, write_fd = os.pipe()
+    os.set_blocking(write_fd, False)
+    old_wakeup = signal.set_wakeup_fd(write_fd, warn_on_full_buffer=False)
+
+    def watch() -> None:
+        while True:
+            try:
+                data = os.read(read_fd, 1)
+            except OSError:
+                return
+            if not data:
+                return
+            signum = data[0]
+            if signum not in (signal.SIGINT, signal.SIGTERM) or acted.wait(HARD_STOP_GRACE_S):
+                continue
+            for cleanup in reversed(list(_cleanups)):
+                with contextlib.suppress(Exception):
+                    cleanup()
+            name = signal.Signals(signum).name
+            with contextlib.suppress(Exception):
+                sys.stdout.flush()
+                print(message(name) if message else f"cancelled: stopped by {name}", file=sys.stderr,
+                      flush=True)
+            os._exit(128 + signum)
+
+    watcher = threading.Thread(target=watch, name="specgen-signal-watch", daemon=True)
+    watcher.start()
+    try:
+        yield
+    finally:
+        signal.set_wakeup_fd(old_wakeup)
+        os.close(write_fd)
+        watcher.join(timeout=2.0 if not _requested else 0.1)
+        with contextlib.suppress(OSError):
+            os.close(read_fd)
+        for s, h in previous.items():
+            signal.signal(s, h if h is not None else signal.SIG_DFL)
+        _requested.clear()
+
+
+_OWN_ROOT = str(Path(__file__).resolve().parents[1])
+_BLENDER_SCRIPT_DIRS = tuple(os.sep + os.path.join("scripts", d) + os.sep
+                             for d in ("addons_core", "modules", "startup", "addons"))
+
+
+def _inside_blender_python(frame) -> bool:
+    """True when the interrupted code is Blender's own Python (add-on registration, Cycles' engine
+    callbacks) or an import, reached before any of SpecGen's frames: Blender catches and prints
+    exceptions raised there instead of passing them on (or crashes, while bpy itself is being imported)."""
+    while frame is not None:
+        name = frame.f_code.co_filename
+        if any(d in name for d in _BLENDER_SCRIPT_DIRS) or name.startswith("<frozen importlib"):
+            return True  # (an import may run inside bpy's C start-up, where raising crashes it)
+        if name.startswith(_OWN_ROOT) and "site-packages" not in name:
+            return False
+        frame = frame.f_back
+    return False
+
+
+def as_interrupted(exc: BaseException) -> Interrupted:
+    """A plain ``KeyboardInterrupt`` (Ctrl-C outside :func:`stop_on_signals`) as SIGINT."""
+    return exc if isinstance(exc, Interrupted) else Interrupted(_requested[0] if _requested else signal.SIGINT)
+
+
+def _snapshot(folder: Path) -> set[str]:
+    if not folder.is_dir():
+        return set()
+    seen: set[str] = set()
+    for root, dirs, files in os.walk(folder):
+        for name in dirs + files:
+            seen.add(os.path.relpath(os.path.join(root, name), folder))
+        if len(seen) > MAX_SNAPSHOT_ENTRIES:
+            return {p for p in seen if os.sep not in p}
+    return seen
+
+
+class OutputGuard:
+    """Remove what a failed or stopped command created in its output folders.
+
+    ``folders`` are snapshotted on entry (a missing one is removed whole if it was created);
+    ``keep`` holds paths to leave in place on purpose. After the block, :attr:`removed` and
+    :attr:`kept` list what happened, for the final message.
+    """
+
+    def __init__(self, folders: Iterable[str | os.PathLike], keep: Iterable[str | os.PathLike] = ()):
+        self.folders = [Path(f) for f in folders if f is not None]
+        self.keep = {Path(k).resolve() for k in keep}
+        self.removed: list[Path] = []
+        self.kept: list[Path] = []
+        self._before: dict[Path, set[str] | None] = {}
+
+    def __enter__(self) -> "OutputGuard":
+        for f in self.folders:
+            self._before[f] = _snapshot(f) if f.exists() else None
+        _cleanups.append(self.clean)
+        return self
+
+    def __exit__(self, exc_type, exc, tb) -> bool:
+        with contextlib.suppress(ValueError):
+            _cleanups.remove(self.clean)
+        if exc_type is not None:
+            self.clean()
+        return False
+
+    def clean(self) -> None:
+        """Remove what appeared in the folders since entry (except ``keep``)."""
+        for folder, before in self._before.items():
+            self._clean(folder, before)
+
+    def _clean(self, folder: Path, before: set[str] | None) -> None:
+        if not folder.is_dir():
+            return
+        # deepest first, so a new folder is empty (bar kept files) when its turn comes
+        for rel in sorted(_snapshot(folder) - (before or set()), key=lambda p: -p.count(os.sep)):
+            path = folder / rel
+            if path.resolve() in self.keep:
+                self.kept.append(path)
+                continue
+            with contextlib.suppress(OSError):
+                if path.is_dir() and not path.is_symlink():
+                    path.rmdir()  # fails (kept) when a kept file is inside
+                else:
+                    path.unlink()
+                self.removed.append(path)
+        if before is None:
+            with contextlib.suppress(OSError):
+                folder.rmdir()
+
+    def left_behind(self) -> str:
+        """One clause for a message: what the stopped command left on purpose, or that it left
+        nothing."""
+        existing = [p for p in self.kept if p.exists()]
+        if existing:
+            return "kept " + ", ".join(str(p) for p in existing)
+        return "nothing partial was left"
+
+
+@contextlib.contextmanager
+def private_tempdir(prefix: str = "specgen_") -> Iterator[Path]:
+    """Point :mod:`tempfile` (and so Cycles' OSL compiler) at a fresh folder; remove it after."""
+    work = Path(tempfile.mkdtemp(prefix=prefix))
+    previous = tempfile.tempdir
+    tempfile.tempdir = str(work)
+
+    def remove() -> None:
+        shutil.rmtree(work, ignore_errors=True)
+
+    try:
+        with on_hard_stop(remove):
+            yield work
+    finally:
+        tempfile.tempdir = previous
+        remove()
+
+
+def verbose_requested(argv: Iterable[str] | None = None) -> bool:
+    """``--verbose`` on the command line, or ``SPECGEN_VERBOSE=1`` (tracebacks to the console)."""
+    return os.environ.get("SPECGEN_VERBOSE", "") not in ("", "0") or \
+        "--verbose" in (sys.argv if argv is None else list(argv))
+
+
+def print_traceback_if(verbose: bool, exc: BaseException) -> None:
+    """The full traceback of ``exc`` on stderr, only when ``verbose`` (never in the one-line message)."""
+    if verbose:
+        traceback.print_exception(type(exc), exc, exc.__traceback__, file=sys.stderr)

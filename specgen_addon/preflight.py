@@ -1,0 +1,246 @@
+"""Up-front checks of each CLI command and of ``batch.py``: arguments, files, folders, sizes.
+
+:func:`check_command` runs before a command's own code (``cli.main`` calls it) and
+:func:`check_batch` before batch.py's bake, so a bad argument costs milliseconds, not the minutes
+of inference, baking or rendering it would otherwise follow. Bounds come from :mod:`.limits`.
+"""
+
+from __future__ import annotations
+
+import argparse
+import re
+from pathlib import Path
+from typing import Callable
+
+from . import limits
+from .errors import ImageInputError, OutputExistsError, SpecGenError
+
+#: Corpus materials ``render-input`` accepts by name or index without a manifest (standard corpus).
+STANDARD_CORPUS_SIZE = 200
+
+
+def check_image_file(path: str | Path) -> Path:
+    """An input image that exists, is readable and whose header size is within the pixel limit."""
+    from .image_checks import check_image_header
+
+    try:
+        path = limits.check_input_file(path, "input image")
+    except SpecGenError as exc:
+        raise ImageInputError(str(exc)) from None
+    check_image_header(path)
+    return path
+
+
+def check_brdf_file(path: str | Path) -> Path:
+    return limits.check_input_file(path, "BRDF file")
+
+
+def check_weights_file(path: str | Path | None) -> None:
+    if path is not None:
+        from .errors import WeightsError
+
+        try:
+            limits.check_input_file(path, "weights file")
+        except SpecGenError as exc:
+            raise WeightsError(str(exc)) from None
+
+
+# ------------------------------------------------------------------------------------ commands
+def _info(a) -> None:
+    check_brdf_file(a.file)
+
+
+def _tabulate(a) -> None:
+    check_brdf_file(a.file)
+    limits.check_wavelength_range(a.wl_min, a.wl_max, a.bands)
+    limits.check_output_file(a.out, a.overwrite, suffixes=(".npz",))
+
+
+def _corpus(a) -> None:
+    limits.check_numbers({"n": a.n, "bands": a.bands})
+    for name in a.tabulate:
+        limits.safe_name(name, "--tabulate material name")
+    limits.check_output_dir(a.out, create=False)
+    if not a.overwrite:
+        for name in a.tabulate:
+            if (Path(a.out) / f"{name}.npz").exists():
+                raise OutputExistsError(f"{Path(a.out) / (name + '.npz')}: already exists "
+                                        "(pass --overwrite to replace it)")
+
+
+def _train(a) -> None:
+    from .config_schema import validate_train_config
+    from .model import DEFAULT_WEIGHTS
+
+    limits.check_numbers({"steps": a.steps, "max-minutes": a.max_minutes})
+    if a.seed is not None and not 0 <= a.seed < 2**32:
+        raise SpecGenError(f"--seed must be between 0 and {2**32 - 1}, got {a.seed}")
+    cfg = a.config or DEFAULT_WEIGHTS.parents[1] / "configs" / "default.json"
+    over = {k: v for k, v in (("steps", a.steps), ("max_minutes", a.max_minutes), ("seed", a.seed))
+            if v is not None}
+    validate_train_config(cfg, over)
+    for d in a.brdf_dir:
+        if not Path(d).is_dir():
+            raise SpecGenError(f"{d}: --brdf-dir is not a folder")
+    limits.check_output_dir(a.out, create=False)
+    out = Path(a.out)
+    ckpt = out / "checkpoint.pt"
+    if a.resume:
+        if not ckpt.is_file():
+            raise SpecGenError(f"{ckpt}: no checkpoint to resume (run without --resume to start afresh)")
+        check_checkpoint(ckpt)
+    elif (out / "specgen.pt").exists() or ckpt.exists():
+        raise OutputExistsError(f"{out}: holds a training run (pass --resume to continue it, "
+                                "or choose another --out)")
+
+
+def check_checkpoint(path: Path) -> None:
+    """A training checkpoint torch can read without unpickling code (corrupt -> one sentence)."""
+    import torch
+
+    try:
+        ck = torch.load(path, map_location="cpu", weights_only=True)
+    except Exception as exc:  # torch raises many types for corrupt pickles/zips
+        raise SpecGenError(f"{path}: corrupt or unreadable checkpoint ({type(exc).__name__}); "
+                           "delete it to start afresh") from None
+    if not isinstance(ck, dict) or "step" not in ck:
+        raise SpecGenError(f"{path}: not a SpecGen training checkpoint")
+
+
+def _infer(a) -> None:
+    check_image_file(a.image)
+    check_weights_file(a.weights)
+    lo, hi = a.range
+    limits.check_wavelength_range(lo, hi, a.bands)
+    out = limits.check_output_file(a.output, a.overwrite, suffixes=(".npz",))
+    if a.rgb:
+        limits.check_output_file(out.with_name(out.stem + "_rgb.npz"), a.overwrite)
+
+
+def _evaluate(a) -> None:
+    check_weights_file(a.weights)
+    limits.check_number("limit", a.limit)
+    if a.json is not None:
+        limits.check_output_file(a.json, getattr(a, "overwrite", False))
+
+
+def _export(a) -> None:
+    check_weights_file(a.weights)
+
+
+def _render_input(a) -> None:
+    limits.check_numbers({"size": a.size, "variant": a.variant})
+    if a.manifest is not None:
+        limits.check_input_file(a.manifest, "corpus manifest")
+    spec = str(a.material)
+    m = re.fullmatch(r"(?:mat)?(\d+)", spec)
+    if m and not Path(spec).is_file() and a.manifest is None:
+        index = int(m.group(1))
+        if index >= STANDARD_CORPUS_SIZE:
+            raise SpecGenError(f"{spec}: the standard corpus has materials 0–{STANDARD_CORPUS_SIZE - 1} "
+                               "(mat0000–mat0199); pass --manifest for a larger corpus")
+    elif Path(spec).exists():
+        check_brdf_file(spec)
+    limits.check_output_file(a.out, True, suffixes=(".exr", ".png"))
+    from .input_image import output_paths
+
+    output_paths(a.out, a.overwrite)
+
+
+def _paper_tables(a) -> None:
+    limits.check_output_file(a.out, overwrite=True)
+    if a.img_dir is not None:
+        limits.check_output_dir(a.img_dir, create=False)
+    check_weights_file(a.weights)
+    limits.check_numbers({"resolution": a.resolution, "ablation-steps": a.ablation_steps,
+                          "budget-minutes": a.budget_minutes})
+    if a.materials is not None:
+        spec = a.materials.strip()
+        if spec.isdigit():
+            limits.check_number("limit", int(spec), bounds=(1, 1000))
+        elif not [s for s in spec.split(",") if s.strip()]:
+            raise SpecGenError("--materials needs a count or comma-separated material names")
+        else:
+            names = [s.strip() for s in spec.split(",") if s.strip()]
+            for s in names:
+                limits.safe_name(s, "--materials name")
+            from .evaluation.protocol import test_materials
+
+            test_materials(None, names)  # unknown names refused before any cache is made
+
+
+CHECKS: dict[str, Callable[[argparse.Namespace], None]] = {
+    "info": _info, "tabulate": _tabulate, "corpus": _corpus, "train": _train, "infer": _infer,
+    "evaluate": _evaluate, "export-onnx": _export, "render-input": _render_input,
+    "paper-tables": _paper_tables,
+}
+
+
+def check_command(args: argparse.Namespace) -> None:
+    """Run the up-front checks of ``args.command`` (no-op for a command without any)."""
+    check = CHECKS.get(getattr(args, "command", None) or "")
+    if check is not None:
+        check(args)
+
+
+def output_folders(args: argparse.Namespace) -> tuple[list[Path], list[Path]]:
+    """(folders a command writes into wholesale, single output files) for :class:`OutputGuard`."""
+    cmd = getattr(args, "command", "")
+    if cmd in ("corpus", "train"):
+        return [Path(args.out)], []
+    files = []
+    for name in ("out", "output", "json"):
+        p = getattr(args, name, None)
+        if isinstance(p, (str, Path)):
+            files.append(Path(p))
+    if cmd == "infer" and getattr(args, "rgb", False):
+        out = Path(args.output)
+        files.append(out.with_name(out.stem + "_rgb.npz"))
+    if cmd == "render-input":
+        out = Path(args.out)
+        files = [out.with_suffix(".exr"), out.with_suffix(".png")]
+    return [], files
+
+
+# ------------------------------------------------------------------------------------ batch.py
+def check_env_name(name: str) -> None:
+    """An environment map name among Blender's studio lights (no path, no '..')."""
+    from . import lighting
+
+    limits.safe_name(name, "environment name")
+    names = lighting.available_envs()
+    if name not in names:
+        raise SpecGenError(f"no environment map named {name!r}; available: {', '.join(names)}")
+
+
+def check_batch(args: argparse.Namespace) -> None:
+    """Everything batch.py needs, checked before the network runs: sizes, files, mesh, names,
+    output folder and existing outputs (``lookup/`` included)."""
+    from .mesh_checks import check_obj
+
+    limits.check_numbers({"resolution": args.resolution, "samples": args.samples,
+                          "env-samples": args.env_samples})
+    limits.check_wavelength_range(args.wl_min, args.wl_max, args.bands)
+    if args.image:
+        check_image_file(args.image)
+        source = Path(args.image)
+    else:
+        limits.check_input_file(args.brdf, "BRDF table")
+        source = Path(args.brdf)
+    limits.safe_name(source.stem, "input file name")
+    check_weights_file(args.weights)
+    if args.mesh not in ("sphere", "suzanne"):
+        check_obj(args.mesh)
+    check_env_name(args.env)
+    out = limits.check_output_dir(args.out, create=False)
+    mesh_tag = args.mesh if args.mesh in ("sphere", "suzanne") else Path(args.mesh).stem
+    target = out / f"{source.stem}_{mesh_tag}_{args.env}.exr"
+    lookup = out / "lookup"
+    for p in (target, target.with_name(target.stem + "_preview.png")):
+        if p.exists() and not args.overwrite:
+            raise OutputExistsError(f"{p}: already exists (pass --overwrite to replace it)")
+    if lookup.exists() and not lookup.is_dir():
+        raise SpecGenError(f"{lookup}: is a file; batch.py writes its lookup textures in that folder")
+    if lookup.is_dir() and any(lookup.iterdir()) and not args.overwrite:
+        raise OutputExistsError(f"{lookup}: holds baked lookups of an earlier run "
+                                "(pass --overwrite to replace them)")
