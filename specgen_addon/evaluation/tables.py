@@ -54,6 +54,10 @@ def photo_arm(method: str) -> str:
 FIGURE_ROLE = "env_unseen1"
 
 
+#: Uplifting methods (the field ``Settings.baselines`` shadows the module inside the class body).
+UPLIFT_METHODS = baselines.METHODS
+
+
 @dataclass
 class Settings:
     """What a run evaluates; the defaults are the full configuration of docs/results.md."""
@@ -62,7 +66,7 @@ class Settings:
     n_materials: int = 10
     material_names: list[str] | None = None
     baselines: tuple[str, ...] = baselines.METHODS
-    photo_baselines: tuple[str, ...] = baselines.METHODS  # uplifting methods of the photo-only arms
+    photo_baselines: tuple[str, ...] = UPLIFT_METHODS  # uplifting methods of the photo-only arms
     env_sampling_scale: float = 1.0
     figure_materials: int = 2
     lut_size: int | None = None  # face-table size of tabulated baselines (None: their default)
@@ -85,8 +89,8 @@ class Settings:
 
         if not self.smoke:
             return {}
-        return {"alphas": photo_fit.ALPHA_GRID[::2], "coat_alphas": photo_fit.COAT_ALPHA_GRID[::3],
-                "refine_steps": 3, "rounds": 1}
+        return {"alphas": photo_fit.ALPHA_GRID[::4], "coat_alphas": photo_fit.COAT_ALPHA_GRID[::7],
+                "refine_steps": 2, "rounds": 1}
 
     def describe(self) -> dict[str, Any]:
         return {"resolution": self.resolution, "n_materials": self.n_materials,
