@@ -300,8 +300,10 @@ def fit_photo(photo: np.ndarray, scene, exposure: float, *, alphas: tuple[float,
         if progress is not None:
             progress(0.8 * (i + 1) / len(pairs))
     alpha, coat_alpha = min(grid, key=grid.get)
+    best = grid[(alpha, coat_alpha)]
     # Coordinate descent: golden-section search in log α, then in log α_c, each within one grid
-    # step of the current value (the coat kept sharper than the base), ``rounds`` times.
+    # step of the current value (the coat kept sharper than the base), ``rounds`` times; a step is
+    # kept only if it lowers the residual.
     step_a = float(np.log(alphas[1] / alphas[0])) if len(alphas) > 1 else 0.0
     step_c = float(np.log(coat_alphas[1] / coat_alphas[0])) if len(coat_alphas) > 1 else 0.0
     for r in range(rounds if refine_steps > 0 else 0):
@@ -309,14 +311,20 @@ def fit_photo(photo: np.ndarray, scene, exposure: float, *, alphas: tuple[float,
         lo = max(la - step_a, np.log(coat_alpha) if coat_alpha is not None else -np.inf, np.log(alphas[0]))
         hi = min(la + step_a, np.log(alphas[-1]))
         if hi > lo:
-            alpha = float(np.exp(_golden(lambda x: _solve(design, b, float(np.exp(x)), coat_alpha)[1],
-                                         lo, hi, refine_steps)))
+            cand = float(np.exp(_golden(lambda x: _solve(design, b, float(np.exp(x)), coat_alpha)[1],
+                                        lo, hi, refine_steps)))
+            res = _solve(design, b, cand, coat_alpha)[1]
+            if res < best:
+                alpha, best = cand, res
         if coat_alpha is not None:
             lc = np.log(coat_alpha)
             lo, hi = max(lc - step_c, np.log(coat_alphas[0])), min(lc + step_c, np.log(alpha))
             if hi > lo:
-                coat_alpha = float(np.exp(_golden(lambda x: _solve(design, b, alpha, float(np.exp(x)))[1],
-                                                  lo, hi, refine_steps)))
+                cand = float(np.exp(_golden(lambda x: _solve(design, b, alpha, float(np.exp(x)))[1],
+                                            lo, hi, refine_steps)))
+                res = _solve(design, b, alpha, cand)[1]
+                if res < best:
+                    coat_alpha, best = cand, res
         if progress is not None:
             progress(0.8 + 0.2 * (r + 1) / rounds)
     theta, res = _solve(design, b, alpha, coat_alpha)
