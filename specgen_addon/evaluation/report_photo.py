@@ -16,7 +16,7 @@ from typing import Any, Callable, Sequence
 
 import numpy as np
 
-from . import baselines, report, tables
+from . import baselines, protocol, report, tables
 
 #: Required margin (dB) of SpecGen over every photo-only baseline (issue 10, "Done when").
 TARGET_MARGIN_DB = 2.0
@@ -121,6 +121,14 @@ def section(h: "tables.Harness", mats: Sequence[Any], specgen_arm: str, add: Cal
     for _, roles in TABLES:
         add(report.methods_table(get, names, {r: lighting(h.scenes[r]) for r in roles}, arms, arm_labels))
         add("")
+    add("By the source of the material's spectrum (mean over both tables' scenes). Some corpus diffuse "
+        "spectra are drawn from Otsu 2018's PCA model, the space the Otsu 2018 uplifting reconstructs in:")
+    add("")
+    groups: dict[str, list[str]] = {}
+    for m in mats:
+        groups.setdefault(protocol.spectrum_source(m), []).append(m.name)
+    add(report.group_table(get, groups, [r for _, roles in TABLES for r in roles], arms, arm_labels))
+    add("")
     add("The fitted analytic BRDFs (the same fit feeds every uplifting method):")
     add("")
     add(fits_table({n: h.cell_fit(n) for n in names}))
