@@ -66,6 +66,9 @@ def build_parser() -> argparse.ArgumentParser:
     ap.add_argument("--backend", choices=("onnx", "torch"), default=None,
                     help="inference backend (default: onnx if onnxruntime is installed)")
     ap.add_argument("--overwrite", action="store_true", help="replace existing output files")
+    from importlib import import_module
+
+    import_module(f"{load_package().__name__}.specgen_addon.cli_model").add_refine_arguments(ap)
     return ap
 
 
@@ -98,6 +101,8 @@ def run(args) -> Path:
             warnings.simplefilter("ignore")
             input_image.load_sphere_image(source)  # no sphere / unreadable -> ImageInputError, early
     env = lighting.load_environment(args.env)  # unknown name -> LightingAssetError with the list
+    cli_model = import_module(f"{pkg.__name__}.specgen_addon.cli_model")
+    photo_lighting = cli_model.input_lighting_from_args(args)  # bad map/file/value -> LightingError
     out = Path(args.out)
     try:
         out.mkdir(parents=True, exist_ok=True)
@@ -124,7 +129,12 @@ def run(args) -> Path:
 
     if args.image:
         info = bake.generate_lookup(str(source), out / "lookup", wavelengths, weights=args.weights,
-                                    backend=args.backend, name=source.stem, progress=progress)
+                                    backend=args.backend, name=source.stem, progress=progress,
+                                    lighting=photo_lighting, refine=args.refine)
+        if info.refinement is not None:
+            print(f"refinement under {photo_lighting.label}: {info.refinement.summary()}", flush=True)
+            for w in info.refinement.warnings:
+                print(f"warning: {w}", file=sys.stderr)
     else:
         table_mod = import_module(f"{pkg.__name__}.specgen_addon.table")
         table = table_mod.BRDFTable.load(source)

@@ -91,6 +91,7 @@ class AtlasInfo:
     tiles_x: int
     tiles_y: int
     rel_error: float = 0.0
+    refinement: object | None = None   # specgen_addon.refine.RefineResult of a generated table
 
     @property
     def n_coeffs(self) -> int:
@@ -428,31 +429,36 @@ def generate_lookup(image, out_dir: str | os.PathLike, wavelengths_nm: np.ndarra
                     weights=None, n_phi_d: int = N_PHI_D, tolerance: float = DEFAULT_TOLERANCE,
                     backend: str | None = None, name: str = "brdf",
                     progress: Callable[[float], None] | None = None,
-                    cancel: Callable[[], bool] | None = None) -> AtlasInfo:
-    """Image of a sphere → spectral BRDF table (``<name>.npz``) → coefficient atlas + JSON.
+                    cancel: Callable[[], bool] | None = None, lighting=None,
+                    refine: bool = True) -> AtlasInfo:
+    """Image of a sphere → spectral BRDF table (``<name>.npz``), refined against the photo under
+    ``lighting`` unless ``refine`` is False → coefficient atlas + JSON.
 
-    Runs without bpy (the Generate operator calls it on a worker thread). Progress: 0–0.8 network,
-    0.8–1 bake.
+    Runs without bpy (the Generate operator calls it on a worker thread). Progress: 0–0.8 network
+    and refinement (:func:`specgen_addon.pipeline.generate`), 0.8–1 bake. The refinement's report
+    is ``info.refinement``.
     """
     from ..specgen_addon.errors import WeightsError
-    from ..specgen_addon.infer import generate_brdf
+    from ..specgen_addon.pipeline import generate
 
     out = Path(out_dir)
     out.mkdir(parents=True, exist_ok=True)
     sub = (lambda lo, hi: (lambda f: progress(lo + (hi - lo) * f))) if progress else (lambda lo, hi: None)
     chosen = backend or choose_backend()
+    kwargs = dict(lighting=lighting, refine=refine, weights=weights, wavelengths_nm=wavelengths_nm,
+                  progress=sub(0.0, 0.8), cancel=cancel)
     try:
-        table = generate_brdf(image, weights=weights, wavelengths_nm=wavelengths_nm, backend=chosen,
-                              progress=sub(0.0, 0.8), cancel=cancel)
+        generated = generate(image, backend=chosen, **kwargs)
     except WeightsError:
         import importlib.util
 
         if backend is not None or chosen != "onnx" or importlib.util.find_spec("torch") is None:
             raise
-        table = generate_brdf(image, weights=weights, wavelengths_nm=wavelengths_nm, backend="torch",
-                              progress=sub(0.0, 0.8), cancel=cancel)
+        generated = generate(image, backend="torch", **kwargs)
+    table = generated.table
     table.save(out / f"{name}.npz", overwrite=True)
     info = bake_atlas(table, out / f"{name}_lookup.exr", n_phi_d=n_phi_d, tolerance=tolerance,
                       progress=sub(0.8, 1.0), cancel=cancel)
     save_atlas_info(info, out / f"{name}_lookup.json")
+    info.refinement = generated.refinement
     return info

@@ -19,7 +19,7 @@ import numpy as np
 from ..specgen_addon.errors import Cancelled, SpecGenError
 from ..specgen_addon.spectra import wavelength_grid
 from . import bake
-from .properties import output_dir
+from .properties import input_lighting, output_dir
 
 TIMER_STEP_S = 0.1
 
@@ -105,11 +105,16 @@ class SPECGEN_OT_generate_brdf(_Modal, bpy.types.Operator):
         s = context.scene.specgen
         weights = bpy.path.abspath(s.weights_path) if s.weights_path else None
         return dict(image=_image_input(s), out_dir=output_dir(s), wavelengths_nm=_wavelengths(s),
-                    weights=weights, n_phi_d=int(s.lookup_resolution), tolerance=s.basis_tolerance)
+                    weights=weights, n_phi_d=int(s.lookup_resolution), tolerance=s.basis_tolerance,
+                    lighting=input_lighting(s), refine=s.refine)
 
     def _done(self, context, info: bake.AtlasInfo) -> None:
         s = context.scene.specgen
         s.atlas_json = str(Path(info.path).with_name(Path(info.path).stem + ".json"))
+        ref = info.refinement
+        s.refine_summary = "" if ref is None else f"Photo match: {ref.after.text()} (network {ref.before.text()})"
+        for warning in ([] if ref is None else ref.warnings):
+            self.report({"WARNING"}, f"SpecGen: {warning}")
         self.report({"INFO"}, f"SpecGen: BRDF generated, {info.n_coeffs} spectral basis "
                               f"coefficients (max error {info.rel_error:.1e})")
 

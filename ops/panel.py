@@ -26,6 +26,16 @@ class SPECGEN_PT_main(bpy.types.Panel):
             col.prop(s, "image_path")
         col.prop(s, "weights_path")
 
+        col = layout.column(heading="Photo")
+        col.prop(s, "input_env")
+        if s.input_env == "FILE":
+            col.prop(s, "input_env_file")
+        if s.input_env != "canonical":
+            col.prop(s, "input_rotation")
+            col.prop(s, "input_exposure")
+            col.prop(s, "input_key_light")
+        col.prop(s, "refine")
+
         col = layout.column(heading="Spectrum", align=True)
         col.prop(s, "wl_min", text="Wavelengths (nm)")
         col.prop(s, "wl_max", text="To")
@@ -53,6 +63,8 @@ class SPECGEN_PT_main(bpy.types.Panel):
             layout.progress(factor=s.progress, type="BAR", text=f"{s.running}… (Esc cancels)")
         elif s.atlas_json:
             layout.label(text=f"Baked: {bpy.path.basename(s.atlas_json)}", icon="INFO")
+            if s.refine_summary:
+                layout.label(text=s.refine_summary, icon="IMAGE_REFERENCE")
 
 
 CLASSES = (SPECGEN_PT_main,)

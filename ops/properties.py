@@ -22,6 +22,21 @@ LOOKUP_RESOLUTIONS = (
 _PATH = {"PATH_SUPPORTS_BLEND_RELATIVE"} if bpy.app.version >= (4, 5, 0) else set()
 
 
+def _input_env_items(self, context):
+    """'Canonical', Blender's bundled HDRIs (found at run time) and 'File…'."""
+    items = [("canonical", "Canonical Studio", "The studio lighting the network's inputs are rendered with")]
+    try:
+        from ..specgen_addon.lighting import available_envs
+
+        names = available_envs()
+    except Exception:  # no studio lights found: canonical and file still work
+        names = []
+    items += [(n, n.title(), f"Blender's bundled '{n}' HDRI") for n in names if n != "canonical"]
+    items.append(("FILE", "File…", "Your own equirectangular HDRI (.exr or .hdr)"))
+    _input_env_items.cache = items  # Blender needs the strings kept alive
+    return items
+
+
 def _update_range(self, context) -> None:
     if self.wl_max <= self.wl_min:
         self.wl_max = self.wl_min + 1.0
@@ -57,11 +72,35 @@ class SpecGenSettings(bpy.types.PropertyGroup):
                                description="Folder for baked lookups and spectral EXR renders")
     overwrite: BoolProperty(name="Overwrite", default=False,
                             description="Replace existing output files")
+    refine: BoolProperty(name="Refine to Photo", default=True,
+                         description="Refine the network's BRDF so that, rendered under the input "
+                                     "lighting, it reproduces the photo")
+    input_env: EnumProperty(name="Photo Lighting", items=_input_env_items,
+                            description="The lighting the photo was taken under")
+    input_env_file: StringProperty(name="HDRI File", subtype="FILE_PATH", options=_PATH,
+                                   description="Equirectangular HDRI (.exr or .hdr) the photo was lit by")
+    input_rotation: FloatProperty(name="Rotation", default=0.0, min=-360.0, max=360.0, precision=1,
+                                  description="Rotation of the photo's HDRI about the up axis (degrees)")
+    input_exposure: FloatProperty(name="Exposure", default=1.0, min=2.0 ** -10, max=2.0 ** 10,
+                                  description="Brightness of the photo's HDRI relative to the canonical level")
+    input_key_light: BoolProperty(name="Key Light", default=False,
+                                  description="Add the canonical D65 key light to the photo's HDRI")
     # State written by the operators (not shown as settings).
+    refine_summary: StringProperty(name="Refinement", default="", options={"HIDDEN"})
     atlas_json: StringProperty(name="Baked Lookup", default="", options={"HIDDEN"})
     progress: FloatProperty(name="Progress", default=0.0, min=0.0, max=1.0, subtype="FACTOR",
                             options={"HIDDEN"})
     running: StringProperty(name="Running", default="", options={"HIDDEN"})
+
+
+def input_lighting(settings: SpecGenSettings):
+    """The validated :class:`~specgen_addon.input_lighting.InputLighting` of the panel."""
+    from ..specgen_addon.input_lighting import parse_lighting
+
+    if settings.input_env == "canonical":
+        return parse_lighting(None)
+    env = bpy.path.abspath(settings.input_env_file) if settings.input_env == "FILE" else settings.input_env
+    return parse_lighting(env, settings.input_rotation, settings.input_exposure, settings.input_key_light)
 
 
 def output_dir(settings: SpecGenSettings) -> str:

@@ -37,6 +37,7 @@ def add_parser(sub: argparse._SubParsersAction) -> argparse.ArgumentParser:
     p.add_argument("--range", type=float, nargs=2, default=(380.0, 780.0), metavar=("START", "END"),
                    help="wavelength range in nm (default 380 780)")
     p.add_argument("--rgb", action="store_true", help="also write OUTPUT_rgb.npz (RGB projection, D65)")
+    add_refine_arguments(p)
     p.add_argument("--overwrite", action="store_true", help="replace existing outputs")
     p.add_argument("--quiet", action="store_true", help="no progress bar")
     p.set_defaults(func=run_infer)
@@ -57,6 +58,44 @@ def add_parser(sub: argparse._SubParsersAction) -> argparse.ArgumentParser:
     p.add_argument("--weights", type=Path, default=None, help="weights (.pt); default: shipped")
     p.set_defaults(func=run_export)
     return p
+
+
+def add_refine_arguments(p: argparse.ArgumentParser) -> None:
+    """``--refine/--no-refine`` and the input lighting options (shared with batch.py)."""
+    g = p.add_argument_group("photo consistency",
+                             "the lighting the photo was taken under, and the refinement that makes "
+                             "the BRDF reproduce the photo under it")
+    g.add_argument("--refine", action=argparse.BooleanOptionalAction, default=True,
+                   help="refine the network's BRDF so it reproduces the photo (default: on)")
+    g.add_argument("--input-env", default="canonical", metavar="NAME|FILE",
+                   help="lighting of the photo: 'canonical' (studio map + key light, default), a "
+                        "bundled map name (forest, courtyard, ...) or an .exr/.hdr file")
+    g.add_argument("--input-rotation", type=float, default=0.0, metavar="DEG",
+                   help="rotation of the input map about the up axis, degrees (default 0)")
+    g.add_argument("--input-exposure", type=float, default=1.0,
+                   help="input map brightness relative to the canonical level (default 1)")
+    g.add_argument("--input-key-light", action=argparse.BooleanOptionalAction, default=None,
+                   help="add the canonical D65 key light to a map (default: only for canonical)")
+
+
+def input_lighting_from_args(args: argparse.Namespace):
+    """The validated :class:`InputLighting` of :func:`add_refine_arguments`' options."""
+    from .input_lighting import parse_lighting
+
+    return parse_lighting(args.input_env, args.input_rotation, args.input_exposure, args.input_key_light)
+
+
+def print_refinement(generated) -> None:
+    """One line on what refinement reached, and its warnings (on stderr)."""
+    import sys
+
+    res = generated.refinement
+    if res is not None:
+        kept = "" if res.improved else " (network's table kept)"
+        print(f"refinement under {res.table.metadata.get('refine_lighting', 'the input lighting')}: "
+              f"{res.summary()}{kept}")
+    for w in generated.warnings:
+        print(f"warning: {w}", file=sys.stderr)
 
 
 def run_train(args: argparse.Namespace) -> int:
@@ -98,7 +137,7 @@ def run_train(args: argparse.Namespace) -> int:
 
 
 def run_infer(args: argparse.Namespace) -> int:
-    from .infer import generate_brdf
+    from .pipeline import generate
     from .spectra import wavelength_grid
 
     out: Path = args.output
@@ -109,13 +148,16 @@ def run_infer(args: argparse.Namespace) -> int:
         if p.exists() and not args.overwrite:
             raise OutputExistsError(f"{p}: already exists (pass --overwrite to replace it)")
     wl = wavelength_grid(args.range[0], args.range[1], args.bands)
+    lighting = input_lighting_from_args(args)
     t0 = time.perf_counter()
     with progress_bar("infer", enabled=not args.quiet) as update:
-        table = generate_brdf(args.image, weights=args.weights, wavelengths_nm=wl, backend=args.backend,
-                              progress=update)
+        generated = generate(args.image, lighting, refine=args.refine, weights=args.weights,
+                             wavelengths_nm=wl, backend=args.backend, progress=update)
+    table = generated.table
     dt = time.perf_counter() - t0
     table.save(out, overwrite=args.overwrite)
     print(f"{out}: spectral BRDF {table.values.shape} ({wl[0]:g}–{wl[-1]:g} nm) in {dt:.1f} s")
+    print_refinement(generated)
     if args.rgb:
         table.to_rgb().save(rgb_out, overwrite=args.overwrite)
         print(f"{rgb_out}: RGB projection (D65, linear sRGB)")

@@ -52,7 +52,9 @@ class RefineOptions:
 
     ``noise`` is σ as a fraction of the photo's level; ``prior`` the pull towards the network
     (relative to each coefficient's data weight); ``smooth`` the smoothness between neighbouring
-    knots; ``clip_level`` marks saturated pixels (``None``: never, for linear EXR photos).
+    knots; ``clip_level`` marks saturated pixels of an 8/16-bit photo (values in [0, 1]): they are
+    left out of the fit, and renders are clipped at 1 like the photo before they are scored
+    (``None``: a linear EXR photo, nothing is clipped).
     """
 
     basis: CorrectionBasis = field(default_factory=CorrectionBasis)
@@ -96,8 +98,9 @@ def render_under(table: BRDFTable, scene, exposure: float) -> np.ndarray:
 
 
 def _smoothness(basis: CorrectionBasis) -> np.ndarray:
+    """Differences between neighbouring θh and θd knots (not across λ: a tint may be saturated)."""
     shape = basis.shape
-    return np.concatenate([difference_operator(shape, ax) for ax in range(3)], axis=0)
+    return np.concatenate([difference_operator(shape, ax) for ax in (0, 1)], axis=0)
 
 
 def refine_brdf(table: BRDFTable, photo: np.ndarray, lighting=None, options: RefineOptions = RefineOptions(),
@@ -201,9 +204,10 @@ def refine_brdf(table: BRDFTable, photo: np.ndarray, lighting=None, options: Ref
     after_img = render_under(refined, scene, exposure)
     if progress is not None:
         progress(0.98)
-    keep_img = op.observe(photo)
-    m_before = reproduction(keep_img, op.observe(before_img))
-    m_after = reproduction(keep_img, op.observe(after_img))
+    if options.clip_level is not None:  # an 8/16-bit photo: the camera clipped at full scale
+        before_img, after_img = np.minimum(before_img, 1.0), np.minimum(after_img, 1.0)
+    m_before = reproduction(b, op.observe(before_img))
+    m_after = reproduction(b, op.observe(after_img))
     improved = m_after.psnr_db >= m_before.psnr_db
     if not improved:
         warnings.append(f"refinement did not improve on the network ({m_after.psnr_db:.1f} dB vs "

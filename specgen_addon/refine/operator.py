@@ -30,6 +30,12 @@ from .basis import CorrectionBasis, sparse_hats
 ProgressFn = Callable[[float], None]
 CancelFn = Callable[[], bool]
 
+#: Pixels seen closer to grazing than this (cos θo < 0.15, θo > 81°) are not observed: in a photo
+#: the outermost ring of the silhouette mixes sphere and background (antialiasing, the circle fit
+#: of the loader), and its values hinge on a BRDF's most extreme grazing entries. About 3% of the
+#: sphere's pixels at 128², a one-pixel ring.
+RIM_COS = 0.15
+
 
 @dataclass
 class SampleGroup:
@@ -91,8 +97,10 @@ class PhotoOperator:
         self.exposure = float(exposure)
         self.shape = scene.geometry.shape
         blocks = scene._prepare()
+        normals = scene.geometry.normals.reshape(-1, 3)
         ids = np.concatenate([b.ids for b in blocks])
-        #: flat image indices of the observed pixels (sphere pixels facing the camera)
+        ids = ids[normals[ids] @ scene.camera_dir >= RIM_COS]
+        #: flat image indices of the observed pixels (sphere pixels facing the camera, off the rim)
         self.pixel_ids = ids
         compact = np.full(self.shape[0] * self.shape[1], -1, dtype=np.int64)
         compact[ids] = np.arange(ids.size)
@@ -105,18 +113,20 @@ class PhotoOperator:
         for n, blk in enumerate(blocks):
             if cancel is not None and cancel():
                 raise Cancelled("refinement cancelled")
-            pix = compact[blk.ids]
+            pix = compact[blk.ids]                     # −1: a rim pixel, not observed
             for wi_l, spec in zip(blk.light_wi, light_spectra):
-                lit = wi_l[:, 2] > 0
+                lit = (wi_l[:, 2] > 0) & (pix >= 0)
                 if np.any(lit):
                     cos = wi_l[lit, 2:3]
                     self.groups.append(_group(pix[lit], wi_l[lit], blk.wo_local[lit], cos, spec))
                     lambert[pix[lit]] += cos * spec
             if blk.env is not None:
                 e = blk.env
-                lambert[pix] += e.irradiance_rgb @ env_u
-                self.groups.append(_group(pix[e.pixel], e.wi_local, blk.wo_local[e.pixel],
-                                          e.weight_rgb, env_u))
+                seen = pix >= 0
+                lambert[pix[seen]] += e.irradiance_rgb[seen] @ env_u
+                s_seen = seen[e.pixel]
+                self.groups.append(_group(pix[e.pixel[s_seen]], e.wi_local[s_seen],
+                                          blk.wo_local[e.pixel[s_seen]], e.weight_rgb[s_seen], env_u))
             if progress is not None:
                 progress((n + 1) / len(blocks))
         #: (P, Λ) radiance of a constant BRDF of 1 sr⁻¹ at each pixel (exact: irradiance, lights)

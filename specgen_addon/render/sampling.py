@@ -23,8 +23,10 @@ from a fixed seed, so renders are deterministic.
 
 from __future__ import annotations
 
+import functools
 import warnings
 from dataclasses import dataclass, replace
+from pathlib import Path
 from typing import Callable
 
 import numpy as np
@@ -90,12 +92,40 @@ class SampleBlock:
     irradiance_rgb: np.ndarray
 
 
-def _sobol(n: int, seed: int) -> np.ndarray:
+#: Precomputed point sets (scripts/make_sobol_points.py) for a Python without scipy (a stock
+#: Blender): every count and seed the shipped sampling settings (and their halves/doubles) use.
+SOBOL_TABLE = Path(__file__).with_name("sobol_points.npz")
+SOBOL_TABLE_COUNTS = (4, 8, 16, 32, 64)
+SOBOL_TABLE_SEEDS = tuple(range(1, 9))
+
+
+def sobol_scipy(n: int, seed: int) -> np.ndarray:
+    """``n`` Owen-scrambled Sobol points in [0, 1)² from scipy (the single source of the table)."""
     from scipy.stats import qmc
 
     with warnings.catch_warnings():
         warnings.simplefilter("ignore")  # non-power-of-two counts lose balance but stay valid
         return qmc.Sobol(d=2, scramble=True, seed=seed).random(n)
+
+
+@functools.lru_cache(maxsize=1)
+def _sobol_table() -> dict[str, np.ndarray]:
+    with np.load(SOBOL_TABLE) as z:
+        return {k: z[k] for k in z.files}
+
+
+def _sobol(n: int, seed: int) -> np.ndarray:
+    """scipy's points, or the same points from :data:`SOBOL_TABLE` where scipy is absent."""
+    try:
+        return sobol_scipy(n, seed)
+    except ImportError:
+        pass
+    table = _sobol_table()
+    key = f"n{n}_s{seed}"
+    if key not in table:
+        raise SpecGenError(f"environment sampling with {n} directions (seed {seed}) needs scipy; "
+                           f"without it, counts {SOBOL_TABLE_COUNTS} and seeds {SOBOL_TABLE_SEEDS} work")
+    return table[key].copy()
 
 
 def _local_to_world(local: np.ndarray, t: np.ndarray, b: np.ndarray, n: np.ndarray) -> np.ndarray:

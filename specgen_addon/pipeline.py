@@ -1,0 +1,81 @@
+"""Photo → spectral BRDF, the way every front end runs it (CLI ``infer``, batch.py, the panel).
+
+1. the photo is read and its sphere cropped to the canonical frame
+   (:func:`specgen_addon.input_image.load_sphere_image`);
+2. it is brought to the canonical white level of its input lighting
+   (:meth:`~specgen_addon.input_lighting.InputLighting.network_gain`) and the network generates the
+   table (:func:`specgen_addon.infer.generate_brdf`);
+3. unless switched off, the table is refined against the photo under that lighting
+   (:func:`specgen_addon.refine.refine_brdf`). Without refinement the network's table is returned
+   untouched.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+from pathlib import Path
+from typing import Callable
+
+import numpy as np
+
+from .table import BRDFTable
+
+ProgressFn = Callable[[float], None]
+CancelFn = Callable[[], bool]
+
+#: Share of the progress bar taken by the network when refinement follows.
+NETWORK_SHARE = 0.45
+
+
+@dataclass
+class Generated:
+    """The table a front end uses, and the refinement's report (``None`` when switched off)."""
+
+    table: BRDFTable
+    refinement: object | None = None   # specgen_addon.refine.RefineResult
+
+    @property
+    def warnings(self) -> list[str]:
+        return [] if self.refinement is None else list(self.refinement.warnings)
+
+
+def load_photo(image) -> tuple[np.ndarray, bool]:
+    """The canonical sphere crop (S, S, 3) of a path or array, and whether it is linear HDR (EXR
+    or array: no pixel counts as clipped) rather than an 8/16-bit sRGB file."""
+    from . import input_image
+
+    if isinstance(image, (str, Path)):
+        return input_image.load_sphere_image(image).astype(np.float64), Path(image).suffix.lower() == ".exr"
+    return input_image.prepare_sphere_array(np.asarray(image)).astype(np.float64), True
+
+
+def generate(image, lighting=None, refine: bool = True, weights=None, wavelengths_nm=None,
+             backend: str = "torch", progress: ProgressFn | None = None,
+             cancel: CancelFn | None = None) -> Generated:
+    """Generate (and by default refine) the spectral BRDF of the sphere in ``image``.
+
+    ``lighting`` is an :class:`~specgen_addon.input_lighting.InputLighting` (default: canonical).
+    ``progress(fraction)`` and ``cancel()`` are passed down; cancelling raises
+    :class:`~specgen_addon.errors.Cancelled` and returns nothing.
+    """
+    from .infer import generate_brdf
+    from .input_lighting import InputLighting
+
+    lighting = lighting or InputLighting()
+    photo, linear = load_photo(image)
+    share = NETWORK_SHARE if refine else 1.0
+
+    def sub(lo: float, hi: float) -> ProgressFn | None:
+        return None if progress is None else (lambda f: progress(lo + (hi - lo) * f))
+
+    table = generate_brdf(photo * lighting.network_gain(), weights=weights, wavelengths_nm=wavelengths_nm,
+                          backend=backend, progress=sub(0.0, share), cancel=cancel)
+    src = str(image) if isinstance(image, (str, Path)) else "image"
+    table.metadata = {**table.metadata, "input_image": src, "input_lighting": lighting.label}
+    if not refine:
+        return Generated(table)
+    from .refine import CLIP_LEVEL, RefineOptions, refine_brdf
+
+    options = RefineOptions(clip_level=None if linear else CLIP_LEVEL)
+    result = refine_brdf(table, photo, lighting, options, progress=sub(share, 1.0), cancel=cancel)
+    return Generated(result.table, result)
