@@ -39,6 +39,7 @@ import numpy as np
 
 from ..corpus.microfacet import specular_geometry
 from ..errors import Cancelled, SpecGenError
+from ..refine.operator import RIM_COS
 from ..refine.solve import nonneg_ridge
 
 ProgressFn = Callable[[float], None]
@@ -52,6 +53,14 @@ COAT_ALPHA_GRID = tuple(float(a) for a in np.geomspace(0.01, 0.3, 15))
 COAT_F0 = 0.04
 #: Names of the fitted linear coefficients, in design-matrix order.
 COEFFICIENTS = ("diffuse_r", "diffuse_g", "diffuse_b", "f0_r", "f0_g", "f0_b", "edge", "coat")
+
+
+def observed_pixels(scene) -> np.ndarray:
+    """Flat mask (H·W,) of the photo pixels a fit or a self-reproduction score uses: the sphere
+    facing the camera, off its grazing rim (cos θo ≥ :data:`specgen_addon.refine.operator.RIM_COS`,
+    the refinement's own rule: the outermost ring mixes sphere and background in a photo)."""
+    normals = scene.geometry.normals.reshape(-1, 3)
+    return scene.geometry.mask.reshape(-1) & (normals @ scene.camera_dir >= RIM_COS)
 
 
 def _above(wi: np.ndarray, wo: np.ndarray) -> np.ndarray:
@@ -273,6 +282,7 @@ def fit_photo(photo: np.ndarray, scene, exposure: float, *, alphas: tuple[float,
         after the grid search (``refine_steps = 0``: grid only).
     clip_level
         Pixels with a channel at or above this value are left out (clipped PNG/JPEG); None: keep all.
+        The silhouette's grazing rim is always left out (:func:`observed_pixels`).
     """
     photo = np.asarray(photo, dtype=np.float64)
     h, w = scene.geometry.shape
@@ -282,7 +292,7 @@ def fit_photo(photo: np.ndarray, scene, exposure: float, *, alphas: tuple[float,
         raise SpecGenError("photo holds NaN or Inf values")
     if not (np.isfinite(exposure) and exposure > 0):
         raise SpecGenError(f"exposure must be positive, got {exposure}")
-    keep = scene.geometry.mask.reshape(-1) & (scene.geometry.normals.reshape(-1, 3) @ scene.camera_dir > 0)
+    keep = observed_pixels(scene)
     rows = photo.reshape(-1, 3)
     if clip_level is not None:
         keep &= ~np.any(rows >= clip_level, axis=1)

@@ -105,7 +105,8 @@ def section(h: "tables.Harness", mats: Sequence[Any], specgen_arm: str, add: Cal
         "exactly as SpecGen's. Mean over the test materials; **bold** = best of the column. "
         "*Self-reproduction*: the method's spectral BRDF rendered under the input's own lighting "
         "against the input image (RGB PSNR with the photo's 99.9th percentile as peak; mean "
-        "CIEDE2000 over the sphere).")
+        "CIEDE2000; over the sphere without its one-pixel grazing rim, θo > 81°, which the fit also "
+        "leaves out, as the refinement does).")
     add("")
     extra = [self_reproduction_column(get, names)]
     for title, roles in TABLES:

@@ -230,7 +230,8 @@ class Harness:
     def run_self_reproduction(self, arm: str, material: Any, brdf: Any) -> dict:
         """Cell :data:`SELF_ROLE` of ``arm``: ``brdf`` (spectral) rendered under the canonical input
         lighting, exactly as the input image is made, against that image (RGB PSNR, mean ΔE2000 over
-        the sphere; :func:`specgen_addon.refine.report.reproduction`). Another SpecGen variant (e.g.
+        the sphere without its grazing rim, as the refinement scores it;
+        :func:`specgen_addon.refine.report.reproduction`). Another SpecGen variant (e.g.
         the refined table) gets its column by calling this with its own arm and BRDF."""
         from .. import spectra
         from ..input_lighting import InputLighting
@@ -243,8 +244,10 @@ class Harness:
         wl = getattr(brdf, "wavelengths", None)   # a table renders at its own bands
         wl = spectra.DEFAULT_WAVELENGTHS_NM if wl is None else wl
         rendered = np.clip(scene.render_spectral(brdf, wl).rgb, 0.0, None) * light.image_exposure
-        mask = scene.geometry.mask
-        rep = reproduction(photo[mask], rendered[mask])
+        from .photo_fit import observed_pixels
+
+        seen = observed_pixels(scene)
+        rep = reproduction(photo.reshape(-1, 3)[seen], rendered.reshape(-1, 3)[seen])
         cell = {"rgb_psnr": rep.psnr_db, "delta_e2000": rep.delta_e2000,
                 "seconds": time.perf_counter() - t0}
         write_json(self.cell_path(arm, material.name, SELF_ROLE), cell)
