@@ -106,6 +106,25 @@ def test_methods_table_averages_and_bolds_the_best():
     assert lines[4] == "| **Average** | light | 25.00 / 0.8000 | **26.00 / 0.8750** |"
 
 
+def test_rows_table_bolds_the_best_of_each_column_and_adds_extra_columns():
+    text = report.rows_table(_cells(), ["m1", "m2"], {"r": "light"}, [("a", "A"), ("b", "B")],
+                             [report.Column("Extra", lambda arm: arm.upper())])
+    lines = text.splitlines()
+    assert lines[0] == "| Method | light PSNR / SSIM | Average PSNR / SSIM | Extra |"
+    assert lines[2] == "| A | 25.00 / 0.8000 | 25.00 / 0.8000 | A |"
+    assert lines[3] == "| B | **26.00 / 0.8750** | **26.00 / 0.8750** | B |"
+
+
+def test_photo_only_targets_compare_with_the_best_baseline():
+    from specgen_addon.evaluation import report_photo, tables
+
+    psnr = {"sg": 33.0, tables.photo_arm("mallett2019"): 30.0, tables.photo_arm("otsu2018"): 32.0}
+    get = lambda arm, mat, role: {"psnr_mean": psnr[arm], "ssim_mean": 0.9} if arm in psnr else None
+    rows = report_photo.target_rows(get, ["m"], "sg", ["mallett2019", "otsu2018"])
+    assert [r[1] for r in rows] == pytest.approx([1.0, 1.0])   # the margin over Otsu, the better one
+    assert all(r[2] == report_photo.TARGET_MARGIN_DB for r in rows)
+
+
 def test_missing_cells_show_a_dash_and_gaps_use_shared_cells():
     get = _cells()
     assert report.fmt(get("c", "m1", "r")) == "—"
@@ -145,7 +164,7 @@ def test_paper_tables_smoke_run_writes_every_table_and_resumes(tmp_path, monkeyp
     args = ["paper-tables", "--out", str(out), "--smoke", "--quiet", "--weights", str(weights)]
     assert main(args) == 0
     text = out.read_text()
-    for heading in ("## (a)", "## (b)", "## (c)", "## (e)", "## Real data", "## Targets"):
+    for heading in ("## (a)", "## (b)", "## (c)", "## (e)", "## (f) Photo-only", "## Real data", "## Targets"):
         assert heading in text
     assert "(d)" in text and "Hadamard" in text
     for png in ("psnr_per_wavelength.png", "gt_vs_specgen_wavelengths.png", "spectral_curves.png"):

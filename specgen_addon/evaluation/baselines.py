@@ -214,6 +214,32 @@ def uplift_reflectance(rgb: np.ndarray, method: str, wavelengths_nm: np.ndarray,
     return out.reshape(*shape, w.size)
 
 
+def uplift_albedo(rgb: np.ndarray, method: str, wavelengths_nm: np.ndarray) -> np.ndarray:
+    """Reflectance spectra (N, Λ) of a few linear-sRGB albedos ``rgb`` (N, 3), each uplifted exactly.
+
+    For the colours of a fitted BRDF (:mod:`.photo_fit`), not for images: every colour is a call
+    to colour-science (no face table). As PBRT 4e's ``RGBAlbedoSpectrum``, a colour whose largest
+    component is ≤ 1 is uplifted as it is; a brighter one (a fit that broke energy conservation)
+    is uplifted at maximum 1 and scaled back. Black stays black.
+    """
+    if method not in METHODS:
+        raise SpecGenError(f"unknown uplifting method {method!r}; known: {', '.join(METHODS)}")
+    rgb = np.clip(np.atleast_2d(np.asarray(rgb, dtype=np.float64)), 0.0, None)
+    w = np.atleast_1d(np.asarray(wavelengths_nm, dtype=np.float64))
+    scale = np.maximum(rgb.max(axis=1), 1.0)
+    if method == MALLETT2019:
+        return rgb @ _mallett_basis(tuple(float(x) for x in w))
+    import colour
+
+    fn = _single_colour_fn(method)
+    out = np.zeros((rgb.shape[0], w.size))
+    for i, (c, s) in enumerate(zip(rgb, scale)):
+        if c.max() > 0:
+            with colour.utilities.suppress_warnings(colour_runtime_warnings=True):
+                out[i] = s * _resample(fn(c / s, None)[0], w)
+    return out
+
+
 def uplift_radiance_image(rgb: np.ndarray, method: str, wavelengths_nm: np.ndarray,
                           white: str = spectra.DEFAULT_ILLUMINANT, lut_size: int | None = None) -> np.ndarray:
     """Spectral radiance image (H, W, Λ) estimated from a linear-sRGB render (H, W, 3).

@@ -5,6 +5,7 @@ Pure functions of the cached cells (no rendering), so the report is rebuilt from
 
 from __future__ import annotations
 
+from dataclasses import dataclass
 from typing import Callable, Mapping, Sequence
 
 import numpy as np
@@ -139,3 +140,26 @@ def targets_table(rows: Sequence[tuple[str, float | None, float, str]]) -> str:
         met = measured >= required if how.startswith("≥") else measured > required
         out.append([name, f"{measured:+.2f} dB", how, "met" if met else "**missed**"])
     return md_table(["Target", "Measured (mean PSNR difference)", "Required", "Result"], out, "lrll")
+
+
+@dataclass(frozen=True)
+class Column:
+    """An extra column of :func:`rows_table`: ``value(arm) -> text`` (e.g. self-reproduction)."""
+
+    header: str
+    value: Callable[[str], str]
+
+
+def rows_table(get: CellGetter, materials: Sequence[str], roles: Mapping[str, str],
+               rows: Sequence[tuple[str, str]], extra: Sequence[Column] = ()) -> str:
+    """Rows = methods ``(arm, label)``, columns = scene roles (mean over materials), their average,
+    then ``extra`` columns. Bold: the best PSNR of each scene column."""
+    cols = [[mean_cell([get(arm, mat, r) for mat in materials]) for r in roles] for arm, _ in rows]
+    for i, (arm, _) in enumerate(rows):
+        cols[i].append(mean_cell([get(arm, mat, r) for mat in materials for r in roles]))
+    by_col = [_row([cols[i][j] for i in range(len(rows))]) for j in range(len(roles) + 1)]
+    header = (["Method"] + [f"{label} PSNR / SSIM" for label in roles.values()] + ["Average PSNR / SSIM"]
+              + [c.header for c in extra])
+    body = [[label] + [by_col[j][i] for j in range(len(roles) + 1)] + [c.value(arm) for c in extra]
+            for i, (arm, label) in enumerate(rows)]
+    return md_table(header, body, "l" + "r" * (len(header) - 1))

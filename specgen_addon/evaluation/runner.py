@@ -82,13 +82,16 @@ def run_paper_tables(out: Path, img_dir: Path | None = None, smoke: bool = False
                      materials: str | None = None, budget_minutes: float | None = None,
                      ablation_steps: int | None = None, ablation: bool = True,
                      weights: Path | None = None, resolution: int | None = None, fresh: bool = False,
-                     progress: bool = True, prepare: bool = False, report_only: bool = False) -> Path:
+                     progress: bool = True, prepare: bool = False, report_only: bool = False,
+                     photo_only: bool = False) -> Path:
     """Run the whole evaluation and write the markdown report ``out`` (returns its path).
 
     ``prepare`` computes only what does not need the shipped weights (ground-truth renders,
     baseline cells, the ablation arms), filling the cache for a later full run; no report then.
     ``report_only`` computes nothing: it rebuilds the report and figures from the cache (the arms
     recorded there by the last full run), e.g. after editing the discussion file.
+    ``photo_only`` runs only the photo-only protocol (table (f): the photo fits, their uplifted
+    renders and SpecGen in the same scenes) and writes a report of that part alone.
     """
     t_start = time.perf_counter()
     out = Path(out)
@@ -124,27 +127,33 @@ def run_paper_tables(out: Path, img_dir: Path | None = None, smoke: bool = False
     # 1. Ablation arms (equal step budgets, deterministic seeds), trained or loaded from the cache.
     arms: dict[str, abl.ArmResult] = {}
     abl_settings = None
-    if report_only:
+    if report_only and not photo_only:
         abl_settings, arms = abl.load_arms(cache / "arms.json")
-    elif ablation:
+    elif ablation and not photo_only:
         abl_settings = abl.ablation_settings(smoke=smoke, steps=ablation_steps, budget_minutes=budget_minutes,
                                              cache_dir=root / "ablation", log=log)
         arms = abl.train_arms(abl_settings, root / "ablation", progress=progress, log=log)
         abl.save_arms(cache / "arms.json", abl_settings, arms)
 
-    # 2. Cells: baselines and SpecGen in every scene, ablation arms under distant light.
+    # 2. Cells: baselines (photo-only and oracle) and SpecGen in every scene, ablation arms under
+    # distant light.
     jobs: list[tuple[str, Any, Any]] = []
     for m in ([] if report_only else mats):
-        jobs.append(("baselines", m, None))
+        jobs.append(("photo", m, None))
+        if not photo_only:
+            jobs.append(("baselines", m, None))
         if not prepare:
             jobs.append((specgen_arm, m, weights_path))
-            jobs.append(("robustness", m, weights_path))
+            if not photo_only:
+                jobs.append(("robustness", m, weights_path))
         for name, arm in arms.items():
             jobs.append((arm.key, m, arm.weights))
     bar = _bar(len(jobs), "paper-tables", progress)
     for kind, m, w in jobs:
         bar.set_postfix_str(f"{m.name}: {kind.split('@')[0]}")
-        if kind == "baselines":
+        if kind == "photo":
+            h.run_photo_baselines(m, tables.MAIN_ROLES)
+        elif kind == "baselines":
             h.run_baselines(m, tables.BASELINE_ROLES)
         elif kind == specgen_arm:
             h.run_model(kind, w, m, tables.MAIN_ROLES, keep_images=True)
@@ -164,7 +173,9 @@ def run_paper_tables(out: Path, img_dir: Path | None = None, smoke: bool = False
     # 3. Real data: the RGL RGB files, SpecGen projected to RGB vs the measured BRDF.
     real: dict[str, dict[str, dict]] = {}
     real_note = ""
-    if REAL_RGL_DIR.is_dir():
+    if photo_only:
+        real_note = "(not run: --photo-only)"
+    elif REAL_RGL_DIR.is_dir():
         files = sorted(p for p in REAL_RGL_DIR.glob("*_rgb.bsdf"))
         for path in files:
             real[path.stem] = ({r: h.cell(f"real-{specgen_arm}", path.stem, r) for r in REAL_ROLES}
@@ -173,11 +184,11 @@ def run_paper_tables(out: Path, img_dir: Path | None = None, smoke: bool = False
         real_note = f"(skipped: {REAL_RGL_DIR} not found)"
 
     # 4. Figures and report.
-    figures = make_figures(h, mats, specgen_arm, img_dir)
+    figures = {} if photo_only else make_figures(h, mats, specgen_arm, img_dir)
     runs = (read_json(cache / "runs.json") or []) if report_only else \
-        record_run(cache, "full", time.perf_counter() - t_start)
+        record_run(cache, "photo-only" if photo_only else "full", time.perf_counter() - t_start)
     text = build_report(h, mats, specgen_arm, weights_path, arms, abl_settings, real, real_note,
-                        figures, out, smoke, runs)
+                        figures, out, smoke, runs, photo_only)
     with atomic_write(out, overwrite=True) as tmp:
         tmp.write_text(text, encoding="utf-8")
     log(f"paper-tables: wrote {out} ({time.perf_counter() - t_start:.0f} s)")
@@ -264,12 +275,13 @@ def _labels(specgen_arm: str) -> dict[str, str]:
 
 def build_report(h: tables.Harness, mats: Sequence[Any], specgen_arm: str, weights: Path,
                  arms: dict[str, "abl.ArmResult"], abl_settings: Any, real: dict, real_note: str,
-                 figures: dict[str, Path], out: Path, smoke: bool, runs: list[dict]) -> str:
-    """The markdown of docs/results.md."""
+                 figures: dict[str, Path], out: Path, smoke: bool, runs: list[dict],
+                 photo_only: bool = False) -> str:
+    """The markdown of docs/results.md (or of the photo-only part alone)."""
     from .report_text import compose
 
     return compose(h, mats, specgen_arm, weights, arms, abl_settings, real, real_note, figures, out,
-                   smoke, runs, machine_description(), git_commit())
+                   smoke, runs, machine_description(), git_commit(), photo_only)
 
 
 def record_run(cache: Path, mode: str, seconds: float) -> list[dict]:

@@ -22,6 +22,13 @@ from . import baselines, protocol
 from .cache import read_json, write_json
 
 SPECGEN = "specgen"
+#: Pseudo-role of a cell holding an arm's *self-reproduction*: its BRDF rendered under the input's
+#: own (canonical) lighting against the input image, ``{"rgb_psnr", "delta_e2000"}``
+#: (:meth:`Harness.run_self_reproduction`). Any arm (a SpecGen variant, a photo-only baseline) may
+#: have one; the photo-only tables show it next to the spectral scores.
+SELF_ROLE = "self_reproduction"
+#: Prefix of the photo-only baselines' arms (:mod:`.photo_fit` + uplifting), e.g. ``photo-otsu2018``.
+PHOTO_PREFIX = "photo-"
 #: Scene roles of each table.
 ROLES_A = ("env_unseen1", "distant")
 ROLES_B = ("env_seen", "env_unseen1", "env_unseen2")
@@ -36,8 +43,19 @@ MAIN_ROLES = ("distant", "env_unseen1", "shape_env", "shape_distant")
 def robustness_arm(specgen_arm: str, env: str) -> str:
     """Arm name of SpecGen fed the sphere photographed under ``env`` (table (b))."""
     return f"{specgen_arm}+input-{env}"
+
+
+def photo_arm(method: str) -> str:
+    """Arm name of the photo-only baseline that uplifts the fitted colours with ``method``."""
+    return PHOTO_PREFIX + method
+
+
 #: Role whose images are kept for the figures.
 FIGURE_ROLE = "env_unseen1"
+
+
+#: Uplifting methods (the field ``Settings.baselines`` shadows the module inside the class body).
+UPLIFT_METHODS = baselines.METHODS
 
 
 @dataclass
@@ -48,6 +66,7 @@ class Settings:
     n_materials: int = 10
     material_names: list[str] | None = None
     baselines: tuple[str, ...] = baselines.METHODS
+    photo_baselines: tuple[str, ...] = UPLIFT_METHODS  # uplifting methods of the photo-only arms
     env_sampling_scale: float = 1.0
     figure_materials: int = 2
     lut_size: int | None = None  # face-table size of tabulated baselines (None: their default)
@@ -64,9 +83,19 @@ class Settings:
         base = EnvSampling()
         return base if self.env_sampling_scale == 1.0 else base.scaled(self.env_sampling_scale)
 
+    def photo_fit_options(self) -> dict[str, Any]:
+        """Keyword arguments of :func:`.photo_fit.fit_photo` (a coarser search for the smoke run)."""
+        from . import photo_fit
+
+        if not self.smoke:
+            return {}
+        return {"alphas": photo_fit.ALPHA_GRID[::4], "coat_alphas": photo_fit.COAT_ALPHA_GRID[::7],
+                "refine_steps": 2, "rounds": 1}
+
     def describe(self) -> dict[str, Any]:
         return {"resolution": self.resolution, "n_materials": self.n_materials,
                 "material_names": self.material_names, "baselines": list(self.baselines),
+                "photo_baselines": list(self.photo_baselines),
                 "lut_size": self.lut_size,
                 "env_samples_per_pixel": self.sampling().total,
                 "wavelengths_nm": [float(w) for w in self.wavelengths_nm]}
@@ -162,7 +191,8 @@ class Harness:
         (:class:`.network_brdf.NetworkBRDF`, used for the ablation arms).
         """
         todo = [r for r in roles if self.cell(arm, material.name, r) is None]
-        if not todo:
+        self_repro = not direct and input_env is None and self.cell(arm, material.name, SELF_ROLE) is None
+        if not todo and not self_repro:
             return
         t0 = time.perf_counter()
         if direct:
@@ -187,6 +217,99 @@ class Harness:
             if keep_images and self._keep_images(material, role):
                 self._save_image(material.name, role, arm, pred.spectral, gt)
             write_json(self.cell_path(arm, material.name, role), cell)
+        if self_repro:
+            self.run_self_reproduction(arm, material, table)
+
+    # -- photo-only protocol and self-reproduction ------------------------------------------------
+    def input_photo(self, material: Any) -> np.ndarray:
+        """The material's canonical sphere input image (what SpecGen and the photo fits see)."""
+        from .. import input_image
+
+        return input_image.render_input(material)
+
+    def run_self_reproduction(self, arm: str, material: Any, brdf: Any) -> dict:
+        """Cell :data:`SELF_ROLE` of ``arm``: ``brdf`` (spectral) rendered under the canonical input
+        lighting, exactly as the input image is made, against that image (RGB PSNR, mean ΔE2000 over
+        the sphere without its grazing rim, as the refinement scores it;
+        :func:`specgen_addon.refine.report.reproduction`). Another SpecGen variant (e.g.
+        the refined table) gets its column by calling this with its own arm and BRDF."""
+        from .. import spectra
+        from ..input_lighting import InputLighting
+        from ..refine.report import reproduction
+
+        t0 = time.perf_counter()
+        photo = self.input_photo(material)
+        light = InputLighting()
+        scene = light.scene(photo.shape[0])
+        wl = getattr(brdf, "wavelengths", None)   # a table renders at its own bands
+        wl = spectra.DEFAULT_WAVELENGTHS_NM if wl is None else wl
+        rendered = np.clip(scene.render_spectral(brdf, wl).rgb, 0.0, None) * light.image_exposure
+        from .photo_fit import observed_pixels
+
+        seen = observed_pixels(scene)
+        rep = reproduction(photo.reshape(-1, 3)[seen], rendered.reshape(-1, 3)[seen])
+        cell = {"rgb_psnr": rep.psnr_db, "delta_e2000": rep.delta_e2000,
+                "seconds": time.perf_counter() - t0}
+        write_json(self.cell_path(arm, material.name, SELF_ROLE), cell)
+        return cell
+
+    def fit_path(self, material: str) -> Path:
+        return self.cache / "photo_fits" / f"{material}.json"
+
+    def cell_fit(self, material: str) -> dict | None:
+        """The cached photo fit of ``material`` (None before :meth:`photo_fit` ran)."""
+        return read_json(self.fit_path(material))
+
+    def photo_fit(self, material: Any) -> dict:
+        """The analytic RGB BRDF fitted to the material's input photo (:func:`.photo_fit.fit_photo`
+        under the canonical input lighting), cached as JSON: ``{"brdf", "residual", "seconds", ...}``."""
+        from ..input_lighting import InputLighting
+        from . import photo_fit
+
+        cached = self.cell_fit(material.name)
+        if cached is not None:
+            return cached
+        t0 = time.perf_counter()
+        photo = self.input_photo(material)
+        light = InputLighting()
+        fit = photo_fit.fit_photo(photo, light.scene(photo.shape[0]), light.image_exposure,
+                                  **self.s.photo_fit_options())
+        out = {"brdf": fit.brdf.to_dict(), "residual": fit.residual, "renders": fit.renders,
+               "pixels": fit.pixels, "seconds": time.perf_counter() - t0, "summary": fit.summary()}
+        write_json(self.fit_path(material.name), out)
+        self.log(f"paper-tables: photo fit of {material.name}: {fit.summary()}")
+        return out
+
+    def run_photo_baselines(self, material: Any, roles: Sequence[str]) -> None:
+        """The photo-only baselines: fit an analytic RGB BRDF to the input photo, uplift its colours
+        with each method, render that spectral BRDF in ``roles`` as SpecGen's is rendered, and score
+        its self-reproduction (:data:`SELF_ROLE`)."""
+        from . import photo_fit
+
+        arms = {m: photo_arm(m) for m in self.s.photo_baselines}
+        todo = {m: [r for r in list(roles) + [SELF_ROLE] if self.cell(arm, material.name, r) is None]
+                for m, arm in arms.items()}
+        if not any(todo.values()):
+            return
+        fit = self.photo_fit(material)
+        brdf = photo_fit.AnalyticRGB.from_dict(fit["brdf"])
+        for method, missing in todo.items():
+            if not missing:
+                continue
+            t0 = time.perf_counter()
+            spectral = photo_fit.uplift_fit(brdf, method, baselines.LUT_WAVELENGTHS_NM)
+            t_up = time.perf_counter() - t0
+            for role in missing:
+                if role == SELF_ROLE:
+                    self.run_self_reproduction(arms[method], material, spectral)
+                    continue
+                gt = self.ground_truth(material, role)
+                t1 = time.perf_counter()
+                pred = self._render(spectral, role)
+                cell = score(gt.spectral, pred.spectral, gt.mask) | {
+                    "seconds_fit": fit["seconds"], "seconds_uplift": t_up,
+                    "seconds_render": time.perf_counter() - t1}
+                write_json(self.cell_path(arms[method], material.name, role), cell)
 
     def run_real(self, name: str, path: Path, weights: Path | None, roles: Sequence[str],
                  arm: str = SPECGEN) -> dict[str, dict]:
