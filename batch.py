@@ -112,7 +112,7 @@ def run(args) -> Path:
             raise errors.OutputExistsError(f"{p}: already exists (pass --overwrite to replace it)")
     wavelengths = spectra.wavelength_grid(args.wl_min, args.wl_max, args.bands)
 
-    bake = import_module(f"{pkg.__name__}.ops.bake")
+    bake = import_module(f"{pkg.__name__}.specgen_addon.bake")
     t0 = time.perf_counter()
     last = [-1]
 

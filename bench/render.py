@@ -40,7 +40,7 @@ def main(argv: list[str] | None = None) -> int:
     from importlib import import_module
 
     render = import_module(f"{pkg.__name__}.ops.render")
-    bake = import_module(f"{pkg.__name__}.ops.bake")
+    bake = import_module(f"{pkg.__name__}.specgen_addon.bake")
     scene_mod = import_module(f"{pkg.__name__}.ops.scene")
     from specgen_addon.corpus import generate_corpus
 

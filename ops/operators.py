@@ -18,7 +18,7 @@ import numpy as np
 
 from ..specgen_addon.errors import Cancelled, SpecGenError
 from ..specgen_addon.spectra import wavelength_grid
-from . import bake
+from ..specgen_addon import bake
 from .properties import output_dir
 
 TIMER_STEP_S = 0.1

@@ -1,6 +1,6 @@
 """Per-band Cycles driver: render a scene's SpecGen materials into a spectral stack.
 
-Cycles (CPU, OSL) renders images of spectral-basis coefficients, not bands (see :mod:`ops.bake`):
+Cycles (CPU, OSL) renders images of spectral-basis coefficients, not bands (see :mod:`specgen_addon.bake`):
 each render carries four coefficient slots × RGB lighting, which the shader
 (``ops/osl/specgen_brdf.osl``) writes as closure weights and Cycles stores in the Emission,
 Diffuse Color, Glossy Color and Transmission Color passes; one compositor File Output node per pass
@@ -31,7 +31,7 @@ import bpy
 import numpy as np
 
 from ..specgen_addon.errors import Cancelled, OutputExistsError, SpecGenError
-from . import bake
+from ..specgen_addon import bake
 
 SHADER_PATH = Path(__file__).resolve().parent / "osl" / "specgen_brdf.osl"
 SHADER_TEXT_NAME = "specgen_brdf.osl"
@@ -132,6 +132,10 @@ def make_material(name: str, atlas: bake.AtlasInfo) -> bpy.types.Material:
     node.inputs["PhiD"].default_value = int(atlas.n_phi_d)
     node.inputs["TilesX"].default_value = int(atlas.tiles_x)
     node.inputs["TilesY"].default_value = int(atlas.tiles_y)
+    if atlas.closures is not None:  # F12/viewport and the full-scene mode use the native stack
+        from .closures import build_closure_stack
+
+        build_closure_stack(mat, atlas.closures, out)
     mat.cycles.emission_sampling = "NONE"  # the emission is reflected light, not a light source
     mat[MATERIAL_TAG] = True
     mat["specgen_wavelengths_nm"] = [float(w) for w in atlas.wavelengths_nm]
@@ -141,6 +145,12 @@ def make_material(name: str, atlas: bake.AtlasInfo) -> bpy.types.Material:
     mat["specgen_offsets"] = [float(x) for x in atlas.offsets]
     mat["specgen_basis_error"] = float(atlas.rel_error)
     return mat
+
+
+def material_output(mat: bpy.types.Material) -> bpy.types.Node:
+    """The material's active Cycles output node."""
+    tree = mat.node_tree
+    return tree.get_output_node("CYCLES") or next(n for n in tree.nodes if n.type == "OUTPUT_MATERIAL")
 
 
 def is_specgen_material(mat: bpy.types.Material | None) -> bool:
@@ -238,6 +248,7 @@ class _SceneState:
         self.out_dir = out_dir
         self.saved: list[tuple[object, str, object]] = []
         self.created: list[tuple[object, object]] = []
+        self.relinked: list[tuple[object, object, object]] = []
 
     def _set(self, owner, attr: str, value) -> None:
         self.saved.append((owner, attr, getattr(owner, attr)))
@@ -292,9 +303,19 @@ class _SceneState:
             fo.file_output_items.new("RGBA", "P")
             tree.links.new(layers.outputs[pass_name], fo.inputs["P"])
         self._set(sc, "compositing_node_group", tree)
+        for mat in specgen_materials(sc):  # the exact shader, not the native stand-in stack
+            surface = material_output(mat).inputs["Surface"]
+            self.relinked.append((mat.node_tree, surface,
+                                  surface.links[0].from_socket if surface.is_linked else None))
+            mat.node_tree.links.new(mat.node_tree.nodes[SCRIPT_NODE_NAME].outputs["BSDF"], surface)
         return self
 
     def __exit__(self, *exc) -> None:
+        for tree, surface, source in reversed(self.relinked):
+            for link in list(surface.links):
+                tree.links.remove(link)
+            if source is not None:
+                tree.links.new(source, surface)
         for owner, attr, value in reversed(self.saved):
             try:
                 setattr(owner, attr, value)

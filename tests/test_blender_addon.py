@@ -22,7 +22,7 @@ bpy = pytest.importorskip("bpy")
 import batch  # noqa: E402  (after the bpy skip: batch's package loader is what Blender mimics)
 
 PKG = batch.load_package()
-bake = import_module(f"{PKG.__name__}.ops.bake")
+bake = import_module(f"{PKG.__name__}.specgen_addon.bake")
 render = import_module(f"{PKG.__name__}.ops.render")
 scene_mod = import_module(f"{PKG.__name__}.ops.scene")
 core_errors = import_module(f"{PKG.__name__}.specgen_addon.errors")
@@ -277,8 +277,8 @@ def test_extension_zip_installs_and_registers(tmp_path):
         "import bl_ext.user_default.specgen as ext\n"
         "assert 'bl_ext.user_default.specgen.ops.render' not in sys.modules or True\n"
         "assert hasattr(bpy.types, 'SPECGEN_PT_main') and hasattr(bpy.types.Scene, 'specgen')\n"
-        "from bl_ext.user_default.specgen.ops import bake\n"
-        "assert bake.__name__ == 'bl_ext.user_default.specgen.ops.bake'\n"
+        "from bl_ext.user_default.specgen.specgen_addon import bake\n"
+        "assert bake.__name__ == 'bl_ext.user_default.specgen.specgen_addon.bake'\n"
         "print('SPECGEN-INSTALLED', ext.__file__)\n")
     env = {**os.environ, "HOME": str(tmp_path / "home")}
     (tmp_path / "home").mkdir()
