@@ -148,36 +148,6 @@ def test_broken_shader_source_is_reported(monkeypatch, tmp_path):
         render.compile_script_node(node)
 
 
-# ------------------------------------------------------------------------- bake (bpy-free maths)
-def test_atlas_lookup_reproduces_the_tables_trilinear_interpolation(rich_table, tmp_path):
-    table = rich_table
-    info = bake.bake_atlas(table, tmp_path / "a.exr", tolerance=1e-6)
-    assert info.n_coeffs == 6 and info.rel_error == 0.0  # five components > 3: complete (Λ = 6)
-    assert info.n_renders == 2                           # constant slot + 6 coefficients
-    rng = np.random.default_rng(3)
-    th, td, pd = rng.uniform(0, np.pi / 2, 500), rng.uniform(0, np.pi / 2, 500), rng.uniform(-np.pi, np.pi, 500)
-    got = bake.atlas_lookup_reference(bake.read_atlas(info), info, th, td, pd)
-    # float32 storage of the shifted coefficients: errors ~1e-7 of the table's peak
-    np.testing.assert_allclose(got, table.eval_hd(th, td, pd), rtol=2e-4, atol=2e-7 * table.values.max())
-
-
-def test_spectral_basis_is_exact_for_low_rank_spectra_and_reports_truncation():
-    rng = np.random.default_rng(0)
-    coeffs = rng.random((5000, 3))
-    spectra = rng.random((3, 9))
-    basis, err = bake.spectral_basis(coeffs @ spectra, tolerance=1e-6)
-    assert basis.shape == (3, 9) and err < 1e-6       # rank 3 + the constant slot: one render
-    np.testing.assert_allclose(basis @ basis.T, np.eye(3), atol=1e-12)
-    full_rank = rng.random((5000, 9))
-    basis, err = bake.spectral_basis(full_rank, tolerance=1e-6)
-    assert basis.shape == (9, 9) and err == 0.0        # nothing smaller fits: complete, exact
-    basis, err = bake.spectral_basis(full_rank, tolerance=1.0)
-    assert basis.shape == (3, 9) and 0 < err <= 1.0     # loose tolerance: truncated, error reported
-    approx = (full_rank @ basis.T) @ basis
-    worst = np.max(np.sqrt(np.mean((approx - full_rank) ** 2, axis=0)) / full_rank.max(axis=0))
-    assert worst == pytest.approx(err, rel=1e-6)
-
-
 # ------------------------------------------------------------------------- Cycles vs reference
 @pytest.mark.slow
 def test_cycles_sphere_matches_reference_under_a_sun(rich_table, tmp_path):
