@@ -1,0 +1,259 @@
+"""Full-scene spectral mode: Cycles path-traces the whole scene, three bands per render.
+
+Headless with the bpy module and real Cycles. Truths: Cycles' own RGB render of the same scene
+(the uplift is linear, so the spectral stack projected back to RGB must agree), the exact mode
+(tabulated BRDF evaluated in OSL, itself checked against the reference renderer), Blender's own
+blackbody colours, and the scene's datablocks before the render.
+"""
+
+from __future__ import annotations
+
+import os
+from importlib import import_module
+from pathlib import Path
+
+import numpy as np
+import pytest
+
+bpy = pytest.importorskip("bpy")
+
+import batch  # noqa: E402
+
+PKG = batch.load_package()
+bake = import_module(f"{PKG.__name__}.specgen_addon.bake")
+render = import_module(f"{PKG.__name__}.ops.render")
+fullscene = import_module(f"{PKG.__name__}.ops.render_fullscene")
+convert = import_module(f"{PKG.__name__}.ops.scene_convert")
+scene_mod = import_module(f"{PKG.__name__}.ops.scene")
+core_errors = import_module(f"{PKG.__name__}.specgen_addon.errors")
+
+from specgen_addon import spectra, uplift  # noqa: E402
+from specgen_addon.fit import ggx_lobe  # noqa: E402
+from specgen_addon.rusinkiewicz import io_from_half_diff  # noqa: E402
+from specgen_addon.table import BRDFTable  # noqa: E402
+
+WL = np.array([410.0, 480.0, 540.0, 600.0, 660.0, 720.0])
+RGB_WL = spectra.wavelength_grid(380.0, 780.0, 21)
+
+
+def _psnr(a: np.ndarray, ref: np.ndarray) -> float:
+    return float(10 * np.log10(ref.max() ** 2 / np.mean((a - ref) ** 2)))
+
+
+def _rgb_render(sc) -> np.ndarray:
+    """Plain RGB Cycles render of ``sc`` (linear Combined, RGBA)."""
+    path = Path(bpy.app.tempdir or "/tmp") / f"specgen_rgb_{os.getpid()}.exr"
+    with fullscene._RenderSettings(sc):
+        bpy.ops.render.render(write_still=False, scene=sc.name)
+        bpy.data.images["Render Result"].save_render(str(path), scene=sc)
+    try:
+        return fullscene._read_combined(path)
+    finally:
+        path.unlink(missing_ok=True)
+
+
+def _camera(sc, location=(0.0, -7.0, 3.0), rotation=(1.2, 0.0, 0.0)):
+    cam = bpy.data.objects.new("cam", bpy.data.cameras.new("cam"))
+    sc.collection.objects.link(cam)
+    cam.location, cam.rotation_euler = location, rotation
+    sc.camera = cam
+    return cam
+
+
+def _principled(name, rgb, **inputs):
+    mat = bpy.data.materials.new(name)
+    bsdf = mat.node_tree.nodes["Principled BSDF"]
+    bsdf.inputs["Base Color"].default_value = (*rgb, 1.0)
+    for key, value in inputs.items():
+        bsdf.inputs[key].default_value = value
+    return mat
+
+
+def _studio_light(name: str) -> str:
+    return os.path.join(bpy.utils.system_resource("DATAFILES", path="studiolights/world"), f"{name}.exr")
+
+
+def _ordinary_scene(samples: int = 64, size=(48, 32)):
+    """Floor (checker texture), Principled objects, area light, sun, HDRI world through a rotated
+    Mapping node plus a second Background node."""
+    bpy.ops.wm.read_factory_settings(use_empty=True)
+    sc = bpy.context.scene
+    sc.render.engine = "CYCLES"
+    sc.render.resolution_x, sc.render.resolution_y = size
+    sc.render.resolution_percentage = 100
+    sc.cycles.samples = samples
+    sc.cycles.use_denoising = False
+    sc.cycles.seed = 3
+    bpy.ops.mesh.primitive_plane_add(size=12)
+    floor = bpy.context.active_object
+    checker = bpy.data.materials.new("floor")
+    t = checker.node_tree
+    tex = t.nodes.new("ShaderNodeTexChecker")
+    tex.inputs["Scale"].default_value = 6.0
+    tex.inputs["Color1"].default_value = (0.8, 0.75, 0.6, 1.0)
+    tex.inputs["Color2"].default_value = (0.1, 0.2, 0.35, 1.0)
+    t.links.new(tex.outputs["Color"], t.nodes["Principled BSDF"].inputs["Base Color"])
+    floor.data.materials.append(checker)
+    for x, rgb, extra in ((-1.6, (0.8, 0.1, 0.05), {"Roughness": 0.3}),
+                          (0.0, (0.9, 0.9, 0.9), {"Metallic": 1.0, "Roughness": 0.25}),
+                          (1.6, (0.1, 0.5, 0.15), {"Coat Weight": 0.5})):
+        bpy.ops.mesh.primitive_uv_sphere_add(radius=0.7, location=(x, 0.0, 0.7))
+        bpy.context.active_object.data.materials.append(_principled(f"ball{x}", rgb, **extra))
+    area = bpy.data.lights.new("area", "AREA")
+    area.energy, area.size, area.color = 300.0, 2.0, (1.0, 0.85, 0.7)
+    obj = bpy.data.objects.new("area", area)
+    obj.location = (-3.0, -2.0, 4.0)
+    obj.rotation_euler = (0.6, -0.5, 0.0)
+    sc.collection.objects.link(obj)
+    sun = scene_mod.add_sun(sc, (0.5, 0.7, 0.5), 2.0, color=(0.9, 0.95, 1.0))
+    sun.data.angle = 0.1
+    world = bpy.data.worlds.new("hdri")
+    sc.world = world
+    w = world.node_tree
+    bg = w.nodes["Background"]
+    env = w.nodes.new("ShaderNodeTexEnvironment")
+    env.image = bpy.data.images.load(_studio_light("courtyard"))
+    mapping = w.nodes.new("ShaderNodeMapping")
+    mapping.inputs["Rotation"].default_value = (0.0, 0.0, 1.3)
+    coords = w.nodes.new("ShaderNodeTexCoord")
+    w.links.new(coords.outputs["Generated"], mapping.inputs["Vector"])
+    w.links.new(mapping.outputs["Vector"], env.inputs["Vector"])
+    w.links.new(env.outputs["Color"], bg.inputs["Color"])
+    bg.inputs["Strength"].default_value = 0.6
+    bg2 = w.nodes.new("ShaderNodeBackground")                    # a second Background, added
+    bg2.inputs["Color"].default_value = (0.2, 0.3, 0.6, 1.0)
+    bg2.inputs["Strength"].default_value = 0.3
+    add = w.nodes.new("ShaderNodeAddShader")
+    w.links.new(bg.outputs[0], add.inputs[0])
+    w.links.new(bg2.outputs[0], add.inputs[1])
+    w.links.new(add.outputs[0], w.nodes["World Output"].inputs["Surface"])
+    _camera(sc)
+    return sc
+
+
+# ------------------------------------------------------------------------- truths
+def test_spectral_stack_projected_to_rgb_matches_a_plain_rgb_cycles_render():
+    sc = _ordinary_scene()
+    before = convert.fingerprint()
+    job = fullscene.FullSceneRenderJob(sc, None, RGB_WL)
+    stack = job.run()
+    assert convert.fingerprint() == before                      # every datablock restored
+    assert stack.shape == (32, 48, RGB_WL.size)
+    assert len(job.timings["render_s"]) == 7                     # 21 bands, three per render
+    rgb = _rgb_render(sc)[..., :3]
+    projected = spectra.spectral_to_linear_srgb(stack, RGB_WL)
+    psnr = _psnr(projected, rgb)
+    assert psnr >= 35.0, psnr
+
+
+def test_full_scene_mode_matches_the_exact_mode_on_a_specgen_only_scene(tmp_path):
+    rho = np.interp(WL, [400, 550, 720], [0.15, 0.7, 0.35])
+    spec = np.interp(WL, [400, 720], [0.9, 0.2])
+
+    def brdf(th, td, pd):
+        wi, wo = io_from_half_diff(th, td, pd)
+        above = ((wi[:, 2] > 0) & (wo[:, 2] > 0))[:, None]
+        return above * rho / np.pi + ggx_lobe(wi, wo, 0.35)[:, None] * spec
+
+    info = bake.bake_atlas(BRDFTable.tabulate(brdf, WL), tmp_path / "a.exr", tolerance=1e-6)
+    assert info.closures.max_error < 0.01
+    bpy.ops.wm.read_factory_settings(use_empty=True)
+    sc = bpy.context.scene
+    scene_mod.add_camera(sc)
+    scene_mod.add_mesh(sc, "sphere").data.materials.append(render.make_material("SpecGen t", info))
+    sc.cycles.filter_width = 0.01
+    scene_mod.add_sun(sc, (0.35, 0.45, 0.82), irradiance=np.pi)
+    scene_mod.add_sun(sc, (-0.6, 0.2, 0.5), irradiance=1.0)
+    sc.render.resolution_x = sc.render.resolution_y = 32
+    sc.cycles.samples = 64                                       # light-selection noise of 2 suns
+    sc.cycles.use_denoising = False
+    exact = render.SpectralRenderJob(sc, None, samples=4, resolution=(32, 32)).run()
+    full = fullscene.FullSceneRenderJob(sc, None, WL).run()
+    psnr = [_psnr(full[..., b], exact[..., b]) for b in range(WL.size)]
+    assert min(psnr) >= 35.0, psnr
+
+
+def test_light_blackbody_follows_planck_like_blenders_own_colour():
+    light = bpy.data.lights.new("bb", "SUN")
+    light.use_temperature = True
+    wl = spectra.wavelength_grid(380.0, 780.0, 81)
+    for kelvin in (2000.0, 4000.0, 6500.0, 10000.0):
+        light.temperature = kelvin
+        ours = spectra.spectral_to_linear_srgb(uplift.blackbody_spectrum(kelvin, wl), wl)
+        np.testing.assert_allclose(ours, light.temperature_color[:], rtol=0.03, atol=0.01)
+    bpy.data.lights.remove(light)
+
+
+def test_blackbody_light_and_emission_render_like_cycles():
+    bpy.ops.wm.read_factory_settings(use_empty=True)
+    sc = bpy.context.scene
+    sc.render.engine = "CYCLES"
+    sc.render.resolution_x = sc.render.resolution_y = 24
+    sc.cycles.samples, sc.cycles.use_denoising = 32, False
+    bpy.ops.mesh.primitive_plane_add(size=10)
+    bpy.context.active_object.data.materials.append(_principled("white", (0.8, 0.8, 0.8)))
+    bpy.ops.mesh.primitive_cube_add(size=1, location=(1.5, 0, 0.5))
+    glow = bpy.data.materials.new("glow")
+    t = glow.node_tree
+    t.nodes.clear()
+    em, bb, out = (t.nodes.new(n) for n in ("ShaderNodeEmission", "ShaderNodeBlackbody",
+                                            "ShaderNodeOutputMaterial"))
+    bb.inputs["Temperature"].default_value = 2500.0
+    t.links.new(bb.outputs[0], em.inputs["Color"])
+    t.links.new(em.outputs[0], out.inputs["Surface"])
+    bpy.context.active_object.data.materials.append(glow)
+    sun = scene_mod.add_sun(sc, (0.2, 0.3, 0.9), 3.0)
+    sun.data.use_temperature, sun.data.temperature = True, 3200.0
+    _camera(sc, (0.0, -6.0, 4.0), (0.9, 0.0, 0.0))
+    before = convert.fingerprint()
+    stack = fullscene.FullSceneRenderJob(sc, None, RGB_WL).run()
+    assert convert.fingerprint() == before
+    psnr = _psnr(spectra.spectral_to_linear_srgb(stack, RGB_WL), _rgb_render(sc)[..., :3])
+    assert psnr >= 30.0, psnr   # Planck vs Blender's fitted blackbody RGB: ~1–3 % apart
+
+
+# ------------------------------------------------------------------------- scene settings
+def test_output_follows_resolution_border_transparency_and_writes_alpha(tmp_path):
+    from specgen_addon.spectral_exr import read_spectral_exr
+
+    sc = _ordinary_scene(samples=2, size=(40, 30))
+    sc.render.resolution_percentage = 50                          # 20 × 15
+    sc.render.film_transparent = True
+    job = fullscene.FullSceneRenderJob(sc, tmp_path / "s.exr", np.array([450.0, 550.0, 650.0, 700.0]))
+    stack = job.run()
+    assert stack.shape == (15, 20, 4)
+    assert job.alpha.min() == 0.0 and job.alpha.max() == pytest.approx(1.0)  # sky transparent
+    import OpenEXR
+
+    with OpenEXR.File(str(tmp_path / "s.exr"), separate_channels=True) as f:
+        names = set(f.parts[0].channels)
+        np.testing.assert_array_equal(np.asarray(f.parts[0].channels["A"].pixels), job.alpha)
+    assert {"A", "R", "G", "B", "S0.450,000000nm", "S0.700,000000nm"} <= names
+    assert read_spectral_exr(tmp_path / "s.exr").values.shape == (15, 20, 4)
+    sc.render.use_border, sc.render.use_crop_to_border = True, True
+    sc.render.border_min_x, sc.render.border_max_x = 0.0, 0.5
+    sc.render.border_min_y, sc.render.border_max_y = 0.0, 1.0
+    cropped = fullscene.FullSceneRenderJob(sc, None, np.array([550.0])).run()
+    assert cropped.shape == (15, 10, 1)
+    assert sc.render.resolution_percentage == 50 and sc.render.film_transparent
+
+
+def test_cancel_restores_the_scene_and_writes_nothing(tmp_path):
+    sc = _ordinary_scene(samples=1, size=(16, 16))
+    before = convert.fingerprint()
+    engine, persistent = sc.render.engine, sc.render.use_persistent_data
+    job = fullscene.FullSceneRenderJob(sc, tmp_path / "s.exr", RGB_WL)
+    steps = job.steps()
+    next(steps)
+    next(steps)                                                  # one band group rendered
+    assert convert.fingerprint() != before                       # the scene is converted now
+    job.cancel()
+    with pytest.raises(core_errors.Cancelled):
+        for _ in steps:
+            pass
+    assert convert.fingerprint() == before
+    assert (sc.render.engine, sc.render.use_persistent_data) == (engine, persistent)
+    assert list(tmp_path.iterdir()) == []
+    sc.camera = None
+    with pytest.raises(core_errors.SpecGenError, match="no camera"):
+        fullscene.FullSceneRenderJob(sc, None, RGB_WL).run()
