@@ -43,6 +43,7 @@ def build_closure_stack(mat: bpy.types.Material, fit: ClosureFit, output: bpy.ty
         last.node.name = STACK_OUTPUT
     tree.links.new(last, output.inputs["Surface"])
     mat[FIT_PROP] = fit.to_json()
+    mat["specgen_fit_error"] = fit.max_error  # shown in the panel
     d_rgb, s_rgb = rgb_standin(fit)
     set_stack_colours(mat, d_rgb, s_rgb)
 

@@ -219,6 +219,13 @@ class SPECGEN_OT_render_stack(_Modal, bpy.types.Operator):
         s = context.scene.specgen
         folder = Path(output_dir(s))
         folder.mkdir(parents=True, exist_ok=True)
+        if s.render_mode == "FULL_SCENE":
+            from .render_fullscene import FullSceneRenderJob
+
+            return FullSceneRenderJob(context.scene, folder / self.filename, _wavelengths(s),
+                                      overwrite=s.overwrite,
+                                      warn=lambda msg: self.report({"WARNING"}, msg),
+                                      log=lambda msg: self.report({"INFO"}, msg))
         return SpectralRenderJob(context.scene, folder / self.filename, samples=s.samples,
                                  resolution=(s.resolution, s.resolution), overwrite=s.overwrite,
                                  env_samples=s.env_samples,

@@ -302,13 +302,18 @@ def test_panel_draws_every_setting_and_the_three_buttons():
     try:
         rows = draw_panel.record_panel(bpy.context)
         s = bpy.context.scene.specgen
+        assert s.render_mode == "FULL_SCENE"                 # the default: the whole scene
+        s.render_mode = "EXACT"
+        exact_rows = draw_panel.record_panel(bpy.context)
         s.running = "Rendering spectral stack"
         busy = draw_panel.record_panel(bpy.context)
     finally:
         PKG.unregister()
     props = {r.name for r in rows if r.kind in ("prop", "template")}
     assert {"image", "image_path", "weights_path", "wl_min", "wl_max", "bands", "lookup_resolution",
-            "samples", "resolution", "output_dir", "overwrite"} <= props
+            "render_mode", "output_dir", "overwrite"} <= props
+    assert "samples" not in props                            # full-scene: the scene's own settings
+    assert {"samples", "resolution", "env_samples"} <= {r.name for r in exact_rows if r.kind == "prop"}
     buttons = [r.name for r in rows if r.kind == "operator"]
     assert buttons == ["specgen.generate_brdf", "specgen.apply", "specgen.render_stack"]
     assert all(r.enabled for r in rows if r.kind == "operator")
@@ -330,6 +335,7 @@ def test_operators_apply_and_render_headless_and_report_errors(table, tmp_path):
         s = sc.specgen
         s.output_dir = str(tmp_path / "out")
         s.resolution, s.samples = 16, 1
+        s.render_mode = "EXACT"
         with pytest.raises(RuntimeError, match="no render-visible object uses a SpecGen material"):
             bpy.ops.specgen.render_stack()          # reported through self.report, one line
         assert not bpy.ops.specgen.apply.poll()     # nothing generated yet
@@ -344,6 +350,13 @@ def test_operators_apply_and_render_headless_and_report_errors(table, tmp_path):
             bpy.ops.specgen.render_stack()          # never overwritten unless asked
         s.overwrite = True
         assert bpy.ops.specgen.render_stack() == {"FINISHED"}
+        s.render_mode = "FULL_SCENE"                 # the scene's resolution and samples
+        sc.render.resolution_x, sc.render.resolution_y, sc.cycles.samples = 12, 8, 1
+        assert bpy.ops.specgen.render_stack(filename="full.exr") == {"FINISHED"}
+        from specgen_addon.spectral_exr import read_spectral_exr
+
+        assert read_spectral_exr(tmp_path / "out" / "full.exr").values.shape == (8, 12, s.bands)
+        assert "specgen_fit_error" in obj.active_material
     finally:
         PKG.unregister()
 
