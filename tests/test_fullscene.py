@@ -25,6 +25,7 @@ render = import_module(f"{PKG.__name__}.ops.render")
 fullscene = import_module(f"{PKG.__name__}.ops.render_fullscene")
 convert = import_module(f"{PKG.__name__}.ops.scene_convert")
 scene_mod = import_module(f"{PKG.__name__}.ops.scene")
+demo = import_module(f"{PKG.__name__}.ops.demo_scenes")
 core_errors = import_module(f"{PKG.__name__}.specgen_addon.errors")
 
 from specgen_addon import spectra, uplift  # noqa: E402
@@ -61,76 +62,11 @@ def _camera(sc, location=(0.0, -7.0, 3.0), rotation=(1.2, 0.0, 0.0)):
 
 
 def _principled(name, rgb, **inputs):
-    mat = bpy.data.materials.new(name)
-    bsdf = mat.node_tree.nodes["Principled BSDF"]
-    bsdf.inputs["Base Color"].default_value = (*rgb, 1.0)
-    for key, value in inputs.items():
-        bsdf.inputs[key].default_value = value
-    return mat
-
-
-def _studio_light(name: str) -> str:
-    return os.path.join(bpy.utils.system_resource("DATAFILES", path="studiolights/world"), f"{name}.exr")
+    return demo.principled(name, rgb, **inputs)
 
 
 def _ordinary_scene(samples: int = 64, size=(48, 32)):
-    """Floor (checker texture), Principled objects, area light, sun, HDRI world through a rotated
-    Mapping node plus a second Background node."""
-    bpy.ops.wm.read_factory_settings(use_empty=True)
-    sc = bpy.context.scene
-    sc.render.engine = "CYCLES"
-    sc.render.resolution_x, sc.render.resolution_y = size
-    sc.render.resolution_percentage = 100
-    sc.cycles.samples = samples
-    sc.cycles.use_denoising = False
-    sc.cycles.seed = 3
-    bpy.ops.mesh.primitive_plane_add(size=12)
-    floor = bpy.context.active_object
-    checker = bpy.data.materials.new("floor")
-    t = checker.node_tree
-    tex = t.nodes.new("ShaderNodeTexChecker")
-    tex.inputs["Scale"].default_value = 6.0
-    tex.inputs["Color1"].default_value = (0.8, 0.75, 0.6, 1.0)
-    tex.inputs["Color2"].default_value = (0.1, 0.2, 0.35, 1.0)
-    t.links.new(tex.outputs["Color"], t.nodes["Principled BSDF"].inputs["Base Color"])
-    floor.data.materials.append(checker)
-    for x, rgb, extra in ((-1.6, (0.8, 0.1, 0.05), {"Roughness": 0.3}),
-                          (0.0, (0.9, 0.9, 0.9), {"Metallic": 1.0, "Roughness": 0.25}),
-                          (1.6, (0.1, 0.5, 0.15), {"Coat Weight": 0.5})):
-        bpy.ops.mesh.primitive_uv_sphere_add(radius=0.7, location=(x, 0.0, 0.7))
-        bpy.context.active_object.data.materials.append(_principled(f"ball{x}", rgb, **extra))
-    area = bpy.data.lights.new("area", "AREA")
-    area.energy, area.size, area.color = 300.0, 2.0, (1.0, 0.85, 0.7)
-    obj = bpy.data.objects.new("area", area)
-    obj.location = (-3.0, -2.0, 4.0)
-    obj.rotation_euler = (0.6, -0.5, 0.0)
-    sc.collection.objects.link(obj)
-    sun = scene_mod.add_sun(sc, (0.5, 0.7, 0.5), 2.0, color=(0.9, 0.95, 1.0))
-    sun.data.angle = 0.1
-    world = bpy.data.worlds.new("hdri")
-    sc.world = world
-    w = world.node_tree
-    bg = w.nodes["Background"]
-    env = w.nodes.new("ShaderNodeTexEnvironment")
-    env.image = bpy.data.images.load(_studio_light("courtyard"))
-    mapping = w.nodes.new("ShaderNodeMapping")
-    mapping.inputs["Rotation"].default_value = (0.0, 0.0, 1.3)
-    coords = w.nodes.new("ShaderNodeTexCoord")
-    w.links.new(coords.outputs["Generated"], mapping.inputs["Vector"])
-    w.links.new(mapping.outputs["Vector"], env.inputs["Vector"])
-    w.links.new(env.outputs["Color"], bg.inputs["Color"])
-    bg.inputs["Strength"].default_value = 0.6
-    world.cycles.sampling_method = "MANUAL"   # a small importance map: 'auto' costs ~5 s per sync
-    world.cycles.sample_map_resolution = 128
-    bg2 = w.nodes.new("ShaderNodeBackground")                    # a second Background, added
-    bg2.inputs["Color"].default_value = (0.2, 0.3, 0.6, 1.0)
-    bg2.inputs["Strength"].default_value = 0.3
-    add = w.nodes.new("ShaderNodeAddShader")
-    w.links.new(bg.outputs[0], add.inputs[0])
-    w.links.new(bg2.outputs[0], add.inputs[1])
-    w.links.new(add.outputs[0], w.nodes["World Output"].inputs["Surface"])
-    _camera(sc)
-    return sc
+    return demo.ordinary_scene(samples, size)
 
 
 # ------------------------------------------------------------------------- truths

@@ -15,8 +15,12 @@ A render packs three bands into one closure's R, G, B, so a lobe's roughness is 
 bands, while the albedo ``ρ(λ)`` and the specular tints ``s_l(λ)`` are per band. The fit is a
 linear non-negative least-squares problem once the roughnesses are fixed: the roughnesses are
 chosen on a grid (all single lobes and pairs), the weights solved exactly per band
-(:func:`_nnls_small`), weighting table entries by ``cos θ_i cos θ_o`` (their contribution to
-rendered radiance). The error reported is the per-band relative RMS of that weighted residual.
+(:func:`_nnls_small`). The residual is taken on ``f cos θ_i cos θ_o`` (what a table entry adds
+to rendered radiance per unit light and projected area), so grazing entries, where measured and
+Fresnel-driven BRDFs reach hundreds of sr⁻¹, do not swamp the fit. The error reported is the
+per-band relative RMS of that residual. Measured on the corpus (rendered spheres under a sun):
+metals fit at 70+ dB, plastics at 22–34 dB only (their dielectric Fresnel rise at grazing angles
+and the matching darkening of the diffuse part have no Fresnel-free GGX + Lambert equivalent).
 
 Angles in radians, wavelengths in nm, BRDF values in sr⁻¹.
 """
@@ -163,7 +167,7 @@ def fit_closures(table, wavelengths_nm: np.ndarray | None = None, max_lobes: int
     target = np.maximum(values.reshape(-1, wl.size).astype(np.float64), 0.0)
     TH, TD, PD = np.meshgrid(th[::sh], td[::sd], pd[::sp], indexing="ij")
     wi, wo = io_from_half_diff(TH.ravel(), TD.ravel(), PD.ravel())
-    weight = np.clip(wi[:, 2], 0, None) * np.clip(wo[:, 2], 0, None)
+    weight = (np.clip(wi[:, 2], 0, None) * np.clip(wo[:, 2], 0, None)) ** 2
     keep = weight > 0
     wi, wo, weight, target = wi[keep], wo[keep], weight[keep], target[keep]
     rough = np.asarray(roughness_grid, np.float64) if max_lobes else np.zeros(0)
