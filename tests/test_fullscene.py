@@ -195,3 +195,66 @@ def test_cancel_restores_the_scene_and_writes_nothing(tmp_path):
     sc.camera = None
     with pytest.raises(core_errors.SpecGenError, match="no camera"):
         fullscene.FullSceneRenderJob(sc, None, RGB_WL).run()
+
+
+# ------------------------------------------------------------------------- SpecGen scenes
+@pytest.fixture(scope="module")
+def white_atlas(tmp_path_factory):
+    """A white SpecGen BRDF (flat 0.8 Lambert + faint GGX) baked at 21 bands."""
+    def fn(th, td, pd):
+        wi, wo = io_from_half_diff(th, td, pd)
+        above = ((wi[:, 2] > 0) & (wo[:, 2] > 0))[:, None]
+        return above * np.full(RGB_WL.size, 0.8 / np.pi) + ggx_lobe(wi, wo, 0.25)[:, None] * 0.04
+    return bake.bake_atlas(BRDFTable.tabulate(fn, RGB_WL), tmp_path_factory.mktemp("w") / "w.exr")
+
+
+def test_cornell_box_bleeds_wall_colours_onto_a_white_specgen_sphere(white_atlas):
+    from bpy_extras.object_utils import world_to_camera_view
+    from mathutils import Vector
+
+    bpy.ops.wm.read_factory_settings(use_empty=True)
+    mat = render.make_material("SpecGen white", white_atlas)
+    sc = demo.cornell_box(mat, samples=48, size=(40, 40))
+    stack = fullscene.FullSceneRenderJob(sc, None, RGB_WL).run()
+
+    def long_over_short(offset) -> float:
+        p = world_to_camera_view(sc, sc.camera, Vector((0.0, 0.1, 0.45)) + Vector(offset))
+        x, y = int(p.x * 40), int((1 - p.y) * 40)
+        s = stack[y - 1:y + 2, x - 1:x + 2].reshape(-1, RGB_WL.size).mean(0)
+        return float(s[RGB_WL >= 620].mean() / s[RGB_WL <= 480].mean())
+
+    red_side, green_side = long_over_short((-0.32, -0.25, 0.0)), long_over_short((0.32, -0.25, 0.0))
+    assert red_side > 1.2 * green_side, (red_side, green_side)   # the sphere itself is flat white
+
+
+@pytest.mark.slow
+def test_batch_renders_a_blend_file_in_full_scene_mode(white_atlas, tmp_path):
+    import subprocess
+    import sys
+
+    from specgen_addon.spectral_exr import read_spectral_exr
+
+    bpy.ops.wm.read_factory_settings(use_empty=True)
+    mat = render.make_material("SpecGen white", white_atlas)
+    demo.ordinary_scene(samples=2, size=(20, 14), specgen_material=mat)
+    blend = tmp_path / "ordinary.blend"
+    bpy.ops.wm.save_as_mainfile(filepath=str(blend))
+    repo = Path(batch.__file__).resolve().parent
+    done = subprocess.run([sys.executable, str(repo / "batch.py"), "--scene", str(blend), "--out",
+                           str(tmp_path / "a"), "--bands", "6"], capture_output=True, text=True,
+                          timeout=600)
+    assert done.returncode == 0, done.stderr[-2000:]
+    assert read_spectral_exr(tmp_path / "a" / "ordinary.exr").values.shape == (14, 20, 6)
+    # as `blender --background ordinary.blend --python batch.py -- --scene --out b`
+    script = ("import sys, runpy, bpy\n"
+              f"bpy.ops.wm.open_mainfile(filepath={str(blend)!r})\n"
+              f"sys.argv = ['blender', '--background', {str(blend)!r}, '--python', 'batch.py', "
+              f"'--', '--scene', '--out', {str(tmp_path / 'b')!r}, '--bands', '4']\n"
+              f"runpy.run_path({str(repo / 'batch.py')!r}, run_name='__main__')\n")
+    done = subprocess.run([sys.executable, "-c", script], capture_output=True, text=True,
+                          timeout=600, cwd=repo)
+    assert done.returncode == 0, done.stderr[-2000:]
+    assert read_spectral_exr(tmp_path / "b" / "ordinary.exr").values.shape == (14, 20, 4)
+    bad = subprocess.run([sys.executable, str(repo / "batch.py"), "--scene", str(tmp_path / "no.blend"),
+                          "--out", str(tmp_path / "c")], capture_output=True, text=True, timeout=600)
+    assert bad.returncode == 2 and bad.stderr.strip().count("\n") == 0 and "no such .blend" in bad.stderr
