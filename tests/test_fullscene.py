@@ -258,3 +258,25 @@ def test_batch_renders_a_blend_file_in_full_scene_mode(white_atlas, tmp_path):
     bad = subprocess.run([sys.executable, str(repo / "batch.py"), "--scene", str(tmp_path / "no.blend"),
                           "--out", str(tmp_path / "c")], capture_output=True, text=True, timeout=600)
     assert bad.returncode == 2 and bad.stderr.strip().count("\n") == 0 and "no such .blend" in bad.stderr
+
+
+def test_f12_after_apply_shows_the_rgb_standin_and_exact_mode_leaves_no_temp_paths(white_atlas):
+    bpy.ops.wm.read_factory_settings(use_empty=True)
+    sc = bpy.context.scene
+    sc.render.engine = "CYCLES"
+    scene_mod.add_camera(sc)
+    mat = render.make_material("SpecGen white", white_atlas)
+    scene_mod.add_mesh(sc, "sphere").data.materials.append(mat)
+    scene_mod.add_sun(sc, (0.0, 0.0, 1.0), irradiance=np.pi)
+    scene_mod.set_world_environment(sc, None, color=(0.05, 0.05, 0.05))
+    sc.render.resolution_x = sc.render.resolution_y = 16
+    sc.cycles.samples = 8
+    f12 = _rgb_render(sc)[..., :3]                   # F12: the native closure stack, RGB
+    assert 0.7 < float(np.median(f12[4:12, 4:12])) < 1.2          # lit white, not black or white-out
+    stack = fullscene.FullSceneRenderJob(sc, None, RGB_WL).run()
+    assert _psnr(f12, spectra.spectral_to_linear_srgb(stack, RGB_WL)) >= 35.0  # stand-in = spectral
+    render.SpectralRenderJob(sc, None, samples=1, resolution=(8, 8)).run()   # exact, with a world
+    node = mat.node_tree.nodes[render.SCRIPT_NODE_NAME]
+    assert node.inputs["EnvMap"].default_value == "" and node.inputs["EnvList"].default_value == ""
+    out = render.material_output(mat)
+    assert out.inputs["Surface"].links[0].from_node.name != render.SCRIPT_NODE_NAME  # stack again
