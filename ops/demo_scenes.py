@@ -85,10 +85,17 @@ def ordinary_scene(samples: int = 64, size: tuple[int, int] = (48, 32),
     if specgen_material is not None:
         _sphere("SpecGen", 0.55, (0.8, -1.6, 0.55), specgen_material)
     area = bpy.data.lights.new("Area", "AREA")
-    area.energy, area.size, area.color = 300.0, 2.0, (1.0, 0.85, 0.7)
+    area.energy, area.size, area.color = 150.0, 2.0, (1.0, 0.85, 0.7)
+    area.exposure = 1.0                                   # × 2: exposure is honoured by Cycles
     obj = bpy.data.objects.new("Area", area)
     obj.location, obj.rotation_euler = (-3.0, -2.0, 4.0), (0.6, -0.5, 0.0)
     sc.collection.objects.link(obj)
+    disabled = bpy.data.collections.new("Disabled lights")   # excluded: must not light anything
+    sc.collection.children.link(disabled)
+    off = bpy.data.objects.new("Disabled", bpy.data.lights.new("Disabled", "POINT"))
+    off.data.energy, off.location = 5000.0, (0.0, -2.0, 2.0)
+    disabled.objects.link(off)
+    bpy.context.view_layer.layer_collection.children[disabled.name].exclude = True
     sun = add_sun(sc, (0.5, 0.7, 0.5), 2.0, color=(0.9, 0.95, 1.0))
     sun.data.angle = 0.1
     world = bpy.data.worlds.new("HDRI")

@@ -1,4 +1,7 @@
-"""Per-band Cycles driver: render a scene's SpecGen materials into a spectral stack.
+"""Exact mode's Cycles driver: render a scene's SpecGen materials into a spectral stack.
+
+The exact mode evaluates the tabulated BRDF itself (direct light, SpecGen objects only; the
+full-scene mode is :mod:`.render_fullscene`). This module also builds the SpecGen material.
 
 Cycles (CPU, OSL) renders images of spectral-basis coefficients, not bands (see :mod:`specgen_addon.bake`):
 each render carries four coefficient slots × RGB lighting, which the shader

@@ -186,6 +186,8 @@ class FullSceneRenderJob:
 
             rgb = linear_srgb_preview(self.spectral, wl)
             attrs = {"specgenRenderer": "SpecGen full-scene Cycles (3 bands per render)",
+                     "specgenPreviewTransform": "RGB = CIE 1931 2deg projection, D65 white, linear "
+                                                "sRGB; Blender's view transform not applied",
                      "specgenSamples": str(self.scene.cycles.samples),
                      **{k: str(v) for k, v in self.attributes.items()}}
             write_spectral_exr(outs[0], self.spectral, wl, overwrite=self.overwrite, rgb=rgb,

@@ -103,6 +103,10 @@ class SceneConversion:
         if tree is None or tree.as_pointer() in self._done_trees:
             return
         self._done_trees.add(tree.as_pointer())
+        if tree.library is not None:
+            self.warn(f"SpecGen: node group {tree.name!r} in {owner} is linked from a library and "
+                      "cannot be converted per band; its colours render as RGB")
+            return
         for node in list(tree.nodes):
             if node.type == "GROUP" and node.node_tree is not None:
                 self._convert_tree(node.node_tree, owner, light_tree)
