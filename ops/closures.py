@@ -1,4 +1,5 @@
-"""Node building for the SpecGen material's native closure stack (Lambert + GGX lobes).
+"""Node building for the SpecGen material's native closure stack (Lambert + GGX lobes, each
+optionally weighted by the view-dependent dielectric Fresnel of a Fresnel node).
 
 The numbers come from :mod:`specgen_addon.fit.closures`; this module only builds and sets nodes.
 A SpecGen material holds two surfaces: the exact OSL shader (used by the exact render mode) and
@@ -15,56 +16,79 @@ from ..specgen_addon.errors import SpecGenError
 from ..specgen_addon.fit import ClosureFit, rgb_standin
 
 FIT_PROP = "specgen_closures"
-DIFFUSE_NODE = "SpecGen Diffuse"
-LOBE_NODE = "SpecGen Lobe {}"
-STACK_OUTPUT = "SpecGen Stack"  # the last Add Shader (or the diffuse node alone)
+PREFIX = "SpecGen "
+STACK_OUTPUT = "SpecGen Stack"  # the node whose first output is the whole stack
 
 
 def build_closure_stack(mat: bpy.types.Material, fit: ClosureFit, output: bpy.types.Node) -> None:
-    """Add Diffuse + Glossy (GGX) nodes summed by Add Shaders, link them to ``output``'s Surface,
-    set the RGB stand-in colours, and keep the fit on the material (JSON custom property)."""
+    """One Diffuse/Glossy (GGX) node per fitted closure (``SpecGen <term>``); Fresnel-weighted
+    ones go through a Mix Shader whose factor is a Fresnel node (``(1 − F)`` for the diffuse,
+    ``F`` for a lobe); all summed by Add Shaders into ``output``'s Surface. Sets the RGB stand-in
+    colours and keeps the fit on the material (JSON custom property)."""
     tree = mat.node_tree
-    diffuse = tree.nodes.new("ShaderNodeBsdfDiffuse")
-    diffuse.name = diffuse.label = DIFFUSE_NODE
-    diffuse.location = (-200, -300)
-    last = diffuse.outputs["BSDF"]
-    for i, r in enumerate(fit.roughness):
-        lobe = tree.nodes.new("ShaderNodeBsdfGlossy")
-        lobe.name = lobe.label = LOBE_NODE.format(i + 1)
-        lobe.distribution = "GGX"  # the fit's model: plain GGX, height-correlated Smith G
-        lobe.inputs["Roughness"].default_value = float(r)
-        lobe.location = (-200, -450 - 150 * i)
+    fresnel = None
+    shaders = []
+    for i, (name, roughness, weighted, _) in enumerate(fit.terms()):
+        if roughness is None:
+            node = tree.nodes.new("ShaderNodeBsdfDiffuse")
+        else:
+            node = tree.nodes.new("ShaderNodeBsdfGlossy")
+            node.distribution = "GGX"  # the fit's model: plain GGX, height-correlated Smith G
+            node.inputs["Roughness"].default_value = roughness
+        node.name = node.label = PREFIX + name
+        node.location = (-400, -300 - 150 * i)
+        out = node.outputs["BSDF"]
+        if weighted:
+            if fresnel is None:
+                fresnel = tree.nodes.new("ShaderNodeFresnel")
+                fresnel.name = fresnel.label = PREFIX + "Fresnel"
+                fresnel.inputs["IOR"].default_value = float(fit.ior)
+                fresnel.location = (-600, -300)
+            mix = tree.nodes.new("ShaderNodeMixShader")  # (1 − fac)·A + fac·B, one side empty
+            mix.location = (-200, -300 - 150 * i)
+            tree.links.new(fresnel.outputs["Fac"], mix.inputs["Fac"])
+            tree.links.new(out, mix.inputs[1 if roughness is None else 2])
+            out = mix.outputs["Shader"]
+        shaders.append(out)
+    if not shaders:  # a black BRDF
+        node = tree.nodes.new("ShaderNodeBsdfDiffuse")
+        node.name = node.label = PREFIX + "Diffuse"
+        node.inputs["Color"].default_value = (0.0, 0.0, 0.0, 1.0)
+        shaders.append(node.outputs["BSDF"])
+    last = shaders[0]
+    for i, nxt in enumerate(shaders[1:]):
         add = tree.nodes.new("ShaderNodeAddShader")
         add.location = (0, -300 - 150 * i)
         tree.links.new(last, add.inputs[0])
-        tree.links.new(lobe.outputs["BSDF"], add.inputs[1])
+        tree.links.new(nxt, add.inputs[1])
         last = add.outputs["Shader"]
-    if last.node != diffuse:
-        last.node.name = STACK_OUTPUT
-    tree.links.new(last, output.inputs["Surface"])
+    stack = tree.nodes.new("NodeReroute")
+    stack.name = stack.label = STACK_OUTPUT
+    stack.location = (150, -300)
+    tree.links.new(last, stack.inputs[0])
+    tree.links.new(stack.outputs[0], output.inputs["Surface"])
     mat[FIT_PROP] = fit.to_json()
     mat["specgen_fit_error"] = fit.max_error  # shown in the panel
-    d_rgb, s_rgb = rgb_standin(fit)
-    set_stack_colours(mat, d_rgb, s_rgb)
+    set_stack_colours(mat, rgb_standin(fit))
 
 
 def material_fit(mat: bpy.types.Material) -> ClosureFit:
     """The closure fit stored on a SpecGen material (SpecGenError when it has none)."""
     text = mat.get(FIT_PROP)
-    if not text or DIFFUSE_NODE not in mat.node_tree.nodes:
+    if not text or STACK_OUTPUT not in mat.node_tree.nodes:
         raise SpecGenError(f"material {mat.name!r} has no native closure fit; Apply the BRDF again")
     return ClosureFit.from_json(text)
 
 
-def set_stack_colours(mat: bpy.types.Material, diffuse: np.ndarray, specular: np.ndarray) -> None:
-    """Colours (3 values each: RGB, or three bands) of the diffuse node and of each lobe."""
+def set_stack_colours(mat: bpy.types.Material, colours: dict[str, np.ndarray]) -> None:
+    """Colour of each closure by term name (three values: RGB, or a render's three bands)."""
     nodes = mat.node_tree.nodes
-    nodes[DIFFUSE_NODE].inputs["Color"].default_value = (*(float(c) for c in diffuse[:3]), 1.0)
-    for i, s in enumerate(specular):
-        nodes[LOBE_NODE.format(i + 1)].inputs["Color"].default_value = (*(float(c) for c in s[:3]), 1.0)
+    for name, c in colours.items():
+        node = nodes.get(PREFIX + name)
+        if node is not None:
+            node.inputs["Color"].default_value = (*(float(v) for v in c[:3]), 1.0)
 
 
 def stack_socket(mat: bpy.types.Material) -> bpy.types.NodeSocket:
     """Output socket of the closure stack."""
-    nodes = mat.node_tree.nodes
-    return (nodes.get(STACK_OUTPUT) or nodes[DIFFUSE_NODE]).outputs[0]
+    return mat.node_tree.nodes[STACK_OUTPUT].outputs[0]

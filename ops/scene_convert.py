@@ -194,8 +194,8 @@ class SceneConversion:
                     uplift.blackbody_spectrum(kelvin, self.wavelengths_nm), group))
                 light.color = tuple((mats[REFLECTANCE] @ rgb) * bb)
         for mat, fit in self._specgen:
-            set_stack_colours(mat, np.asarray(uplift.group_values(fit.diffuse, group)),
-                              np.asarray([uplift.group_values(s, group) for s in fit.specular]))
+            set_stack_colours(mat, {name: np.asarray(uplift.group_values(spectrum, group))
+                                    for name, _, _, spectrum in fit.terms(nonzero=False)})
 
     # ---------------------------------------------------------------- restore
     def restore(self) -> None:

@@ -7,6 +7,7 @@ import pytest
 
 from specgen_addon.errors import SpecGenError
 from specgen_addon.fit import ClosureFit, fit_closures, ggx_lobe, rgb_standin
+from specgen_addon.fit.closures import fresnel_dielectric
 from specgen_addon.rusinkiewicz import io_from_half_diff
 from specgen_addon.table import BRDFTable
 
@@ -79,9 +80,33 @@ def test_fit_recovers_a_diffuse_plus_ggx_material(model_table):
     np.testing.assert_allclose(fit.roughness, 0.3, atol=0.01)
     np.testing.assert_allclose(fit.specular.sum(axis=0), SPEC, rtol=0.01)
     assert fit.max_error < 1e-3
+    assert not np.any(fit.diffuse_fresnel > 1e-3) and not np.any(fit.specular_fresnel > 1e-3)
     wi, wo = _dirs(500, seed=2)
     ref = RHO[None] / np.pi + ggx_lobe(wi, wo, 0.3)[:, None] * SPEC[None]   # the analytic model
     np.testing.assert_allclose(fit.eval(wi, wo), ref, rtol=0.02, atol=1e-3 * ref.max())
+
+
+def test_fit_recovers_a_fresnel_weighted_plastic():
+    # Lambert · (1 − F(θo)) + GGX · F(θo), F the dielectric Fresnel of Cycles' Fresnel node (η 1.5)
+    def plastic(th, td, pd):
+        wi, wo = io_from_half_diff(th, td, pd)
+        above = ((wi[:, 2] > 0) & (wo[:, 2] > 0))[:, None]
+        f = fresnel_dielectric(wo[:, 2], 1.5)[:, None]
+        return above * RHO[None] / np.pi * (1 - f) + ggx_lobe(wi, wo, 0.2)[:, None] * f * 3 * SPEC[None]
+    fit = fit_closures(BRDFTable.tabulate(plastic, WL))
+    assert fit.max_error < 1e-3
+    assert {"Diffuse Fresnel", "Lobe 1 Fresnel"} <= {t[0] for t in fit.terms()}
+    np.testing.assert_allclose(fit.diffuse_fresnel, RHO, rtol=0.01)
+    wi, wo = _dirs(500, seed=5)
+    np.testing.assert_allclose(fit.eval(wi, wo), plastic(*__import__("specgen_addon.rusinkiewicz",
+                               fromlist=["half_diff_from_io"]).half_diff_from_io(wi, wo)),
+                               rtol=0.03, atol=1e-3)
+
+
+def test_fresnel_matches_the_textbook_dielectric_values():
+    assert fresnel_dielectric(np.array([1.0]), 1.5)[0] == pytest.approx(0.04)      # ((η−1)/(η+1))²
+    assert fresnel_dielectric(np.array([0.0]), 1.5)[0] == pytest.approx(1.0)
+    assert fresnel_dielectric(np.array([0.5]), 1 / 1.5)[0] == pytest.approx(1.0)    # total reflection
 
 
 def test_fit_reports_a_large_error_for_a_material_outside_the_model():
@@ -97,7 +122,8 @@ def test_fit_roundtrips_through_json_and_interpolates_bands(model_table):
     fit = fit_closures(model_table, max_lobes=1)
     assert fit.roughness.shape == (1,) and fit.specular.shape == (1, WL.size)
     back = ClosureFit.from_json(fit.to_json())
-    for a in ("wavelengths_nm", "diffuse", "roughness", "specular", "rel_error"):
+    for a in ("wavelengths_nm", "diffuse", "roughness", "specular", "rel_error", "diffuse_fresnel",
+              "specular_fresnel", "ior"):
         np.testing.assert_array_equal(getattr(back, a), getattr(fit, a))
     mid = fit.at(np.array([460.0]))
     np.testing.assert_allclose(mid.diffuse, (fit.diffuse[0] + fit.diffuse[1]) / 2)
@@ -110,6 +136,7 @@ def test_fit_roundtrips_through_json_and_interpolates_bands(model_table):
 def test_rgb_standin_of_a_flat_spectrum_is_grey():
     wl = np.linspace(380, 780, 21)
     fit = ClosureFit(wl, np.full(21, 0.5), np.array([0.3]), np.full((1, 21), 0.04), np.zeros(21))
-    diffuse, spec = rgb_standin(fit)
-    np.testing.assert_allclose(diffuse, 0.5, atol=2e-3)
-    np.testing.assert_allclose(spec[0], 0.04, atol=2e-4)
+    colours = rgb_standin(fit)
+    assert set(colours) == {"Diffuse", "Lobe 1"}                # zero closures are left out
+    np.testing.assert_allclose(colours["Diffuse"], 0.5, atol=2e-3)
+    np.testing.assert_allclose(colours["Lobe 1"], 0.04, atol=2e-4)

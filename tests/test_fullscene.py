@@ -84,13 +84,19 @@ def test_spectral_stack_projected_to_rgb_matches_a_plain_rgb_cycles_render():
     assert psnr >= 35.0, psnr
 
 
-def test_full_scene_mode_matches_the_exact_mode_on_a_specgen_only_scene(tmp_path):
+@pytest.mark.parametrize("fresnel", [False, True], ids=["lambert+ggx", "fresnel-plastic"])
+def test_full_scene_mode_matches_the_exact_mode_on_a_specgen_only_scene(tmp_path, fresnel):
+    from specgen_addon.fit.closures import fresnel_dielectric
+
     rho = np.interp(WL, [400, 550, 720], [0.15, 0.7, 0.35])
     spec = np.interp(WL, [400, 720], [0.9, 0.2])
 
     def brdf(th, td, pd):
-        wi, wo = io_from_half_diff(th, td, pd)
+        wi, wo = io_from_half_diff(th, td, pd)              # wi: light, wo: view (as the OSL)
         above = ((wi[:, 2] > 0) & (wo[:, 2] > 0))[:, None]
+        if fresnel:  # the Fresnel node / Mix Shader closures
+            f = fresnel_dielectric(wo[:, 2], 1.5)[:, None]
+            return above * rho / np.pi * (1 - f) + ggx_lobe(wi, wo, 0.3)[:, None] * spec * f * 5
         return above * rho / np.pi + ggx_lobe(wi, wo, 0.35)[:, None] * spec
 
     info = bake.bake_atlas(BRDFTable.tabulate(brdf, WL), tmp_path / "a.exr", tolerance=1e-6)
