@@ -88,7 +88,3 @@ def set_stack_colours(mat: bpy.types.Material, colours: dict[str, np.ndarray]) -
         if node is not None:
             node.inputs["Color"].default_value = (*(float(v) for v in c[:3]), 1.0)
 
-
-def stack_socket(mat: bpy.types.Material) -> bpy.types.NodeSocket:
-    """Output socket of the closure stack."""
-    return mat.node_tree.nodes[STACK_OUTPUT].outputs[0]
