@@ -4,6 +4,8 @@ Runs inside Blender or on the ``bpy`` module, with the same arguments::
 
     blender --background --python batch.py -- --image IMG --mesh sphere --env studio --out DIR
     python batch.py --image IMG --mesh suzanne --env courtyard --out DIR [--bands 21 ...]
+    python batch.py --scene FILE.blend --out DIR [--bands 21 ...]        # full-scene spectral
+    blender --background FILE.blend --python batch.py -- --scene --out DIR
 
 Writes ``DIR/<image>_<mesh>_<env>.exr`` (Fichet et al. 2021 spectral layout with an RGB preview)
 and ``…_preview.png``, plus the generated BRDF table and its baked lookups under ``DIR/lookup/``.
@@ -50,6 +52,10 @@ def build_parser() -> argparse.ArgumentParser:
     src.add_argument("--image", help="photo of a sphere of the material (EXR/PNG/JPEG)")
     src.add_argument("--brdf", help="render this spectral BRDF table (.npz from "
                      "`python -m specgen_addon`) instead of generating one from an image")
+    src.add_argument("--scene", nargs="?", const="", metavar="FILE.blend",
+                     help="full-scene spectral render of this .blend (its camera, frame, "
+                     "resolution, samples, lights and world; SpecGen materials already applied); "
+                     "without FILE: the .blend Blender was started with")
     ap.add_argument("--mesh", default="sphere", help="'sphere', 'suzanne' or a path to an .obj file")
     ap.add_argument("--env", default="studio",
                     help="environment map name from Blender's studio lights (e.g. studio, courtyard)")
@@ -57,8 +63,10 @@ def build_parser() -> argparse.ArgumentParser:
     ap.add_argument("--bands", type=int, default=21, help="number of wavelength bands (default 21)")
     ap.add_argument("--wl-min", type=float, default=380.0, help="shortest wavelength, nm (default 380)")
     ap.add_argument("--wl-max", type=float, default=780.0, help="longest wavelength, nm (default 780)")
-    ap.add_argument("--samples", type=int, default=16, help="Cycles samples per pixel (default 16)")
-    ap.add_argument("--resolution", type=int, default=256, help="image width = height in pixels (default 256)")
+    ap.add_argument("--samples", type=int, default=None,
+                    help="Cycles samples per pixel (default 16; --scene: the scene's)")
+    ap.add_argument("--resolution", type=int, default=None,
+                    help="image width = height in pixels (default 256; --scene: the scene's)")
     ap.add_argument("--env-samples", type=int, default=2,
                     help="environment directions per Cycles sample in the shader (default 2)")
     ap.add_argument("--sun", action="store_true", help="add a sun from the upper left (irradiance π)")
@@ -83,6 +91,10 @@ def _script_argv(argv: list[str] | None) -> list[str]:
 
 def run(args) -> Path:
     """Generate, bake, build the scene, render; returns the spectral EXR path."""
+    if args.scene is not None:
+        return run_scene(args)
+    args.samples = 16 if args.samples is None else args.samples
+    args.resolution = 256 if args.resolution is None else args.resolution
     pkg = load_package()
     from importlib import import_module
 
@@ -120,7 +132,7 @@ def run(args) -> Path:
             raise errors.OutputExistsError(f"{p}: already exists (pass --overwrite to replace it)")
     wavelengths = spectra.wavelength_grid(args.wl_min, args.wl_max, args.bands)
 
-    bake = import_module(f"{pkg.__name__}.ops.bake")
+    bake = import_module(f"{pkg.__name__}.specgen_addon.bake")
     t0 = time.perf_counter()
     last = [-1]
 
@@ -176,6 +188,60 @@ def run(args) -> Path:
                                    warn=lambda m: print(m, file=sys.stderr))
     job.run(lambda f: interrupts.raise_if_stopped())  # between band renders
     print(f"spectral render ({args.bands} bands, {args.resolution}², {args.samples} spp) in "
+          f"{time.perf_counter() - t0:.1f} s", flush=True)
+    print(f"wrote {target}")
+    print(f"wrote {target.with_name(target.stem + '_preview.png')}")
+    return target
+
+
+def run_scene(args) -> Path:
+    """Full-scene spectral render of a .blend file (or the one already open); returns the EXR."""
+    pkg = load_package()
+    from importlib import import_module
+
+    errors = import_module(f"{pkg.__name__}.specgen_addon.errors")
+    spectra = import_module(f"{pkg.__name__}.specgen_addon.spectra")
+    import bpy
+
+    if args.scene:
+        blend = Path(args.scene).resolve()
+        if blend.suffix.lower() != ".blend" or not blend.is_file():
+            raise errors.SpecGenError(f"{args.scene}: no such .blend file")
+    elif bpy.data.filepath:
+        blend = Path(bpy.data.filepath)
+    else:
+        raise errors.SpecGenError("--scene needs a .blend file (or start Blender with one)")
+    wavelengths = spectra.wavelength_grid(args.wl_min, args.wl_max, args.bands)
+    out = Path(args.out)
+    try:
+        out.mkdir(parents=True, exist_ok=True)
+    except OSError as exc:
+        raise errors.SpecGenError(f"{out}: cannot create the output folder ({exc.strerror})") from None
+    target = out / f"{blend.stem}.exr"
+    for p in (target, target.with_name(target.stem + "_preview.png")):
+        if p.exists() and not args.overwrite:
+            raise errors.OutputExistsError(f"{p}: already exists (pass --overwrite to replace it)")
+    if Path(bpy.data.filepath or "").resolve() != blend:
+        try:
+            bpy.ops.wm.open_mainfile(filepath=str(blend), load_ui=False)
+        except RuntimeError as exc:
+            raise errors.SpecGenError(f"{blend}: cannot open the .blend file ({exc})") from None
+    scene = bpy.context.scene
+    if args.samples is not None:
+        scene.cycles.samples = args.samples
+    if args.resolution is not None:
+        scene.render.resolution_x = scene.render.resolution_y = args.resolution
+        scene.render.resolution_percentage = 100
+    fullscene = import_module(f"{pkg.__name__}.ops.render_fullscene")
+    t0 = time.perf_counter()
+    job = fullscene.FullSceneRenderJob(scene, target, wavelengths, overwrite=args.overwrite,
+                                       attributes={"specgenScene": str(blend)},
+                                       warn=lambda m: print(m, file=sys.stderr),
+                                       log=lambda m: print(m, flush=True))
+    job.run()
+    h, w = job.spectral.shape[:2]
+    print(f"full-scene spectral render of {blend.name} ({args.bands} bands, {w}x{h}, "
+          f"{scene.cycles.samples} spp, {len(job.timings['render_s'])} Cycles renders) in "
           f"{time.perf_counter() - t0:.1f} s", flush=True)
     print(f"wrote {target}")
     print(f"wrote {target.with_name(target.stem + '_preview.png')}")

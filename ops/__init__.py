@@ -1,7 +1,8 @@
 """Blender side of SpecGen: scene settings, operators, the N-panel, the OSL bake and Cycles driver.
 
 ``register``/``unregister`` add and remove exactly the classes and the ``Scene.specgen`` property of
-:mod:`.properties`, :mod:`.operators` and :mod:`.panel`; the numerics live in :mod:`.bake` (bpy-free)
+:mod:`.properties`, :mod:`.operators` and :mod:`.panel`; the numerics live in the bpy-free core
+(:mod:`specgen_addon.bake`, :mod:`specgen_addon.uplift`, :mod:`specgen_addon.fit`)
 and the core package.
 """
 

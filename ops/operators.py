@@ -18,7 +18,7 @@ import numpy as np
 
 from ..specgen_addon.errors import SpecGenError
 from ..specgen_addon.spectra import wavelength_grid
-from . import bake
+from ..specgen_addon import bake
 from .properties import input_lighting, output_dir
 from .reporting import check_generate_settings, check_render_settings, report_exception
 
@@ -218,6 +218,13 @@ class SPECGEN_OT_render_stack(_Modal, bpy.types.Operator):
         s = context.scene.specgen
         check_render_settings(s, self.filename)  # a plain .exr name: never outside the folder
         folder = check_output_dir(output_dir(s))
+        if s.render_mode == "FULL_SCENE":
+            from .render_fullscene import FullSceneRenderJob
+
+            return FullSceneRenderJob(context.scene, folder / self.filename, _wavelengths(s),
+                                      overwrite=s.overwrite,
+                                      warn=lambda msg: self.report({"WARNING"}, msg),
+                                      log=lambda msg: self.report({"INFO"}, msg))
         return SpectralRenderJob(context.scene, folder / self.filename, samples=s.samples,
                                  resolution=(s.resolution, s.resolution), overwrite=s.overwrite,
                                  env_samples=s.env_samples,

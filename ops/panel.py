@@ -45,9 +45,11 @@ class SPECGEN_PT_main(bpy.types.Panel):
         col.prop(s, "basis_tolerance")
 
         col = layout.column(heading="Render", align=True)
-        col.prop(s, "samples")
-        col.prop(s, "resolution")
-        col.prop(s, "env_samples")
+        col.prop(s, "render_mode")
+        if s.render_mode == "EXACT":  # the full-scene mode takes these from the scene
+            col.prop(s, "samples")
+            col.prop(s, "resolution")
+            col.prop(s, "env_samples")
         col = layout.column()
         col.prop(s, "output_dir")
         col.prop(s, "overwrite")
@@ -65,6 +67,10 @@ class SPECGEN_PT_main(bpy.types.Panel):
             layout.label(text=f"Baked: {bpy.path.basename(s.atlas_json)}", icon="INFO")
             if s.refine_summary:
                 layout.label(text=s.refine_summary, icon="IMAGE_REFERENCE")
+        mat = getattr(context.object, "active_material", None)
+        if mat is not None and "specgen_fit_error" in mat:
+            layout.label(text=f"Closure fit error: {100 * mat['specgen_fit_error']:.1f} %",
+                         icon="INFO")
 
 
 CLASSES = (SPECGEN_PT_main,)

@@ -18,6 +18,16 @@ LOOKUP_RESOLUTIONS = (
 )
 
 
+RENDER_MODES = (
+    ("FULL_SCENE", "Full Scene",
+     "Cycles path-traces every object, light and the world (global illumination), three bands per "
+     "render; the SpecGen BRDF as its fitted native closures"),
+    ("EXACT", "Exact (SpecGen Objects, Direct Light)",
+     "The tabulated BRDF evaluated exactly in OSL, direct light from up to four sun/point lights "
+     "and the world, on SpecGen objects only (for validation)"),
+)
+
+
 # "//" = relative to the .blend (Blender 4.5+ asks path properties to opt in)
 _PATH = {"PATH_SUPPORTS_BLEND_RELATIVE"} if bpy.app.version >= (4, 5, 0) else set()
 
@@ -62,6 +72,8 @@ class SpecGenSettings(bpy.types.PropertyGroup):
     basis_tolerance: FloatProperty(name="Basis Tolerance", default=1e-3, min=0.0, max=0.1,
                                    precision=4, description="Relative error allowed when the "
                                    "spectra are compressed to a basis (0 = exact, more renders)")
+    render_mode: EnumProperty(name="Mode", items=RENDER_MODES, default="FULL_SCENE",
+                              description="What Render Spectral Stack renders")
     samples: IntProperty(name="Samples", default=16, min=1, max=4096,
                          description="Cycles samples per pixel of each spectral render")
     resolution: IntProperty(name="Resolution", default=256, min=8, max=4096,

@@ -1,6 +1,9 @@
-"""Per-band Cycles driver: render a scene's SpecGen materials into a spectral stack.
+"""Exact mode's Cycles driver: render a scene's SpecGen materials into a spectral stack.
 
-Cycles (CPU, OSL) renders images of spectral-basis coefficients, not bands (see :mod:`ops.bake`):
+The exact mode evaluates the tabulated BRDF itself (direct light, SpecGen objects only; the
+full-scene mode is :mod:`.render_fullscene`). This module also builds the SpecGen material.
+
+Cycles (CPU, OSL) renders images of spectral-basis coefficients, not bands (see :mod:`specgen_addon.bake`):
 each render carries four coefficient slots × RGB lighting, which the shader
 (``ops/osl/specgen_brdf.osl``) writes as closure weights and Cycles stores in the Emission,
 Diffuse Color, Glossy Color and Transmission Color passes; one compositor File Output node per pass
@@ -31,8 +34,8 @@ import bpy
 import numpy as np
 
 from ..specgen_addon.errors import Cancelled, OutputExistsError, SpecGenError
+from ..specgen_addon import bake
 from ..specgen_addon.interrupts import private_tempdir
-from . import bake
 
 SHADER_PATH = Path(__file__).resolve().parent / "osl" / "specgen_brdf.osl"
 SHADER_TEXT_NAME = "specgen_brdf.osl"
@@ -134,6 +137,10 @@ def make_material(name: str, atlas: bake.AtlasInfo) -> bpy.types.Material:
     node.inputs["PhiD"].default_value = int(atlas.n_phi_d)
     node.inputs["TilesX"].default_value = int(atlas.tiles_x)
     node.inputs["TilesY"].default_value = int(atlas.tiles_y)
+    if atlas.closures is not None:  # F12/viewport and the full-scene mode use the native stack
+        from .closures import build_closure_stack
+
+        build_closure_stack(mat, atlas.closures, out)
     mat.cycles.emission_sampling = "NONE"  # the emission is reflected light, not a light source
     mat[MATERIAL_TAG] = True
     mat["specgen_wavelengths_nm"] = [float(w) for w in atlas.wavelengths_nm]
@@ -143,6 +150,12 @@ def make_material(name: str, atlas: bake.AtlasInfo) -> bpy.types.Material:
     mat["specgen_offsets"] = [float(x) for x in atlas.offsets]
     mat["specgen_basis_error"] = float(atlas.rel_error)
     return mat
+
+
+def material_output(mat: bpy.types.Material) -> bpy.types.Node:
+    """The material's active Cycles output node."""
+    tree = mat.node_tree
+    return tree.get_output_node("CYCLES") or next(n for n in tree.nodes if n.type == "OUTPUT_MATERIAL")
 
 
 def is_specgen_material(mat: bpy.types.Material | None) -> bool:
@@ -168,15 +181,63 @@ def _uplift(wavelengths_nm: np.ndarray) -> np.ndarray:
     return uplift_basis(wavelengths_nm)
 
 
+def _mapping_rotation_z(world_name: str, node) -> float:
+    """Z rotation (radians) applied by the Mapping node driving an Environment Texture's Vector,
+    as a shift of the map; SpecGenError for anything the exact mode cannot reproduce."""
+    vec = node.inputs["Vector"]
+    if not vec.is_linked:
+        return 0.0
+    src = vec.links[0].from_node
+    if src.type == "TEX_COORD":
+        return 0.0
+    if src.type != "MAPPING" or src.vector_type not in ("POINT", "TEXTURE", "VECTOR"):
+        raise SpecGenError(f"world {world_name!r}: the environment texture's vector comes from a "
+                           f"{src.type} node; the exact mode supports a Mapping rotation about Z "
+                           "only (use the Full Scene mode)")
+    feed = src.inputs["Vector"].links[0].from_socket if src.inputs["Vector"].is_linked else None
+    if feed is None or feed.node.type != "TEX_COORD" or feed.name not in ("Generated", "Object"):
+        raise SpecGenError(f"world {world_name!r}: Mapping node {src.name!r} does not map the view "
+                           "direction (Texture Coordinate: Generated); the exact mode cannot honour it")
+    rot = src.inputs["Rotation"].default_value
+    loc = src.inputs["Location"].default_value if "Location" in src.inputs else (0.0, 0.0, 0.0)
+    scale = src.inputs["Scale"].default_value
+    linked = any(src.inputs[k].is_linked for k in ("Rotation", "Location", "Scale") if k in src.inputs)
+    if (linked or abs(rot[0]) > 1e-6 or abs(rot[1]) > 1e-6 or any(abs(c) > 1e-6 for c in loc)
+            or any(abs(c - scale[0]) > 1e-6 for c in scale) or scale[0] <= 0):
+        raise SpecGenError(f"world {world_name!r}: Mapping node {src.name!r} does more than rotate "
+                           "about Z; the exact mode cannot honour it (use the Full Scene mode)")
+    return float(-rot[2] if src.vector_type == "TEXTURE" else rot[2])
+
+
+def rotate_equirect(rgb: np.ndarray, angle_z: float) -> np.ndarray:
+    """Equirect map as seen through a Mapping rotation ``angle_z`` about Z (radians).
+
+    Blender looks up the texture at ``R_z(θ) d``, whose azimuth is larger by θ, i.e. ``u`` smaller
+    by ``θ/2π`` (``u = −atan2(y, x)/2π + ½``): the image moves right by ``θ/2π`` of its width
+    (periodic, linear between columns).
+    """
+    w = rgb.shape[1]
+    shift = (angle_z / (2 * np.pi) * w) % w
+    k = int(np.floor(shift))
+    t = shift - k
+    return (1 - t) * np.roll(rgb, k, axis=1) + t * np.roll(rgb, k + 1, axis=1)
+
+
 def world_environment(scene: bpy.types.Scene, max_width: int = 512) -> np.ndarray | None:
     """Linear-sRGB radiance (H, W, 3), row 0 at the zenith, of the world's environment texture
-    times its Background strength; a constant map for a plain Background colour; None if black."""
+    (through a Mapping rotation about Z) times its Background strength; a constant map for a plain
+    Background colour; None if black. Several Background nodes are refused."""
     world = scene.world
     if world is None or world.node_tree is None:
         return None
-    background = next((n for n in world.node_tree.nodes if n.type == "BACKGROUND"), None)
-    if background is None:
+    out = world.node_tree.get_output_node("CYCLES")
+    if out is None or not out.inputs["Surface"].is_linked:
         return None
+    background = out.inputs["Surface"].links[0].from_node
+    used = [n for n in world.node_tree.nodes if n.type == "BACKGROUND" and n.outputs[0].is_linked]
+    if background.type != "BACKGROUND" or len(used) > 1:
+        raise SpecGenError(f"world {world.name!r} combines several shaders (e.g. Background nodes); "
+                           "the exact mode supports one Background node (use the Full Scene mode)")
     strength = float(background.inputs["Strength"].default_value)
     color_in = background.inputs["Color"]
     if color_in.is_linked:
@@ -193,39 +254,122 @@ def world_environment(scene: bpy.types.Scene, max_width: int = 512) -> np.ndarra
         rgb = px.reshape(h, w, 4)[::-1, :, :3].copy()
         while rgb.shape[1] > max_width and rgb.shape[0] % 2 == 0 and rgb.shape[1] % 2 == 0:
             rgb = rgb.reshape(rgb.shape[0] // 2, 2, rgb.shape[1] // 2, 2, 3).mean(axis=(1, 3))
+        rgb = rotate_equirect(rgb, _mapping_rotation_z(world.name, src))
     else:
         rgb = np.broadcast_to(np.asarray(color_in.default_value[:3], np.float32), (8, 16, 3)).copy()
     rgb = np.clip(rgb * strength, 0.0, None)
     return None if not np.any(rgb > 0) else rgb
 
 
+def render_visible(obj: bpy.types.Object, view_layer: bpy.types.ViewLayer) -> bool:
+    """Whether ``obj`` renders in ``view_layer``: not hidden for render, and in at least one
+    collection that is neither excluded from the layer nor hidden for render (up to the root)."""
+    if obj.hide_render:
+        return False
+
+    def walk(layer_coll) -> bool:
+        if layer_coll.exclude or layer_coll.collection.hide_render:
+            return False
+        if obj.name in layer_coll.collection.objects:
+            return True
+        return any(walk(child) for child in layer_coll.children)
+
+    root = view_layer.layer_collection
+    return obj.name in root.collection.objects or any(walk(c) for c in root.children)
+
+
+def _view_layer(scene: bpy.types.Scene) -> bpy.types.ViewLayer:
+    vl = bpy.context.view_layer
+    return vl if vl is not None and vl.id_data == scene else scene.view_layers[0]
+
+
+def _light_strength(light: bake.Light, targets: list) -> float:
+    """Luminance of the light's irradiance on the SpecGen objects (sun: E; point: I/d²)."""
+    y = float(np.dot(light.rgb, (0.2126, 0.7152, 0.0722)))
+    if light.kind == "sun":
+        return y
+    d2 = min(float(np.sum((np.asarray(light.vector) - np.asarray(t)) ** 2)) for t in targets)
+    return y / max(d2, 1e-6)
+
+
 def scene_lights(scene: bpy.types.Scene, warn: Callable[[str], None] = print) -> bake.SceneLights:
-    """Sun and point lights plus the world environment of ``scene``, in linear sRGB.
+    """Sun and point lights plus the world environment of ``scene``, in linear sRGB, for the exact mode.
 
     Spectra follow from the RGB with the environment's uplift basis (Mallett & Yuksel 2019 × D65),
     so a white sun of strength E is D65 irradiance E, as in the reference renderer. A point light
-    of power P (W) has radiant intensity P/4π.
+    of power P (W) has radiant intensity P/4π. Light exposure (× 2^exposure) and blackbody
+    temperature (its RGB colour) are honoured; lights in excluded or render-hidden collections
+    are skipped. Everything the mode cannot do is warned about by name: area and spot lights,
+    sun angle, lights without cast shadows, emissive meshes, and lights beyond
+    :data:`bake.MAX_LIGHTS`, of which the weakest (irradiance on the SpecGen objects) are dropped.
     """
     from mathutils import Vector
 
     lights: list[bake.Light] = []
+    names: list[str] = []
+    layer = _view_layer(scene)
     depsgraph = bpy.context.evaluated_depsgraph_get()  # fresh matrix_world of just-moved objects
     for obj in scene.objects:
-        if obj.type != "LIGHT" or obj.hide_render:
+        if obj.type != "LIGHT" or not render_visible(obj, layer):
             continue
         data = obj.data
         matrix = obj.evaluated_get(depsgraph).matrix_world if scene == bpy.context.scene else obj.matrix_world
-        rgb = np.asarray(data.color[:3], dtype=np.float64)
+        rgb = np.asarray(data.color[:3], dtype=np.float64) * 2.0 ** float(getattr(data, "exposure", 0.0))
+        if getattr(data, "use_temperature", False):
+            rgb = rgb * np.asarray(data.temperature_color[:3], np.float64)
+        if data.type in ("SUN", "POINT") and not getattr(data, "use_shadow", True):
+            warn(f"SpecGen: light {obj.name!r} casts no shadow in Blender; the exact mode shadows "
+                 "every light")
         if data.type == "SUN":
+            if data.angle > 1e-4:
+                warn(f"SpecGen: sun {obj.name!r} has an angle of {np.degrees(data.angle):.1f}°; the "
+                     "exact mode renders it as a point-like sun (hard shadows)")
             d = (matrix.to_3x3() @ Vector((0.0, 0.0, 1.0))).normalized()
             lights.append(bake.Light("sun", tuple(d), tuple(float(data.energy) * rgb)))
         elif data.type == "POINT":
             lights.append(bake.Light("point", tuple(matrix.translation),
                                      tuple(float(data.energy) / (4 * math.pi) * rgb)))
         else:
-            warn(f"SpecGen: {data.type.lower()} light {obj.name!r} is ignored (sun and point only)")
+            warn(f"SpecGen: {data.type.lower()} light {obj.name!r} is ignored by the exact mode "
+                 "(sun and point lights only; the Full Scene mode renders it)")
+            continue
+        names.append(obj.name)
+    targets = []
+    emissive = []
+    for obj in scene.objects:
+        if obj.type not in ("MESH", "CURVE", "SURFACE", "META", "FONT") or not render_visible(obj, layer):
+            continue
+        mats = [s.material for s in obj.material_slots if s.material is not None]
+        if any(is_specgen_material(m) for m in mats):
+            targets.append(tuple(obj.matrix_world.translation))
+        elif any(_emits(m) for m in mats):
+            emissive.append(obj.name)
+    targets = targets or [(0.0, 0.0, 0.0)]
+    for name in emissive:
+        warn(f"SpecGen: emissive object {name!r} does not light the exact mode's SpecGen objects")
+    if len(lights) > bake.MAX_LIGHTS:
+        order = sorted(range(len(lights)), key=lambda i: -_light_strength(lights[i], targets))
+        keep = sorted(order[:bake.MAX_LIGHTS])
+        dropped = [names[i] for i in order[bake.MAX_LIGHTS:]]
+        warn(f"SpecGen: the exact mode takes {bake.MAX_LIGHTS} lights; dropped the weakest: "
+             + ", ".join(repr(n) for n in dropped))
+        lights = [lights[i] for i in keep]
     env_rgb = world_environment(scene)
     return bake.SceneLights(lights, None if env_rgb is None else bake.EnvironmentLight(env_rgb))
+
+
+def _emits(mat: bpy.types.Material) -> bool:
+    """Whether a (non-SpecGen) material emits light: an Emission node or a Principled emission."""
+    if mat.node_tree is None:
+        return False
+    for node in mat.node_tree.nodes:
+        if node.type == "EMISSION" and node.inputs["Strength"].default_value > 0:
+            return True
+        if (node.type == "BSDF_PRINCIPLED" and node.inputs["Emission Strength"].default_value > 0
+                and (node.inputs["Emission Color"].is_linked
+                     or any(c > 0 for c in node.inputs["Emission Color"].default_value[:3]))):
+            return True
+    return False
 
 
 # ------------------------------------------------------------------------------ scene state
@@ -240,6 +384,7 @@ class _SceneState:
         self.out_dir = out_dir
         self.saved: list[tuple[object, str, object]] = []
         self.created: list[tuple[object, object]] = []
+        self.relinked: list[tuple[object, object, object]] = []
 
     def _set(self, owner, attr: str, value) -> None:
         self.saved.append((owner, attr, getattr(owner, attr)))
@@ -294,9 +439,19 @@ class _SceneState:
             fo.file_output_items.new("RGBA", "P")
             tree.links.new(layers.outputs[pass_name], fo.inputs["P"])
         self._set(sc, "compositing_node_group", tree)
+        for mat in specgen_materials(sc):  # the exact shader, not the native stand-in stack
+            surface = material_output(mat).inputs["Surface"]
+            self.relinked.append((mat.node_tree, surface,
+                                  surface.links[0].from_socket if surface.is_linked else None))
+            mat.node_tree.links.new(mat.node_tree.nodes[SCRIPT_NODE_NAME].outputs["BSDF"], surface)
         return self
 
     def __exit__(self, *exc) -> None:
+        for tree, surface, source in reversed(self.relinked):
+            for link in list(surface.links):
+                tree.links.remove(link)
+            if source is not None:
+                tree.links.new(source, surface)
         for owner, attr, value in reversed(self.saved):
             try:
                 setattr(owner, attr, value)
@@ -407,8 +562,6 @@ class SpectralRenderJob:
             lights = scene_lights(self.scene, self.warn)
             if not lights.lights and lights.environment is None:
                 raise SpecGenError("the scene has no sun, point light or world lighting")
-            if len(lights.lights) > bake.MAX_LIGHTS:
-                self.warn(f"SpecGen: only the first {bake.MAX_LIGHTS} of {len(lights.lights)} lights are used")
             slots = (lights.lights + [None] * bake.MAX_LIGHTS)[:bake.MAX_LIGHTS]
             env_map = env_list = ""
             if lights.environment is not None:
@@ -465,6 +618,11 @@ class SpectralRenderJob:
             self.timings["total_s"] = time.perf_counter() - t0
             yield 1.0
         finally:
+            for mat in mats:  # no dangling paths to the deleted temporary lighting files
+                node = mat.node_tree.nodes.get(SCRIPT_NODE_NAME)
+                if node is not None:
+                    node.inputs["EnvMap"].default_value = ""
+                    node.inputs["EnvList"].default_value = ""
             shutil.rmtree(work, ignore_errors=True)
 
     def run(self, progress: Callable[[float], None] | None = None) -> np.ndarray:

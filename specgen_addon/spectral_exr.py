@@ -66,7 +66,8 @@ def linear_srgb_preview(values: np.ndarray, wavelengths_nm: np.ndarray) -> np.nd
 
 def write_spectral_exr(path: str | os.PathLike, values: np.ndarray, wavelengths_nm: np.ndarray,
                        overwrite: bool = False, rgb: np.ndarray | None = None,
-                       attributes: dict[str, str] | None = None) -> Path:
+                       attributes: dict[str, str] | None = None,
+                       alpha: np.ndarray | None = None) -> Path:
     """Write an emissive spectral EXR (Fichet et al. 2021) with an RGB preview, atomically.
 
     Parameters
@@ -83,6 +84,8 @@ def write_spectral_exr(path: str | os.PathLike, values: np.ndarray, wavelengths_
         Linear-sRGB preview (H, W, 3); computed from the spectrum with the CIE 1931 CMFs if omitted.
     attributes
         Extra string header attributes (e.g. the source image, the BRDF name).
+    alpha
+        Optional coverage (H, W) written as channel ``A`` (e.g. a render with a transparent film).
 
     Returns
     -------
@@ -108,6 +111,10 @@ def write_spectral_exr(path: str | os.PathLike, values: np.ndarray, wavelengths_
     channels = {channel_name(w): np.ascontiguousarray(values[:, :, i]) for i, w in enumerate(wavelengths)}
     for i, name in enumerate("RGB"):
         channels[name] = np.ascontiguousarray(rgb[:, :, i])
+    if alpha is not None:
+        if np.shape(alpha) != values.shape[:2]:
+            raise SpectralEXRError(f"{path}: alpha must be {values.shape[:2]}, got {np.shape(alpha)}")
+        channels["A"] = np.ascontiguousarray(alpha, dtype=np.float32)
     header = {
         "compression": OpenEXR.ZIP_COMPRESSION,
         "type": OpenEXR.scanlineimage,

@@ -690,7 +690,7 @@ def test_cancelled_generate_leaves_nothing_in_the_lookup_folder(after_calls, sta
     import batch
     from importlib import import_module
 
-    bake = import_module(f"{batch.load_package().__name__}.ops.bake")
+    bake = import_module(f"{batch.load_package().__name__}.specgen_addon.bake")
     errors = import_module(f"{batch.load_package().__name__}.specgen_addon.errors")
     out = tmp_path / "lookup"
     calls = []

@@ -22,7 +22,7 @@ bpy = pytest.importorskip("bpy")
 import batch  # noqa: E402  (after the bpy skip: batch's package loader is what Blender mimics)
 
 PKG = batch.load_package()
-bake = import_module(f"{PKG.__name__}.ops.bake")
+bake = import_module(f"{PKG.__name__}.specgen_addon.bake")
 render = import_module(f"{PKG.__name__}.ops.render")
 scene_mod = import_module(f"{PKG.__name__}.ops.scene")
 core_errors = import_module(f"{PKG.__name__}.specgen_addon.errors")
@@ -148,36 +148,6 @@ def test_broken_shader_source_is_reported(monkeypatch, tmp_path):
         render.compile_script_node(node)
 
 
-# ------------------------------------------------------------------------- bake (bpy-free maths)
-def test_atlas_lookup_reproduces_the_tables_trilinear_interpolation(rich_table, tmp_path):
-    table = rich_table
-    info = bake.bake_atlas(table, tmp_path / "a.exr", tolerance=1e-6)
-    assert info.n_coeffs == 6 and info.rel_error == 0.0  # five components > 3: complete (Λ = 6)
-    assert info.n_renders == 2                           # constant slot + 6 coefficients
-    rng = np.random.default_rng(3)
-    th, td, pd = rng.uniform(0, np.pi / 2, 500), rng.uniform(0, np.pi / 2, 500), rng.uniform(-np.pi, np.pi, 500)
-    got = bake.atlas_lookup_reference(bake.read_atlas(info), info, th, td, pd)
-    # float32 storage of the shifted coefficients: errors ~1e-7 of the table's peak
-    np.testing.assert_allclose(got, table.eval_hd(th, td, pd), rtol=2e-4, atol=2e-7 * table.values.max())
-
-
-def test_spectral_basis_is_exact_for_low_rank_spectra_and_reports_truncation():
-    rng = np.random.default_rng(0)
-    coeffs = rng.random((5000, 3))
-    spectra = rng.random((3, 9))
-    basis, err = bake.spectral_basis(coeffs @ spectra, tolerance=1e-6)
-    assert basis.shape == (3, 9) and err < 1e-6       # rank 3 + the constant slot: one render
-    np.testing.assert_allclose(basis @ basis.T, np.eye(3), atol=1e-12)
-    full_rank = rng.random((5000, 9))
-    basis, err = bake.spectral_basis(full_rank, tolerance=1e-6)
-    assert basis.shape == (9, 9) and err == 0.0        # nothing smaller fits: complete, exact
-    basis, err = bake.spectral_basis(full_rank, tolerance=1.0)
-    assert basis.shape == (3, 9) and 0 < err <= 1.0     # loose tolerance: truncated, error reported
-    approx = (full_rank @ basis.T) @ basis
-    worst = np.max(np.sqrt(np.mean((approx - full_rank) ** 2, axis=0)) / full_rank.max(axis=0))
-    assert worst == pytest.approx(err, rel=1e-6)
-
-
 # ------------------------------------------------------------------------- Cycles vs reference
 @pytest.mark.slow
 def test_cycles_sphere_matches_reference_under_a_sun(rich_table, tmp_path):
@@ -277,8 +247,8 @@ def test_extension_zip_installs_and_registers(tmp_path):
         "import bl_ext.user_default.specgen as ext\n"
         "assert 'bl_ext.user_default.specgen.ops.render' not in sys.modules or True\n"
         "assert hasattr(bpy.types, 'SPECGEN_PT_main') and hasattr(bpy.types.Scene, 'specgen')\n"
-        "from bl_ext.user_default.specgen.ops import bake\n"
-        "assert bake.__name__ == 'bl_ext.user_default.specgen.ops.bake'\n"
+        "from bl_ext.user_default.specgen.specgen_addon import bake\n"
+        "assert bake.__name__ == 'bl_ext.user_default.specgen.specgen_addon.bake'\n"
         "print('SPECGEN-INSTALLED', ext.__file__)\n")
     env = {**os.environ, "HOME": str(tmp_path / "home")}
     (tmp_path / "home").mkdir()
@@ -332,13 +302,18 @@ def test_panel_draws_every_setting_and_the_three_buttons():
     try:
         rows = draw_panel.record_panel(bpy.context)
         s = bpy.context.scene.specgen
+        assert s.render_mode == "FULL_SCENE"                 # the default: the whole scene
+        s.render_mode = "EXACT"
+        exact_rows = draw_panel.record_panel(bpy.context)
         s.running = "Rendering spectral stack"
         busy = draw_panel.record_panel(bpy.context)
     finally:
         PKG.unregister()
     props = {r.name for r in rows if r.kind in ("prop", "template")}
     assert {"image", "image_path", "weights_path", "wl_min", "wl_max", "bands", "lookup_resolution",
-            "samples", "resolution", "output_dir", "overwrite"} <= props
+            "render_mode", "output_dir", "overwrite"} <= props
+    assert "samples" not in props                            # full-scene: the scene's own settings
+    assert {"samples", "resolution", "env_samples"} <= {r.name for r in exact_rows if r.kind == "prop"}
     buttons = [r.name for r in rows if r.kind == "operator"]
     assert buttons == ["specgen.generate_brdf", "specgen.apply", "specgen.render_stack"]
     assert all(r.enabled for r in rows if r.kind == "operator")
@@ -360,6 +335,7 @@ def test_operators_apply_and_render_headless_and_report_errors(table, tmp_path):
         s = sc.specgen
         s.output_dir = str(tmp_path / "out")
         s.resolution, s.samples = 16, 1
+        s.render_mode = "EXACT"
         with pytest.raises(RuntimeError, match="no render-visible object uses a SpecGen material"):
             bpy.ops.specgen.render_stack()          # reported through self.report, one line
         assert not bpy.ops.specgen.apply.poll()     # nothing generated yet
@@ -374,6 +350,13 @@ def test_operators_apply_and_render_headless_and_report_errors(table, tmp_path):
             bpy.ops.specgen.render_stack()          # never overwritten unless asked
         s.overwrite = True
         assert bpy.ops.specgen.render_stack() == {"FINISHED"}
+        s.render_mode = "FULL_SCENE"                 # the scene's resolution and samples
+        sc.render.resolution_x, sc.render.resolution_y, sc.cycles.samples = 12, 8, 1
+        assert bpy.ops.specgen.render_stack(filename="full.exr") == {"FINISHED"}
+        from specgen_addon.spectral_exr import read_spectral_exr
+
+        assert read_spectral_exr(tmp_path / "out" / "full.exr").values.shape == (8, 12, s.bands)
+        assert "specgen_fit_error" in obj.active_material
     finally:
         PKG.unregister()
 

@@ -39,9 +39,9 @@ from typing import Callable
 
 import numpy as np
 
-from ..specgen_addon.errors import Cancelled, OutputExistsError, SpecGenError
-from ..specgen_addon.io_utils import atomic_write
-from ..specgen_addon.table import N_PHI_D, N_THETA_D, N_THETA_H
+from .errors import Cancelled, OutputExistsError, SpecGenError
+from .io_utils import atomic_write
+from .table import N_PHI_D, N_THETA_D, N_THETA_H
 
 COEFFS_PER_RENDER = 4   # coefficient slots per Cycles render: one RGBA lookup group, 4 passes
 DEFAULT_TOLERANCE = 1e-3
@@ -80,7 +80,8 @@ class AtlasInfo:
     ``basis`` (K, Λ) holds the spectral basis ``B_k(λ)`` at ``wavelengths_nm`` and ``offsets`` (K,)
     the shifts ``o_k``. Slot 0 is the constant 1, slot ``k + 1`` holds ``c_k + o_k``; group file
     ``g`` holds slots ``4g … 4g+3`` in R, G, B, A. ``rel_error`` is the largest per-band RMS
-    truncation error relative to that band's peak (0 when exact).
+    truncation error relative to that band's peak (0 when exact). ``closures`` is the table's
+    Lambert + GGX fit (:mod:`specgen_addon.fit.closures`) that the full-scene render uses.
     """
 
     path: Path
@@ -91,6 +92,7 @@ class AtlasInfo:
     tiles_x: int
     tiles_y: int
     rel_error: float = 0.0
+    closures: "ClosureFit | None" = None  # native closure fit for the full-scene render
     refinement: object | None = None   # specgen_addon.refine.RefineResult of a generated table
 
     @property
@@ -192,7 +194,12 @@ def bake_atlas(table, path: str | os.PathLike, wavelengths_nm: np.ndarray | None
         φd samples kept (lookup resolution): 180 is the full MERL grid.
     tolerance, max_coeffs
         Spectral basis truncation (see :func:`spectral_basis`); ``tolerance=0`` keeps it exact.
+
+    The native closure fit (:func:`specgen_addon.fit.fit_closures`) at the same bands is stored
+    in the returned info.
     """
+    from .fit import fit_closures
+
     if not getattr(table, "is_spectral", False):
         raise SpecGenError("the Blender bake needs a spectral BRDF table (wavelengths in nm)")
     wl = np.asarray(table.wavelengths if wavelengths_nm is None else wavelengths_nm, dtype=np.float64)
@@ -211,7 +218,8 @@ def bake_atlas(table, path: str | os.PathLike, wavelengths_nm: np.ndarray | None
                             coeffs + offsets.astype(np.float32)], axis=-1)
     del coeffs
     tiles_x, tiles_y = atlas_layout(n_phi_d)
-    info = AtlasInfo(Path(path), wl, basis, offsets, n_phi_d, tiles_x, tiles_y, rel)
+    info = AtlasInfo(Path(path), wl, basis, offsets, n_phi_d, tiles_x, tiles_y, rel,
+                     fit_closures(table, None if wavelengths_nm is None else wl))
     info.path.parent.mkdir(parents=True, exist_ok=True)
     shape = (tiles_y * N_THETA_D, tiles_x * N_THETA_H)
     for g, target in enumerate(info.group_paths):
@@ -239,7 +247,7 @@ def atlas_lookup_reference(atlas: np.ndarray, info: AtlasInfo, theta_h: np.ndarr
                            theta_d: np.ndarray, phi_d: np.ndarray) -> np.ndarray:
     """NumPy twin of the shader's lookup on :func:`read_atlas` (two bilinear taps), projected back
     onto the bands with the basis: ``f_r`` (N, Λ)."""
-    from ..specgen_addon.table import phi_d_index, theta_d_index, theta_h_index
+    from .table import phi_d_index, theta_d_index, theta_h_index
 
     x = np.clip(theta_h_index(np.ravel(theta_h)), 0, N_THETA_H - 1)
     y = np.clip(theta_d_index(np.ravel(theta_d)), 0, N_THETA_D - 1)
@@ -336,7 +344,7 @@ def light_socket_values(light: Light | None) -> dict[str, object]:
 
 def environment_density(rgb: np.ndarray) -> np.ndarray:
     """Texel probabilities ∝ luminance · cos(elevation) (sum 1), as the reference renderer samples."""
-    from ..specgen_addon.render.environment import srgb_luminance_weights
+    from .render.environment import srgb_luminance_weights
 
     h = rgb.shape[0]
     cos_el = np.cos(((1.0 - (np.arange(h) + 0.5) / h) - 0.5) * np.pi)
@@ -391,7 +399,8 @@ def save_atlas_info(info: AtlasInfo, path: str | os.PathLike) -> Path:
     data = {"format": "specgen-atlas", "version": 1, "path": str(info.path),
             "wavelengths_nm": [float(w) for w in info.wavelengths_nm],
             "basis": info.basis.tolist(), "offsets": info.offsets.tolist(), "n_phi_d": info.n_phi_d, "tiles_x": info.tiles_x,
-            "tiles_y": info.tiles_y, "rel_error": info.rel_error}
+            "tiles_y": info.tiles_y, "rel_error": info.rel_error,
+            "closures": None if info.closures is None else info.closures.to_json()}
     with atomic_write(path, overwrite=True) as tmp:
         tmp.write_text(json.dumps(data))
     return Path(path)
@@ -410,7 +419,11 @@ def load_atlas_info(path: str | os.PathLike) -> AtlasInfo:
                          np.asarray(data["basis"], float), np.asarray(data["offsets"], float),
                          int(data["n_phi_d"]), int(data["tiles_x"]),
                          int(data["tiles_y"]), float(data["rel_error"]))
-    except (OSError, ValueError, KeyError, TypeError) as exc:
+        if data.get("closures"):
+            from .fit import ClosureFit
+
+            info.closures = ClosureFit.from_json(data["closures"])
+    except (OSError, ValueError, KeyError, TypeError, SpecGenError) as exc:
         raise SpecGenError(f"{path}: cannot read the baked lookup description ({exc})") from None
     missing = [str(p) for p in info.group_paths if not p.is_file()]
     if missing:
@@ -439,8 +452,8 @@ def generate_lookup(image, out_dir: str | os.PathLike, wavelengths_nm: np.ndarra
     is ``info.refinement``. Without ``overwrite`` existing outputs of ``name`` are refused up front;
     whatever fails or is cancelled leaves nothing new in ``out_dir``.
     """
-    from ..specgen_addon.interrupts import OutputGuard
-    from ..specgen_addon.limits import check_output_dir, safe_name
+    from .interrupts import OutputGuard
+    from .limits import check_output_dir, safe_name
 
     out = Path(out_dir)
     safe_name(name, "BRDF name")
@@ -458,8 +471,8 @@ def generate_lookup(image, out_dir: str | os.PathLike, wavelengths_nm: np.ndarra
 
 def _generate_lookup(image, out: Path, wavelengths_nm, weights, n_phi_d, tolerance, backend, name,
                      progress, cancel, lighting, refine) -> AtlasInfo:
-    from ..specgen_addon.errors import WeightsError
-    from ..specgen_addon.pipeline import generate
+    from .errors import WeightsError
+    from .pipeline import generate
 
     sub = (lambda lo, hi: (lambda f: progress(lo + (hi - lo) * f))) if progress else (lambda lo, hi: None)
     chosen = backend or choose_backend()

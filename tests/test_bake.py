@@ -1,0 +1,103 @@
+"""Bake numerics in the core (specgen_addon.bake): spectral basis, lookup atlas, environment
+sampling density, closure fit stored with the atlas. No bpy."""
+
+from __future__ import annotations
+
+import numpy as np
+import pytest
+
+from specgen_addon import bake
+from specgen_addon.render.environment import srgb_luminance_weights
+from specgen_addon.rusinkiewicz import io_from_half_diff
+from specgen_addon.table import BRDFTable
+
+WL = np.array([410.0, 480.0, 540.0, 600.0, 660.0, 720.0])
+
+pytest.importorskip("OpenEXR")
+
+
+@pytest.fixture(scope="module")
+def rich_table() -> BRDFTable:
+    """Five angular terms with five different spectra: the complete basis (Λ = 6) is needed."""
+    rng = np.random.default_rng(0)
+    spectra_ = rng.random((5, WL.size))
+
+    def fn(th, td, pd):
+        wi, wo = io_from_half_diff(th, td, pd)
+        above = ((wi[:, 2] > 0) & (wo[:, 2] > 0)).astype(float)
+        h = np.cos(th)
+        terms = np.stack([np.ones_like(th), h ** 20, h ** 200, (1 - np.cos(td)) ** 5,
+                          np.clip(np.sum(wi * wo, -1), 0, 1) ** 4], -1)
+        return above[:, None] * (terms @ spectra_) / np.pi
+    return BRDFTable.tabulate(fn, WL)
+
+
+def test_atlas_lookup_reproduces_the_tables_trilinear_interpolation(rich_table, tmp_path):
+    table = rich_table
+    info = bake.bake_atlas(table, tmp_path / "a.exr", tolerance=1e-6)
+    assert info.n_coeffs == 6 and info.rel_error == 0.0  # five components > 3: complete (Λ = 6)
+    assert info.n_renders == 2                           # constant slot + 6 coefficients
+    rng = np.random.default_rng(3)
+    th, td, pd = rng.uniform(0, np.pi / 2, 500), rng.uniform(0, np.pi / 2, 500), rng.uniform(-np.pi, np.pi, 500)
+    got = bake.atlas_lookup_reference(bake.read_atlas(info), info, th, td, pd)
+    # float32 storage of the shifted coefficients: errors ~1e-7 of the table's peak
+    np.testing.assert_allclose(got, table.eval_hd(th, td, pd), rtol=2e-4, atol=2e-7 * table.values.max())
+
+
+def test_atlas_description_keeps_the_closure_fit(rich_table, tmp_path):
+    info = bake.bake_atlas(rich_table, tmp_path / "a.exr")
+    assert info.closures is not None and info.closures.wavelengths_nm.tolist() == WL.tolist()
+    bake.save_atlas_info(info, tmp_path / "a.json")
+    back = bake.load_atlas_info(tmp_path / "a.json")
+    np.testing.assert_array_equal(back.closures.diffuse, info.closures.diffuse)
+    np.testing.assert_array_equal(back.basis, info.basis)
+
+
+def test_spectral_basis_is_exact_for_low_rank_spectra_and_reports_truncation():
+    rng = np.random.default_rng(0)
+    coeffs = rng.random((5000, 3))
+    spectra = rng.random((3, 9))
+    basis, err = bake.spectral_basis(coeffs @ spectra, tolerance=1e-6)
+    assert basis.shape == (3, 9) and err < 1e-6       # rank 3 + the constant slot: one render
+    np.testing.assert_allclose(basis @ basis.T, np.eye(3), atol=1e-12)
+    full_rank = rng.random((5000, 9))
+    basis, err = bake.spectral_basis(full_rank, tolerance=1e-6)
+    assert basis.shape == (9, 9) and err == 0.0        # nothing smaller fits: complete, exact
+    basis, err = bake.spectral_basis(full_rank, tolerance=1.0)
+    assert basis.shape == (3, 9) and 0 < err <= 1.0     # loose tolerance: truncated, error reported
+    approx = (full_rank @ basis.T) @ basis
+    worst = np.max(np.sqrt(np.mean((approx - full_rank) ** 2, axis=0)) / full_rank.max(axis=0))
+    assert worst == pytest.approx(err, rel=1e-6)
+
+
+def test_environment_density_is_luminance_times_solid_angle():
+    rng = np.random.default_rng(4)
+    rgb = rng.random((8, 16, 3))
+    p = bake.environment_density(rgb)
+    assert p.sum() == pytest.approx(1.0)
+    h = rgb.shape[0]
+    # texel solid angle ∝ cos(elevation) at the row centre: (2π/W)(π/H) cos(el)
+    el = (0.5 - (np.arange(h) + 0.5) / h) * np.pi
+    ref = (rgb @ srgb_luminance_weights()) * np.cos(el)[:, None]
+    np.testing.assert_allclose(p, ref / ref.sum(), rtol=1e-12)
+    assert bake.environment_density(np.zeros((4, 8, 3))).sum() == pytest.approx(1.0)  # black: uniform
+
+
+def test_environment_directions_follow_the_density(tmp_path):
+    rgb = np.zeros((16, 32, 3), np.float32)
+    rgb[3, 5] = 100.0                                  # one bright texel
+    rgb += 0.01
+    env = bake.EnvironmentLight(rgb, n_list=4096)
+    _, lst = bake.bake_environment(env, tmp_path / "m.exr", tmp_path / "l.exr")
+    import OpenEXR
+
+    with OpenEXR.File(str(lst), separate_channels=True) as f:
+        ch = f.parts[0].channels
+        d = np.stack([np.asarray(ch[c].pixels) for c in "RGB"], -1).reshape(-1, 3)
+    np.testing.assert_allclose(np.linalg.norm(d, axis=-1), 1.0, atol=1e-5)
+    # Blender's equirect mapping of those directions lands in the bright texel as often as p says
+    u = -np.arctan2(d[:, 1], d[:, 0]) / (2 * np.pi) + 0.5
+    v = np.arcsin(np.clip(d[:, 2], -1, 1)) / np.pi + 0.5
+    row, col = ((1 - v) * 16).astype(int), (u * 32).astype(int) % 32
+    p = bake.environment_density(rgb)
+    assert np.mean((row == 3) & (col == 5)) == pytest.approx(p[3, 5], abs=0.01)
