@@ -41,9 +41,9 @@ def srgb_luminance_weights() -> np.ndarray:
     """(3,) weights giving CIE Y from linear sRGB (colour-science's sRGB matrix)."""
     global _SRGB_Y_WEIGHTS
     if _SRGB_Y_WEIGHTS is None:
-        import colour
+        from ..colour_tables import tables
 
-        _SRGB_Y_WEIGHTS = np.asarray(colour.RGB_COLOURSPACES["sRGB"].matrix_RGB_to_XYZ[1], float)
+        _SRGB_Y_WEIGHTS = np.asarray(tables()["srgb_rgb_to_xyz"][1], float)
     return _SRGB_Y_WEIGHTS
 
 
@@ -51,12 +51,13 @@ def srgb_luminance_weights() -> np.ndarray:
 def _uplift_basis_cached(method: str, key: tuple[float, ...]) -> np.ndarray:
     w = np.asarray(key)
     if method == MALLETT2019:
-        import colour
+        from ..colour_tables import tables
 
-        basis = colour.recovery.MSDS_BASIS_FUNCTIONS_sRGB_MALLETT2019
+        t = tables()  # colour-science's basis, precomputed (specgen_addon.colour_tables)
         # Outside the basis' 380–780 nm support the nearest value is held (a smooth continuation
         # of the flat reflectance that white uplifts to).
-        b = np.stack([np.interp(w, basis.wavelengths, basis.values[:, c]) for c in range(3)])
+        b = np.stack([np.interp(w, t["mallett2019_wavelengths_nm"], t["mallett2019_values"][:, c])
+                      for c in range(3)])
         return b * spectra.illuminant_spd("D65", w)[None, :]
     return srgb_luminance_weights()[:, None] * spectra.illuminant_spd(method, w)[None, :]
 
