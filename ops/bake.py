@@ -51,20 +51,11 @@ ENV_LIST_WIDTH = 256
 
 def _write_exr(path: Path, channels: dict[str, np.ndarray], overwrite: bool = True,
                attributes: dict[str, str] | None = None, tiled: bool = False) -> Path:
-    import OpenEXR
+    # tiled: OIIO's texture cache reads tiles directly instead of re-tiling scanlines
+    from ..specgen_addon.image_io import write_exr
 
-    header = {"compression": OpenEXR.ZIP_COMPRESSION, "type": OpenEXR.scanlineimage}
-    if tiled:  # OIIO's texture cache reads tiles directly instead of re-tiling scanlines
-        tiles = OpenEXR.TileDescription()
-        tiles.xSize = tiles.ySize = 64
-        tiles.mode = OpenEXR.ONE_LEVEL
-        header.update(type=OpenEXR.tiledimage, tiles=tiles, compression=OpenEXR.NO_COMPRESSION)
-    header.update(attributes or {})
-    with atomic_write(path, overwrite=overwrite) as tmp:
-        with OpenEXR.File(header, {k: np.ascontiguousarray(v, dtype=np.float32)
-                                   for k, v in channels.items()}) as exr:
-            exr.write(str(tmp))
-    return Path(path)
+    return write_exr(path, channels, overwrite=overwrite, attributes=attributes, tiled=tiled,
+                     compression="none" if tiled else "zip")
 
 
 def group_path(base: Path, group: int) -> Path:
@@ -266,13 +257,12 @@ def atlas_lookup_reference(atlas: np.ndarray, info: AtlasInfo, theta_h: np.ndarr
 
 def read_atlas(info: AtlasInfo) -> np.ndarray:
     """All slot planes stacked (H, W, 4 × groups) (for tests and checks)."""
-    import OpenEXR
+    from ..specgen_addon.image_io import read_exr
 
     planes = []
     for p in info.group_paths:
-        with OpenEXR.File(str(p), separate_channels=True) as exr:
-            ch = exr.parts[0].channels
-            planes += [np.asarray(ch[c].pixels) for c in "RGBA"]
+        ch, _ = read_exr(p)
+        planes += [ch[c] for c in "RGBA"]
     return np.stack(planes, axis=-1)
 
 

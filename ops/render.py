@@ -308,13 +308,12 @@ class _SceneState:
 
 
 def _read_pass(path: Path) -> np.ndarray:
-    import OpenEXR
+    from ..specgen_addon.image_io import read_exr
 
-    with OpenEXR.File(str(path), separate_channels=True) as exr:
-        ch = exr.parts[0].channels
-        names = sorted(ch)
-        pick = {c: next(n for n in names if n.endswith("." + c) or n == c) for c in "RGB"}
-        return np.stack([np.asarray(ch[pick[c]].pixels, np.float32) for c in "RGB"], axis=-1)
+    ch, _ = read_exr(path)
+    names = sorted(ch)
+    pick = {c: next(n for n in names if n.endswith("." + c) or n == c) for c in "RGB"}
+    return np.stack([ch[pick[c]] for c in "RGB"], axis=-1)
 
 
 def _find_output(out_dir: Path, index: int) -> Path:
