@@ -124,7 +124,8 @@ def run(args) -> Path:
 
     if args.image:
         info = bake.generate_lookup(str(source), out / "lookup", wavelengths, weights=args.weights,
-                                    backend=args.backend, name=source.stem, progress=progress)
+                                    backend=args.backend, name=source.stem, progress=progress,
+                                    save_table=True)
     else:
         table_mod = import_module(f"{pkg.__name__}.specgen_addon.table")
         table = table_mod.BRDFTable.load(source)

@@ -418,11 +418,13 @@ def generate_lookup(image, out_dir: str | os.PathLike, wavelengths_nm: np.ndarra
                     weights=None, n_phi_d: int = N_PHI_D, tolerance: float = DEFAULT_TOLERANCE,
                     backend: str | None = None, name: str = "brdf",
                     progress: Callable[[float], None] | None = None,
-                    cancel: Callable[[], bool] | None = None) -> AtlasInfo:
-    """Image of a sphere → spectral BRDF table (``<name>.npz``) → coefficient atlas + JSON.
+                    cancel: Callable[[], bool] | None = None, save_table: bool = False,
+                    preview: bool = False) -> AtlasInfo:
+    """Image of a sphere → spectral BRDF table → coefficient atlas + JSON (``<name>_lookup.*``).
 
     Runs without bpy (the Generate operator calls it on a worker thread). Progress: 0–0.8 network,
-    0.8–1 bake.
+    0.8–1 bake. ``save_table`` also exports the full table as ``<name>.npz`` (122 MB at 21 bands,
+    so only on request); ``preview`` writes ``<name>_preview.png`` (:mod:`specgen_addon.preview`).
     """
     from ..specgen_addon.errors import WeightsError
     from ..specgen_addon.infer import generate_brdf
@@ -441,7 +443,12 @@ def generate_lookup(image, out_dir: str | os.PathLike, wavelengths_nm: np.ndarra
             raise
         table = generate_brdf(image, weights=weights, wavelengths_nm=wavelengths_nm, backend="torch",
                               progress=sub(0.0, 0.8), cancel=cancel)
-    table.save(out / f"{name}.npz", overwrite=True)
+    if save_table:
+        table.save(out / f"{name}.npz", overwrite=True)
+    if preview:
+        from ..specgen_addon.preview import write_preview
+
+        write_preview(table, out / f"{name}_preview.png")
     info = bake_atlas(table, out / f"{name}_lookup.exr", n_phi_d=n_phi_d, tolerance=tolerance,
                       progress=sub(0.8, 1.0), cancel=cancel)
     save_atlas_info(info, out / f"{name}_lookup.json")

@@ -22,6 +22,10 @@ LOOKUP_RESOLUTIONS = (
 _PATH = {"PATH_SUPPORTS_BLEND_RELATIVE"} if bpy.app.version >= (4, 5, 0) else set()
 
 
+def _is_specgen_material(self, material) -> bool:
+    return bool(material.get("specgen"))
+
+
 def _update_range(self, context) -> None:
     if self.wl_max <= self.wl_min:
         self.wl_max = self.wl_min + 1.0
@@ -57,6 +61,15 @@ class SpecGenSettings(bpy.types.PropertyGroup):
                                description="Folder for baked lookups and spectral EXR renders")
     overwrite: BoolProperty(name="Overwrite", default=False,
                             description="Replace existing output files")
+    export_table: BoolProperty(name="Export Table", default=False,
+                               description="Also write the full BRDF table (<name>.npz, ~120 MB at "
+                               "21 bands) beside the lookups")
+    material: PointerProperty(name="Material", type=bpy.types.Material, poll=_is_specgen_material,
+                              description="SpecGen material that Apply assigns (each Generate "
+                              "makes a new one unless Overwrite is on)")
+    refine_residual: FloatProperty(name="Refinement Residual", default=-1.0, precision=4,
+                                   description="RMS residual of the last refinement against the "
+                                   "input photo (negative: not refined)")
     # State written by the operators (not shown as settings).
     atlas_json: StringProperty(name="Baked Lookup", default="", options={"HIDDEN"})
     progress: FloatProperty(name="Progress", default=0.0, min=0.0, max=1.0, subtype="FACTOR",

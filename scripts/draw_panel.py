@@ -84,6 +84,9 @@ class RecordingLayout:
     def separator(self, **_):
         self.rows.append(Row("heading", ""))
 
+    def template_icon(self, icon_value: int = 0, scale: float = 1.0, **_):
+        self.rows.append(Row("icon", "", str(icon_value)))
+
 
 def record_panel(context) -> list[Row]:
     """Run ``SPECGEN_PT_main.draw`` against a recording layout; the add-on must be registered."""

@@ -165,3 +165,37 @@ def _piecewise_logits(fusion) -> tuple[torch.Tensor, torch.Tensor, torch.Tensor,
     _, bias = fusion.gap_functionals()
     return kinks.float(), p_seg.float(), q_seg.float(), bias.detach()
 
+
+
+class GridHeadExport(GridHead):
+    """:class:`GridHead` for export: the AFF branch logits as the exact piecewise-linear functions
+    of ``s`` that :meth:`GridHead.forward_inplace` uses, written with ONNX-friendly ops (the
+    segment is the count of kinks below ``s``, i.e. ``torch.bucketize``), so onnxruntime skips the
+    d-wide expansion and its two (…, d) temporaries per grid point. Same output as :meth:`forward`.
+    """
+
+    def __init__(self, model: SpecGen):
+        super().__init__(model)
+        if self.aff:
+            kinks, p_seg, q_seg, bias = _piecewise_logits(model.fusion)
+            self.register_buffer("kinks", kinks, persistent=False)
+            self.register_buffer("p_seg", p_seg.T.contiguous(), persistent=False)   # (n+1, 6)
+            self.register_buffer("q_seg", q_seg.T.contiguous(), persistent=False)
+            self.register_buffer("s_bias", bias.reshape(()), persistent=False)
+
+    def forward(self, t1, t2, t3, t4, t5, t6) -> torch.Tensor:
+        if not self.aff:
+            return super().forward(t1, t2, t3, t4, t5, t6)
+        b = (t1[:, :, None, None], t2[:, None, :, None], t3[None, :, :, None],
+             t4[:, None, None, :], t5[None, :, None, :], t6[None, None, :, :])
+        mapping = self.model.mapping
+        s = (b[0][..., -1] + b[1][..., -1] + b[2][..., -1] + b[3][..., -1] + b[4][..., -1]
+             + b[5][..., -1] + self.s_bias)
+        seg = (s[..., None] > self.kinks).to(torch.int64).sum(dim=-1)
+        w = torch.softmax(self.p_seg[seg] * s[..., None] + self.q_seg[seg], dim=-1)
+        h = mapping.fc1.bias + w[..., 0:1] * b[0][..., :-1]
+        for k in range(1, 6):
+            h = h + w[..., k:k + 1] * b[k][..., :-1]
+        h = torch.relu(h)
+        h = torch.relu(mapping.fc2(h))
+        return mapping.fc3(h)[..., 0]
