@@ -66,6 +66,8 @@ def build_parser() -> argparse.ArgumentParser:
     ap.add_argument("--backend", choices=("onnx", "torch"), default=None,
                     help="inference backend (default: onnx if onnxruntime is installed)")
     ap.add_argument("--overwrite", action="store_true", help="replace existing output files")
+    ap.add_argument("--verbose", action="store_true",
+                    help="let Blender's own log lines (e.g. 'Saved: ...') through to stdout")
     return ap
 
 
@@ -159,7 +161,9 @@ def run(args) -> Path:
                                    attributes={"specgenSource": str(source), "specgenMesh": args.mesh,
                                                "specgenEnvironment": args.env},
                                    warn=lambda m: print(m, file=sys.stderr))
-    job.run(lambda f: None)
+    quiet = import_module(f"{pkg.__name__}.specgen_addon.quiet")
+    with quiet.native_stdout_silenced(not args.verbose):  # Cycles' "Saved: ..." lines
+        job.run(lambda f: None)
     print(f"spectral render ({args.bands} bands, {args.resolution}², {args.samples} spp) in "
           f"{time.perf_counter() - t0:.1f} s", flush=True)
     print(f"wrote {target}")
