@@ -22,8 +22,8 @@ from .table import GRID_SHAPE, N_THETA_D, N_THETA_H, BRDFTable
 
 BACKENDS = ("torch", "onnx")
 #: θd rows per block: 10 × 180 × Λ points (~38 k at 21 bands) keep torch's temporaries
-#: cache-sized; onnxruntime has more overhead per call and prefers larger blocks.
-BLOCK_THETA_D = {"torch": 10, "onnx": 30}
+#: cache-sized; the channels-first ONNX head (32 × points temporaries) fits best at 5.
+BLOCK_THETA_D = {"torch": 10, "onnx": 5}
 
 ProgressFn = Callable[[float], None]
 CancelFn = Callable[[], bool]

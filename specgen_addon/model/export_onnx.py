@@ -4,7 +4,9 @@ Two graphs, beside the ``.pt`` weights (see :func:`specgen_addon.infer.onnx_path
 
 * ``<stem>.tables.onnx``: ``image (1, 3, S, S)``, ``u_lambda (Λ,)`` -> the six grid tables
   (:class:`~specgen_addon.model.fast.GridTables`);
-* ``<stem>.head.onnx``: a block of table rows -> r' (:class:`~specgen_addon.model.fast.GridHead`),
+* ``<stem>.head.onnx``: a block of table rows -> r' (:class:`~specgen_addon.model.fast.GridHead`,
+  exported in the channels-first arrangement of
+  :class:`~specgen_addon.model.fast.GridHeadChannelsFirst`, which onnxruntime runs ~2× faster),
   with dynamic block sizes and band count.
 
 The model config travels in the graphs' metadata (``specgen_config``), so the onnx backend does
@@ -19,7 +21,7 @@ from pathlib import Path
 import torch
 
 from ..io_utils import atomic_write
-from .fast import GridHead, GridTables, lambda_coords
+from .fast import GridHeadChannelsFirst, GridTables, lambda_coords
 from .specgen import SpecGen, load_weights
 
 OPSET = 17
@@ -48,7 +50,7 @@ def export_onnx(weights: str | Path | None = None, out_stem: str | Path | None =
         out_stem = (src or DEFAULT_WEIGHTS).with_suffix("")
     tables_path, head_path = onnx_paths(Path(f"{out_stem}.pt"))
     cfg_json = json.dumps(model.cfg.to_dict())
-    tables, head = GridTables(model).eval(), GridHead(model).eval()
+    tables, head = GridTables(model).eval(), GridHeadChannelsFirst(model).eval()
     image = torch.zeros(1, 3, model.cfg.image_size, model.cfg.image_size)
     u_lam = lambda_coords(model, DEFAULT_WAVELENGTHS_NM)
     with torch.no_grad():

@@ -166,36 +166,43 @@ def _piecewise_logits(fusion) -> tuple[torch.Tensor, torch.Tensor, torch.Tensor,
     return kinks.float(), p_seg.float(), q_seg.float(), bias.detach()
 
 
+class GridHeadChannelsFirst(GridHead):
+    """:class:`GridHead` rearranged for onnxruntime: the same operations (same output to float
+    rounding) in a channels-first layout ``(C, Λ, nh, nd, 180)``.
 
-class GridHeadExport(GridHead):
-    """:class:`GridHead` for export: the AFF branch logits as the exact piecewise-linear functions
-    of ``s`` that :meth:`GridHead.forward_inplace` uses, written with ONNX-friendly ops (the
-    segment is the count of kinks below ``s``, i.e. ``torch.bucketize``), so onnxruntime skips the
-    d-wide expansion and its two (…, d) temporaries per grid point. Same output as :meth:`forward`.
+    In the table layout ``(…, C)`` every broadcast product ``w_k · f_k`` runs over spans of C = 32
+    values, and onnxruntime's elementwise kernels pay their per-span overhead ~1 M times per block.
+    With the channels outermost and φd innermost, every operand broadcasts over spans of ≥ 180
+    contiguous values (or is a scalar per span), and the three linear layers become plain matrix
+    products ``W (out, C) @ h (C, points)``. Inputs and output are :class:`GridHead`'s.
     """
-
-    def __init__(self, model: SpecGen):
-        super().__init__(model)
-        if self.aff:
-            kinks, p_seg, q_seg, bias = _piecewise_logits(model.fusion)
-            self.register_buffer("kinks", kinks, persistent=False)
-            self.register_buffer("p_seg", p_seg.T.contiguous(), persistent=False)   # (n+1, 6)
-            self.register_buffer("q_seg", q_seg.T.contiguous(), persistent=False)
-            self.register_buffer("s_bias", bias.reshape(()), persistent=False)
 
     def forward(self, t1, t2, t3, t4, t5, t6) -> torch.Tensor:
         if not self.aff:
             return super().forward(t1, t2, t3, t4, t5, t6)
-        b = (t1[:, :, None, None], t2[:, None, :, None], t3[None, :, :, None],
-             t4[:, None, None, :], t5[None, :, None, :], t6[None, None, :, :])
-        mapping = self.model.mapping
-        s = (b[0][..., -1] + b[1][..., -1] + b[2][..., -1] + b[3][..., -1] + b[4][..., -1]
-             + b[5][..., -1] + self.s_bias)
-        seg = (s[..., None] > self.kinks).to(torch.int64).sum(dim=-1)
-        w = torch.softmax(self.p_seg[seg] * s[..., None] + self.q_seg[seg], dim=-1)
-        h = mapping.fc1.bias + w[..., 0:1] * b[0][..., :-1]
+        # (C, Λ, nh, nd, φd)
+        f = (t1.permute(2, 0, 1)[:, None, :, :, None], t2.permute(2, 0, 1)[:, None, :, None, :],
+             t3.permute(2, 0, 1)[:, None, None, :, :], t4.permute(2, 1, 0)[:, :, :, None, None],
+             t5.permute(2, 1, 0)[:, :, None, :, None], t6.permute(2, 1, 0)[:, :, None, None, :])
+        fusion, mapping = self.model.fusion, self.model.mapping
+        _, bias = fusion.gap_functionals()
+        s = f[0][-1] + f[1][-1] + f[2][-1] + f[3][-1] + f[4][-1] + f[5][-1] + bias   # (Λ, nh, nd, φd)
+        shape = s.shape
+        s = s.reshape(1, -1)
+        z = torch.relu(fusion.expand.weight @ s + fusion.expand.bias[:, None])      # (d, P)
+        logits = fusion.heads.weight @ z + fusion.heads.bias[:, None]              # (6, P)
+        # softmax over the six rows with elementwise ops (a reduction over the leading axis is
+        # slow in onnxruntime)
+        top = logits[0]
         for k in range(1, 6):
-            h = h + w[..., k:k + 1] * b[k][..., :-1]
-        h = torch.relu(h)
-        h = torch.relu(mapping.fc2(h))
-        return mapping.fc3(h)[..., 0]
+            top = torch.maximum(top, logits[k])
+        e = torch.exp(logits - top)
+        total = e[0] + e[1] + e[2] + e[3] + e[4] + e[5]
+        w = (e / total).reshape((6, 1) + tuple(shape))                             # (6, 1, Λ, …)
+        h = mapping.fc1.bias[:, None, None, None, None] + w[0] * f[0][:-1]
+        for k in range(1, 6):
+            h = h + w[k] * f[k][:-1]
+        h = torch.relu(h).reshape(h.shape[0], -1)
+        h = torch.relu(mapping.fc2.weight @ h + mapping.fc2.bias[:, None])
+        r = (mapping.fc3.weight @ h + mapping.fc3.bias[:, None]).reshape(shape)    # (Λ, nh, nd, φd)
+        return r.permute(1, 2, 3, 0)
