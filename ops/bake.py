@@ -426,11 +426,24 @@ def generate_lookup(image, out_dir: str | os.PathLike, wavelengths_nm: np.ndarra
     0.8–1 bake. ``save_table`` also exports the full table as ``<name>.npz`` (122 MB at 21 bands,
     so only on request); ``preview`` writes ``<name>_preview.png`` (:mod:`specgen_addon.preview`).
     """
+    out = Path(out_dir)
+    out.mkdir(parents=True, exist_ok=True)
+    before = set(out.iterdir())
+    try:
+        return _generate_lookup(image, out, wavelengths_nm, weights, n_phi_d, tolerance, backend,
+                                name, progress, cancel, save_table, preview)
+    except BaseException:  # cancelled or failed: remove the files this call added (nothing half-made)
+        for p in set(out.iterdir()) - before:
+            if p.name.startswith(f"{name}_") or p.name == f"{name}.npz":
+                p.unlink(missing_ok=True)
+        raise
+
+
+def _generate_lookup(image, out: Path, wavelengths_nm, weights, n_phi_d, tolerance, backend, name,
+                     progress, cancel, save_table, preview) -> AtlasInfo:
     from ..specgen_addon.errors import WeightsError
     from ..specgen_addon.infer import generate_brdf
 
-    out = Path(out_dir)
-    out.mkdir(parents=True, exist_ok=True)
     sub = (lambda lo, hi: (lambda f: progress(lo + (hi - lo) * f))) if progress else (lambda lo, hi: None)
     chosen = backend or choose_backend()
     try:

@@ -139,10 +139,10 @@ class SPECGEN_OT_generate_brdf(_Modal, bpy.types.Operator):
     def execute(self, context):
         try:
             info = bake.generate_lookup(**self._job_args(context))
+            self._done(context, info)
         except SpecGenError as exc:
             self.report({"ERROR"}, str(exc))
             return {"CANCELLED"}
-        self._done(context, info)
         return {"FINISHED"}
 
     def invoke(self, context, event):
@@ -187,7 +187,11 @@ class SPECGEN_OT_generate_brdf(_Modal, bpy.types.Operator):
         if isinstance(result, BaseException):
             self.report({"ERROR"}, f"SpecGen: {type(result).__name__}: {result}")
             return {"CANCELLED"}
-        self._done(context, result)
+        try:
+            self._done(context, result)
+        except SpecGenError as exc:
+            self.report({"ERROR"}, str(exc))
+            return {"CANCELLED"}
         return {"FINISHED"}
 
 

@@ -118,3 +118,20 @@ def test_two_materials_with_different_bases_render_side_by_side_keeping_their_co
     for mat in mats.values():
         node = mat.node_tree.nodes[render.SCRIPT_NODE_NAME]
         assert node.inputs["Atlas"].default_value == mat["specgen_atlas_groups"][0]
+
+
+def test_cancelled_generate_leaves_no_files_of_its_set(tmp_path):
+    from specgen_addon.model import DEFAULT_WEIGHTS
+
+    Cancelled = import_module(f"{PKG.__name__}.specgen_addon.errors").Cancelled
+
+    if not Path(DEFAULT_WEIGHTS).is_file():
+        pytest.skip(f"no shipped weights at {DEFAULT_WEIGHTS}")
+    (tmp_path / "other_lookup.json").write_text("{}")                  # someone else's file stays
+    seen = []
+    with pytest.raises(Cancelled):
+        bake.generate_lookup(str(REPO / "examples" / "sphere.png"), tmp_path, WL[:3], n_phi_d=45,
+                             name="sphere", preview=True, progress=seen.append,
+                             cancel=lambda: bool(seen) and seen[-1] >= 0.8)   # stop in the bake
+    assert max(seen) >= 0.8
+    assert sorted(p.name for p in tmp_path.iterdir()) == ["other_lookup.json"]
