@@ -72,7 +72,7 @@ def test_full_zip_validates_bundles_its_wheels_and_stays_under_60_mb(full_zip):
     for wheel in manifest["wheels"]:
         assert wheel.removeprefix("./") in names
     assert "specgen_addon/data/colour_tables.npz" in names
-    assert not any(n.startswith(("tests/", "bench/", ".venv/")) for n in names)
+    assert not any(n.startswith(("tests/", "bench/", ".venv/", ".git")) for n in names)
 
 
 # --------------------------------------------------------------------------- stock Blender
