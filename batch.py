@@ -172,13 +172,10 @@ def run(args) -> Path:
 
 
 def _write_rgb_exr(path: Path, rgb) -> None:
-    import numpy as np
-    import OpenEXR
+    from importlib import import_module
 
-    rgb = np.asarray(rgb, dtype=np.float32)
-    with OpenEXR.File({"compression": OpenEXR.ZIP_COMPRESSION},
-                      {c: np.ascontiguousarray(rgb[..., i]) for i, c in enumerate("RGB")}) as exr:
-        exr.write(str(path))
+    image_io = import_module(f"{load_package().__name__}.specgen_addon.image_io")  # OpenEXR or OIIO
+    image_io.write_exr(path, {c: rgb[..., i] for i, c in enumerate("RGB")}, overwrite=True)
 
 
 def main(argv: list[str] | None = None) -> int:

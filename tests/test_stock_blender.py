@@ -226,3 +226,51 @@ def test_numpy_ndimage_twins_match_scipy():
     y, x = rng.uniform(-3, 45, 500), rng.uniform(-3, 55, 500)
     np.testing.assert_allclose(ndimage_np.map_coordinates(img[..., 0], [y, x]),
                                ndimage.map_coordinates(img[..., 0], [y, x], order=1, mode="nearest"), atol=1e-12)
+
+
+BATCH_SCRIPT = r'''
+import importlib.abc, json, os, runpy, sys
+BLOCKED = set(json.loads(os.environ["SPECGEN_BLOCKED"]))
+
+class Block(importlib.abc.MetaPathFinder):
+    def find_spec(self, name, path=None, target=None):
+        if name.split(".")[0] in BLOCKED:
+            raise ImportError(f"{name} is not in a stock Blender")
+        return None
+
+sys.meta_path.insert(0, Block())
+import bpy  # noqa: E402
+sys.path.append(os.path.join(bpy.utils.resource_path("LOCAL"), "python", "lib", "python3.11", "site-packages"))
+script = sys.argv[1]
+sys.argv = ["blender", "--background", "--python", script, "--", *sys.argv[2:]]
+runpy.run_path(script, run_name="__main__")
+'''
+
+
+def test_batch_renders_a_table_in_a_stock_blender(tmp_path):
+    import importlib.util
+
+    from specgen_addon.rusinkiewicz import io_from_half_diff
+    from specgen_addon.table import BRDFTable
+
+    _bpy_root()
+    site = tmp_path / "site"
+    site.mkdir()
+    for name in ("bpy", "numpy"):
+        (site / name).symlink_to(Path(importlib.util.find_spec(name).submodule_search_locations[0]))
+    rho = np.array([0.2, 0.5, 0.7])
+
+    def lambert(th, td, pd):
+        wi, wo = io_from_half_diff(th, td, pd)
+        return np.where(((wi[:, 2] > 0) & (wo[:, 2] > 0))[:, None], rho[None] / np.pi, 0.0)
+
+    BRDFTable.tabulate(lambert, np.array([450.0, 550.0, 650.0])).save(tmp_path / "l.npz")
+    env = {"HOME": str(tmp_path), "PATH": os.environ.get("PATH", ""), "PYTHONPATH": str(site),
+           "SPECGEN_BLOCKED": json.dumps(BLOCKED), "PYTHONNOUSERSITE": "1"}
+    done = subprocess.run([sys.executable, "-S", "-c", BATCH_SCRIPT, str(REPO / "batch.py"), "--brdf",
+                           str(tmp_path / "l.npz"), "--out", str(tmp_path / "out"), "--bands", "3",
+                           "--wl-min", "450", "--wl-max", "650", "--resolution", "16", "--samples", "1"],
+                          env=env, cwd=tmp_path, capture_output=True, text=True, timeout=300)
+    assert done.returncode == 0, done.stdout[-2000:] + done.stderr[-2000:]
+    assert (tmp_path / "out" / "l_sphere_studio.exr").is_file()
+    assert "Saved:" not in done.stdout

@@ -68,27 +68,20 @@ def uplift_basis(wavelengths_nm: np.ndarray, method: str = MALLETT2019) -> np.nd
 
 
 def read_exr_rgb(path: str | Path) -> np.ndarray:
-    """Read the R, G, B channels of an OpenEXR file as float32 (H, W, 3), row 0 on top."""
-    import OpenEXR
+    """Read the R, G, B channels of an OpenEXR file as float32 (H, W, 3), row 0 on top
+    (OpenEXR, or Blender's bundled OpenImageIO: :mod:`specgen_addon.image_io`)."""
+    from ..image_io import ImageIOError, read_exr
 
     path = Path(path)
     if not path.is_file():
         raise SpecGenError(f"{path}: environment map not found")
     try:
-        with OpenEXR.File(str(path)) as f:
-            channels = f.channels()
-            if "RGB" in channels or "RGBA" in channels:
-                px = channels.get("RGB", channels.get("RGBA")).pixels
-                rgb = np.asarray(px[..., :3], dtype=np.float32)
-            elif all(c in channels for c in "RGB"):
-                rgb = np.stack([np.asarray(channels[c].pixels, np.float32) for c in "RGB"], -1)
-            else:
-                raise SpecGenError(f"{path}: EXR has no R, G, B channels (has {sorted(channels)})")
-    except SpecGenError:
-        raise
-    except Exception as exc:  # OpenEXR raises plain exceptions for corrupt files
-        raise SpecGenError(f"{path}: cannot read EXR ({exc})") from exc
-    return rgb
+        channels, _ = read_exr(path)
+    except ImageIOError as exc:
+        raise SpecGenError(f"{path}: cannot read EXR ({exc})") from None
+    if not all(c in channels for c in "RGB"):
+        raise SpecGenError(f"{path}: EXR has no R, G, B channels (has {sorted(channels)})")
+    return np.stack([channels[c] for c in "RGB"], -1)
 
 
 def direction_to_uv(d: np.ndarray, rotation_rad: float = 0.0) -> tuple[np.ndarray, np.ndarray]:
