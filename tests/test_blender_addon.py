@@ -338,7 +338,7 @@ def test_panel_draws_every_setting_and_the_three_buttons():
         PKG.unregister()
     props = {r.name for r in rows if r.kind in ("prop", "template")}
     assert {"image", "image_path", "weights_path", "wl_min", "wl_max", "bands", "lookup_resolution",
-            "samples", "resolution", "output_dir", "overwrite"} <= props
+            "samples", "resolution", "output_dir", "overwrite", "export_table", "material"} <= props
     buttons = [r.name for r in rows if r.kind == "operator"]
     assert buttons == ["specgen.generate_brdf", "specgen.apply", "specgen.render_stack"]
     assert all(r.enabled for r in rows if r.kind == "operator")
