@@ -36,6 +36,17 @@ def _lambertian(rho: np.ndarray) -> BRDFTable:
     return BRDFTable.tabulate(f, WL)
 
 
+def _record_panel():
+    import importlib.util
+    import sys
+
+    spec = importlib.util.spec_from_file_location("draw_panel", REPO / "scripts" / "draw_panel.py")
+    draw_panel = importlib.util.module_from_spec(spec)
+    sys.modules["draw_panel"] = draw_panel  # dataclasses look their module up
+    spec.loader.exec_module(draw_panel)
+    return draw_panel.record_panel(bpy.context)
+
+
 def test_generate_names_never_collide_unless_overwrite(tmp_path):
     assert naming.clean_stem("my photo (2).png") == "my_photo_2"
     assert naming.stem_for_generate("sphere.png", tmp_path, False, []) == "sphere"
@@ -76,6 +87,11 @@ def test_two_generates_make_two_material_sets_and_apply_assigns_the_chosen_one(t
             bpy.context.view_layer.objects.active = obj
             assert bpy.ops.specgen.apply() == {"FINISHED"}
         assert a.active_material == first and b.active_material == second
+        s.refine_residual = 0.0123                                    # filled by a refinement
+        rows = _record_panel()
+        labels = [r.label for r in rows if r.kind == "label"]
+        assert "Refinement residual: 0.0123" in labels and "SpecGen sphere" in labels
+        assert any(r.kind == "template" and r.value == "SpecGen sphere.001" for r in rows)
         s.overwrite = True                                            # Overwrite on: same names
         s.material = first
         assert bpy.ops.specgen.generate_brdf() == {"FINISHED"}
