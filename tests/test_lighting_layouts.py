@@ -38,13 +38,19 @@ def test_studio_lights_come_from_blenders_api_in_an_installed_layout(tmp_path, m
     assert lighting.available_envs() == ["forest"]
 
 
-def test_studio_lights_fall_back_to_the_wheel_layout_without_bpy_imported(monkeypatch):
-    if lighting.wheel_datafiles_dir() is None:
+def test_studio_lights_fall_back_to_the_wheel_layout_without_blenders_api(monkeypatch):
+    wheel = lighting.wheel_datafiles_dir()   # located with find_spec, never importing bpy
+    if wheel is None:
         pytest.skip("the bpy wheel is not installed")
-    monkeypatch.delitem(sys.modules, "bpy", raising=False)
+    assert wheel.parent.parent.name == "datafiles" and wheel.parents[3].name == "bpy"
+    monkeypatch.setattr(lighting, "blender_datafiles_dir", lambda: None)  # bpy not imported
     found = lighting.studiolights_dir()
-    assert found == lighting.wheel_datafiles_dir() and (found / "studio.exr").is_file()
-    assert "bpy" not in sys.modules          # located without importing it
+    assert found == wheel and (found / "studio.exr").is_file()
+
+
+def test_blenders_api_is_asked_only_when_bpy_is_already_imported(monkeypatch):
+    monkeypatch.setitem(sys.modules, "bpy", None)   # as if never imported
+    assert lighting.blender_datafiles_dir() is None
 
 
 def test_blenders_api_and_the_wheel_layout_agree_in_the_bpy_module():
