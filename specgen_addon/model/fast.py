@@ -174,19 +174,17 @@ class GridHeadChannelsFirst(GridHead):
     values, and onnxruntime's elementwise kernels pay their per-span overhead ~1 M times per block.
     With the channels outermost and φd innermost, every operand broadcasts over spans of ≥ 180
     contiguous values (or is a scalar per span), and the three linear layers become plain matrix
-    products ``W (out, C) @ h (C, points)``. Inputs and output are :class:`GridHead`'s.
+    products ``W (out, C) @ h (C, points)``.
+
+    Inputs are the blocks of :func:`specgen_addon.infer.channels_first_tables` (arranged once per
+    grid, not per block): the AFF statistic rows ``s1 … s6`` (Λ|1, nh|1, nd|1, 180|1) and the
+    feature rows ``f1 … f6`` (C, Λ|1, nh|1, nd|1, 180|1). Output: r' (Λ, nh, nd, 180). AFF only.
     """
 
-    def forward(self, t1, t2, t3, t4, t5, t6) -> torch.Tensor:
-        if not self.aff:
-            return super().forward(t1, t2, t3, t4, t5, t6)
-        # (C, Λ, nh, nd, φd)
-        f = (t1.permute(2, 0, 1)[:, None, :, :, None], t2.permute(2, 0, 1)[:, None, :, None, :],
-             t3.permute(2, 0, 1)[:, None, None, :, :], t4.permute(2, 1, 0)[:, :, :, None, None],
-             t5.permute(2, 1, 0)[:, :, None, :, None], t6.permute(2, 1, 0)[:, :, None, None, :])
+    def forward(self, s1, s2, s3, s4, s5, s6, f1, f2, f3, f4, f5, f6) -> torch.Tensor:
         fusion, mapping = self.model.fusion, self.model.mapping
         _, bias = fusion.gap_functionals()
-        s = f[0][-1] + f[1][-1] + f[2][-1] + f[3][-1] + f[4][-1] + f[5][-1] + bias   # (Λ, nh, nd, φd)
+        s = s1 + s2 + s3 + s4 + s5 + s6 + bias                                     # (Λ, nh, nd, φd)
         shape = s.shape
         s = s.reshape(1, -1)
         z = torch.relu(fusion.expand.weight @ s + fusion.expand.bias[:, None])      # (d, P)
@@ -199,10 +197,10 @@ class GridHeadChannelsFirst(GridHead):
         e = torch.exp(logits - top)
         total = e[0] + e[1] + e[2] + e[3] + e[4] + e[5]
         w = (e / total).reshape((6, 1) + tuple(shape))                             # (6, 1, Λ, …)
-        h = mapping.fc1.bias[:, None, None, None, None] + w[0] * f[0][:-1]
+        f = (f1, f2, f3, f4, f5, f6)
+        h = mapping.fc1.bias[:, None, None, None, None] + w[0] * f[0]
         for k in range(1, 6):
-            h = h + w[k] * f[k][:-1]
+            h = h + w[k] * f[k]
         h = torch.relu(h).reshape(h.shape[0], -1)
         h = torch.relu(mapping.fc2.weight @ h + mapping.fc2.bias[:, None])
-        r = (mapping.fc3.weight @ h + mapping.fc3.bias[:, None]).reshape(shape)    # (Λ, nh, nd, φd)
-        return r.permute(1, 2, 3, 0)
+        return (mapping.fc3.weight @ h + mapping.fc3.bias[:, None]).reshape(shape)  # (Λ, nh, nd, φd)
