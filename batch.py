@@ -74,7 +74,9 @@ def build_parser() -> argparse.ArgumentParser:
     ap.add_argument("--backend", choices=("onnx", "torch"), default=None,
                     help="inference backend (default: onnx if onnxruntime is installed)")
     ap.add_argument("--overwrite", action="store_true", help="replace existing output files")
-    ap.add_argument("--verbose", action="store_true", help="print the traceback of an error")
+    ap.add_argument("--verbose", action="store_true",
+                    help="print the traceback of an error, and let Blender's own log lines "
+                         "(e.g. 'Saved: ...') through to stdout")
     from importlib import import_module
 
     import_module(f"{load_package().__name__}.specgen_addon.cli_model").add_refine_arguments(ap)
@@ -146,7 +148,8 @@ def run(args) -> Path:
     if args.image:
         info = bake.generate_lookup(str(source), out / "lookup", wavelengths, weights=args.weights,
                                     backend=args.backend, name=source.stem, progress=progress,
-                                    lighting=photo_lighting, refine=args.refine)
+                                    lighting=photo_lighting, refine=args.refine,
+                                    save_table=True)
         if info.refinement is not None:
             print(f"refinement under {photo_lighting.label}: {info.refinement.summary()}", flush=True)
             for w in info.refinement.warnings:
@@ -186,7 +189,9 @@ def run(args) -> Path:
                                    attributes={"specgenSource": str(source), "specgenMesh": args.mesh,
                                                "specgenEnvironment": args.env},
                                    warn=lambda m: print(m, file=sys.stderr))
-    job.run(lambda f: interrupts.raise_if_stopped())  # between band renders
+    quiet = import_module(f"{pkg.__name__}.specgen_addon.quiet")
+    with quiet.native_stdout_silenced(not args.verbose):  # Cycles' "Saved: ..." lines
+        job.run(lambda f: interrupts.raise_if_stopped())  # between band renders
     print(f"spectral render ({args.bands} bands, {args.resolution}², {args.samples} spp) in "
           f"{time.perf_counter() - t0:.1f} s", flush=True)
     print(f"wrote {target}")
@@ -249,13 +254,10 @@ def run_scene(args) -> Path:
 
 
 def _write_rgb_exr(path: Path, rgb) -> None:
-    import numpy as np
-    import OpenEXR
+    from importlib import import_module
 
-    rgb = np.asarray(rgb, dtype=np.float32)
-    with OpenEXR.File({"compression": OpenEXR.ZIP_COMPRESSION},
-                      {c: np.ascontiguousarray(rgb[..., i]) for i, c in enumerate("RGB")}) as exr:
-        exr.write(str(path))
+    image_io = import_module(f"{load_package().__name__}.specgen_addon.image_io")  # OpenEXR or OIIO
+    image_io.write_exr(path, {c: rgb[..., i] for i, c in enumerate("RGB")}, overwrite=True)
 
 
 #: What batch.py is doing, for the one-line message of a stopped run.

@@ -1,8 +1,9 @@
 """Benchmark: seconds and peak memory to generate the full spectral BRDF table from one image.
 
-Usage: ``python bench/infer.py [IMAGE] [--weights W] [--backend torch|onnx] [--bands 21] [--repeat 3]``
+Usage: ``python bench/infer.py [IMAGE] [--weights W] [--backend both|torch|onnx] [--bands 21] [--repeat 3]``
 
-Prints the machine, the wall time of :func:`specgen_addon.infer.generate_brdf` for the full
+Prints the machine and, per backend (both by default, runs interleaved so a busy machine slows
+both alike), the wall time of :func:`specgen_addon.infer.generate_brdf` for the full
 90 × 90 × 180 × Λ table (1.458 M angle points × Λ bands), and the process' peak resident memory
 (``getrusage`` ru_maxrss) above the level after the weights were loaded.
 """
@@ -29,7 +30,7 @@ def main() -> int:
     ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     ap.add_argument("image", nargs="?", type=Path, default=REPO / "examples" / "sphere.png")
     ap.add_argument("--weights", type=Path, default=None)
-    ap.add_argument("--backend", choices=("torch", "onnx"), default="torch")
+    ap.add_argument("--backend", choices=("both", "torch", "onnx"), default="both")
     ap.add_argument("--bands", type=int, default=21)
     ap.add_argument("--repeat", type=int, default=3)
     args = ap.parse_args()
@@ -41,22 +42,30 @@ def main() -> int:
     from specgen_addon.spectra import wavelength_grid
 
     wl = wavelength_grid(380.0, 780.0, args.bands)
-    infer.get_backend(args.weights, args.backend)          # load once: not part of the timing
+    backends = ("onnx", "torch") if args.backend == "both" else (args.backend,)
+    for backend in backends:
+        infer.get_backend(args.weights, backend)           # load once: not part of the timing
     params = count_parameters(load_weights(args.weights))
     base = rss_mb()
-    times = []
+    times: dict[str, list[float]] = {b: [] for b in backends}
+    cpu: dict[str, list[float]] = {b: [] for b in backends}
     table = None
     for _ in range(args.repeat):
-        table = None                                       # measure one table's memory, not two
-        t0 = time.perf_counter()
-        table = infer.generate_brdf(args.image, weights=args.weights, wavelengths_nm=wl, backend=args.backend)
-        times.append(time.perf_counter() - t0)
+        for backend in backends:
+            table = None                                   # measure one table's memory, not two
+            t0, c0 = time.perf_counter(), time.process_time()
+            table = infer.generate_brdf(args.image, weights=args.weights, wavelengths_nm=wl, backend=backend)
+            times[backend].append(time.perf_counter() - t0)
+            cpu[backend].append(time.process_time() - c0)
     n_eval = table.values.size
     print(f"machine: {describe_machine()}")
-    print(f"model: {params:,} parameters; backend {args.backend}")
+    print(f"model: {params:,} parameters")
     print(f"table: {table.values.shape} = {n_eval / 1e6:.1f} M evaluations ({table.values.nbytes / 1e6:.0f} MB)")
-    print(f"time: best {min(times):.2f} s, median {float(np.median(times)):.2f} s over {args.repeat} runs")
-    print(f"peak RSS: {rss_mb():.0f} MB total, {rss_mb() - base:.0f} MB above the loaded model")
+    for backend in backends:
+        t = times[backend]
+        print(f"{backend}: wall best {min(t):.2f} s, median {float(np.median(t)):.2f} s over {args.repeat} "
+              f"runs; CPU (all threads) best {min(cpu[backend]):.2f} s")
+    print(f"peak RSS: {rss_mb():.0f} MB total, {rss_mb() - base:.0f} MB above the loaded models")
     return 0
 
 

@@ -19,6 +19,7 @@ import numpy as np
 from ..specgen_addon.errors import SpecGenError
 from ..specgen_addon.spectra import wavelength_grid
 from ..specgen_addon import bake
+from . import naming
 from .properties import input_lighting, output_dir
 from .reporting import check_generate_settings, check_render_settings, report_exception
 
@@ -106,26 +107,50 @@ class SPECGEN_OT_generate_brdf(_Modal, bpy.types.Operator):
         s = context.scene.specgen
         check_generate_settings(s)
         weights = bpy.path.abspath(s.weights_path) if s.weights_path else None
-        return dict(image=_image_input(s), out_dir=output_dir(s), wavelengths_nm=_wavelengths(s),
-                    weights=weights, n_phi_d=int(s.lookup_resolution), tolerance=s.basis_tolerance,
+        image = _image_input(s)
+        out = output_dir(s)
+        source = s.image.name if s.image is not None else bpy.path.basename(s.image_path)
+        specgen_names = [m.name for m in bpy.data.materials if m.get("specgen")]
+        self._stem = naming.stem_for_generate(source, out, s.overwrite, specgen_names)
+        self._out = out
+        return dict(image=image, out_dir=out, wavelengths_nm=_wavelengths(s), weights=weights,
+                    n_phi_d=int(s.lookup_resolution), tolerance=s.basis_tolerance, name=self._stem,
+                    save_table=s.export_table, preview=True,
                     lighting=input_lighting(s), refine=s.refine, overwrite=s.overwrite)
 
     def _done(self, context, info: bake.AtlasInfo) -> None:
+        from .render import make_material
+
         s = context.scene.specgen
-        s.atlas_json = str(Path(info.path).with_name(Path(info.path).stem + ".json"))
+        s.atlas_json = str(naming.lookup_json(self._out, self._stem))
+        mat = make_material(naming.material_name(self._stem), info)
+        mat["specgen_stem"] = self._stem
+        png = naming.preview_png(self._out, self._stem)
+        if png.is_file():
+            name = naming.preview_name(self._stem)
+            img = bpy.data.images.get(name)
+            if img is None:
+                img = bpy.data.images.load(str(png))
+                img.name = name
+            else:
+                img.filepath = str(png)
+                img.reload()
+            mat["specgen_preview"] = img.name
+        s.material = mat
         ref = info.refinement
         s.refine_summary = "" if ref is None else f"Photo match: {ref.after.text()} (network {ref.before.text()})"
+        s.refine_residual = -1.0 if ref is None else ref.after.psnr_db
         for warning in ([] if ref is None else ref.warnings):
             self.report({"WARNING"}, f"SpecGen: {warning}")
-        self.report({"INFO"}, f"SpecGen: BRDF generated, {info.n_coeffs} spectral basis "
-                              f"coefficients (max error {info.rel_error:.1e})")
+        self.report({"INFO"}, f"SpecGen: material {mat.name!r} generated, {info.n_coeffs} spectral "
+                              f"basis coefficients (max error {info.rel_error:.1e})")
 
     def execute(self, context):
         try:
             info = bake.generate_lookup(**self._job_args(context))
+            self._done(context, info)
         except BaseException as exc:  # Ctrl-C in a headless run included: one sentence, no traceback
             return report_exception(self, exc, "BRDF generation")
-        self._done(context, info)
         return {"FINISHED"}
 
     def invoke(self, context, event):
@@ -162,7 +187,10 @@ class SPECGEN_OT_generate_brdf(_Modal, bpy.types.Operator):
         result = self._result[0] if self._result else SpecGenError("generation stopped unexpectedly")
         if isinstance(result, BaseException):
             return report_exception(self, result, "BRDF generation")
-        self._done(context, result)
+        try:
+            self._done(context, result)
+        except Exception as exc:
+            return report_exception(self, exc, "BRDF generation")
         return {"FINISHED"}
 
 
@@ -175,27 +203,29 @@ class SPECGEN_OT_apply(bpy.types.Operator):
 
     @classmethod
     def poll(cls, context):
-        return bool(context.scene.specgen.atlas_json)
+        s = context.scene.specgen
+        return s.material is not None or bool(s.atlas_json)
 
     def execute(self, context):
         from .render import make_material
 
         s = context.scene.specgen
         try:
-            info = bake.load_atlas_info(s.atlas_json)
             targets = [o for o in context.selected_objects if o.type in {"MESH", "CURVE", "SURFACE", "META", "FONT"}]
             if not targets:
                 raise SpecGenError("select at least one mesh object")
-            mat = make_material(f"SpecGen {Path(info.path).stem}", info)
+            mat = s.material
+            if mat is None:  # a lookup baked elsewhere (e.g. by batch.py): build its material
+                info = bake.load_atlas_info(s.atlas_json)
+                mat = make_material(f"SpecGen {Path(info.path).stem}", info)
         except Exception as exc:
             return report_exception(self, exc, "Apply")
-        for obj in targets:
+        for obj in targets:  # the active slot gets it; other slots keep their materials
             if obj.material_slots:
-                for slot in obj.material_slots:
-                    slot.material = mat
+                obj.material_slots[obj.active_material_index].material = mat
             else:
                 obj.data.materials.append(mat)
-        self.report({"INFO"}, f"SpecGen: material applied to {len(targets)} object(s)")
+        self.report({"INFO"}, f"SpecGen: {mat.name!r} applied to {len(targets)} object(s)")
         return {"FINISHED"}
 
 

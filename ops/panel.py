@@ -24,6 +24,8 @@ class SPECGEN_PT_main(bpy.types.Panel):
         col.template_ID(s, "image", open="image.open")
         if s.image is None:
             col.prop(s, "image_path")
+        else:
+            _thumbnail(col, s.image)
         col.prop(s, "weights_path")
 
         col = layout.column(heading="Photo")
@@ -53,6 +55,19 @@ class SPECGEN_PT_main(bpy.types.Panel):
         col = layout.column()
         col.prop(s, "output_dir")
         col.prop(s, "overwrite")
+        col.prop(s, "export_table")
+
+        col = layout.column(heading="Material")
+        col.template_ID(s, "material")
+        if s.material is not None:
+            preview = bpy.data.images.get(s.material.get("specgen_preview", ""))
+            if preview is not None:
+                _thumbnail(col, preview)
+        if s.refine_residual >= 0.0:
+            col.label(text=f"Refinement residual: {s.refine_residual:.4g}", icon="GRAPH")
+        others = [m.name for m in bpy.data.materials if m.get("specgen") and m != s.material]
+        for name in others:
+            col.label(text=name, icon="MATERIAL")
 
         layout.use_property_split = False
         col = layout.column(align=True)
@@ -71,6 +86,15 @@ class SPECGEN_PT_main(bpy.types.Panel):
         if mat is not None and "specgen_fit_error" in mat:
             layout.label(text=f"Closure fit error: {100 * mat['specgen_fit_error']:.1f} %",
                          icon="INFO")
+
+
+def _thumbnail(layout, image) -> None:
+    """Draw an image datablock's preview (the input photo, a material's preview sphere)."""
+    try:
+        icon = image.preview_ensure().icon_id
+    except (AttributeError, RuntimeError):  # no previews without a UI (background mode)
+        return
+    layout.template_icon(icon_value=icon, scale=6.0)
 
 
 CLASSES = (SPECGEN_PT_main,)

@@ -47,6 +47,10 @@ def _input_env_items(self, context):
     return items
 
 
+def _is_specgen_material(self, material) -> bool:
+    return bool(material.get("specgen"))
+
+
 def _update_range(self, context) -> None:
     if self.wl_max <= self.wl_min:
         self.wl_max = self.wl_min + 1.0
@@ -97,6 +101,15 @@ class SpecGenSettings(bpy.types.PropertyGroup):
                                   description="Brightness of the photo's HDRI relative to the canonical level")
     input_key_light: BoolProperty(name="Key Light", default=False,
                                   description="Add the canonical D65 key light to the photo's HDRI")
+    export_table: BoolProperty(name="Export Table", default=False,
+                               description="Also write the full BRDF table (<name>.npz, ~120 MB at "
+                               "21 bands) beside the lookups")
+    material: PointerProperty(name="Material", type=bpy.types.Material, poll=_is_specgen_material,
+                              description="SpecGen material that Apply assigns (each Generate "
+                              "makes a new one unless Overwrite is on)")
+    refine_residual: FloatProperty(name="Refinement Residual", default=-1.0, precision=4,
+                                   description="RMS residual of the last refinement against the "
+                                   "input photo (negative: not refined)")
     # State written by the operators (not shown as settings).
     refine_summary: StringProperty(name="Refinement", default="", options={"HIDDEN"})
     atlas_json: StringProperty(name="Baked Lookup", default="", options={"HIDDEN"})

@@ -465,13 +465,12 @@ class _SceneState:
 
 
 def _read_pass(path: Path) -> np.ndarray:
-    import OpenEXR
+    from ..specgen_addon.image_io import read_exr
 
-    with OpenEXR.File(str(path), separate_channels=True) as exr:
-        ch = exr.parts[0].channels
-        names = sorted(ch)
-        pick = {c: next(n for n in names if n.endswith("." + c) or n == c) for c in "RGB"}
-        return np.stack([np.asarray(ch[pick[c]].pixels, np.float32) for c in "RGB"], axis=-1)
+    ch, _ = read_exr(path)
+    names = sorted(ch)
+    pick = {c: next(n for n in names if n.endswith("." + c) or n == c) for c in "RGB"}
+    return np.stack([ch[pick[c]] for c in "RGB"], axis=-1)
 
 
 def _find_output(out_dir: Path, index: int) -> Path:
@@ -534,16 +533,19 @@ class SpectralRenderJob:
         mats = specgen_materials(self.scene)
         if not mats:
             raise SpecGenError("no render-visible object uses a SpecGen material (Apply one first)")
-        keys = {(tuple(m["specgen_wavelengths_nm"]), tuple(m["specgen_basis"]),
-                 tuple(m["specgen_offsets"])) for m in mats}
-        if len(keys) != 1:
-            # One spectral basis per render: the passes hold coefficients of that basis.
-            raise SpecGenError("SpecGen materials in the scene have different bands or spectral "
-                               "bases; generate them with the same settings")
-        wl, basis, offsets = next(iter(keys))
-        self.wavelengths_nm = np.asarray(wl, dtype=np.float64)
-        self.basis = np.asarray(basis, dtype=np.float64).reshape(-1, self.wavelengths_nm.size)
-        self.offsets = np.asarray(offsets, dtype=np.float64)
+        bands = {tuple(m["specgen_wavelengths_nm"]) for m in mats}
+        if len(bands) != 1:
+            raise SpecGenError("SpecGen materials in the scene have different wavelength bands; "
+                               "generate them with the same From, To and Bands")
+        self.wavelengths_nm = np.asarray(next(iter(bands)), dtype=np.float64)
+        # One group per spectral basis: a render's passes hold coefficients of one basis, so each
+        # group renders with the others' shaders muted (their images add up, see steps()).
+        groups: dict[tuple, list] = {}
+        for m in mats:
+            groups.setdefault((tuple(m["specgen_basis"]), tuple(m["specgen_offsets"])), []).append(m)
+        self.groups = [(np.asarray(b, np.float64).reshape(-1, self.wavelengths_nm.size),
+                        np.asarray(o, np.float64), ms) for (b, o), ms in groups.items()]
+        self.basis, self.offsets = self.groups[0][0], self.groups[0][1]
         for m in mats:
             for p in m["specgen_atlas_groups"]:
                 if not Path(p).is_file():
@@ -555,7 +557,6 @@ class SpectralRenderJob:
         t0 = time.perf_counter()
         mats = self._preflight()
         wl = self.wavelengths_nm
-        renders = -(-(self.basis.shape[0] + 1) // bake.COEFFS_PER_RENDER)
         ensure_oslquery()
         work = Path(tempfile.mkdtemp(prefix="specgen_render_"))
         try:
@@ -580,28 +581,37 @@ class SpectralRenderJob:
             self.timings["bake_s"] = time.perf_counter() - t0
             yield 0.02
             h, w = self.resolution[1], self.resolution[0]
-            images = np.zeros((h, w, renders * bake.COEFFS_PER_RENDER, 3), np.float32)
+            uplift = _uplift(wl)
+            plan = [(g, r) for g, (basis, _, _) in enumerate(self.groups)
+                    for r in range(-(-(basis.shape[0] + 1) // bake.COEFFS_PER_RENDER))]
+            images = [np.zeros((h, w, len([p for p in plan if p[0] == g]) * bake.COEFFS_PER_RENDER, 3),
+                               np.float32) for g in range(len(self.groups))]
             t_render = 0.0
-            for r in range(renders):
+            for i, (g, r) in enumerate(plan):
                 self._check()
-                out_dir = work / f"r{r}"
+                out_dir = work / f"g{g}r{r}"
                 out_dir.mkdir()
-                for mat in mats:
-                    node = mat.node_tree.nodes[SCRIPT_NODE_NAME]
-                    node.inputs["Atlas"].default_value = list(mat["specgen_atlas_groups"])[r]
-                    mat.node_tree.update_tag()  # a string-socket edit alone does not re-sync Cycles
-                    mat.update_tag()
+                for other, (_, _, group_mats) in enumerate(self.groups):
+                    for mat in group_mats:
+                        node = mat.node_tree.nodes[SCRIPT_NODE_NAME]
+                        # other bases' materials are muted (an empty Atlas shades black)
+                        node.inputs["Atlas"].default_value = \
+                            list(mat["specgen_atlas_groups"])[r] if other == g else ""
+                        mat.node_tree.update_tag()  # a string-socket edit alone does not re-sync Cycles
+                        mat.update_tag()
                 t = time.perf_counter()
                 with _SceneState(self.scene, self.samples, self.resolution, out_dir):
                     bpy.ops.render.render(write_still=False, scene=self.scene.name)
                 t_render += time.perf_counter() - t
-                for i in range(len(PASSES)):
-                    images[:, :, r * bake.COEFFS_PER_RENDER + i] = _read_pass(_find_output(out_dir, i))
-                yield 0.02 + 0.93 * (r + 1) / renders
+                for j in range(len(PASSES)):
+                    images[g][:, :, r * bake.COEFFS_PER_RENDER + j] = _read_pass(_find_output(out_dir, j))
+                yield 0.02 + 0.93 * (i + 1) / len(plan)
             self._check()
             self.timings["cycles_s"] = t_render
-            self.coefficient_images = images
-            self.spectral = bake.assemble_spectrum(images, self.basis, self.offsets, _uplift(wl))
+            self.coefficient_images = images[0]
+            # rendering is linear: the groups' spectra add up
+            self.spectral = sum(bake.assemble_spectrum(images[g], basis, offsets, uplift)
+                                for g, (basis, offsets, _) in enumerate(self.groups))
             outs = self._outputs()
             if outs is not None:
                 from ..specgen_addon.spectral_exr import (linear_srgb_preview, write_preview_png,
@@ -624,6 +634,9 @@ class SpectralRenderJob:
                     node.inputs["EnvMap"].default_value = ""
                     node.inputs["EnvList"].default_value = ""
             shutil.rmtree(work, ignore_errors=True)
+            for mat in mats:  # unmute: every material shows its own first lookup again
+                mat.node_tree.nodes[SCRIPT_NODE_NAME].inputs["Atlas"].default_value = \
+                    list(mat["specgen_atlas_groups"])[0]
 
     def run(self, progress: Callable[[float], None] | None = None) -> np.ndarray:
         """Run all steps; returns the spectral stack (H, W, Λ)."""

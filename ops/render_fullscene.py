@@ -45,13 +45,19 @@ def _render_layer(scene: bpy.types.Scene) -> bpy.types.ViewLayer:
 
 
 def _read_combined(path: Path) -> np.ndarray:
-    """RGBA (H, W, 4) float32 of an EXR written by ``save_render``, row 0 on top."""
-    import OpenEXR
+    """RGBA (H, W, 4) float32 of an EXR written by ``save_render``, row 0 on top (OpenEXR, or
+    Blender's bundled OpenImageIO in a stock Blender)."""
+    from ..specgen_addon.image_io import read_exr
 
-    with OpenEXR.File(str(path), separate_channels=True) as exr:
-        ch = exr.parts[0].channels
-        return np.stack([np.asarray(ch[c].pixels, np.float32) if c in ch else
-                         np.ones_like(np.asarray(ch["R"].pixels, np.float32)) for c in "RGBA"], -1)
+    ch, _ = read_exr(path)
+    names = sorted(ch)
+
+    def pick(c: str):
+        return next((ch[n] for n in names if n == c or n.endswith("." + c)), None)
+
+    rgb = [pick(c) for c in "RGB"]
+    alpha = pick("A")
+    return np.stack(rgb + [np.ones_like(rgb[0]) if alpha is None else alpha], -1)
 
 
 class _RenderSettings:

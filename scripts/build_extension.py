@@ -22,6 +22,7 @@ import zipfile
 from pathlib import Path
 
 REPO = Path(__file__).resolve().parents[1]
+SIZE_LIMIT_BYTES = 60 * 2**20  # per platform (docs/blender.md)
 
 
 def _manifest() -> tuple[str, dict]:
@@ -106,7 +107,12 @@ def main(argv: list[str] | None = None) -> int:
     out = args.out or REPO / "dist" / f"{manifest['id']}-{manifest['version']}.zip"
     if args.fetch_wheels and not args.no_wheels:
         fetch_wheels(list(manifest.get("wheels", [])))
-    print(build(out, with_wheels=not args.no_wheels))
+    zip_path = build(out, with_wheels=not args.no_wheels)
+    size = zip_path.stat().st_size
+    print(f"{zip_path} ({size / 2**20:.1f} MiB = {size:,} bytes)")
+    if size > SIZE_LIMIT_BYTES:
+        print(f"warning: the zip is above the {SIZE_LIMIT_BYTES / 2**20:.0f} MiB per-platform budget",
+              file=sys.stderr)
     return 0
 
 

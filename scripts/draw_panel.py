@@ -84,6 +84,9 @@ class RecordingLayout:
     def separator(self, **_):
         self.rows.append(Row("heading", ""))
 
+    def template_icon(self, icon_value: int = 0, scale: float = 1.0, **_):
+        self.rows.append(Row("icon", "", str(icon_value)))
+
 
 def record_panel(context) -> list[Row]:
     """Run ``SPECGEN_PT_main.draw`` against a recording layout; the add-on must be registered."""
@@ -137,6 +140,8 @@ def paint(rows: list[Row], path: Path, title: str = "SpecGen") -> Path:
         elif row.kind == "progress":
             ax.add_patch(FancyBboxPatch((0.5, y + 0.05), 8.9, 0.6, boxstyle="round,pad=0.03", fc="#4772b3", ec="none"))
             ax.text(4.95, y + 0.35, row.label, color="#ffffff", fontsize=8, ha="center", va="center")
+        elif row.kind == "icon":  # an image preview (input thumbnail, preview sphere)
+            ax.add_patch(FancyBboxPatch((4.5, y + 0.05), 1.2, 0.6, boxstyle="round,pad=0.03", fc="#222222", ec="#6a6a6a"))
         else:
             ax.text(0.6, y + 0.35, "i  " + row.label, color="#cfcfcf", fontsize=8, va="center")
     path.parent.mkdir(parents=True, exist_ok=True)

@@ -51,20 +51,11 @@ ENV_LIST_WIDTH = 256
 
 def _write_exr(path: Path, channels: dict[str, np.ndarray], overwrite: bool = True,
                attributes: dict[str, str] | None = None, tiled: bool = False) -> Path:
-    import OpenEXR
+    # tiled: OIIO's texture cache reads tiles directly instead of re-tiling scanlines
+    from .image_io import write_exr
 
-    header = {"compression": OpenEXR.ZIP_COMPRESSION, "type": OpenEXR.scanlineimage}
-    if tiled:  # OIIO's texture cache reads tiles directly instead of re-tiling scanlines
-        tiles = OpenEXR.TileDescription()
-        tiles.xSize = tiles.ySize = 64
-        tiles.mode = OpenEXR.ONE_LEVEL
-        header.update(type=OpenEXR.tiledimage, tiles=tiles, compression=OpenEXR.NO_COMPRESSION)
-    header.update(attributes or {})
-    with atomic_write(path, overwrite=overwrite) as tmp:
-        with OpenEXR.File(header, {k: np.ascontiguousarray(v, dtype=np.float32)
-                                   for k, v in channels.items()}) as exr:
-            exr.write(str(tmp))
-    return Path(path)
+    return write_exr(path, channels, overwrite=overwrite, attributes=attributes, tiled=tiled,
+                     compression="none" if tiled else "zip")
 
 
 def group_path(base: Path, group: int) -> Path:
@@ -275,13 +266,12 @@ def atlas_lookup_reference(atlas: np.ndarray, info: AtlasInfo, theta_h: np.ndarr
 
 def read_atlas(info: AtlasInfo) -> np.ndarray:
     """All slot planes stacked (H, W, 4 × groups) (for tests and checks)."""
-    import OpenEXR
+    from .image_io import read_exr
 
     planes = []
     for p in info.group_paths:
-        with OpenEXR.File(str(p), separate_channels=True) as exr:
-            ch = exr.parts[0].channels
-            planes += [np.asarray(ch[c].pixels) for c in "RGBA"]
+        ch, _ = read_exr(p)
+        planes += [ch[c] for c in "RGBA"]
     return np.stack(planes, axis=-1)
 
 
@@ -443,14 +433,17 @@ def generate_lookup(image, out_dir: str | os.PathLike, wavelengths_nm: np.ndarra
                     backend: str | None = None, name: str = "brdf",
                     progress: Callable[[float], None] | None = None,
                     cancel: Callable[[], bool] | None = None, overwrite: bool = True,
-                    lighting=None, refine: bool = True) -> AtlasInfo:
-    """Image of a sphere → spectral BRDF table (``<name>.npz``), refined against the photo under
-    ``lighting`` unless ``refine`` is False → coefficient atlas + JSON.
+                    lighting=None, refine: bool = True, save_table: bool = False,
+                    preview: bool = False) -> AtlasInfo:
+    """Image of a sphere → spectral BRDF table, refined against the photo under ``lighting``
+    unless ``refine`` is False → coefficient atlas + JSON (``<name>_lookup.*``).
 
     Runs without bpy (the Generate operator calls it on a worker thread). Progress: 0–0.8 network
     and refinement (:func:`specgen_addon.pipeline.generate`), 0.8–1 bake. The refinement's report
-    is ``info.refinement``. Without ``overwrite`` existing outputs of ``name`` are refused up front;
-    whatever fails or is cancelled leaves nothing new in ``out_dir``.
+    is ``info.refinement``. ``save_table`` also exports the full table as ``<name>.npz`` (122 MB at
+    21 bands, so only on request); ``preview`` writes ``<name>_preview.png``
+    (:mod:`specgen_addon.preview`). Without ``overwrite`` existing outputs of ``name`` are refused
+    up front; whatever fails or is cancelled leaves nothing new in ``out_dir``.
     """
     from .interrupts import OutputGuard
     from .limits import check_output_dir, safe_name
@@ -466,11 +459,11 @@ def generate_lookup(image, out_dir: str | os.PathLike, wavelengths_nm: np.ndarra
     with OutputGuard([out]):  # failed, cancelled or interrupted: nothing new stays in out_dir
         out.mkdir(parents=True, exist_ok=True)
         return _generate_lookup(image, out, wavelengths_nm, weights, n_phi_d, tolerance, backend,
-                                name, progress, cancel, lighting, refine)
+                                name, progress, cancel, lighting, refine, save_table, preview)
 
 
 def _generate_lookup(image, out: Path, wavelengths_nm, weights, n_phi_d, tolerance, backend, name,
-                     progress, cancel, lighting, refine) -> AtlasInfo:
+                     progress, cancel, lighting, refine, save_table, preview) -> AtlasInfo:
     from .errors import WeightsError
     from .pipeline import generate
 
@@ -487,7 +480,12 @@ def _generate_lookup(image, out: Path, wavelengths_nm, weights, n_phi_d, toleran
             raise
         generated = generate(image, backend="torch", **kwargs)
     table = generated.table
-    table.save(out / f"{name}.npz", overwrite=True)
+    if save_table:
+        table.save(out / f"{name}.npz", overwrite=True)
+    if preview:
+        from .preview import write_preview
+
+        write_preview(table, out / f"{name}_preview.png")
     info = bake_atlas(table, out / f"{name}_lookup.exr", n_phi_d=n_phi_d, tolerance=tolerance,
                       progress=sub(0.8, 1.0), cancel=cancel)
     save_atlas_info(info, out / f"{name}_lookup.json")

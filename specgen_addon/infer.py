@@ -22,8 +22,8 @@ from .table import GRID_SHAPE, N_THETA_D, N_THETA_H, BRDFTable
 
 BACKENDS = ("torch", "onnx")
 #: θd rows per block: 10 × 180 × Λ points (~38 k at 21 bands) keep torch's temporaries
-#: cache-sized; onnxruntime has more overhead per call and prefers larger blocks.
-BLOCK_THETA_D = {"torch": 10, "onnx": 30}
+#: cache-sized; the channels-first ONNX head (32 × points temporaries) fits best at 5.
+BLOCK_THETA_D = {"torch": 10, "onnx": 5}
 
 ProgressFn = Callable[[float], None]
 CancelFn = Callable[[], bool]
@@ -118,8 +118,11 @@ class _TorchBackend:
         with self.torch.no_grad():
             return self.head.forward_inplace(*blocks)
 
-    def slice(self, t, sl0, sl1=None):
-        return t[sl0] if sl1 is None else t[sl0, sl1]
+    def prepare(self, tables):
+        return tables
+
+    def block(self, tables, i: int, j: int, nd: int):
+        return table_block(tables, i, j, nd)
 
 
 class _OnnxBackend:
@@ -153,13 +156,55 @@ class _OnnxBackend:
     def make_tables(self, x: np.ndarray, u_lambda: np.ndarray) -> tuple[np.ndarray, ...]:
         return tuple(self.tables.run(None, {"image": x, "u_lambda": u_lambda}))
 
+    @property
+    def channels_first(self) -> bool:
+        """Whether the head graph is the channels-first export (12 inputs) or the plain one (6)."""
+        return len(self.head.get_inputs()) == 12
+
+    def prepare(self, tables):
+        return channels_first_tables(tables) if self.channels_first else tables
+
+    def block(self, tables, i: int, j: int, nd: int):
+        return channels_first_block(tables, i, j, nd) if self.channels_first else table_block(tables, i, j, nd)
+
     def run_head(self, blocks) -> np.ndarray:
+        if self.channels_first:
+            names = CHANNELS_FIRST_INPUTS
+            r = self.head.run(None, {n: np.ascontiguousarray(b) for n, b in zip(names, blocks)})[0]
+            return r.transpose(1, 2, 3, 0)                    # (Λ, nh, nd, φd) -> (nh, nd, φd, Λ)
         names = ("t1", "t2", "t3", "t4", "t5", "t6")
         feeds = {n: np.ascontiguousarray(b) for n, b in zip(names, blocks)}
         return self.head.run(None, feeds)[0]
 
-    def slice(self, t, sl0, sl1=None):
-        return t[sl0] if sl1 is None else t[sl0, sl1]
+
+CHANNELS_FIRST_INPUTS = ("s1", "s2", "s3", "s4", "s5", "s6", "f1", "f2", "f3", "f4", "f5", "f6")
+
+
+def table_block(tables, i: int, j: int, nd: int) -> tuple:
+    """Rows of the six grid tables for θh row ``i`` and θd rows ``j … j+nd`` (:class:`GridHead` inputs)."""
+    t1, t2, t3, t4, t5, t6 = tables
+    si, sj = slice(i, i + 1), slice(j, j + nd)
+    return t1[si, sj], t2[si], t3[sj], t4[si], t5[sj], t6
+
+
+def channels_first_tables(tables) -> tuple[np.ndarray, ...]:
+    """The six grid tables (…, C+1) arranged once for the channels-first head
+    (:class:`~specgen_addon.model.fast.GridHeadChannelsFirst`): statistic rows ``s_k``
+    (Λ|1, 90|1, 90|1, 180|1) and feature rows ``f_k`` (C, Λ|1, 90|1, 90|1, 180|1)."""
+    t1, t2, t3, t4, t5, t6 = (np.asarray(t, dtype=np.float32) for t in tables)
+    cf = (t1.transpose(2, 0, 1)[:, None, :, :, None], t2.transpose(2, 0, 1)[:, None, :, None, :],
+          t3.transpose(2, 0, 1)[:, None, None, :, :], t4.transpose(2, 1, 0)[:, :, :, None, None],
+          t5.transpose(2, 1, 0)[:, :, None, :, None], t6.transpose(2, 1, 0)[:, :, None, None, :])
+    return tuple(np.ascontiguousarray(a[-1]) for a in cf) + tuple(np.ascontiguousarray(a[:-1]) for a in cf)
+
+
+def channels_first_block(arranged, i: int, j: int, nd: int) -> tuple[np.ndarray, ...]:
+    """:func:`channels_first_tables` cut to θh row ``i`` and θd rows ``j … j+nd`` (axes −3, −2)."""
+    def cut(a: np.ndarray) -> np.ndarray:
+        return a[..., slice(i, i + 1) if a.shape[-3] > 1 else slice(None),
+                 slice(j, j + nd) if a.shape[-2] > 1 else slice(None), :]
+
+    return tuple(cut(a) for a in arranged)
 
 
 def get_backend(weights=None, backend: str = "torch"):
@@ -234,7 +279,7 @@ def generate_brdf(image, weights=None, wavelengths_nm=None, backend: str = "torc
 def evaluate_grid(be, tables, n_lambda: int, progress: ProgressFn | None = None,
                   cancel: CancelFn | None = None, workers: int = 2) -> np.ndarray:
     """r' (μ-law) on the full grid ``(90, 90, 180, Λ)``, block by block on ``workers`` threads."""
-    t1, t2, t3, t4, t5, t6 = tables
+    prepared = be.prepare(tables)
     out = np.empty(GRID_SHAPE + (n_lambda,), dtype=np.float32)
     nd = BLOCK_THETA_D["torch" if isinstance(be, _TorchBackend) else "onnx"]
     blocks = [(i, j) for i in range(N_THETA_H) for j in range(0, N_THETA_D, nd)]
@@ -246,9 +291,8 @@ def evaluate_grid(be, tables, n_lambda: int, progress: ProgressFn | None = None,
         if stop.is_set():
             return
         i, j = ij
-        si, sj = slice(i, i + 1), slice(j, j + nd)
-        r = be.run_head((t1[si, sj], t2[si], t3[sj], t4[si], t5[sj], t6))
-        out[si, sj] = np.asarray(r)
+        r = be.run_head(be.block(prepared, i, j, nd))
+        out[i:i + 1, j:j + nd] = np.asarray(r)
         with lock:
             done[0] += 1
 

@@ -175,27 +175,29 @@ def read_image(path: str | Path) -> np.ndarray:
     if not path.is_file():
         raise ImageInputError(f"{path}: {'is a folder, not an image file' if path.is_dir() else 'no such image file'}")
     image_checks.check_image_header(path)  # pixel limit, before any decoding
+    from .image_io import ImageIOError, read_exr, read_ldr
+
     if path.suffix.lower() == ".exr":
-        import OpenEXR
-
         try:
-            with OpenEXR.File(str(path)) as f:
-                channels = f.channels()
-                if len(channels) == 1 and next(iter(channels)) in ("RGB", "RGBA"):
-                    arr = np.asarray(next(iter(channels.values())).pixels, np.float32)
-                else:
-                    names = [n for n in ("R", "G", "B", "A") if n in channels]
-                    if names[:3] != ["R", "G", "B"]:
-                        raise ImageInputError(f"{path}: EXR needs R, G, B channels, has "
-                                              f"{', '.join(sorted(channels))} ({len(channels)} channels)")
-                    arr = np.stack([np.asarray(channels[n].pixels, np.float32) for n in names], -1)
-                return image_checks.clean_exr_pixels(image_checks.downsample_linear(arr), path)
-        except ImageInputError:
-            raise
-        except Exception as exc:
-            raise ImageInputError(f"{path}: cannot read EXR ({exc})") from exc
-    from PIL import Image, UnidentifiedImageError
-
+            channels, _ = read_exr(path)  # OpenEXR, or Blender's bundled OpenImageIO
+        except ImageIOError as exc:
+            raise ImageInputError(f"{path}: cannot read EXR ({exc})") from None
+        names = [n for n in ("R", "G", "B", "A") if n in channels]
+        if names[:3] != ["R", "G", "B"]:
+            raise ImageInputError(f"{path}: EXR needs R, G, B channels, has "
+                                  f"{', '.join(sorted(channels))} ({len(channels)} channels)")
+        arr = np.stack([np.asarray(channels[n], np.float32) for n in names], -1)
+        return image_checks.clean_exr_pixels(image_checks.downsample_linear(arr), path)
+    try:
+        from PIL import Image, UnidentifiedImageError
+    except ImportError:  # a stock Blender: its bundled OpenImageIO decodes the file
+        try:
+            arr = read_ldr(path)
+        except ImageIOError as exc:
+            raise ImageInputError(str(exc)) from None
+        if arr.shape[-1] in (3, 4):
+            arr[..., :3] = spectra.srgb_decode(arr[..., :3]).astype(np.float32)
+        return image_checks.downsample_linear(arr)
     try:
         with Image.open(path) as im:  # header only: the limit is checked before decoding
             return image_checks.pil_to_linear(im, path)
@@ -272,13 +274,34 @@ def prepare_sphere_array(arr: np.ndarray, size: int = CANONICAL_SIZE) -> np.ndar
     return _resample_circle(rgb, cx, cy, r, size)
 
 
+def _ndimage():
+    """scipy.ndimage, or its numpy twin (:mod:`specgen_addon.ndimage_np`) in a stock Blender."""
+    try:
+        from scipy import ndimage
+    except ImportError:
+        from . import ndimage_np as ndimage
+    return ndimage
+
+
+def _ransac_circle(pts: np.ndarray, residual_threshold: float, max_trials: int):
+    """skimage's RANSAC circle fit, or its numpy twin in a stock Blender: (model, inliers)."""
+    try:
+        from skimage.measure import CircleModel, ransac
+    except ImportError:
+        from .ndimage_np import ransac_circle
+
+        return ransac_circle(pts, residual_threshold=residual_threshold, max_trials=max_trials)
+    return ransac(pts, CircleModel, min_samples=3, residual_threshold=residual_threshold,
+                  max_trials=max_trials, rng=0)
+
+
 def _foreground(rgb: np.ndarray, noise_floor: float = 0.0) -> np.ndarray:
     """Pixels that differ from the background, whose colour is the median of the image border.
 
     ``noise_floor`` (a fraction of the bright end of the luminance) treats darker pixels of a
     black background as background, e.g. compression noise of a JPEG.
     """
-    from scipy import ndimage
+    ndimage = _ndimage()
 
     lum = rgb @ np.array([0.2126, 0.7152, 0.0722])
     if not np.percentile(lum, 99.5) > 0:
@@ -308,7 +331,7 @@ def _foreground(rgb: np.ndarray, noise_floor: float = 0.0) -> np.ndarray:
 
 def _circle_of_mask(mask: np.ndarray, fit_outline: bool) -> tuple[float, float, float]:
     """(cx, cy, r) in pixel units (pixel centres at integer + 0.5) of the sphere in ``mask``."""
-    from scipy import ndimage
+    ndimage = _ndimage()
 
     area = float(mask.sum())
     ys, xs = np.nonzero(mask)
@@ -316,8 +339,6 @@ def _circle_of_mask(mask: np.ndarray, fit_outline: bool) -> tuple[float, float, 
         raise ImageInputError("no sphere found (foreground too small)")
     cx, cy, r = xs.mean() + 0.5, ys.mean() + 0.5, np.sqrt(area / np.pi)
     if fit_outline:
-        from skimage.measure import CircleModel, ransac
-
         edge = mask & ~ndimage.binary_erosion(mask)
         ey, ex = np.nonzero(edge)
         pts = np.stack([ex + 0.5, ey + 0.5], -1).astype(np.float64)
@@ -325,8 +346,7 @@ def _circle_of_mask(mask: np.ndarray, fit_outline: bool) -> tuple[float, float, 
         if len(pts) >= 10:
             with warnings.catch_warnings():  # degenerate triples (collinear edge points) warn
                 warnings.simplefilter("ignore")
-                model, inliers = ransac(pts, CircleModel, min_samples=3, residual_threshold=1.5,
-                                        max_trials=200, rng=0)
+                model, inliers = _ransac_circle(pts, residual_threshold=1.5, max_trials=200)
         if model is None or inliers is None or inliers.mean() <= 0.5:
             raise ImageInputError("no sphere found (the foreground's outline is not a circle; "
                                   "give the image an alpha channel masking the sphere)")
@@ -351,7 +371,7 @@ def _circle_of_mask(mask: np.ndarray, fit_outline: bool) -> tuple[float, float, 
 def _resample_circle(rgb: np.ndarray, cx: float, cy: float, r: float, size: int) -> np.ndarray:
     """Bilinear resample of the square around the circle onto the canonical pixel grid (area
     pre-filter when shrinking), background outside the unit disc set to 0."""
-    from scipy import ndimage
+    ndimage = _ndimage()
 
     scale = 2.0 * r / size  # source pixels per output pixel
     src = rgb

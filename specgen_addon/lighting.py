@@ -1,8 +1,15 @@
 """Lighting assets: the CC0 HDR environment maps that ship inside the ``bpy`` wheel.
 
-Blender's studio-light worlds (``bpy/<version>/datafiles/studiolights/world/*.exr``, Poly Haven
-originals, CC0, 1024×512) are located at run time through ``importlib.util.find_spec("bpy")`` —
-``bpy`` is never imported and nothing is copied into the repository.
+Blender's studio-light worlds (``studiolights/world/*.exr`` under Blender's ``datafiles``, Poly
+Haven originals, CC0, 1024×512) are located at run time, never copied into the repository:
+
+1. through Blender's own API, ``bpy.utils.system_resource('DATAFILES', path='studiolights/world')``,
+   right in an installed Blender and in the bpy module alike — but only when ``bpy`` is already
+   imported (this core never imports it);
+2. else in the bpy *wheel*'s layout (``bpy/<version>/datafiles/...``), found with
+   ``importlib.util.find_spec("bpy")`` without importing it.
+
+Both steps are injectable (:func:`studiolights_dir` takes a resolver), so each layout is testable.
 
 Split, after the paper's robustness table (one training indoor map, one held-out indoor map, one
 held-out outdoor map): :data:`TRAIN_ENVS` light the training inputs (with rotations and exposures as
@@ -13,7 +20,9 @@ from __future__ import annotations
 
 import functools
 import importlib.util
+import sys
 from pathlib import Path
+from typing import Callable
 
 from .errors import SpecGenError
 from .render.environment import Environment
@@ -29,18 +38,41 @@ class LightingAssetError(SpecGenError):
     """The environment maps of the bpy wheel cannot be found."""
 
 
-def studiolights_dir() -> Path:
-    """Directory holding Blender's studio-light world EXRs (located without importing bpy)."""
+def blender_datafiles_dir() -> Path | None:
+    """``studiolights/world`` from Blender's API when ``bpy`` is already imported, else None."""
+    bpy = sys.modules.get("bpy")
+    utils = getattr(bpy, "utils", None)
+    if utils is None or not hasattr(utils, "system_resource"):
+        return None
+    found = utils.system_resource("DATAFILES", path=_RELATIVE.relative_to("datafiles").as_posix())
+    return Path(found) if found else None
+
+
+def wheel_datafiles_dir() -> Path | None:
+    """``datafiles/studiolights/world`` in the bpy wheel's layout (``bpy/<version>/...``), found
+    without importing bpy; None when the wheel is not installed or has no such folder."""
     spec = importlib.util.find_spec("bpy")
     if spec is None or not spec.submodule_search_locations:
-        raise LightingAssetError("environment maps come from the bpy wheel, which is not installed "
-                                 "(pip install bpy==5.0.1)")
+        return None
     for root in spec.submodule_search_locations:
         for candidate in sorted(Path(root).glob(f"*/{_RELATIVE.as_posix()}"), reverse=True):
             if candidate.is_dir():
                 return candidate
-    raise LightingAssetError(f"bpy is installed but has no {_RELATIVE.as_posix()} directory "
-                             f"under {list(spec.submodule_search_locations)}")
+    return None
+
+
+def studiolights_dir(resolvers: tuple[Callable[[], Path | None], ...] | None = None) -> Path:
+    """Directory holding Blender's studio-light world EXRs.
+
+    ``resolvers`` are tried in order (default: :func:`blender_datafiles_dir`, then
+    :func:`wheel_datafiles_dir`); the first existing directory wins.
+    """
+    for resolve in resolvers or (blender_datafiles_dir, wheel_datafiles_dir):
+        found = resolve()
+        if found is not None and Path(found).is_dir():
+            return Path(found)
+    raise LightingAssetError("Blender's studio-light environment maps were not found (run inside "
+                             "Blender, or install the bpy wheel: pip install bpy==5.0.1)")
 
 
 def available_envs() -> list[str]:

@@ -1,7 +1,9 @@
 """Spectral maths: wavelength grids, CIE 1931 CMFs, illuminants, spectrum → XYZ → linear sRGB.
 
 Everything colorimetric comes from colour-science (``colour.MSDS_CMFS``, ``colour.SDS_ILLUMINANTS``,
-``colour.RGB_COLOURSPACES['sRGB']``, ``colour.cctf_encoding``); nothing is hand-typed.
+``colour.RGB_COLOURSPACES['sRGB']``, Bradford adaptation) through the tables it generates at build
+time (:mod:`specgen_addon.colour_tables`), so this module runs with numpy alone (inside a stock
+Blender); nothing is hand-typed. Tests check it against colour-science itself.
 
 Conventions (used by the renderer, the corpus and the Blender side alike):
 
@@ -18,6 +20,7 @@ import functools
 
 import numpy as np
 
+from . import colour_tables
 from .errors import SpecGenError
 
 #: Range the spectral machinery accepts (the RGL spectral measurements span 360–1000 nm).
@@ -59,12 +62,10 @@ def band_widths(wavelengths_nm: np.ndarray) -> np.ndarray:
 
 @functools.lru_cache(maxsize=32)
 def _cmfs_cached(key: tuple[float, ...]) -> np.ndarray:
-    import colour
-
-    cmfs = colour.MSDS_CMFS[CMFS_NAME]
+    t = colour_tables.tables()
     w = np.asarray(key)
     # CMFs are zero outside their tabulated 360–830 nm support.
-    out = np.stack([np.interp(w, cmfs.wavelengths, cmfs.values[:, c], left=0.0, right=0.0)
+    out = np.stack([np.interp(w, t["cmfs_wavelengths_nm"], t["cmfs_values"][:, c], left=0.0, right=0.0)
                     for c in range(3)], axis=-1)
     return out
 
@@ -76,14 +77,9 @@ def cmfs(wavelengths_nm: np.ndarray) -> np.ndarray:
 
 @functools.lru_cache(maxsize=64)
 def _illuminant_cached(name: str, key: tuple[float, ...]) -> np.ndarray:
-    import colour
-
-    if name not in colour.SDS_ILLUMINANTS:
-        raise SpecGenError(f"unknown illuminant {name!r}; known: "
-                           f"{', '.join(sorted(colour.SDS_ILLUMINANTS)[:12])}, ...")
-    sd = colour.SDS_ILLUMINANTS[name]
+    sd_wavelengths, sd_values = colour_tables.illuminant(name)
     w = np.asarray(key)
-    spd = np.interp(w, sd.wavelengths, sd.values)
+    spd = np.interp(w, sd_wavelengths, sd_values)
     ybar = _cmfs_cached(key)[:, 1]
     dl = band_widths(w)
     norm = np.sum(spd * ybar * dl) / np.sum(ybar * dl)
@@ -115,9 +111,7 @@ def spectral_to_xyz(values: np.ndarray, wavelengths_nm: np.ndarray) -> np.ndarra
 
 @functools.lru_cache(maxsize=1)
 def _xyz_to_srgb_matrix() -> np.ndarray:
-    import colour
-
-    return np.asarray(colour.RGB_COLOURSPACES["sRGB"].matrix_XYZ_to_RGB, dtype=np.float64)
+    return colour_tables.tables()["srgb_xyz_to_rgb"].copy()
 
 
 def xyz_to_linear_srgb(xyz: np.ndarray) -> np.ndarray:
@@ -127,13 +121,10 @@ def xyz_to_linear_srgb(xyz: np.ndarray) -> np.ndarray:
 
 @functools.lru_cache(maxsize=64)
 def _white_balance_cached(name: str, key: tuple[float, ...]) -> np.ndarray:
-    import colour
-
     w = np.asarray(key)
     white_grid = spectral_to_xyz(illuminant_spd(name, w), w)
-    white_srgb = colour.xy_to_XYZ(colour.RGB_COLOURSPACES["sRGB"].whitepoint)
-    return np.asarray(colour.adaptation.matrix_chromatic_adaptation_VonKries(
-        white_grid / white_grid[1], white_srgb, transform="Bradford"), dtype=np.float64)
+    return colour_tables.von_kries_bradford(white_grid / white_grid[1],
+                                            colour_tables.tables()["srgb_white_xyz"])
 
 
 def white_balance_matrix(wavelengths_nm: np.ndarray, illuminant: str = DEFAULT_ILLUMINANT) -> np.ndarray:
@@ -168,15 +159,20 @@ def reflectance_to_linear_srgb(reflectance: np.ndarray, wavelengths_nm: np.ndarr
                                    wavelengths_nm, white=illuminant)
 
 
-def srgb_encode(linear: np.ndarray) -> np.ndarray:
-    """Linear → non-linear sRGB (IEC 61966-2-1 transfer function), via colour-science."""
-    import colour
+def _spow(x: np.ndarray, p: float) -> np.ndarray:
+    """Sign-preserving power (colour-science's ``spow``): negative values stay negative."""
+    return np.sign(x) * np.abs(x) ** p
 
-    return colour.cctf_encoding(np.asarray(linear), function="sRGB")
+
+def srgb_encode(linear: np.ndarray) -> np.ndarray:
+    """Linear → non-linear sRGB, IEC 61966-2-1:1999 inverse EOTF (colour-science's
+    ``eotf_inverse_sRGB``, checked equal in the tests)."""
+    x = np.asarray(linear, dtype=np.float64)
+    return np.where(x <= 0.0031308, x * 12.92, 1.055 * _spow(x, 1 / 2.4) - 0.055)
 
 
 def srgb_decode(encoded: np.ndarray) -> np.ndarray:
-    """Non-linear sRGB → linear (inverse of :func:`srgb_encode`), via colour-science."""
-    import colour
-
-    return colour.cctf_decoding(np.asarray(encoded), function="sRGB")
+    """Non-linear sRGB → linear, IEC 61966-2-1:1999 EOTF (inverse of :func:`srgb_encode`;
+    colour-science's ``eotf_sRGB``, checked equal in the tests)."""
+    v = np.asarray(encoded, dtype=np.float64)
+    return np.where(v <= 0.0031308 * 12.92, v / 12.92, _spow((v + 0.055) / 1.055, 2.4))

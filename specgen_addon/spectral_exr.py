@@ -7,7 +7,8 @@ float channel per wavelength, named ``S0.<λ>nm`` with a comma as decimal separa
 integrating the spectrum against the CIE 1931 2° CMFs) sits beside the spectral channels so that
 ordinary viewers show a picture.
 
-Pure Python + the ``OpenEXR`` package; no ``bpy``. Writes are atomic
+numpy + :mod:`specgen_addon.image_io` (the ``OpenEXR`` package, or Blender's bundled OpenImageIO
+when it is absent); no ``bpy``. Writes are atomic
 (:func:`specgen_addon.io_utils.atomic_write`) and never overwrite unless asked.
 """
 
@@ -21,7 +22,6 @@ from pathlib import Path
 import numpy as np
 
 from .errors import SpecGenError
-from .io_utils import atomic_write
 
 SPECTRAL_LAYOUT_VERSION = "1.0"
 EMISSIVE_UNITS = "W.m^-2.sr^-1"
@@ -92,7 +92,7 @@ def write_spectral_exr(path: str | os.PathLike, values: np.ndarray, wavelengths_
     Path
         The written file.
     """
-    import OpenEXR
+    from .image_io import write_exr
 
     values = np.asarray(values, dtype=np.float32)
     wavelengths = np.asarray(wavelengths_nm, dtype=np.float64).reshape(-1)
@@ -115,18 +115,10 @@ def write_spectral_exr(path: str | os.PathLike, values: np.ndarray, wavelengths_
         if np.shape(alpha) != values.shape[:2]:
             raise SpectralEXRError(f"{path}: alpha must be {values.shape[:2]}, got {np.shape(alpha)}")
         channels["A"] = np.ascontiguousarray(alpha, dtype=np.float32)
-    header = {
-        "compression": OpenEXR.ZIP_COMPRESSION,
-        "type": OpenEXR.scanlineimage,
-        "spectralLayoutVersion": SPECTRAL_LAYOUT_VERSION,
-        "emissiveUnits": EMISSIVE_UNITS,
-    }
+    header = {"spectralLayoutVersion": SPECTRAL_LAYOUT_VERSION, "emissiveUnits": EMISSIVE_UNITS}
     for key, value in (attributes or {}).items():
         header[str(key)] = str(value)
-    with atomic_write(path, overwrite=overwrite) as tmp:
-        with OpenEXR.File(header, channels) as exr:
-            exr.write(str(tmp))
-    return Path(path)
+    return write_exr(path, channels, overwrite=overwrite, attributes=header)
 
 
 def read_spectral_exr(path: str | os.PathLike) -> SpectralImage:
@@ -135,18 +127,15 @@ def read_spectral_exr(path: str | os.PathLike) -> SpectralImage:
     Raises :class:`SpectralEXRError` when the file is missing, unreadable, has no ``S0.<λ>nm``
     channel, or lacks the ``spectralLayoutVersion`` attribute.
     """
-    import OpenEXR
+    from .image_io import ImageIOError, read_exr
 
     path = Path(path)
     if not path.is_file():
         raise SpectralEXRError(f"{path}: no such file")
     try:
-        with OpenEXR.File(str(path), separate_channels=True) as exr:
-            part = exr.parts[0]
-            header = {k: v for k, v in part.header.items() if isinstance(v, str)}
-            raw = {name: np.asarray(ch.pixels, dtype=np.float32) for name, ch in part.channels.items()}
-    except Exception as exc:  # OpenEXR raises plain RuntimeError/ValueError on corrupt files
-        raise SpectralEXRError(f"{path}: not a readable OpenEXR file ({exc})") from exc
+        raw, header = read_exr(path)
+    except ImageIOError as exc:
+        raise SpectralEXRError(str(exc)) from None
     if "spectralLayoutVersion" not in header:
         raise SpectralEXRError(f"{path}: missing spectralLayoutVersion attribute (not a spectral EXR)")
     bands = sorted((w, name) for name in raw if (w := parse_channel_name(name)) is not None)
@@ -161,12 +150,9 @@ def read_spectral_exr(path: str | os.PathLike) -> SpectralImage:
 def write_preview_png(path: str | os.PathLike, rgb_linear: np.ndarray, overwrite: bool = False,
                       exposure: float = 1.0) -> Path:
     """Write a linear-sRGB image (H, W, 3) as an 8-bit sRGB-encoded PNG, atomically."""
-    from PIL import Image
-
+    from .image_io import write_png8
     from .spectra import srgb_encode
 
     encoded = srgb_encode(np.clip(np.asarray(rgb_linear, dtype=np.float64) * exposure, 0.0, 1.0))
     pixels = np.round(np.clip(encoded, 0.0, 1.0) * 255.0).astype(np.uint8)
-    with atomic_write(path, overwrite=overwrite) as tmp:
-        Image.fromarray(pixels).save(tmp, format="PNG")
-    return Path(path)
+    return write_png8(path, pixels, overwrite=overwrite)

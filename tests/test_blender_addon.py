@@ -311,7 +311,7 @@ def test_panel_draws_every_setting_and_the_three_buttons():
         PKG.unregister()
     props = {r.name for r in rows if r.kind in ("prop", "template")}
     assert {"image", "image_path", "weights_path", "wl_min", "wl_max", "bands", "lookup_resolution",
-            "render_mode", "output_dir", "overwrite"} <= props
+            "render_mode", "output_dir", "overwrite", "export_table", "material"} <= props
     assert "samples" not in props                            # full-scene: the scene's own settings
     assert {"samples", "resolution", "env_samples"} <= {r.name for r in exact_rows if r.kind == "prop"}
     buttons = [r.name for r in rows if r.kind == "operator"]

@@ -217,4 +217,4 @@ def test_lighting_lists_name_real_maps_and_keep_held_out_maps_apart():
 def test_lighting_reports_missing_bpy_wheel(monkeypatch):
     monkeypatch.setattr(lighting.importlib.util, "find_spec", lambda name: None)
     with pytest.raises(lighting.LightingAssetError, match="bpy wheel"):
-        lighting.studiolights_dir()
+        lighting.studiolights_dir((lighting.wheel_datafiles_dir,))

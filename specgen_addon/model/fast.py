@@ -165,3 +165,42 @@ def _piecewise_logits(fusion) -> tuple[torch.Tensor, torch.Tensor, torch.Tensor,
     _, bias = fusion.gap_functionals()
     return kinks.float(), p_seg.float(), q_seg.float(), bias.detach()
 
+
+class GridHeadChannelsFirst(GridHead):
+    """:class:`GridHead` rearranged for onnxruntime: the same operations (same output to float
+    rounding) in a channels-first layout ``(C, Λ, nh, nd, 180)``.
+
+    In the table layout ``(…, C)`` every broadcast product ``w_k · f_k`` runs over spans of C = 32
+    values, and onnxruntime's elementwise kernels pay their per-span overhead ~1 M times per block.
+    With the channels outermost and φd innermost, every operand broadcasts over spans of ≥ 180
+    contiguous values (or is a scalar per span), and the three linear layers become plain matrix
+    products ``W (out, C) @ h (C, points)``.
+
+    Inputs are the blocks of :func:`specgen_addon.infer.channels_first_tables` (arranged once per
+    grid, not per block): the AFF statistic rows ``s1 … s6`` (Λ|1, nh|1, nd|1, 180|1) and the
+    feature rows ``f1 … f6`` (C, Λ|1, nh|1, nd|1, 180|1). Output: r' (Λ, nh, nd, 180). AFF only.
+    """
+
+    def forward(self, s1, s2, s3, s4, s5, s6, f1, f2, f3, f4, f5, f6) -> torch.Tensor:
+        fusion, mapping = self.model.fusion, self.model.mapping
+        _, bias = fusion.gap_functionals()
+        s = s1 + s2 + s3 + s4 + s5 + s6 + bias                                     # (Λ, nh, nd, φd)
+        shape = s.shape
+        s = s.reshape(1, -1)
+        z = torch.relu(fusion.expand.weight @ s + fusion.expand.bias[:, None])      # (d, P)
+        logits = fusion.heads.weight @ z + fusion.heads.bias[:, None]              # (6, P)
+        # softmax over the six rows with elementwise ops (a reduction over the leading axis is
+        # slow in onnxruntime)
+        top = logits[0]
+        for k in range(1, 6):
+            top = torch.maximum(top, logits[k])
+        e = torch.exp(logits - top)
+        total = e[0] + e[1] + e[2] + e[3] + e[4] + e[5]
+        w = (e / total).reshape((6, 1) + tuple(shape))                             # (6, 1, Λ, …)
+        f = (f1, f2, f3, f4, f5, f6)
+        h = mapping.fc1.bias[:, None, None, None, None] + w[0] * f[0]
+        for k in range(1, 6):
+            h = h + w[k] * f[k]
+        h = torch.relu(h).reshape(h.shape[0], -1)
+        h = torch.relu(mapping.fc2.weight @ h + mapping.fc2.bias[:, None])
+        return (mapping.fc3.weight @ h + mapping.fc3.bias[:, None]).reshape(shape)  # (Λ, nh, nd, φd)

@@ -41,9 +41,9 @@ def srgb_luminance_weights() -> np.ndarray:
     """(3,) weights giving CIE Y from linear sRGB (colour-science's sRGB matrix)."""
     global _SRGB_Y_WEIGHTS
     if _SRGB_Y_WEIGHTS is None:
-        import colour
+        from ..colour_tables import tables
 
-        _SRGB_Y_WEIGHTS = np.asarray(colour.RGB_COLOURSPACES["sRGB"].matrix_RGB_to_XYZ[1], float)
+        _SRGB_Y_WEIGHTS = np.asarray(tables()["srgb_rgb_to_xyz"][1], float)
     return _SRGB_Y_WEIGHTS
 
 
@@ -51,12 +51,13 @@ def srgb_luminance_weights() -> np.ndarray:
 def _uplift_basis_cached(method: str, key: tuple[float, ...]) -> np.ndarray:
     w = np.asarray(key)
     if method == MALLETT2019:
-        import colour
+        from ..colour_tables import tables
 
-        basis = colour.recovery.MSDS_BASIS_FUNCTIONS_sRGB_MALLETT2019
+        t = tables()  # colour-science's basis, precomputed (specgen_addon.colour_tables)
         # Outside the basis' 380–780 nm support the nearest value is held (a smooth continuation
         # of the flat reflectance that white uplifts to).
-        b = np.stack([np.interp(w, basis.wavelengths, basis.values[:, c]) for c in range(3)])
+        b = np.stack([np.interp(w, t["mallett2019_wavelengths_nm"], t["mallett2019_values"][:, c])
+                      for c in range(3)])
         return b * spectra.illuminant_spd("D65", w)[None, :]
     return srgb_luminance_weights()[:, None] * spectra.illuminant_spd(method, w)[None, :]
 
@@ -67,27 +68,20 @@ def uplift_basis(wavelengths_nm: np.ndarray, method: str = MALLETT2019) -> np.nd
 
 
 def read_exr_rgb(path: str | Path) -> np.ndarray:
-    """Read the R, G, B channels of an OpenEXR file as float32 (H, W, 3), row 0 on top."""
-    import OpenEXR
+    """Read the R, G, B channels of an OpenEXR file as float32 (H, W, 3), row 0 on top
+    (OpenEXR, or Blender's bundled OpenImageIO: :mod:`specgen_addon.image_io`)."""
+    from ..image_io import ImageIOError, read_exr
 
     path = Path(path)
     if not path.is_file():
         raise SpecGenError(f"{path}: environment map not found")
     try:
-        with OpenEXR.File(str(path)) as f:
-            channels = f.channels()
-            if "RGB" in channels or "RGBA" in channels:
-                px = channels.get("RGB", channels.get("RGBA")).pixels
-                rgb = np.asarray(px[..., :3], dtype=np.float32)
-            elif all(c in channels for c in "RGB"):
-                rgb = np.stack([np.asarray(channels[c].pixels, np.float32) for c in "RGB"], -1)
-            else:
-                raise SpecGenError(f"{path}: EXR has no R, G, B channels (has {sorted(channels)})")
-    except SpecGenError:
-        raise
-    except Exception as exc:  # OpenEXR raises plain exceptions for corrupt files
-        raise SpecGenError(f"{path}: cannot read EXR ({exc})") from exc
-    return rgb
+        channels, _ = read_exr(path)
+    except ImageIOError as exc:
+        raise SpecGenError(f"{path}: cannot read EXR ({exc})") from None
+    if not all(c in channels for c in "RGB"):
+        raise SpecGenError(f"{path}: EXR has no R, G, B channels (has {sorted(channels)})")
+    return np.stack([channels[c] for c in "RGB"], -1)
 
 
 def read_hdr_rgb(path: str | Path) -> np.ndarray:

@@ -1,0 +1,76 @@
+"""Names of the datablocks and files one SpecGen material owns (no bpy: testable anywhere).
+
+Each Generate makes one *set*, found from its stem ``<stem>`` (e.g. ``sphere``, ``sphere.001``):
+
+* material ``SpecGen <stem>`` (its OSL node reads the lookups; its custom properties hold the
+  spectral basis);
+* preview image ``SpecGen <stem> preview`` (the numpy-rendered sphere, :mod:`specgen_addon.preview`);
+* files in the output folder: ``<stem>_lookup.gNN.exr`` (lookups), ``<stem>_lookup.json`` (basis
+  and layout), ``<stem>_preview.png``, and ``<stem>.npz`` only when the table is exported.
+
+With *Overwrite* off a new Generate never reuses a stem that has a material or files; with it on,
+the stem of the input is reused and its set replaced.
+"""
+
+from __future__ import annotations
+
+import re
+from pathlib import Path
+from typing import Callable, Iterable
+
+PREFIX = "SpecGen"
+MAX_STEM = 48
+
+
+def clean_stem(raw: str) -> str:
+    """A file- and datablock-safe stem from an image or file name (``"my photo.png"`` → ``my_photo``)."""
+    stem = Path(raw).stem if "." in Path(raw).name else Path(raw).name
+    stem = re.sub(r"[^A-Za-z0-9_\-]+", "_", stem).strip("_")
+    return stem[:MAX_STEM] or "brdf"
+
+
+def material_name(stem: str) -> str:
+    return f"{PREFIX} {stem}"
+
+
+def preview_name(stem: str) -> str:
+    return f"{PREFIX} {stem} preview"
+
+
+def lookup_json(out_dir: str | Path, stem: str) -> Path:
+    return Path(out_dir) / f"{stem}_lookup.json"
+
+
+def preview_png(out_dir: str | Path, stem: str) -> Path:
+    return Path(out_dir) / f"{stem}_preview.png"
+
+
+def files_of(out_dir: str | Path, stem: str) -> list[Path]:
+    """Existing files of the set ``stem`` in ``out_dir``."""
+    out = Path(out_dir)
+    if not out.is_dir():
+        return []
+    return sorted(p for p in out.iterdir() if p.name.startswith(f"{stem}_lookup")
+                  or p.name in (f"{stem}_preview.png", f"{stem}.npz"))
+
+
+def unique_stem(base: str, taken: Callable[[str], bool]) -> str:
+    """``base`` if free, else ``base.001``, ``base.002`` … (Blender's own numbering)."""
+    if not taken(base):
+        return base
+    for i in range(1, 1000):
+        candidate = f"{base}.{i:03d}"
+        if not taken(candidate):
+            return candidate
+    raise RuntimeError(f"no free name for {base!r}")
+
+
+def stem_for_generate(source: str, out_dir: str | Path, overwrite: bool,
+                      material_names: Iterable[str]) -> str:
+    """The stem a Generate of ``source`` uses: the input's own with Overwrite on, else the first
+    whose material and files do not exist yet."""
+    base = clean_stem(source)
+    if overwrite:
+        return base
+    names = set(material_names)
+    return unique_stem(base, lambda s: material_name(s) in names or bool(files_of(out_dir, s)))
