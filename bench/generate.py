@@ -4,7 +4,7 @@ Usage: ``python bench/generate.py [IMAGE] [--bands 21] [--lookup 180] [--repeat 
 
 Registers the add-on as Blender does, then times ``bpy.ops.specgen.generate_brdf()`` (what the
 button runs: image → network → spectral basis → lookup textures, then the material and its
-preview) with the backend a stock Blender uses (onnxruntime), and :func:`ops.bake.generate_lookup`
+preview) with the backend a stock Blender uses (onnxruntime), and :func:`specgen_addon.bake.generate_lookup`
 alone (inference + bake, the issue's target of ≤ 5 s) for onnx and torch. Runs are interleaved
 so a busy machine slows all alike; the load average is printed with the machine, and the
 process CPU time (all threads) beside the wall time, which a shared machine inflates less.
@@ -39,7 +39,7 @@ def main() -> int:
     import batch
 
     pkg = batch.load_package()
-    bake = import_module(f"{pkg.__name__}.ops.bake")
+    bake = import_module(f"{pkg.__name__}.specgen_addon.bake")
     from specgen_addon.spectra import wavelength_grid
 
     wl = wavelength_grid(380.0, 780.0, args.bands)
@@ -49,8 +49,8 @@ def main() -> int:
     s = bpy.context.scene.specgen
     s.image_path, s.output_dir, s.bands, s.lookup_resolution = str(args.image), str(out), args.bands, args.lookup
     s.overwrite = True
-    bake.generate_lookup(str(args.image), out, wl, n_phi_d=int(args.lookup), backend="onnx")  # warm-up:
-    bake.generate_lookup(str(args.image), out, wl, n_phi_d=int(args.lookup), backend="torch")  # model loads
+    bake.generate_lookup(str(args.image), out, wl, n_phi_d=int(args.lookup), backend="onnx", refine=False)  # warm-up:
+    bake.generate_lookup(str(args.image), out, wl, n_phi_d=int(args.lookup), backend="torch", refine=False)  # model loads
     times: dict[str, list[float]] = {"operator (onnx)": [], "onnx": [], "torch": []}
     cpu: dict[str, list[float]] = {k: [] for k in times}
     for _ in range(args.repeat):
@@ -60,7 +60,7 @@ def main() -> int:
         cpu["operator (onnx)"].append(time.process_time() - c0)
         for backend in ("onnx", "torch"):
             t0, c0 = time.perf_counter(), time.process_time()
-            bake.generate_lookup(str(args.image), out, wl, n_phi_d=int(args.lookup), backend=backend)
+            bake.generate_lookup(str(args.image), out, wl, n_phi_d=int(args.lookup), backend=backend, refine=False)
             times[backend].append(time.perf_counter() - t0)
             cpu[backend].append(time.process_time() - c0)
     pkg.unregister()

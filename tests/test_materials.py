@@ -14,7 +14,7 @@ bpy = pytest.importorskip("bpy")
 import batch  # noqa: E402
 
 PKG = batch.load_package()
-bake = import_module(f"{PKG.__name__}.ops.bake")
+bake = import_module(f"{PKG.__name__}.specgen_addon.bake")
 naming = import_module(f"{PKG.__name__}.ops.naming")
 render = import_module(f"{PKG.__name__}.ops.render")
 scene_mod = import_module(f"{PKG.__name__}.ops.scene")

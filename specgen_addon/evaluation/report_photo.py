@@ -24,7 +24,8 @@ TARGET_MARGIN_DB = 2.0
 
 def specgen_variants(specgen_arm: str) -> list[tuple[str, str]]:
     """``(arm, label)`` of the SpecGen rows of the photo-only tables and targets, in row order."""
-    return [(specgen_arm, "**SpecGen**")]
+    return [(specgen_arm, "**SpecGen** (network alone)"),
+            (tables.refined_arm(specgen_arm), "**SpecGen, refined to the photo**")]
 
 
 def photo_rows(methods: Sequence[str]) -> list[tuple[str, str]]:

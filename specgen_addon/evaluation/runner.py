@@ -144,6 +144,7 @@ def run_paper_tables(out: Path, img_dir: Path | None = None, smoke: bool = False
             jobs.append(("baselines", m, None))
         if not prepare:
             jobs.append((specgen_arm, m, weights_path))
+            jobs.append((tables.refined_arm(specgen_arm), m, weights_path))
             if not photo_only:
                 jobs.append(("robustness", m, weights_path))
         for name, arm in arms.items():
@@ -157,6 +158,8 @@ def run_paper_tables(out: Path, img_dir: Path | None = None, smoke: bool = False
             h.run_baselines(m, tables.BASELINE_ROLES)
         elif kind == specgen_arm:
             h.run_model(kind, w, m, tables.MAIN_ROLES, keep_images=True)
+        elif kind == tables.refined_arm(specgen_arm):
+            h.run_model(kind, w, m, tables.MAIN_ROLES, refine=True)
         elif kind == "robustness":
             for role in tables.ROLES_B:
                 env = h.scenes[role].env

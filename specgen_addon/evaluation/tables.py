@@ -27,6 +27,11 @@ SPECGEN = "specgen"
 #: (:meth:`Harness.run_self_reproduction`). Any arm (a SpecGen variant, a photo-only baseline) may
 #: have one; the photo-only tables show it next to the spectral scores.
 SELF_ROLE = "self_reproduction"
+
+
+def refined_arm(specgen_arm: str) -> str:
+    """The arm of SpecGen's table refined against its input photo (:mod:`specgen_addon.refine`)."""
+    return f"{specgen_arm}+refined"
 #: Prefix of the photo-only baselines' arms (:mod:`.photo_fit` + uplifting), e.g. ``photo-otsu2018``.
 PHOTO_PREFIX = "photo-"
 #: Scene roles of each table.
@@ -182,13 +187,15 @@ class Harness:
                 write_json(self.cell_path(method, material.name, role), cell)
 
     def run_model(self, arm: str, weights: Path | None, material: Any, roles: Sequence[str],
-                  keep_images: bool = False, input_env: str | None = None, direct: bool = False) -> None:
+                  keep_images: bool = False, input_env: str | None = None, direct: bool = False,
+                  refine: bool = False) -> None:
         """Generate the spectral BRDF from the sphere input and score it in ``roles``.
 
         The input is the canonical sphere image, or with ``input_env`` the sphere photographed under
         that environment map instead of the canonical one (robustness, table (b)). ``direct``
         queries the network at the render's directions instead of tabulating it
-        (:class:`.network_brdf.NetworkBRDF`, used for the ablation arms).
+        (:class:`.network_brdf.NetworkBRDF`, used for the ablation arms). ``refine`` refines the
+        canonical input's table against that input (:func:`specgen_addon.refine.refine_brdf`).
         """
         todo = [r for r in roles if self.cell(arm, material.name, r) is None]
         self_repro = not direct and input_env is None and self.cell(arm, material.name, SELF_ROLE) is None
@@ -202,6 +209,12 @@ class Harness:
             table = NetworkBRDF(weights, input_image.render_input(material))
         elif input_env is None:
             table = generate_from_sphere(material, weights, self.wl)
+            if refine:
+                from .. import input_image
+                from ..refine import RefineOptions, refine_brdf
+
+                table = refine_brdf(table, input_image.render_input(material),
+                                    options=RefineOptions(clip_level=None)).table
         else:
             from .. import infer
 
