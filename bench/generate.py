@@ -49,6 +49,7 @@ def main() -> int:
     s = bpy.context.scene.specgen
     s.image_path, s.output_dir, s.bands, s.lookup_resolution = str(args.image), str(out), args.bands, args.lookup
     s.overwrite = True
+    s.refine = False  # the issue times Generate without refinement (bench/refine.py times that)
     bake.generate_lookup(str(args.image), out, wl, n_phi_d=int(args.lookup), backend="onnx", refine=False)  # warm-up:
     bake.generate_lookup(str(args.image), out, wl, n_phi_d=int(args.lookup), backend="torch", refine=False)  # model loads
     times: dict[str, list[float]] = {"operator (onnx)": [], "onnx": [], "torch": []}
