@@ -107,6 +107,10 @@ scene_mod.add_sun(sc, (0.0, 0.0, 1.0))
 s = sc.specgen
 s.image_path, s.output_dir = image, out
 s.bands, s.lookup_resolution, s.resolution, s.samples = 5, "45", 16, 1
+# the default full-scene mode renders with the scene's own settings: keep them tiny
+sc.render.resolution_x = sc.render.resolution_y = 16
+sc.render.resolution_percentage = 100
+sc.cycles.samples = 1
 assert bpy.ops.specgen.generate_brdf() == {"FINISHED"}
 bpy.context.view_layer.objects.active = obj
 obj.select_set(True)

@@ -30,7 +30,7 @@ import numpy as np
 from ..errors import Cancelled, SpecGenError
 from ..table import BRDFTable
 from .basis import CorrectionBasis
-from .operator import PhotoOperator
+from .operator import PhotoOperator, render_grid
 from .report import Reproduction, photo_scale, reproduction
 from .solve import difference_operator, nonneg_ridge
 
@@ -92,8 +92,9 @@ def diffuse_floor_of(table: BRDFTable) -> np.ndarray:
 
 
 def render_under(table: BRDFTable, scene, exposure: float) -> np.ndarray:
-    """Photo (H, W, 3) of ``table`` under a prepared scene: the reference renderer, as the input."""
-    res = scene.render_spectral(table, table.wavelengths)
+    """Photo (H, W, 3) of ``table`` under a prepared scene: the reference renderer, as the input,
+    integrated on :func:`.operator.render_grid` of the table's bands."""
+    res = scene.render_spectral(table, render_grid(table.wavelengths))
     return np.clip(res.rgb, 0.0, None) * exposure
 
 

@@ -77,6 +77,15 @@ def _group(pixel: np.ndarray, wi: np.ndarray, wo: np.ndarray, weights: np.ndarra
                        np.asarray(radiance_basis, np.float64))
 
 
+def render_grid(wavelengths_nm: np.ndarray) -> np.ndarray:
+    """Wavelengths (nm) a photo of a table with these bands is integrated on: the bands themselves
+    and the default 21-band grid's wavelengths that fall inside them."""
+    wl = np.asarray(wavelengths_nm, dtype=np.float64)
+    default = spectra.DEFAULT_WAVELENGTHS_NM
+    inside = default[(default > wl[0] + 1e-6) & (default < wl[-1] - 1e-6)]
+    return np.unique(np.concatenate([wl, inside]))
+
+
 class PhotoOperator:
     """Linear map from a BRDF table to the photo's pixels under one lighting.
 
@@ -85,15 +94,23 @@ class PhotoOperator:
     scene
         A prepared :class:`~specgen_addon.render.Scene` (the input's sphere and lighting).
     wavelengths_nm
-        The table's wavelengths (nm); spectra are integrated to linear sRGB on this grid.
+        The table's wavelengths (nm). Light and camera are integrated on :func:`render_grid` (the
+        table's bands plus the default 21-band grid inside their range, the table interpolated
+        linearly in λ as the renderer does), so a coarse table is not scored through a coarse
+        CMF sum.
     exposure
         Photo value per unit radiance.
     """
 
     def __init__(self, scene, wavelengths_nm: np.ndarray, exposure: float,
                  progress: ProgressFn | None = None, cancel: CancelFn | None = None):
-        wl = np.asarray(wavelengths_nm, dtype=np.float64)
-        self.wavelengths_nm = wl
+        self.wavelengths_nm = np.asarray(wavelengths_nm, dtype=np.float64)
+        wl = render_grid(self.wavelengths_nm)
+        #: (Λr,) wavelengths (nm) light and camera are integrated on; ``interp`` (Λ, Λr) maps table
+        #: spectra onto them (linear in λ, as :meth:`BRDFTable.eval` interpolates)
+        self.render_wavelengths_nm = wl
+        eye = np.eye(self.wavelengths_nm.size)
+        self.interp = np.stack([np.interp(wl, self.wavelengths_nm, eye[c]) for c in range(eye.shape[0])])
         self.exposure = float(exposure)
         self.shape = scene.geometry.shape
         blocks = scene._prepare()
@@ -156,7 +173,8 @@ class PhotoOperator:
     # ------------------------------------------------------------------------- design matrices
     def lambert_design(self, spectrum: np.ndarray, spectral_hats: np.ndarray) -> np.ndarray:
         """(P, 3, L): photo of the Lambertian-like BRDF ``spectrum(λ) s_l(λ)`` per spectral hat."""
-        per_band = self.lambert[:, :, None] * (np.asarray(spectrum)[:, None] * spectral_hats)[None]
+        on_grid = self.interp.T @ (np.asarray(spectrum)[:, None] * spectral_hats)     # (Λr, L)
+        per_band = self.lambert[:, :, None] * on_grid[None]
         return self.exposure * np.einsum("cw,pwl->pcl", self.to_rgb, per_band, optimize=True)
 
     def lobe_design(self, values: np.ndarray, floor: np.ndarray, basis: CorrectionBasis,
@@ -168,14 +186,14 @@ class PhotoOperator:
         is built — so the design reproduces the renderer's lookups of that table.
         """
         na, nb, nl = basis.shape
-        wl = self.wavelengths_nm
-        s_hats = basis.spectral_hats(wl)
+        s_hats = basis.spectral_hats(self.wavelengths_nm)
         h_idx, h_val = sparse_hats(basis.theta_h_hats())
         d_idx, d_val = sparse_hats(basis.theta_d_hats())
         flat = values.reshape(-1, values.shape[-1])
         floor32 = np.asarray(floor, np.float32)
-        # B[w, c·L + l] = M[c, w] s_l(w): spectrum × spectral hat → RGB per hat
-        proj = (self.to_rgb.T[:, :, None] * s_hats[:, None, :]).reshape(wl.size, 3 * nl)
+        # per spectral hat l: table bands × s_l → render grid (Λ, Λr), then radiance, then → RGB
+        to_grid = [(s_hats[:, l:l + 1] * self.interp).astype(np.float32) for l in range(nl)]
+        to_rgb = self.to_rgb.T.astype(np.float32)                                  # (Λr, 3)
         n_bins = self.n_pixels * na * nb
         design = np.zeros((n_bins, 3 * nl))
         total = max(self.n_samples, 1)
@@ -198,8 +216,10 @@ class PhotoOperator:
                         base = (i * N_THETA_D + j) * N_PHI_D
                         q = (1 - tp)[:, None] * flat[base + kp] + tp[:, None] * flat[base + kp1]
                         q -= floor32
-                        q *= radiance
-                        rgb = q @ proj.astype(np.float32)          # (S, 3L)
+                        rgb = np.empty((q.shape[0], 3, nl), dtype=np.float32)
+                        for l in range(nl):
+                            rgb[:, :, l] = ((q @ to_grid[l]) * radiance) @ to_rgb
+                        rgb = rgb.reshape(q.shape[0], 3 * nl)     # (S, 3L), c-major
                         w_ij = wi * wj
                         for ka in range(h_idx.shape[1]):
                             a = h_idx[i, ka]
