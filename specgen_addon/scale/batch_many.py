@@ -12,6 +12,7 @@ from __future__ import annotations
 
 import json
 import logging
+import operator
 import shutil
 import sys
 import time
@@ -151,10 +152,8 @@ def run_batch_many(opts: BatchManyOptions, log: Callable[[str], None] = print) -
 
 def _run_on_cluster(opts: BatchManyOptions, todo: list[items_mod.Item], run: str, meta: dict,
                     log: Callable[[str], None]) -> dict[str, dict]:
-    import cloudpickle
     from distributed import as_completed
 
-    cloudpickle.register_pickle_by_value(worker_mod)   # workers need no import of this package
     client, cluster = _connect(opts)
     out = str(opts.out.resolve())
     staging = opts.out / ".work"
@@ -166,9 +165,10 @@ def _run_on_cluster(opts: BatchManyOptions, todo: list[items_mod.Item], run: str
         meta["dashboard"] = client.dashboard_link
         log(f"Dask: {meta['workers']} workers at {meta['scheduler']}; dashboard {meta['dashboard']}")
         cmd = batch_command(opts)
+        run_item = _shipped_run_item(client, run)
         futures = {}
         for it in todo:
-            fut = client.submit(worker_mod.run_item, it.to_dict(), out, run, cmd, list(opts.batch_args),
+            fut = client.submit(operator.call, run_item, it.to_dict(), out, run, cmd, list(opts.batch_args),
                                 str(REPO), it.fingerprint(opts.batch_args), opts.timeout,
                                 key=f"specgen-{it.id}-{run}", retries=opts.retries, pure=False)
             futures[fut] = it
@@ -208,6 +208,20 @@ def _run_on_cluster(opts: BatchManyOptions, todo: list[items_mod.Item], run: str
         if staging.is_dir() and not any(staging.iterdir()):
             staging.rmdir()
     return results
+
+
+def _shipped_run_item(client, run: str):
+    """A future holding :func:`.worker.run_item` rebuilt on a worker from its code (cloudpickle by
+    value): the scheduler and workers import nothing from this package; tasks call it with
+    ``operator.call``. Kept as a task (not scattered data), so a lost worker's copy is remade."""
+    import cloudpickle
+
+    cloudpickle.register_pickle_by_value(worker_mod)
+    try:
+        blob = cloudpickle.dumps(worker_mod.run_item)
+    finally:
+        cloudpickle.unregister_pickle_by_value(worker_mod)
+    return client.submit(cloudpickle.loads, blob, key=f"specgen-run-item-{run}")
 
 
 def format_summary(report: dict) -> str:
