@@ -43,8 +43,28 @@ def _die_with_parent() -> None:  # pragma: no cover - runs in the child between 
         pass
 
 
-def _run(cmd: list[str], log: Path, cwd: str, env: dict, timeout: float | None) -> tuple[int, str]:
-    """Run ``cmd`` with stdout and stderr appended to ``log``; (exit status, last output line)."""
+def _child_cpu_seconds() -> float:
+    try:
+        import resource
+
+        ru = resource.getrusage(resource.RUSAGE_CHILDREN)
+        return ru.ru_utime + ru.ru_stime
+    except (ImportError, OSError):  # not POSIX
+        return float("nan")
+
+
+def _run(cmd: list[str], log: Path, cwd: str, env: dict, timeout: float | None,
+         cpu: list[float]) -> tuple[int, str]:
+    """Run ``cmd`` with stdout and stderr appended to ``log``; (exit status, last output line).
+    Adds the child's CPU seconds to ``cpu[0]`` (one task per worker thread: the delta is its own)."""
+    c0 = _child_cpu_seconds()
+    try:
+        return _run_logged(cmd, log, cwd, env, timeout)
+    finally:
+        cpu[0] += _child_cpu_seconds() - c0
+
+
+def _run_logged(cmd: list[str], log: Path, cwd: str, env: dict, timeout: float | None) -> tuple[int, str]:
     with open(log, "a") as fh:
         fh.write("$ " + " ".join(cmd) + "\n")
         fh.flush()
@@ -84,6 +104,8 @@ def run_item(item: dict, out: str, run: str, batch_cmd: list[str], batch_args: l
     record = {"id": item_id, "input": item["input"], "worker": f"{socket.gethostname()}:{os.getpid()}",
               "attempts": attempt, "stages_s": {}}
 
+    cpu = [0.0]
+
     def fail(message: str, retry: bool) -> dict:
         failed_log.parent.mkdir(exist_ok=True)
         shutil.copyfile(log, failed_log)
@@ -99,7 +121,7 @@ def run_item(item: dict, out: str, run: str, batch_cmd: list[str], batch_args: l
         if item["kind"] != "image":
             t = time.perf_counter()
             code, last = _run([sys.executable, "-m", "specgen_addon.scale.prepare", item["input"],
-                               str(work / "input")], log, repo, env, timeout)
+                               str(work / "input")], log, repo, env, timeout, cpu)
             record["stages_s"]["prepare"] = round(time.perf_counter() - t, 2)
             if code != 0:
                 return fail(last or f"prepare exited with status {code}", retry=code != EXIT_BAD_INPUT)
@@ -108,14 +130,14 @@ def run_item(item: dict, out: str, run: str, batch_cmd: list[str], batch_args: l
         cmd = [sys.executable if c == PYTHON else c for c in batch_cmd]
         t = time.perf_counter()
         code, last = _run(cmd + [option, source, "--out", str(work), "--overwrite", *batch_args],
-                          log, repo, env, timeout)
+                          log, repo, env, timeout, cpu)
         record["stages_s"]["batch"] = round(time.perf_counter() - t, 2)
         if code != 0:
             return fail(last or f"batch.py exited with status {code}", retry=code != EXIT_BAD_INPUT)
         shutil.rmtree(work / "input", ignore_errors=True)  # prepared inputs are intermediate
         outputs = sorted(str(p.relative_to(work)) for p in work.rglob("*") if p.is_file())
-        record.update(status="done", error=None, outputs=outputs,
-                      seconds=round(time.perf_counter() - t0, 2), fingerprint=fingerprint)
+        record.update(status="done", error=None, outputs=outputs, seconds=round(time.perf_counter() - t0, 2),
+                      cpu_seconds=round(cpu[0], 2), fingerprint=fingerprint)
         (work / RECORD_NAME).write_text(json.dumps(record, indent=1))
         _publish(work, out_dir / item_id, staging / f"{item_id}.old.{run}")
     except BaseException:
