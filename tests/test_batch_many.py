@@ -159,7 +159,7 @@ def test_batch_many_on_a_local_cluster_reports_a_bad_input_while_the_others_fini
     assert {k: r["status"] for k, r in status.items()} == {"bad": "failed", "linen": "done", "ramp": "done",
                                                             "velvet": "done"}
     assert "no sphere" in status["bad"]["error"] and status["bad"]["attempts"] == 1
-    assert report["workers"] == 2 and len({status[k]["worker"] for k in ("linen", "ramp", "velvet")}) >= 1
+    assert report["workers"] == 2 and len({r["worker"] for r in status.values()}) == 2  # both took items
     for name, mesh in (("linen", "linen_sphere_studio"), ("velvet", "velvet_sphere_studio"),
                        ("ramp", "ramp_sphere_studio")):
         wavelengths, values = colour.read_spectral_image_Fichet2021(tmp_path / "out" / name / f"{mesh}.exr")["S0"]

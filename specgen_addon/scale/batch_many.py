@@ -165,7 +165,7 @@ def _run_on_cluster(opts: BatchManyOptions, todo: list[items_mod.Item], run: str
         meta["dashboard"] = client.dashboard_link
         log(f"Dask: {meta['workers']} workers at {meta['scheduler']}; dashboard {meta['dashboard']}")
         cmd = batch_command(opts)
-        run_item = _shipped_run_item(client, run)
+        run_item = _shipped_run_item(client)
         futures = {}
         for it in todo:
             fut = client.submit(operator.call, run_item, it.to_dict(), out, run, cmd, list(opts.batch_args),
@@ -210,18 +210,18 @@ def _run_on_cluster(opts: BatchManyOptions, todo: list[items_mod.Item], run: str
     return results
 
 
-def _shipped_run_item(client, run: str):
-    """A future holding :func:`.worker.run_item` rebuilt on a worker from its code (cloudpickle by
-    value): the scheduler and workers import nothing from this package; tasks call it with
-    ``operator.call``. Kept as a task (not scattered data), so a lost worker's copy is remade."""
+def _shipped_run_item(client):
+    """A future of :func:`.worker.run_item`, scattered to every worker by value (cloudpickle): the
+    scheduler and workers import nothing from this package, and tasks call it with
+    ``operator.call``. Broadcast, so no worker is preferred for holding it."""
     import cloudpickle
 
     cloudpickle.register_pickle_by_value(worker_mod)
     try:
-        blob = cloudpickle.dumps(worker_mod.run_item)
+        [future] = client.scatter([worker_mod.run_item], broadcast=True, hash=False)
     finally:
         cloudpickle.unregister_pickle_by_value(worker_mod)
-    return client.submit(cloudpickle.loads, blob, key=f"specgen-run-item-{run}")
+    return future
 
 
 def format_summary(report: dict) -> str:
