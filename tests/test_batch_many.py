@@ -5,6 +5,7 @@ The cluster tests are small on purpose (2 workers, tiny renders): the machine is
 
 from __future__ import annotations
 
+import contextlib
 import json
 import os
 import shutil
@@ -224,3 +225,44 @@ def test_batch_many_on_a_separate_scheduler_and_workers_retries_then_reports(tmp
     assert "Segmentation fault (simulated)" in {r["id"]: r for r in report["items"]}["crash"]["error"]
     assert (tmp_path / "out" / "flaky" / "flaky_render.exr").is_file()
     assert not (tmp_path / "out" / "failed" / "flaky.log").exists()
+
+
+@pytest.mark.slow
+def test_ctrl_c_stops_batch_many_cleanly_with_exit_130(tmp_path):
+    """Ctrl-C (SIGINT to the whole process group, as a terminal sends it): one line, exit 130,
+    no item folder, no staging left, and no process of the group survives."""
+    pytest.importorskip("distributed")
+    script = tmp_path / "slow_batch.py"
+    script.write_text(FAKE_BATCH.replace("    (pathlib.Path(a.out)", "    import time; time.sleep(60)\n    (pathlib.Path(a.out)"))
+    inputs = _touch(tmp_path / "in", "a.png", "b.png", "c.png")
+    out = tmp_path / "out"
+    proc = subprocess.Popen([sys.executable, "-m", "specgen_addon", "batch-many", *map(str, inputs), "--out", str(out),
+                             "--batch-script", str(script), "--dashboard-address", ":0", "--quiet"],
+                            cwd=REPO, stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True, start_new_session=True,
+                            preexec_fn=lambda: signal.signal(signal.SIGINT, signal.SIG_DFL))
+    try:
+        deadline = time.monotonic() + 90
+        while not (out / ".work").is_dir() or not any((out / ".work").glob("*.attempts")):
+            assert time.monotonic() < deadline and proc.poll() is None, "items never started"
+            time.sleep(0.2)
+        os.killpg(proc.pid, signal.SIGINT)
+        _, err = proc.communicate(timeout=60)
+    finally:
+        _stop(proc)
+    assert proc.returncode == 130
+    assert err.strip().splitlines() == ["cancelled: nothing partial was written"], err[-2000:]
+    assert sorted(p.name for p in out.iterdir()) == []
+    psutil = pytest.importorskip("psutil")  # a dependency of distributed
+
+    def alive() -> list:  # processes of the group, zombies waiting for init to reap them aside
+        found = []
+        for p in psutil.process_iter(["status"]):
+            with contextlib.suppress(psutil.Error, OSError):
+                if os.getpgid(p.pid) == proc.pid and p.info["status"] != psutil.STATUS_ZOMBIE:
+                    found.append(p)
+        return found
+
+    deadline = time.monotonic() + 15
+    while alive() and time.monotonic() < deadline:
+        time.sleep(0.5)
+    assert not alive()  # workers and their batch.py children are gone

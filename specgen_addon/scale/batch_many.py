@@ -10,17 +10,20 @@ reported and never stops the others.
 
 from __future__ import annotations
 
+import contextlib
 import json
 import logging
 import operator
 import shutil
+import signal
 import sys
+import threading
 import time
 import uuid
 from dataclasses import dataclass, field
 from importlib import util as importlib_util
 from pathlib import Path
-from typing import Callable
+from typing import Callable, Iterator
 
 from ..errors import SpecGenError
 from ..io_utils import atomic_write
@@ -122,9 +125,25 @@ def _connect(opts: BatchManyOptions):
             client.close()
             raise SpecGenError(f"no Dask worker joined {opts.scheduler} within 60 s") from None
         return client, None
-    cluster = LocalCluster(n_workers=opts.workers, threads_per_worker=1, processes=True,
-                           dashboard_address=opts.dashboard_address, silence_logs=logging.ERROR)
+    with _workers_ignore_ctrl_c():
+        cluster = LocalCluster(n_workers=opts.workers, threads_per_worker=1, processes=True,
+                               dashboard_address=opts.dashboard_address, silence_logs=logging.ERROR)
     return Client(cluster), cluster
+
+
+@contextlib.contextmanager
+def _workers_ignore_ctrl_c() -> Iterator[None]:
+    """Start worker processes with SIGINT ignored (inherited by their batch.py children): Ctrl-C
+    in the terminal reaches the whole process group, but only this process should handle it,
+    by shutting the cluster down (workers and their children then end without tracebacks)."""
+    if threading.current_thread() is not threading.main_thread():
+        yield
+        return
+    previous = signal.signal(signal.SIGINT, signal.SIG_IGN)
+    try:
+        yield
+    finally:
+        signal.signal(signal.SIGINT, previous)
 
 
 def run_batch_many(opts: BatchManyOptions, log: Callable[[str], None] = print) -> dict:
