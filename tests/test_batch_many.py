@@ -266,3 +266,20 @@ def test_ctrl_c_stops_batch_many_cleanly_with_exit_130(tmp_path):
     while alive() and time.monotonic() < deadline:
         time.sleep(0.5)
     assert not alive()  # workers and their batch.py children are gone
+
+
+@pytest.mark.slow
+def test_prepare_renders_rgb_brdfs_to_their_photo_and_passes_spectral_tables(tmp_path, rgl_files, capsys):
+    from specgen_addon.input_image import load_sphere_image
+    from specgen_addon.scale import prepare
+
+    kind, path = prepare.prepare(rgl_files["felt"], tmp_path / "w")  # real RGL RGB measurement
+    assert kind == "image" and path == tmp_path / "w" / "acrylic_felt_green_rgb.exr"
+    sphere = load_sphere_image(path)  # what batch.py --image will accept
+    assert sphere.shape[-1] == 3 and sphere[..., 1].mean() > sphere[..., 2].mean()  # green felt
+    table = _spectral_npz(tmp_path / "ramp.npz")
+    assert prepare.prepare(table, tmp_path / "w") == ("brdf", table)
+    (tmp_path / "junk.binary").write_bytes(os.urandom(1000))
+    assert prepare.main([str(tmp_path / "junk.binary"), str(tmp_path / "w")]) == prepare.EXIT_BAD_INPUT
+    err = capsys.readouterr().err.strip().splitlines()
+    assert len(err) == 1 and err[0].startswith("prepare: error:")
