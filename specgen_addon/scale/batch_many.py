@@ -14,6 +14,7 @@ import contextlib
 import json
 import logging
 import operator
+import os
 import shutil
 import signal
 import sys
@@ -73,11 +74,10 @@ def check_batch_args(batch_script: Path, batch_args: list[str]) -> None:
         raise SpecGenError(f"batch.py arguments: {message}")
 
     parser.error = refuse
+    if {"-h", "--help"} & set(batch_args):
+        refuse("--help is not an item setting")
     sentinel = "\0batch-many"
-    try:
-        ns = parser.parse_args(["--image", sentinel, "--out", sentinel, *batch_args])
-    except SystemExit:
-        raise SpecGenError("batch.py arguments: --help is not an item setting") from None
+    ns = parser.parse_args(["--image", sentinel, "--out", sentinel, *batch_args])
     if ns.image != sentinel or ns.out != sentinel or getattr(ns, "overwrite", False):
         raise SpecGenError(f"batch.py arguments: {', '.join(OWN_OPTIONS)} are set by batch-many per item")
 
@@ -103,10 +103,11 @@ def _validate(opts: BatchManyOptions) -> list[items_mod.Item]:
         raise SpecGenError(f"{opts.blender}: Blender executable not found")
     check_batch_args(Path(opts.batch_script), opts.batch_args)
     found = items_mod.make_items(items_mod.collect_inputs(opts.inputs, opts.manifest))
-    try:
-        opts.out.mkdir(parents=True, exist_ok=True)
-    except OSError as exc:
-        raise SpecGenError(f"{opts.out}: cannot create the output folder ({exc.strerror})") from None
+    if opts.out.exists() and not opts.out.is_dir():
+        raise SpecGenError(f"{opts.out}: exists and is not a folder")
+    parent = next(p for p in [opts.out.absolute(), *opts.out.absolute().parents] if p.exists())
+    if not os.access(parent, os.W_OK):
+        raise SpecGenError(f"{opts.out}: {parent} is not writable")
     return found
 
 
@@ -174,11 +175,15 @@ def _run_on_cluster(opts: BatchManyOptions, todo: list[items_mod.Item], run: str
     from distributed import as_completed
 
     client, cluster = _connect(opts)
-    out = str(opts.out.resolve())
     staging = opts.out / ".work"
     results: dict[str, dict] = {}
     bar = None
     try:
+        try:  # made only now: a run refused while connecting leaves nothing behind
+            opts.out.mkdir(parents=True, exist_ok=True)
+        except OSError as exc:
+            raise SpecGenError(f"{opts.out}: cannot create the output folder ({exc.strerror})") from None
+        out = str(opts.out.resolve())
         meta["scheduler"] = client.scheduler.address
         meta["workers"] = len(client.scheduler_info()["workers"])
         meta["dashboard"] = client.dashboard_link
