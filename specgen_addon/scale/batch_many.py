@@ -177,6 +177,7 @@ def _run_on_cluster(opts: BatchManyOptions, todo: list[items_mod.Item], run: str
     client, cluster = _connect(opts)
     staging = opts.out / ".work"
     results: dict[str, dict] = {}
+    futures: dict = {}
     bar = None
     try:
         try:  # made only now: a run refused while connecting leaves nothing behind
@@ -190,7 +191,6 @@ def _run_on_cluster(opts: BatchManyOptions, todo: list[items_mod.Item], run: str
         log(f"Dask: {meta['workers']} workers at {meta['scheduler']}; dashboard {meta['dashboard']}")
         cmd = batch_command(opts)
         run_item = _shipped_run_item(client)
-        futures = {}
         for it in todo:
             fut = client.submit(operator.call, run_item, it.to_dict(), out, run, cmd, list(opts.batch_args),
                                 str(REPO), it.fingerprint(opts.batch_args), opts.timeout,
@@ -219,7 +219,7 @@ def _run_on_cluster(opts: BatchManyOptions, todo: list[items_mod.Item], run: str
                 bar.set_postfix(failed=failed, refresh=False)
                 bar.update(1)
     except KeyboardInterrupt:
-        client.cancel(list(futures) if "futures" in locals() else [], force=True)
+        client.cancel(list(futures), force=True)
         raise
     finally:
         if bar is not None:
@@ -228,7 +228,10 @@ def _run_on_cluster(opts: BatchManyOptions, todo: list[items_mod.Item], run: str
         if cluster is not None:
             cluster.close()
         for p in staging.glob(f"*.{run}*"):  # this run's unfinished items (Ctrl-C, lost workers)
-            shutil.rmtree(p, ignore_errors=True) if p.is_dir() else p.unlink(missing_ok=True)
+            if p.is_dir():
+                shutil.rmtree(p, ignore_errors=True)
+            else:
+                p.unlink(missing_ok=True)
         if staging.is_dir() and not any(staging.iterdir()):
             staging.rmdir()
     return results
