@@ -11,8 +11,8 @@ def add_parser(sub: argparse._SubParsersAction) -> argparse.ArgumentParser:
     p = sub.add_parser(
         "batch-many", help="run batch.py's pipeline on many photos / BRDF files on a Dask cluster",
         description="For every input (photo of a sphere, or BRDF file .npz/.binary/.bsdf): generate "
-                    "the spectral BRDF, bake, render the scene, write the spectral EXR and preview "
-                    "into OUT/<name>/, as batch.py does. Runs on a local Dask cluster, or on an "
+                    "the spectral BRDF (refined as batch.py does), bake, render the scene, write the "
+                    "spectral EXR and preview into OUT/<name>/. Runs on a local Dask cluster, or on an "
                     "existing one with --scheduler. A rerun skips finished items; a failed item is "
                     "retried, then reported without stopping the others. Writes OUT/report.json; "
                     "exits 1 when an item failed.",
