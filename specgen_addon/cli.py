@@ -22,6 +22,7 @@ COMMAND_MODULES = [
     "cli_eval",
     "cli_model",
     "cli_render",
+    "cli_scale",
 ]
 
 EXIT_USER_ERROR = 2

@@ -14,7 +14,10 @@ from .progress import progress_bar
 def add_parser(sub: argparse._SubParsersAction) -> argparse.ArgumentParser:
     p = sub.add_parser("train", help="train SpecGen on the corpus (+ RGB BRDFs) from a config file",
                        description="Joint spectral + RGB training (paper §3.3) on CPU. Writes OUT/"
-                                   "specgen.pt, checkpoint.pt, history.csv and loss_curve.png.")
+                                   "specgen.pt, checkpoint.pt, history.csv and loss_curve.png. Under "
+                                   "torchrun (torchrun --nproc_per_node N -m specgen_addon train ...) "
+                                   "each rank trains on a shard of every step's materials with DDP "
+                                   "(docs/scale.md).")
     p.add_argument("--config", type=Path, default=None,
                    help="JSON/TOML with 'model' and 'train' sections (default: configs/default.json)")
     p.add_argument("--out", type=Path, required=True, help="output directory")
@@ -104,6 +107,7 @@ def run_train(args: argparse.Namespace) -> int:
 
     from .model import DEFAULT_WEIGHTS, count_parameters, load_weights
     from .train import build_material_sets
+    from .train import distributed as ddp
     from .train.loop import load_config, plot_history, train
 
     cfg_path = args.config or DEFAULT_WEIGHTS.parents[1] / "configs" / "default.json"
@@ -117,17 +121,23 @@ def run_train(args: argparse.Namespace) -> int:
     if (out / "specgen.pt").exists() and not args.resume:
         raise OutputExistsError(f"{out}/specgen.pt: exists (pass --resume to continue that run)")
     out.mkdir(parents=True, exist_ok=True)
+    dctx = ddp.init_from_env()  # under torchrun: join the process group; else one process
+    say = print if dctx.is_main else ddp.silent  # rank 0 speaks for the job
     from .evaluation.cache import cache_root
 
     cache = cache_root() / "train-data"
     t0 = time.perf_counter()
-    spectral, rgb, val = build_material_sets(mcfg, tcfg, cache_dir=cache, log=print,
-                                             progress=not args.quiet)
+    with ddp.main_first(dctx):  # rank 0 fills the input-render cache, the others then read it
+        spectral, rgb, val = build_material_sets(mcfg, tcfg, cache_dir=cache, log=say,
+                                                 progress=not args.quiet and dctx.is_main)
     prep = time.perf_counter() - t0
-    print(f"materials: {len(spectral)} spectral, {len(rgb)} RGB, {len(val)} validation "
+    say(f"materials: {len(spectral)} spectral, {len(rgb)} RGB, {len(val)} validation "
           f"(inputs ready in {prep:.0f} s)")
     res = train(mcfg, tcfg, spectral, rgb, val, out, resume=args.resume, show_progress=not args.quiet,
-                meta={"config_file": str(cfg_path), "data_prep_seconds": round(prep, 1)})
+                meta={"config_file": str(cfg_path), "data_prep_seconds": round(prep, 1),
+                      "world_size": dctx.world_size})
+    if not dctx.is_main:
+        return 0
     plot_history(res.history, out / "loss_curve.png",
                  title=f"SpecGen training: seed {tcfg.seed}, {res.steps} steps, {res.wall_seconds / 60:.1f} min")
     n = count_parameters(load_weights(res.weights))

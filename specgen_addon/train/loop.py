@@ -30,6 +30,7 @@ from ..errors import SpecGenError
 from ..io_utils import atomic_write
 from ..model import Config, SpecGen, count_parameters, save_weights
 from ..spectra import wavelength_grid
+from . import distributed as ddp
 from .data import Batch, TrainingMaterial, make_batch
 
 #: Band grid (nm) the spectral targets are evaluated on: 10 nm steps over the visible range.
@@ -206,16 +207,23 @@ def train(mcfg: Config, tcfg: TrainConfig, spectral: MaterialSet, rgb: MaterialS
     history: list[dict[str, float]] = []
     start_step, elapsed0 = 0, 0.0
     ckpt_path = out / "checkpoint.pt"
-    if resume and ckpt_path.is_file():
-        ck = torch.load(ckpt_path, map_location="cpu", weights_only=True)
+    dctx = ddp.context()  # rank/world size under torchrun; 0 of 1 otherwise
+    ddp.check_shardable({"spectral_materials_per_step": min(tcfg.spectral_materials_per_step, len(spectral)),
+                         "rgb_materials_per_step": min(tcfg.rgb_materials_per_step, len(rgb))}, dctx)
+    ck = ddp.broadcast(torch.load(ckpt_path, map_location="cpu", weights_only=True)
+                       if resume and dctx.is_main and ckpt_path.is_file() else None, dctx)
+    if ck is not None:
         if ck["model_config"] != mcfg.to_dict() or ck["train_config"] != _tdict(tcfg, ignore_budget=True):
             raise SpecGenError(f"{ckpt_path}: checkpoint was made with a different configuration")
         model.load_state_dict(ck["model"])
         opt.load_state_dict(ck["optimizer"])
         start_step, elapsed0, history = ck["step"], ck["elapsed"], ck["history"]
     val_batch = _validation_batch(tcfg, mcfg, val)
+    step_losses = ddp.step_losses(model, group_loss, dctx)  # this rank's share, DDP-averaged
 
     def checkpoint(step: int, elapsed: float) -> None:
+        if not dctx.is_main:
+            return
         payload = {"model": model.state_dict(), "optimizer": opt.state_dict(), "step": step,
                    "elapsed": elapsed, "history": history, "model_config": mcfg.to_dict(),
                    "train_config": _tdict(tcfg, ignore_budget=True)}
@@ -224,7 +232,7 @@ def train(mcfg: Config, tcfg: TrainConfig, spectral: MaterialSet, rgb: MaterialS
         _write_history(out / "history.csv", history)
 
     bar = None
-    if show_progress:
+    if show_progress and dctx.is_main:
         from tqdm import tqdm
 
         bar = tqdm(total=tcfg.steps, initial=start_step, desc="train", unit="step", dynamic_ncols=True,
@@ -245,13 +253,14 @@ def train(mcfg: Config, tcfg: TrainConfig, spectral: MaterialSet, rgb: MaterialS
         loss = torch.zeros(())
         rec: dict[str, float] = {"step": step + 1, "lr": lr_at(tcfg, step)}
         tv_terms = []
-        if b_spec is not None:
-            l_spec, tv = group_loss(model, b_spec)
+        g_spec, g_rgb = step_losses(b_spec, b_rgb)
+        if g_spec is not None:
+            l_spec, tv = g_spec
             loss = loss + l_spec
             tv_terms.append(tv)
             rec["spec"] = float(l_spec.detach())
-        if b_rgb is not None:
-            l_rgb, tv = group_loss(model, b_rgb)
+        if g_rgb is not None:
+            l_rgb, tv = g_rgb
             loss = loss + tcfg.rgb_weight * l_rgb
             tv_terms.append(tv)
             rec["rgb"] = float(l_rgb.detach())
@@ -262,6 +271,7 @@ def train(mcfg: Config, tcfg: TrainConfig, spectral: MaterialSet, rgb: MaterialS
         step += 1
         rec["tv"] = float(l_tv.detach())
         rec["loss"] = float(loss.detach())
+        rec = ddp.mean_record(rec, dctx)
         if val_batch is not None and (step % tcfg.val_every == 0 or step == tcfg.steps):
             rec["val"] = evaluate_batch(model, val_batch)
         rec["elapsed"] = elapsed0 + time.perf_counter() - t0
@@ -285,7 +295,7 @@ def train(mcfg: Config, tcfg: TrainConfig, spectral: MaterialSet, rgb: MaterialS
     info = {"steps": step, "planned_steps": tcfg.steps, "wall_seconds": round(wall, 1),
             "seed": tcfg.seed, "parameters": count_parameters(model), "train_config": _tdict(tcfg),
             "final_val_mse": history[-1].get("val") if history else None, **(meta or {})}
-    weights = save_weights(model, out / "specgen.pt", meta=info)
+    weights = save_weights(model, out / "specgen.pt", meta=info) if dctx.is_main else out / "specgen.pt"
     return TrainResult(weights, step, wall, history, stopped)
 
 

@@ -1,0 +1,158 @@
+"""What a Dask worker runs for one ``batch-many`` item (standard library only).
+
+The pipeline is ``batch.py``'s (generate → refine where asked → bake → render the scene →
+spectral EXR + preview), run as a child process, so every item gets a fresh ``bpy`` in its own
+process and a crash cannot take the worker down. BRDF files go through :mod:`.prepare` first.
+
+Atomicity: the item is made in ``OUT/.work/<id>.<run>/`` and renamed to ``OUT/<id>/`` (one
+``rename`` on the same file system) only after everything, ``item.json`` last, was written. A
+failed or cancelled item leaves no ``OUT/<id>/``, only its log in ``OUT/failed/<id>.log``.
+
+Failures: a bad input (exit status 2, the pipeline's clean one-line refusal) would fail the same
+way again, so it is returned as a failed record at once. Anything else (a crash, a signal, a
+timeout) raises, and Dask retries the item (``retries=``) before the client reports it.
+
+This module imports nothing from the package: the client ships it to workers by value
+(cloudpickle), so a ``dask worker`` needs only the Python environment and the repository
+(the same path on every host, usually a shared file system, like the output folder).
+"""
+
+from __future__ import annotations
+
+import ctypes
+import json
+import os
+import shutil
+import signal
+import socket
+import subprocess
+import sys
+import time
+from pathlib import Path
+
+EXIT_BAD_INPUT = 2
+RECORD_NAME = "item.json"
+PYTHON = "{python}"  #: placeholder in a command for the worker's own interpreter
+
+
+def _die_with_parent() -> None:  # pragma: no cover - runs in the child between fork and exec
+    """Linux: the child gets SIGTERM when the worker that started it dies (cluster shut down)."""
+    try:
+        ctypes.CDLL(None).prctl(1, signal.SIGTERM)  # PR_SET_PDEATHSIG
+    except (OSError, AttributeError):
+        pass
+
+
+def _child_cpu_seconds() -> float:
+    try:
+        import resource
+
+        ru = resource.getrusage(resource.RUSAGE_CHILDREN)
+        return ru.ru_utime + ru.ru_stime
+    except (ImportError, OSError):  # not POSIX
+        return float("nan")
+
+
+def _run(cmd: list[str], log: Path, cwd: str, env: dict, timeout: float | None,
+         cpu: list[float]) -> tuple[int, str]:
+    """Run ``cmd`` with stdout and stderr appended to ``log``; (exit status, last output line).
+    Adds the child's CPU seconds to ``cpu[0]`` (one task per worker thread: the delta is its own)."""
+    c0 = _child_cpu_seconds()
+    try:
+        return _run_logged(cmd, log, cwd, env, timeout)
+    finally:
+        cpu[0] += _child_cpu_seconds() - c0
+
+
+def _run_logged(cmd: list[str], log: Path, cwd: str, env: dict, timeout: float | None) -> tuple[int, str]:
+    with open(log, "a") as fh:
+        fh.write("$ " + " ".join(cmd) + "\n")
+        fh.flush()
+        try:
+            code = subprocess.run(cmd, stdout=fh, stderr=subprocess.STDOUT, cwd=cwd, env=env,
+                                  timeout=timeout, preexec_fn=_die_with_parent if os.name == "posix" else None
+                                  ).returncode
+        except subprocess.TimeoutExpired:
+            fh.write(f"timed out after {timeout:g} s\n")
+            return -1, f"timed out after {timeout:g} s"
+    lines = [ln.strip() for ln in log.read_text(errors="replace").splitlines() if ln.strip()]
+    return code, lines[-1] if lines else ""
+
+
+def run_item(item: dict, out: str, run: str, batch_cmd: list[str], batch_args: list[str], repo: str,
+             fingerprint: dict, timeout: float | None = None) -> dict:
+    """Make one item's results in ``out/<id>/``; returns its record (status "done" or "failed").
+
+    ``batch_cmd`` starts ``batch.py`` (``{python}`` stands for this worker's interpreter); the
+    input option, ``--out`` and ``--overwrite`` are added, then ``batch_args``. Raises
+    RuntimeError on a failure worth retrying.
+    """
+    t0 = time.perf_counter()
+    out_dir = Path(out)
+    item_id = item["id"]
+    staging = out_dir / ".work"
+    work = staging / f"{item_id}.{run}"
+    failed_log = out_dir / "failed" / f"{item_id}.log"
+    counter = staging / f"{item_id}.{run}.attempts"
+    staging.mkdir(parents=True, exist_ok=True)
+    attempt = int(counter.read_text()) + 1 if counter.is_file() else 1
+    counter.write_text(str(attempt))
+    shutil.rmtree(work, ignore_errors=True)   # what a killed earlier attempt left
+    work.mkdir()
+    log = work / "batch.log"
+    env = dict(os.environ, PYTHONPATH=os.pathsep.join(filter(None, [repo, os.environ.get("PYTHONPATH")])))
+    record = {"id": item_id, "input": item["input"], "worker": f"{socket.gethostname()}:{os.getpid()}",
+              "attempts": attempt, "stages_s": {}}
+
+    cpu = [0.0]
+
+    def fail(message: str, retry: bool) -> dict:
+        failed_log.parent.mkdir(exist_ok=True)
+        shutil.copyfile(log, failed_log)
+        shutil.rmtree(work, ignore_errors=True)
+        if retry:
+            raise RuntimeError(f"{item_id}: {message}")
+        counter.unlink(missing_ok=True)
+        return {**record, "status": "failed", "error": message, "log": str(failed_log),
+                "seconds": round(time.perf_counter() - t0, 2)}
+
+    try:
+        option, source = ("--image", item["input"]) if item["kind"] == "image" else ("--brdf", item["input"])
+        if item["kind"] != "image":
+            t = time.perf_counter()
+            code, last = _run([sys.executable, "-m", "specgen_addon.scale.prepare", item["input"],
+                               str(work / "input")], log, repo, env, timeout, cpu)
+            record["stages_s"]["prepare"] = round(time.perf_counter() - t, 2)
+            if code != 0:
+                return fail(last or f"prepare exited with status {code}", retry=code != EXIT_BAD_INPUT)
+            kind, source = last.split(" ", 1)
+            option = "--image" if kind == "image" else "--brdf"
+        cmd = [sys.executable if c == PYTHON else c for c in batch_cmd]
+        t = time.perf_counter()
+        code, last = _run(cmd + [option, source, "--out", str(work), "--overwrite", *batch_args],
+                          log, repo, env, timeout, cpu)
+        record["stages_s"]["batch"] = round(time.perf_counter() - t, 2)
+        if code != 0:
+            return fail(last or f"batch.py exited with status {code}", retry=code != EXIT_BAD_INPUT)
+        shutil.rmtree(work / "input", ignore_errors=True)  # prepared inputs are intermediate
+        outputs = sorted(str(p.relative_to(work)) for p in work.rglob("*") if p.is_file())
+        record.update(status="done", error=None, outputs=outputs, seconds=round(time.perf_counter() - t0, 2),
+                      cpu_seconds=round(cpu[0], 2), fingerprint=fingerprint)
+        (work / RECORD_NAME).write_text(json.dumps(record, indent=1))
+        _publish(work, out_dir / item_id, staging / f"{item_id}.old.{run}")
+    except BaseException:
+        shutil.rmtree(work, ignore_errors=True)
+        raise
+    failed_log.unlink(missing_ok=True)
+    counter.unlink(missing_ok=True)
+    return record
+
+
+def _publish(work: Path, final: Path, aside: Path) -> None:
+    """Rename the finished folder into place; an old result (``--overwrite``) is moved aside
+    first and deleted after, so ``final`` is at every moment either the old or the new result
+    (or, for the instant between two renames, absent)."""
+    if final.exists():
+        os.rename(final, aside)
+    os.rename(work, final)
+    shutil.rmtree(aside, ignore_errors=True)
