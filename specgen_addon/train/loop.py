@@ -138,7 +138,12 @@ def load_config(path: str | Path) -> tuple[Config, TrainConfig]:
     unknown = set(d) - {"model", "train"}
     if unknown:
         raise SpecGenError(f"{path}: unknown sections {sorted(unknown)} (expected model, train)")
-    return Config.from_dict(d.get("model", {})), TrainConfig.from_dict(d.get("train", {}))
+    train_d = dict(d.get("train", {}))
+    init = train_d.get("init_weights")
+    if isinstance(init, str) and not Path(init).is_absolute():
+        # relative to the config file's directory (e.g. "../weights/specgen_default.pt")
+        train_d["init_weights"] = str((path.parent / init).resolve())
+    return Config.from_dict(d.get("model", {})), TrainConfig.from_dict(train_d)
 
 
 @dataclass
@@ -364,7 +369,8 @@ def evaluate_batch(model: SpecGen, b: Batch) -> float:
 def _tdict(tcfg: TrainConfig, ignore_budget: bool = False) -> dict[str, Any]:
     d = dataclasses.asdict(tcfg)
     if ignore_budget:  # a resumed run may extend its budget or change what it logs
-        for k in ("steps", "max_minutes", "threads", "checkpoint_every", "val_every"):
+        for k in ("steps", "max_minutes", "threads", "checkpoint_every", "val_every", "init_weights",
+                  "render_workers"):
             d.pop(k)
     return d
 
