@@ -72,8 +72,10 @@ def run_train(args: argparse.Namespace) -> int:
                               ("seed", args.seed)) if v is not None}
     if args.brdf_dir:
         over["brdf_dirs"] = list(tcfg.brdf_dirs) + [str(d) for d in args.brdf_dir]
-    tcfg = dataclasses.replace(tcfg, **over)
+    tcfg = dataclasses.replace(tcfg, **over).validate()
     out: Path = args.out
+    if out.exists() and not out.is_dir():
+        raise SpecGenError(f"{out}: exists and is not a directory")
     if (out / "specgen.pt").exists() and not args.resume:
         raise OutputExistsError(f"{out}/specgen.pt: exists (pass --resume to continue that run)")
     out.mkdir(parents=True, exist_ok=True)

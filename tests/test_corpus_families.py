@@ -216,3 +216,31 @@ def test_family_mix_is_checked_before_any_work():
     with pytest.raises(SpecGenError, match="non-negative"):
         check_mix({"sheen": -1.0})
     assert check_mix({"sheen": 2, "lobes": 2}) == {"sheen": 0.5, "lobes": 0.5}
+
+
+@pytest.mark.parametrize("argv, message", [
+    (["--n", "0"], "--n must be between"),
+    (["--n", "5", "--seed", "-1"], "--seed must be"),
+    (["--n", "5", "--families", "velvet=1"], "unknown material family"),
+    (["--n", "5", "--families", "sheen=lots"], "not a number"),
+    (["--n", "5", "--bands", "0"], "--bands must be"),
+])
+def test_corpus_command_refuses_bad_sizes_seeds_and_families(tmp_path, capsys, argv, message):
+    from specgen_addon.cli import main as cli_main
+
+    out = tmp_path / "c"
+    assert cli_main(["corpus", "--out", str(out), "--quiet", *argv]) == 2
+    assert message in capsys.readouterr().err
+    assert not out.exists()
+
+
+def test_corpus_command_writes_a_mixed_manifest_that_loads_back(tmp_path):
+    from specgen_addon.cli import main as cli_main
+    from specgen_addon.corpus import load_manifest
+
+    out = tmp_path / "c"
+    assert cli_main(["corpus", "--n", "12", "--families", "sheen=1,thin_film=1", "--out", str(out),
+                     "--quiet"]) == 0
+    mats = load_manifest(out / "manifest.json")
+    assert mats == generate_mixed_corpus(12, 0, {"sheen": 1, "thin_film": 1})
+    assert {material_family(m) for m in mats} == {"sheen", "thin_film"}
