@@ -9,6 +9,7 @@ from specgen_addon.corpus.generate import material_family
 from specgen_addon.train.evaluate import evaluate_families, format_family_results, mixed_test_materials
 
 
+@pytest.mark.slow
 def test_mixed_test_materials_are_held_out_and_grouped_by_family():
     mats = mixed_test_materials(2, ["sheen", "thin_film"])
     assert [material_family(m) for m in mats].count("sheen") == 2

@@ -198,3 +198,11 @@ def test_train_command_refuses_bad_overrides_before_any_work(tmp_path, repo_dir)
     assert cli_main(["train", "--config", cfg, "--out", str(tmp_path / "r"), "--steps", "0", "--quiet"]) == 2
     assert cli_main(["train", "--config", cfg, "--out", str(tmp_path / "r"), "--seed", "-3", "--quiet"]) == 2
     assert not (tmp_path / "r").exists()
+
+
+def test_real_rgl_files_are_held_out_of_default_training(repo_dir):
+    # ../shared/data/rgl is real test data: neither the dataclass nor the shipped config trains on it
+    _, tcfg = load_config(repo_dir / "configs" / "default.json")
+    assert TrainConfig().use_shared_rgl is False and tcfg.use_shared_rgl is False
+    assert not any("rgl" in d for d in tcfg.brdf_dirs)
+    assert tcfg.corpus_size >= 2000 and tcfg.lighting == "mix" and tcfg.families
