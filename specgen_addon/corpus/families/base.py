@@ -182,7 +182,7 @@ class Quadrature:
     row: np.ndarray     # index into MU_NODES
 
 
-@functools.lru_cache(maxsize=64)
+@functools.lru_cache(maxsize=8)  # ~5 MB each; callers cache the albedo curves they make
 def halfvector_quadrature(alpha: float, n_u: int = 48, n_phi: int = 32) -> Quadrature:
     """Quadrature over GGX(α)-warped half vectors: ``tan²θh = α² u/(1−u)``, φ ∈ [0, π] doubled.
 
