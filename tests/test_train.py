@@ -206,3 +206,14 @@ def test_real_rgl_files_are_held_out_of_default_training(repo_dir):
     assert TrainConfig().use_shared_rgl is False and tcfg.use_shared_rgl is False
     assert not any("rgl" in d for d in tcfg.brdf_dirs)
     assert tcfg.corpus_size >= 2000 and tcfg.lighting == "mix" and tcfg.families
+
+
+def test_component_stacks_resample_like_a_user_image():
+    from specgen_addon.infer import resample_square
+    from specgen_addon.train.lighting_mix import resample_stack
+
+    rng = np.random.default_rng(0)
+    stack = rng.uniform(0, 2, size=(3, 128, 128, 3)).astype(np.float32)
+    ours = resample_stack(stack, 64).astype(np.float32)
+    ref = np.stack([resample_square(im, 64) for im in stack])
+    np.testing.assert_allclose(ours, ref, rtol=1e-3, atol=1e-3)  # float16 storage
