@@ -70,7 +70,8 @@ def main() -> None:
         table = generate_brdf(input_image.render_input(m), weights=args.weights, wavelengths_nm=WL)
         h_true = _lab(_specular(m, THETA_D), 0.5)
         h_pred = _lab(_specular(table, THETA_D), 0.5)
-        hue = lambda lab: np.degrees(np.arctan2(lab[:, 2], lab[:, 1])) % 360  # noqa: E731
+        # hue angle, unwrapped along θd (a film sweeping through red shows as a continuous curve)
+        hue = lambda lab: np.degrees(np.unwrap(np.arctan2(lab[:, 2], lab[:, 1])))  # noqa: E731
         de = colour.delta_E(h_true, h_pred, method="CIE 2000")
         curves.append((m, hue(h_true), hue(h_pred)))
         print(f"thin film {m.name} ({m.kind}, d = {m.thickness_nm:.0f} nm, η_f = {m.film_eta}): "
@@ -100,9 +101,8 @@ def main() -> None:
             ax.plot(deg, ht, "k-", label="truth")
             ax.plot(deg, hp, "C3--", label="SpecGen (network alone)")
             ax.set_xlabel("θd (degrees), θh = 0")
-            ax.set_ylabel("CIELAB hue h° (D65)")
+            ax.set_ylabel("CIELAB hue h° (D65, unwrapped)")
             ax.set_title(f"{m.name}: {m.kind}, d = {m.thickness_nm:.0f} nm", fontsize=9)
-            ax.set_ylim(0, 360)
             ax.legend(fontsize=8)
         fig.tight_layout()
         args.figure.parent.mkdir(parents=True, exist_ok=True)
