@@ -13,7 +13,14 @@ With ``--figure PNG`` it also draws the corpus picture of docs/corpus.md: every 
 small sphere lit by one distant light (linear sRGB through :meth:`Material.eval_rgb`, clipped,
 sRGB-encoded), grouped by split, beside the metals' normal-incidence reflectance spectra.
 
+With ``--inputs K`` it instead measures the issue-11 corpus at scale: generating the default
+mixed corpus (2900 materials, seed 0) and rendering the training-input lighting components
+(:mod:`specgen_addon.train.lighting_mix`) of K train materials per family that share one
+environment variant (as the cache's ordering makes them), then extrapolates to every train/val
+material the default config renders, on ``--workers`` processes.
+
 Usage: ``.venv/bin/python bench/corpus.py [--repeat N] [--figure docs/img/corpus.png]``
+``.venv/bin/python bench/corpus.py --inputs 4 [--workers 2]``
 """
 
 from __future__ import annotations
@@ -112,11 +119,47 @@ def draw_figure(path: Path) -> None:
     print(f"figure: {path}")
 
 
+def bench_inputs(per_family: int, workers: int) -> None:
+    """Mixed-corpus generation + per-family input-render cost, extrapolated to the default run."""
+    from specgen_addon.corpus.generate import generate_mixed_corpus, material_family
+    from specgen_addon.train.data import TrainingMaterial
+    from specgen_addon.train.lighting_mix import COMPONENTS, ComponentCache, env_variant
+
+    print(f"machine: {describe_machine()}")
+    t0 = time.perf_counter()
+    corpus = generate_mixed_corpus(2900, 0)
+    print(f"generate the mixed corpus (2900 materials): {time.perf_counter() - t0:.1f} s")
+    renders = [m for m in corpus if m.split == "train"] + [m for m in corpus if m.split == "val"][:24]
+    variant = env_variant(corpus[0].name)
+    with tempfile.TemporaryDirectory() as tmp:
+        cache = ComponentCache(tmp)
+        cache.make(TrainingMaterial(corpus[0].name, corpus[0], True))  # scenes and tables warm
+        total = 0.0
+        for fam in sorted({material_family(m) for m in corpus}):
+            pick = [m for m in corpus if material_family(m) == fam and env_variant(m.name) == variant
+                    and m is not corpus[0]][:per_family]
+            start = time.perf_counter()
+            for m in pick:
+                cache.make(TrainingMaterial(m.name, m, True))
+            per = (time.perf_counter() - start) / len(pick)
+            n = sum(material_family(m) == fam for m in renders)
+            total += n * per
+            print(f"  {fam:<12} {per:5.2f} s/material ({len(COMPONENTS)} components) × {n} materials")
+    print(f"input renders for {len(renders)} materials on {workers} processes: ≈ {total / workers / 60:.1f} min "
+          f"(extrapolated; load average above)")
+
+
 def main() -> None:
     parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     parser.add_argument("--repeat", type=int, default=3)
     parser.add_argument("--figure", type=Path, help="also draw the corpus contact sheet (PNG)")
+    parser.add_argument("--inputs", type=int, default=0, metavar="K",
+                        help="measure the mixed corpus and its input renders (K materials per family)")
+    parser.add_argument("--workers", type=int, default=2)
     args = parser.parse_args()
+    if args.inputs:
+        bench_inputs(args.inputs, args.workers)
+        return
     if args.figure:
         draw_figure(args.figure)
     print(f"machine: {describe_machine()}")

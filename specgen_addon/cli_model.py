@@ -54,6 +54,13 @@ def add_parser(sub: argparse._SubParsersAction) -> argparse.ArgumentParser:
     p.add_argument("--json", type=Path, default=None, help="also write the results as JSON")
     p.add_argument("--overwrite", action="store_true", help="replace an existing --json file")
     p.add_argument("--backend", choices=("torch", "onnx"), default="torch")
+    p.add_argument("--families", type=int, default=0, metavar="N",
+                   help="also score N test materials per corpus family (mixed corpus of "
+                        "configs/default.json) under the distant lights and the held-out maps, and "
+                        "the real RGL files in ../shared/data/rgl (default 0: off)")
+    p.add_argument("--no-envs", action="store_true", help="with --families: distant lights only")
+    p.add_argument("--family-resolution", type=int, default=64,
+                   help="sphere size (px) of the per-family renders (default 64)")
     p.add_argument("--quiet", action="store_true", help="no progress bar")
     p.set_defaults(func=run_evaluate)
 
@@ -116,8 +123,10 @@ def run_train(args: argparse.Namespace) -> int:
                               ("seed", args.seed)) if v is not None}
     if args.brdf_dir:
         over["brdf_dirs"] = list(tcfg.brdf_dirs) + [str(d) for d in args.brdf_dir]
-    tcfg = dataclasses.replace(tcfg, **over)
+    tcfg = dataclasses.replace(tcfg, **over).validate()
     out: Path = args.out
+    if out.exists() and not out.is_dir():
+        raise SpecGenError(f"{out}: exists and is not a directory")
     if (out / "specgen.pt").exists() and not args.resume:
         raise OutputExistsError(f"{out}/specgen.pt: exists (pass --resume to continue that run)")
     out.mkdir(parents=True, exist_ok=True)
@@ -176,12 +185,29 @@ def run_infer(args: argparse.Namespace) -> int:
 
 
 def run_evaluate(args: argparse.Namespace) -> int:
-    from .train.evaluate import evaluate_test_split, format_results
+    from .train.evaluate import evaluate_families, evaluate_test_split, format_family_results, format_results
 
+    if args.limit is not None and args.limit < 1:
+        raise SpecGenError(f"--limit must be ≥ 1, got {args.limit}")
+    if not 16 <= args.family_resolution <= 1024:
+        raise SpecGenError(f"--family-resolution must be 16–1024, got {args.family_resolution}")
+    if args.families < 0:
+        raise SpecGenError(f"--families must be ≥ 0, got {args.families}")
+    if args.weights is not None and not args.weights.is_file():
+        raise SpecGenError(f"{args.weights}: weights file not found")
     with progress_bar("evaluate", enabled=not args.quiet) as update:
         res = evaluate_test_split(weights=args.weights, limit=args.limit, backend=args.backend,
                                   progress=update)
     print(format_results(res))
+    if args.families:
+        from .train import SHARED_RGL_DIR
+
+        with progress_bar("evaluate families", enabled=not args.quiet) as update:
+            res["by_family"] = evaluate_families(weights=args.weights, per_family=args.families,
+                                                 envs=not args.no_envs, rgl_dir=SHARED_RGL_DIR,
+                                                 resolution=args.family_resolution,
+                                                 backend=args.backend, progress=update)
+        print(format_family_results(res["by_family"]))
     if args.json:
         from .io_utils import atomic_write
 

@@ -128,3 +128,92 @@ def test_config_files_load_and_reject_unknown_keys(tmp_path, repo_dir):
     (tmp_path / "bad.json").write_text('{"train": {"stepz": 3}}')
     with pytest.raises(SpecGenError, match="stepz"):
         load_config(tmp_path / "bad.json")
+
+
+def _component_sets(n: int = 3):
+    from specgen_addon.train.lighting_mix import COMPONENTS
+
+    mats = [RampMaterial(a=0.1 + 0.1 * i, b=0.3, alpha=0.1 + 0.1 * i) for i in range(n)]
+    tm = [TrainingMaterial(f"m{i}", m, True) for i, m in enumerate(mats)]
+    rng = np.random.default_rng(0)
+    stacks = []
+    for m in mats:
+        base = m.image(32)
+        stacks.append(np.stack([base * rng.uniform(0.2, 1.0) for _ in COMPONENTS]).astype(np.float16))
+    return MaterialSet(tm, stacks), MaterialSet([], []), MaterialSet(tm[:1], stacks[:1])
+
+
+def test_training_with_lighting_drawn_per_step_is_bit_identical_for_a_seed(tmp_path):
+    spec, rgb, val = _component_sets()
+    tcfg = TrainConfig(**{**FAST, "steps": 5, "lighting": "mix", "rgb_materials_per_step": 0})
+    a = train(Config(**SMALL), tcfg, spec, rgb, val, tmp_path / "a", show_progress=False)
+    b = train(Config(**SMALL), tcfg, spec, rgb, val, tmp_path / "b", show_progress=False)
+    c = train(Config(**SMALL), dataclasses.replace(tcfg, seed=1), spec, rgb, val, tmp_path / "c",
+              show_progress=False)
+    sa, sb, sc = (load_weights(r.weights).state_dict() for r in (a, b, c))
+    assert all(torch.equal(sa[k], sb[k]) for k in sa)
+    assert not all(torch.equal(sa[k], sc[k]) for k in sa)
+
+
+def test_lighting_mix_draws_a_new_lighting_every_time():
+    from specgen_addon.train.lighting_mix import COMPONENTS, MODE_P, mix_lighting, quantise
+
+    rng = np.random.default_rng(0)
+    stack = rng.uniform(0.0, 0.5, size=(len(COMPONENTS), 3, 8, 8)).astype(np.float16)
+    images = [mix_lighting(stack, np.random.default_rng([0, s])) for s in range(200)]
+    canonical = sum(np.array_equal(im, stack[0].astype(np.float32)) or
+                    np.array_equal(im, stack[1].astype(np.float32)) for im in images)
+    assert abs(canonical / 200 - MODE_P[0]) < 0.12
+    others = [im.tobytes() for im in images if not (np.array_equal(im, stack[0].astype(np.float32)) or
+                                                   np.array_equal(im, stack[1].astype(np.float32)))]
+    assert len(set(others)) == len(others)  # every non-canonical input is a fresh lighting
+    q = quantise(np.full((2, 2, 3), 1.7, np.float32))
+    assert np.all(q == 1.0)  # clipped like an 8-bit image
+
+
+@pytest.mark.parametrize("bad, message", [
+    ({"steps": 0}, "steps must be an integer ≥ 1"),
+    ({"seed": -1}, "seed must be an integer ≥ 0"),
+    ({"corpus_size": 2.5}, "corpus_size must be an integer"),
+    ({"families": {"velvet": 1.0}}, "unknown material family 'velvet'"),
+    ({"lighting": "sunny"}, "lighting must be"),
+    ({"lr": -1.0}, "lr must be"),
+    ({"init_weights": "/nonexistent/w.pt"}, "not found"),
+])
+def test_bad_training_configs_are_refused_with_one_clear_error(tmp_path, bad, message):
+    from specgen_addon.cli import main as cli_main
+
+    with pytest.raises(SpecGenError, match=message):
+        TrainConfig.from_dict(bad)
+    path = tmp_path / "bad.json"
+    path.write_text(json.dumps({"train": bad}))
+    assert cli_main(["train", "--config", str(path), "--out", str(tmp_path / "run"), "--quiet"]) == 2
+    assert not (tmp_path / "run").exists()
+
+
+def test_train_command_refuses_bad_overrides_before_any_work(tmp_path, repo_dir):
+    from specgen_addon.cli import main as cli_main
+
+    cfg = str(repo_dir / "configs" / "default.json")
+    assert cli_main(["train", "--config", cfg, "--out", str(tmp_path / "r"), "--steps", "0", "--quiet"]) == 2
+    assert cli_main(["train", "--config", cfg, "--out", str(tmp_path / "r"), "--seed", "-3", "--quiet"]) == 2
+    assert not (tmp_path / "r").exists()
+
+
+def test_real_rgl_files_are_held_out_of_default_training(repo_dir):
+    # ../shared/data/rgl is real test data: neither the dataclass nor the shipped config trains on it
+    _, tcfg = load_config(repo_dir / "configs" / "default.json")
+    assert TrainConfig().use_shared_rgl is False and tcfg.use_shared_rgl is False
+    assert not any("rgl" in d for d in tcfg.brdf_dirs)
+    assert tcfg.corpus_size >= 2000 and tcfg.lighting == "mix" and tcfg.families
+
+
+def test_component_stacks_resample_like_a_user_image():
+    from specgen_addon.infer import resample_square
+    from specgen_addon.train.lighting_mix import resample_stack
+
+    rng = np.random.default_rng(0)
+    stack = rng.uniform(0, 2, size=(3, 128, 128, 3)).astype(np.float32)
+    ours = resample_stack(stack, 64).astype(np.float32)
+    ref = np.stack([resample_square(im, 64) for im in stack])
+    np.testing.assert_allclose(ours, ref, rtol=1e-3, atol=1e-3)  # float16 storage

@@ -15,7 +15,7 @@ MANIFEST_FORMAT = "specgen-corpus"
 MANIFEST_VERSION = 1
 
 
-def save_manifest(path: str | os.PathLike, materials: Sequence[Material], seed: int | None = None,
+def save_manifest(path: str | os.PathLike, materials: Sequence, seed: int | None = None,
                   overwrite: bool = False) -> Path:
     """Write ``materials`` to ``path`` (JSON) atomically; returns the path."""
     path = Path(path)
@@ -39,8 +39,10 @@ def load_manifest(path: str | os.PathLike) -> list[Material]:
         raise SpecGenError(f"{path}: not a SpecGen corpus manifest")
     if doc.get("version") != MANIFEST_VERSION:
         raise SpecGenError(f"{path}: unsupported manifest version {doc.get('version')}")
+    from .families import material_from_dict
+
     try:
-        return [Material.from_dict(d) for d in doc["materials"]]
+        return [material_from_dict(d) for d in doc["materials"]]
     except SpecGenError as exc:
         raise SpecGenError(f"{path}: {exc}") from None
 

@@ -134,4 +134,5 @@ def cosine_weighted_mean(curves: np.ndarray) -> np.ndarray:
 def lookup_mu(curves: np.ndarray, mu: np.ndarray) -> np.ndarray:
     """Evaluate curves (Λ, 65) at cosines ``mu`` (N,): returns (N, Λ), linear in ``μ``."""
     i, f = _interp_weights(np.asarray(mu, dtype=np.float64), MU_NODES)
-    return curves[:, i].T * (1.0 - f)[:, None] + curves[:, i + 1].T * f[:, None]
+    rows = np.ascontiguousarray(np.asarray(curves).T)  # (65, Λ): gather rows, not columns
+    return rows[i] * (1.0 - f)[:, None] + rows[i + 1] * f[:, None]

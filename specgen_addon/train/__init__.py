@@ -59,9 +59,13 @@ def build_material_sets(mcfg: Config, tcfg: TrainConfig, cache_dir: str | Path,
                         ) -> tuple[MaterialSet, MaterialSet, MaterialSet]:
     """(spectral, rgb, validation) material sets with cached input renders."""
     from ..corpus import generate_corpus
+    from ..corpus.generate import generate_mixed_corpus
 
     cache_dir = Path(cache_dir)
-    corpus = generate_corpus(tcfg.corpus_size, tcfg.corpus_seed)
+    if tcfg.families is None:
+        corpus = generate_corpus(tcfg.corpus_size, tcfg.corpus_seed)
+    else:
+        corpus = generate_mixed_corpus(tcfg.corpus_size, tcfg.corpus_seed, tcfg.families)
     train = [m for m in corpus if m.split == "train"]
     val = [m for m in corpus if m.split == "val"]
     spectral = [TrainingMaterial(m.name, m, True, "train") for m in train]
@@ -72,6 +76,8 @@ def build_material_sets(mcfg: Config, tcfg: TrainConfig, cache_dir: str | Path,
     for mat in load_file_materials(find_brdf_files(dirs), cache_dir, progress=log):
         (spectral if mat.spectral else rgb).append(mat)
     valset = [TrainingMaterial(m.name, m, True, "val") for m in val]
+    if tcfg.lighting == "mix":
+        return _mixed_lighting_sets(mcfg, tcfg, cache_dir, spectral, rgb, valset, log, progress)
 
     cache = InputImageCache(cache_dir, render_input_variant)
     everything = spectral + [m for m in rgb if not m.name.endswith("/rgb")] + valset
@@ -93,6 +99,35 @@ def build_material_sets(mcfg: Config, tcfg: TrainConfig, cache_dir: str | Path,
 
     def imgs(mats: list[TrainingMaterial]) -> list[np.ndarray]:
         # An RGB version sees the same input images as its spectral original.
+        return [images[m.name.removesuffix("/rgb")] for m in mats]
+
+    return (MaterialSet(spectral, imgs(spectral)), MaterialSet(rgb, imgs(rgb)),
+            MaterialSet(valset, imgs(valset)))
+
+
+def _mixed_lighting_sets(mcfg: Config, tcfg: TrainConfig, cache_dir: Path, spectral, rgb, valset,
+                        log: Callable[[str], None], progress: bool):
+    """Material sets whose images are lighting-component stacks (:mod:`.lighting_mix`)."""
+    from .lighting_mix import COMPONENTS, ComponentCache
+
+    cache = ComponentCache(cache_dir)
+    valset = valset[: tcfg.val_materials]  # only these are ever used
+    everything = spectral + [m for m in rgb if not m.name.endswith("/rgb")] + valset
+    todo = cache.missing(everything)
+    if todo:
+        log(f"rendering {len(todo)} materials under {len(COMPONENTS)} lighting components into {cache_dir}")
+    bar = None
+    if progress and todo:
+        from tqdm import tqdm
+
+        bar = tqdm(total=len(todo), desc="input renders", unit="mat", mininterval=5.0)
+    cache.fill(everything, workers=tcfg.render_workers,
+               progress=(lambda f: bar.update(round(f * len(todo)) - bar.n)) if bar else None)
+    if bar is not None:
+        bar.close()
+    images = {m.name: cache.load(m, mcfg.image_size) for m in everything}
+
+    def imgs(mats: list[TrainingMaterial]) -> list[np.ndarray]:
         return [images[m.name.removesuffix("/rgb")] for m in mats]
 
     return (MaterialSet(spectral, imgs(spectral)), MaterialSet(rgb, imgs(rgb)),

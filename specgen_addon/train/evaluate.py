@@ -63,3 +63,108 @@ def format_results(res: dict[str, Any]) -> str:
     lines.append(f"{'mean':<12} {'':<20} {res['psnr_mean']:8.2f} {res['ssim_mean']:7.4f}   "
                  f"({res['n']} test materials, {len(res['wavelengths_nm'])} bands, distant lights)")
     return "\n".join(lines)
+
+
+# --- per-family evaluation (issue 11) ------------------------------------------------------------
+
+#: The mixed corpus the default model trains on (configs/default.json), whose test split is scored.
+MIXED_CORPUS_SIZE = 2900
+MIXED_CORPUS_SEED = 0
+
+
+def mixed_test_materials(per_family: int, families: list[str] | None = None) -> list:
+    """The first ``per_family`` test materials of each family of the mixed corpus (corpus order)."""
+    from ..corpus.generate import generate_mixed_corpus, material_family
+    from ..corpus.families import FAMILY_NAMES
+
+    wanted = list(FAMILY_NAMES if families is None else families)
+    out, count = [], {f: 0 for f in wanted}
+    for m in generate_mixed_corpus(MIXED_CORPUS_SIZE, MIXED_CORPUS_SEED):
+        f = material_family(m)
+        if m.split == "test" and f in count and count[f] < per_family:
+            out.append(m)
+            count[f] += 1
+    return out
+
+
+def evaluate_families(weights: str | Path | None = None, per_family: int = 4, envs: bool = True,
+                      rgl_dir: str | Path | None = None, backend: str = "torch",
+                      resolution: int = RESOLUTION, families: list[str] | None = None,
+                      progress: Callable[[float], None] | None = None) -> dict[str, Any]:
+    """PSNR/SSIM per family of the mixed test split, network alone (no refinement).
+
+    Scenes: the protocol's distant lights and, with ``envs``, the two held-out environment maps
+    (:data:`specgen_addon.lighting.HELDOUT_ENVS`). The input is always the canonical sphere.
+    ``rgl_dir``: real RGL RGB files (``*.bsdf``) scored in linear sRGB under the distant lights
+    (the project renderer's slice assignment: the light direction selects the measured slice).
+    """
+    from .. import input_image, lighting, metrics
+    from ..evaluation.protocol import DISTANT_LIGHTS, WAVELENGTHS_NM
+    from ..corpus.generate import material_family
+    from ..infer import generate_brdf
+    from ..render import render_rgb, render_spectral, sphere_geometry
+
+    geo = sphere_geometry(resolution)
+    scenes: list[tuple[str, dict]] = [("distant", {"lights": DISTANT_LIGHTS})]
+    if envs:
+        scenes += [(f"env-{e}", {"environment": lighting.load_environment(e)}) for e in lighting.HELDOUT_ENVS]
+    mats = mixed_test_materials(per_family, families)
+    rgl_files = sorted(Path(rgl_dir).glob("*.bsdf")) if rgl_dir is not None and Path(rgl_dir).is_dir() else []
+    total = len(mats) + len(rgl_files)
+    rows = []
+    for i, mat in enumerate(mats):
+        table = generate_brdf(input_image.render_input(mat), weights=weights, wavelengths_nm=WAVELENGTHS_NM,
+                              backend=backend)
+        row: dict[str, Any] = {"material": mat.name, "family": material_family(mat), "kind": mat.kind}
+        for label, kw in scenes:
+            gt = render_spectral(mat, geo, wavelengths_nm=WAVELENGTHS_NM, **kw).spectral
+            pred = render_spectral(table, geo, wavelengths_nm=WAVELENGTHS_NM, **kw).spectral
+            res = metrics.spectral_metrics(gt, pred, geo.mask)
+            row[f"psnr_{label}"], row[f"ssim_{label}"] = float(res.psnr_mean), float(res.ssim_mean)
+        rows.append(row)
+        if progress is not None:
+            progress((i + 1) / total)
+    for j, path in enumerate(rgl_files):
+        from ..formats import load_brdf
+
+        brdf = load_brdf(path)
+        table = generate_brdf(input_image.render_input(brdf), weights=weights, wavelengths_nm=WAVELENGTHS_NM,
+                              backend=backend)
+        gt = render_rgb(brdf, geo, lights=DISTANT_LIGHTS).rgb
+        pred = render_spectral(table, geo, lights=DISTANT_LIGHTS, wavelengths_nm=WAVELENGTHS_NM).rgb
+        res = metrics.spectral_metrics(gt, pred, geo.mask)
+        rows.append({"material": path.stem, "family": "rgl (real, RGB)", "kind": "measured",
+                     "psnr_distant": float(res.psnr_mean), "ssim_distant": float(res.ssim_mean)})
+        if progress is not None:
+            progress((len(mats) + j + 1) / total)
+    labels = [lab for lab, _ in scenes]
+    by_family: dict[str, dict[str, float]] = {}
+    for fam in dict.fromkeys(r["family"] for r in rows):
+        sel = [r for r in rows if r["family"] == fam]
+        by_family[fam] = {"n": len(sel), **{f"{k}_{lab}": float(np.mean([r[f"{k}_{lab}"] for r in sel]))
+                                          for lab in labels for k in ("psnr", "ssim")
+                                          if all(f"{k}_{lab}" in r for r in sel)}}
+    synth = [r for r in rows if r["kind"] != "measured"]
+    means = {f"{k}_{lab}": float(np.mean([r[f"{k}_{lab}"] for r in synth]))
+             for lab in labels for k in ("psnr", "ssim")} if synth else {}
+    return {"materials": rows, "families": by_family, "means": means, "scenes": labels,
+            "per_family": per_family, "resolution": resolution,
+            "weights": str(weights) if weights else "default", "backend": backend,
+            "corpus": {"size": MIXED_CORPUS_SIZE, "seed": MIXED_CORPUS_SEED},
+            "metrics": getattr(metrics, "NORMALISATION_TEXT", "")}
+
+
+def format_family_results(res: dict[str, Any]) -> str:
+    """Per-family table: PSNR dB / SSIM per scene, then the mean over synthetic materials."""
+    labels = res["scenes"]
+    head = f"{'family':<18} {'n':>3} " + " ".join(f"{lab:>22}" for lab in labels)
+    lines = [head]
+    for fam, s in res["families"].items():
+        cells = [f"{s[f'psnr_{lab}']:8.2f} dB / {s[f'ssim_{lab}']:.4f}" if f"psnr_{lab}" in s else f"{'—':>22}"
+                 for lab in labels]
+        lines.append(f"{fam:<18} {s['n']:>3} " + " ".join(f"{c:>22}" for c in cells))
+    if res["means"]:
+        cells = [f"{res['means'][f'psnr_{lab}']:8.2f} dB / {res['means'][f'ssim_{lab}']:.4f}" for lab in labels]
+        lines.append(f"{'mean (synthetic)':<18} {sum(s['n'] for f, s in res['families'].items() if not f.startswith('rgl')):>3} "
+                     + " ".join(f"{c:>22}" for c in cells))
+    return "\n".join(lines)

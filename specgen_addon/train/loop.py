@@ -58,12 +58,21 @@ class TrainConfig:
     input_variants: int = 4
     png_augment: bool = True
     canonical_fraction: float = 0.75
-    use_shared_rgl: bool = True
+    use_shared_rgl: bool = False
     brdf_dirs: list[str] = field(default_factory=list)
     checkpoint_every: int = 250
     val_every: int = 250
     val_materials: int = 8
     threads: int = 2
+    #: Family mix of the corpus (family → weight); None: the classic recipe only (issue 3).
+    families: dict[str, float] | None = None
+    #: "variants": cached renders under ``input_variants`` fixed lightings; "mix": lighting drawn
+    #: per step from cached components (:mod:`.lighting_mix`).
+    lighting: str = "variants"
+    #: Start from these weights (same model config) instead of a random initialisation.
+    init_weights: str | None = None
+    #: Processes rendering missing input images before training.
+    render_workers: int = 2
 
     @classmethod
     def from_dict(cls, d: dict[str, Any]) -> "TrainConfig":
@@ -71,7 +80,46 @@ class TrainConfig:
         unknown = set(d) - names
         if unknown:
             raise SpecGenError(f"unknown training config keys: {sorted(unknown)}")
-        return cls(**d)
+        try:
+            cfg = cls(**d)
+        except TypeError as exc:
+            raise SpecGenError(f"bad training config ({exc})") from None
+        cfg.validate()
+        return cfg
+
+    def validate(self) -> "TrainConfig":
+        """Raise one SpecGenError naming the first bad value (sizes, seeds, families, modes)."""
+        def is_int(v: Any) -> bool:
+            return isinstance(v, int) and not isinstance(v, bool)
+
+        for key, lo in (("seed", 0), ("corpus_seed", 0), ("steps", 1), ("corpus_size", 1),
+                        ("spectral_materials_per_step", 0), ("rgb_materials_per_step", 0),
+                        ("angles_per_material", 1), ("wavelengths_per_angle", 1), ("input_variants", 1),
+                        ("lr_decay_every", 1), ("checkpoint_every", 1), ("val_every", 1),
+                        ("val_materials", 0), ("threads", 1), ("render_workers", 1)):
+            v = getattr(self, key)
+            if not is_int(v) or v < lo:
+                raise SpecGenError(f"training config: {key} must be an integer ≥ {lo}, got {v!r}")
+        for key in ("lr", "lr_decay", "tv_weight", "rgb_weight", "canonical_fraction"):
+            v = getattr(self, key)
+            if not isinstance(v, (int, float)) or isinstance(v, bool) or not np.isfinite(v) or v < 0:
+                raise SpecGenError(f"training config: {key} must be a finite number ≥ 0, got {v!r}")
+        if self.lr <= 0 or self.canonical_fraction > 1:
+            raise SpecGenError("training config: lr must be > 0 and canonical_fraction ≤ 1")
+        if self.max_minutes is not None and not (isinstance(self.max_minutes, (int, float))
+                                                 and self.max_minutes > 0):
+            raise SpecGenError(f"training config: max_minutes must be > 0, got {self.max_minutes!r}")
+        if self.lighting not in ("variants", "mix"):
+            raise SpecGenError(f"training config: lighting must be 'variants' or 'mix', got {self.lighting!r}")
+        if self.spectral_materials_per_step + self.rgb_materials_per_step == 0:
+            raise SpecGenError("training config: no materials per step")
+        if self.families is not None:
+            from ..corpus.generate import check_mix
+
+            check_mix(self.families)
+        if self.init_weights is not None and not Path(self.init_weights).is_file():
+            raise SpecGenError(f"training config: init_weights {self.init_weights}: file not found")
+        return self
 
 
 def load_config(path: str | Path) -> tuple[Config, TrainConfig]:
@@ -91,7 +139,12 @@ def load_config(path: str | Path) -> tuple[Config, TrainConfig]:
     unknown = set(d) - {"model", "train"}
     if unknown:
         raise SpecGenError(f"{path}: unknown sections {sorted(unknown)} (expected model, train)")
-    return Config.from_dict(d.get("model", {})), TrainConfig.from_dict(d.get("train", {}))
+    train_d = dict(d.get("train", {}))
+    init = train_d.get("init_weights")
+    if isinstance(init, str) and not Path(init).is_absolute():
+        # relative to the config file's directory (e.g. "../weights/specgen_default.pt")
+        train_d["init_weights"] = str((path.parent / init).resolve())
+    return Config.from_dict(d.get("model", {})), TrainConfig.from_dict(train_d)
 
 
 @dataclass
@@ -120,7 +173,7 @@ def lr_at(tcfg: TrainConfig, step: int) -> float:
 
 
 def _draw(rng: np.random.Generator, mset: MaterialSet, k: int, canonical_fraction: float,
-          n_variants: int) -> tuple[list[TrainingMaterial], list[np.ndarray]]:
+          n_variants: int, lighting: str = "variants") -> tuple[list[TrainingMaterial], list[np.ndarray]]:
     """``k`` materials and one input image each: the canonical lighting with probability
     ``canonical_fraction`` (its linear or PNG version), else any of the material's images.
 
@@ -131,6 +184,12 @@ def _draw(rng: np.random.Generator, mset: MaterialSet, k: int, canonical_fractio
     mats, imgs = [], []
     for i in np.sort(idx):
         stack = mset.images[i]
+        if lighting == "mix":
+            from .lighting_mix import mix_lighting
+
+            mats.append(mset.materials[i])
+            imgs.append(mix_lighting(stack, rng))
+            continue
         canonical = np.arange(0, stack.shape[0], max(1, n_variants))   # variant 0 (and its PNG)
         if rng.random() < canonical_fraction:
             j = canonical[rng.integers(0, canonical.size)]
@@ -170,7 +229,7 @@ def make_step_batches(tcfg: TrainConfig, mcfg: Config, spectral: MaterialSet, rg
         if len(mset) == 0 or k <= 0:
             out.append(None)
             continue
-        mats, imgs = _draw(rng, mset, k, tcfg.canonical_fraction, tcfg.input_variants)
+        mats, imgs = _draw(rng, mset, k, tcfg.canonical_fraction, tcfg.input_variants, tcfg.lighting)
         out.append(make_batch(mats, imgs, rng, tcfg.angles_per_material, tcfg.wavelengths_per_angle,
                               is_spec, TARGET_WAVELENGTHS_NM, mcfg.mu))
     return out[0], out[1]
@@ -181,7 +240,7 @@ def _validation_batch(tcfg: TrainConfig, mcfg: Config, val: MaterialSet) -> Batc
         return None
     rng = np.random.default_rng([tcfg.seed, 1_000_003])
     mats = val.materials[: tcfg.val_materials]
-    imgs = [val.images[i][0] for i in range(len(mats))]
+    imgs = [np.asarray(val.images[i][0], dtype=np.float32) for i in range(len(mats))]
     return make_batch(mats, imgs, rng, tcfg.angles_per_material, tcfg.wavelengths_per_angle, True,
                       TARGET_WAVELENGTHS_NM, mcfg.mu)
 
@@ -203,6 +262,13 @@ def train(mcfg: Config, tcfg: TrainConfig, spectral: MaterialSet, rgb: MaterialS
     torch.use_deterministic_algorithms(True)
     torch.manual_seed(tcfg.seed)
     model = SpecGen(mcfg)
+    if tcfg.init_weights is not None and not (resume and (out / "checkpoint.pt").is_file()):
+        from ..model import load_weights
+
+        init = load_weights(tcfg.init_weights)
+        if init.cfg.to_dict() != mcfg.to_dict():
+            raise SpecGenError(f"{tcfg.init_weights}: weights were made with a different model config")
+        model.load_state_dict({k: v.float() for k, v in init.state_dict().items()})
     opt = torch.optim.Adam(model.parameters(), lr=tcfg.lr, betas=(0.9, 0.999))
     history: list[dict[str, float]] = []
     start_step, elapsed0 = 0, 0.0
@@ -313,7 +379,8 @@ def evaluate_batch(model: SpecGen, b: Batch) -> float:
 def _tdict(tcfg: TrainConfig, ignore_budget: bool = False) -> dict[str, Any]:
     d = dataclasses.asdict(tcfg)
     if ignore_budget:  # a resumed run may extend its budget or change what it logs
-        for k in ("steps", "max_minutes", "threads", "checkpoint_every", "val_every"):
+        for k in ("steps", "max_minutes", "threads", "checkpoint_every", "val_every", "init_weights",
+                  "render_workers"):
             d.pop(k)
     return d
 

@@ -1,0 +1,114 @@
+"""Issue 11's two family checks, truth against the network's prediction (network alone):
+
+* thin film: hue (CIELAB h°, D65) of the specular direction (θh = 0) over θd for two held-out
+  thin-film test materials, drawn as a figure;
+* coloured highlight: for held-out tinted-coat test materials, the chromaticity of the specular
+  peak (θh = 0, θd = 10°; luminance normalised to Y = 0.5 so only chromaticity counts) as ΔE2000
+  between truth and prediction.
+
+Each prediction comes from the material's canonical input image
+(:func:`specgen_addon.input_image.render_input`), as `evaluate` does.
+
+Usage: ``.venv/bin/python bench/family_checks.py [--weights W.pt] [--figure docs/img/thin_film_hue.png]``
+"""
+
+from __future__ import annotations
+
+import argparse
+import json
+import sys
+from pathlib import Path
+
+import numpy as np
+from machine import describe_machine  # bench/machine.py
+
+REPO = Path(__file__).resolve().parents[1]
+sys.path.insert(0, str(REPO))
+
+WL = np.linspace(380.0, 780.0, 41)
+THETA_D = np.radians(np.linspace(0.0, 80.0, 33))
+
+
+def _lab(spectra_rows: np.ndarray, normalise_y: float | None = None) -> np.ndarray:
+    import colour
+
+    from specgen_addon.spectra import reflectance_to_linear_srgb
+
+    rgb = reflectance_to_linear_srgb(spectra_rows, WL)
+    xyz = colour.RGB_to_XYZ(rgb, colour.RGB_COLOURSPACES["sRGB"], apply_cctf_decoding=False)
+    if normalise_y is not None:
+        xyz = xyz * (normalise_y / np.maximum(xyz[..., 1:2], 1e-12))
+    return colour.XYZ_to_Lab(xyz, colour.CCS_ILLUMINANTS["CIE 1931 2 Degree Standard Observer"]["D65"])
+
+
+def _specular(brdf, theta_d: np.ndarray) -> np.ndarray:
+    from specgen_addon.rusinkiewicz import io_from_half_diff
+
+    wi, wo = io_from_half_diff(np.zeros_like(theta_d), theta_d, np.zeros_like(theta_d))
+    return np.asarray(brdf.eval(wi, wo, WL))
+
+
+def main() -> None:
+    import colour
+
+    from specgen_addon import input_image
+    from specgen_addon.infer import generate_brdf
+    from specgen_addon.train.evaluate import mixed_test_materials
+
+    p = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    p.add_argument("--weights", type=Path, default=None)
+    p.add_argument("--figure", type=Path, default=None)
+    p.add_argument("--json", type=Path, default=None)
+    args = p.parse_args()
+    print(f"machine: {describe_machine()}")
+    print(f"weights: {args.weights or 'shipped'}")
+    out: dict = {"weights": str(args.weights or "shipped")}
+    films = mixed_test_materials(2, ["thin_film"])
+    coats = mixed_test_materials(3, ["tinted_coat"])
+    curves = []
+    for m in films:
+        table = generate_brdf(input_image.render_input(m), weights=args.weights, wavelengths_nm=WL)
+        h_true = _lab(_specular(m, THETA_D), 0.5)
+        h_pred = _lab(_specular(table, THETA_D), 0.5)
+        # hue angle, unwrapped along θd (a film sweeping through red shows as a continuous curve)
+        hue = lambda lab: np.degrees(np.unwrap(np.arctan2(lab[:, 2], lab[:, 1])))  # noqa: E731
+        de = colour.delta_E(h_true, h_pred, method="CIE 2000")
+        curves.append((m, hue(h_true), hue(h_pred)))
+        print(f"thin film {m.name} ({m.kind}, d = {m.thickness_nm:.0f} nm, η_f = {m.film_eta}): "
+              f"true hue span {np.ptp(hue(h_true)):.0f}°, predicted span {np.ptp(hue(h_pred)):.0f}°, "
+              f"mean ΔE2000 (Y-normalised) over θd {de.mean():.1f}")
+        out.setdefault("thin_film", []).append({"material": m.name, "hue_true": hue(h_true).tolist(),
+                                                "hue_pred": hue(h_pred).tolist(), "mean_dE2000": float(de.mean())})
+    for m in coats:
+        table = generate_brdf(input_image.render_input(m), weights=args.weights, wavelengths_nm=WL)
+        td = np.radians([10.0])
+        de = float(colour.delta_E(_lab(_specular(m, td), 0.5), _lab(_specular(table, td), 0.5),
+                                  method="CIE 2000")[0])
+        print(f"tinted coat {m.name} ({m.kind}): specular-peak chromaticity ΔE2000 = {de:.1f} "
+              f"({'meets' if de <= 3 else 'misses'} ≤ 3)")
+        out.setdefault("tinted_coat", []).append({"material": m.name, "dE2000": de})
+    if args.json:
+        args.json.write_text(json.dumps(out, indent=1))
+    if args.figure:
+        import matplotlib
+
+        matplotlib.use("Agg")
+        import matplotlib.pyplot as plt
+
+        fig, axes = plt.subplots(1, len(curves), figsize=(5 * len(curves), 3.6), dpi=100)
+        for ax, (m, ht, hp) in zip(np.atleast_1d(axes), curves):
+            deg = np.degrees(THETA_D)
+            ax.plot(deg, ht, "k-", label="truth")
+            ax.plot(deg, hp, "C3--", label="SpecGen (network alone)")
+            ax.set_xlabel("θd (degrees), θh = 0")
+            ax.set_ylabel("CIELAB hue h° (D65, unwrapped)")
+            ax.set_title(f"{m.name}: {m.kind}, d = {m.thickness_nm:.0f} nm", fontsize=9)
+            ax.legend(fontsize=8)
+        fig.tight_layout()
+        args.figure.parent.mkdir(parents=True, exist_ok=True)
+        fig.savefig(args.figure)
+        print(f"figure: {args.figure}")
+
+
+if __name__ == "__main__":
+    main()

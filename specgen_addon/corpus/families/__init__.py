@@ -1,0 +1,20 @@
+"""Corpus material families beyond the classic plastic/metal recipe (issue 11), one module each.
+
+``classic`` (:class:`~..material.Material`), :class:`TintedCoat`, :class:`CarPaint`,
+:class:`ThinFilm`, :class:`Sheen` and :class:`Lobes` (long-tailed, very sharp and retro-reflective
+lobes) all follow the BRDF protocol; :func:`material_from_dict` rebuilds any of them.
+"""
+
+from .base import FAMILIES, FamilyMaterial, directional_albedo, halfvector_quadrature, hemisphere_quadrature, material_from_dict
+from .car_paint import CarPaint
+from .lobes import Lobes
+from .sheen import Sheen
+from .thin_film import ThinFilm, airy_reflectance
+from .tinted_coat import TintedCoat
+
+#: Every family name, the classic recipe first.
+FAMILY_NAMES: tuple[str, ...] = ("classic",) + tuple(FAMILIES)
+
+__all__ = ["CarPaint", "FAMILIES", "FAMILY_NAMES", "FamilyMaterial", "Lobes", "Sheen", "ThinFilm",
+           "TintedCoat", "airy_reflectance", "directional_albedo", "halfvector_quadrature",
+           "hemisphere_quadrature", "material_from_dict"]

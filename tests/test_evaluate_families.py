@@ -1,0 +1,29 @@
+"""Per-family evaluation (issue 11): rows per family of the mixed test split, and the RGL rows."""
+
+from __future__ import annotations
+
+import numpy as np
+import pytest
+
+from specgen_addon.corpus.generate import material_family
+from specgen_addon.train.evaluate import evaluate_families, format_family_results, mixed_test_materials
+
+
+@pytest.mark.slow
+def test_mixed_test_materials_are_held_out_and_grouped_by_family():
+    mats = mixed_test_materials(2, ["sheen", "thin_film"])
+    assert [material_family(m) for m in mats].count("sheen") == 2
+    assert [material_family(m) for m in mats].count("thin_film") == 2
+    assert all(m.split == "test" for m in mats)
+
+
+@pytest.mark.slow
+def test_family_rows_average_to_the_family_means(shared_dir):
+    rgl = shared_dir / "data" / "rgl" if shared_dir is not None else None
+    res = evaluate_families(per_family=1, envs=False, resolution=24, families=["sheen"], rgl_dir=rgl)
+    rows = [r for r in res["materials"] if r["family"] == "sheen"]
+    assert len(rows) == 1 and np.isfinite(rows[0]["psnr_distant"])
+    assert res["families"]["sheen"]["psnr_distant"] == pytest.approx(rows[0]["psnr_distant"])
+    if rgl is not None and any(rgl.glob("*.bsdf")):
+        assert res["families"]["rgl (real, RGB)"]["n"] == len(list(rgl.glob("*.bsdf")))
+    assert "sheen" in format_family_results(res)
