@@ -252,7 +252,7 @@ def test_ctrl_c_stops_batch_many_cleanly_with_exit_130(tmp_path):
     finally:
         _stop(proc)
     assert proc.returncode == 130
-    assert err.strip().splitlines() == ["cancelled: nothing partial was written"], err[-2000:]
+    assert err.strip().splitlines() == ["cancelled: batch-many stopped by SIGINT; nothing partial was left"], err[-2000:]
     assert sorted(p.name for p in out.iterdir()) == []
     psutil = pytest.importorskip("psutil")  # a dependency of distributed
 

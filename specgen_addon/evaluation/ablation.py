@@ -120,7 +120,10 @@ DEFAULT_CONFIG = REPO_ROOT / "configs" / "default.json"
 
 
 def _default_configs() -> tuple[dict[str, Any], dict[str, Any]]:
-    """(model, train) dicts of the shipped model's config file (Config/TrainConfig defaults without it)."""
+    """(model, train) dicts of the shipped model's config file (Config/TrainConfig defaults without it).
+
+    Ablation arms train from scratch: the config's ``init_weights`` (a warm start from the shipped
+    weights) is dropped, so every arm starts equal and arms of another architecture can train."""
     from ..model import Config
     from ..train.loop import TrainConfig, load_config
 
@@ -128,7 +131,7 @@ def _default_configs() -> tuple[dict[str, Any], dict[str, Any]]:
         mcfg, tcfg = load_config(DEFAULT_CONFIG)
     else:
         mcfg, tcfg = Config(), TrainConfig()
-    return mcfg.to_dict(), dataclasses.asdict(tcfg)
+    return mcfg.to_dict(), dataclasses.asdict(dataclasses.replace(tcfg, init_weights=None))
 
 
 def ablation_settings(smoke: bool = False, steps: int | None = None, budget_minutes: float | None = None,
