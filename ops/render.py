@@ -481,8 +481,28 @@ def _find_output(out_dir: Path, index: int) -> Path:
 
 
 # ------------------------------------------------------------------------------ the job
+class RenderJobOutputs:
+    """Cancel flag and output paths shared by the render jobs (``output``: the EXR or None)."""
+
+    output: object
+    _cancelled: bool
+
+    def cancel(self) -> None:
+        self._cancelled = True
+
+    def _check(self) -> None:
+        if self._cancelled:
+            raise Cancelled("spectral render cancelled; nothing was written")
+
+    def _outputs(self) -> tuple[Path, Path] | None:
+        if self.output is None:
+            return None
+        exr = Path(self.output)
+        return exr, exr.with_name(exr.stem + "_preview.png")
+
+
 @dataclass
-class SpectralRenderJob:
+class SpectralRenderJob(RenderJobOutputs):
     """Render ``scene`` band group by band group, then write a spectral EXR and a PNG preview.
 
     Iterate :meth:`steps` (each step is at most one Cycles render; yields progress in [0, 1]) or
@@ -507,19 +527,6 @@ class SpectralRenderJob:
     coefficient_images: np.ndarray | None = field(default=None, init=False)
     timings: dict = field(default_factory=dict, init=False)
     _cancelled: bool = field(default=False, init=False)
-
-    def cancel(self) -> None:
-        self._cancelled = True
-
-    def _check(self) -> None:
-        if self._cancelled:
-            raise Cancelled("spectral render cancelled; nothing was written")
-
-    def _outputs(self) -> tuple[Path, Path] | None:
-        if self.output is None:
-            return None
-        exr = Path(self.output)
-        return exr, exr.with_name(exr.stem + "_preview.png")
 
     def _preflight(self) -> list[bpy.types.Material]:
         outs = self._outputs()

@@ -29,6 +29,7 @@ import numpy as np
 
 from ..specgen_addon import uplift
 from ..specgen_addon.errors import Cancelled, OutputExistsError, SpecGenError
+from .render import RenderJobOutputs
 from .scene_convert import SceneConversion
 
 FIT_WARN = 0.05  # closure-fit error (relative RMS) above which the user is warned
@@ -96,7 +97,7 @@ class _RenderSettings:
 
 
 @dataclass
-class FullSceneRenderJob:
+class FullSceneRenderJob(RenderJobOutputs):
     """Render the whole ``scene`` per band group and write a spectral EXR (+ PNG preview).
 
     Iterate :meth:`steps` (one Cycles render per step, yields progress in [0, 1]) or call
@@ -116,19 +117,6 @@ class FullSceneRenderJob:
     fit_errors: dict = field(default_factory=dict, init=False)
     timings: dict = field(default_factory=dict, init=False)
     _cancelled: bool = field(default=False, init=False)
-
-    def cancel(self) -> None:
-        self._cancelled = True
-
-    def _check(self) -> None:
-        if self._cancelled:
-            raise Cancelled("spectral render cancelled; nothing was written")
-
-    def _outputs(self) -> tuple[Path, Path] | None:
-        if self.output is None:
-            return None
-        exr = Path(self.output)
-        return exr, exr.with_name(exr.stem + "_preview.png")
 
     def _preflight(self) -> None:
         self.wavelengths_nm = np.asarray(self.wavelengths_nm, np.float64).reshape(-1)
