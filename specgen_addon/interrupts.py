@@ -76,6 +76,30 @@ def on_hard_stop(cleanup) -> Iterator[None]:
             _cleanups.remove(cleanup)
 
 
+
+#: Wakeup pipes of the active :func:`stop_on_signals` blocks. A process forked while one is active
+#: (a multiprocessing or Dask worker) inherits the pipe *and* the wakeup fd: a signal to that child
+#: would write its number into our pipe and our watcher would end this process. Forked children
+#: drop both (:func:`_forget_wakeup_in_child`).
+_WAKEUP_PIPES: list[tuple[int, int]] = []
+
+
+def _forget_wakeup_in_child() -> None:
+    if not _WAKEUP_PIPES:
+        return
+    with contextlib.suppress(Exception):
+        signal.set_wakeup_fd(-1)
+    for fds in _WAKEUP_PIPES:
+        for fd in fds:
+            with contextlib.suppress(OSError):
+                os.close(fd)
+    _WAKEUP_PIPES.clear()
+
+
+if hasattr(os, "register_at_fork"):
+    os.register_at_fork(after_in_child=_forget_wakeup_in_child)
+
+
 @contextlib.contextmanager
 def stop_on_signals(message=None) -> Iterator[None]:
     """SIGINT and SIGTERM raise :class:`Interrupted` while the block runs (main thread only).
@@ -103,6 +127,7 @@ def stop_on_signals(message=None) -> Iterator[None]:
 
     previous = {s: signal.signal(s, handler) for s in (signal.SIGINT, signal.SIGTERM)}
     read_fd, write_fd = os.pipe()
+    _WAKEUP_PIPES.append((read_fd, write_fd))
     os.set_blocking(write_fd, False)
     old_wakeup = signal.set_wakeup_fd(write_fd, warn_on_full_buffer=False)
 
@@ -133,6 +158,8 @@ def stop_on_signals(message=None) -> Iterator[None]:
         yield
     finally:
         signal.set_wakeup_fd(old_wakeup)
+        with contextlib.suppress(ValueError):
+            _WAKEUP_PIPES.remove((read_fd, write_fd))
         os.close(write_fd)
         watcher.join(timeout=2.0 if not _requested else 0.1)
         with contextlib.suppress(OSError):
