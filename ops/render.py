@@ -373,7 +373,25 @@ def _emits(mat: bpy.types.Material) -> bool:
 
 
 # ------------------------------------------------------------------------------ scene state
-class _SceneState:
+class SavedAttributes:
+    """Set Blender properties for a render and put every one back afterwards, newest first
+    (a datablock deleted meanwhile is skipped). Subclasses keep ``self.saved``."""
+
+    saved: list[tuple[object, str, object]]
+
+    def _set(self, owner, attr: str, value) -> None:
+        self.saved.append((owner, attr, getattr(owner, attr)))
+        setattr(owner, attr, value)
+
+    def _restore_attributes(self) -> None:
+        for owner, attr, value in reversed(self.saved):
+            try:
+                setattr(owner, attr, value)
+            except (ReferenceError, AttributeError, TypeError):
+                pass
+
+
+class _SceneState(SavedAttributes):
     """Temporarily switch a scene to the spectral set-up; restore everything on exit."""
 
     def __init__(self, scene: bpy.types.Scene, samples: int, resolution: tuple[int, int],
@@ -385,10 +403,6 @@ class _SceneState:
         self.saved: list[tuple[object, str, object]] = []
         self.created: list[tuple[object, object]] = []
         self.relinked: list[tuple[object, object, object]] = []
-
-    def _set(self, owner, attr: str, value) -> None:
-        self.saved.append((owner, attr, getattr(owner, attr)))
-        setattr(owner, attr, value)
 
     def __enter__(self) -> "_SceneState":
         sc = self.scene
@@ -452,11 +466,7 @@ class _SceneState:
                 tree.links.remove(link)
             if source is not None:
                 tree.links.new(source, surface)
-        for owner, attr, value in reversed(self.saved):
-            try:
-                setattr(owner, attr, value)
-            except (ReferenceError, AttributeError, TypeError):
-                pass
+        self._restore_attributes()
         for collection, block in reversed(self.created):
             try:
                 collection.remove(block)

@@ -29,7 +29,7 @@ import numpy as np
 
 from ..specgen_addon import uplift
 from ..specgen_addon.errors import Cancelled, OutputExistsError, SpecGenError
-from .render import RenderJobOutputs
+from .render import RenderJobOutputs, SavedAttributes
 from .scene_convert import SceneConversion
 
 FIT_WARN = 0.05  # closure-fit error (relative RMS) above which the user is warned
@@ -61,16 +61,12 @@ def _read_combined(path: Path) -> np.ndarray:
     return np.stack(rgb + [np.ones_like(rgb[0]) if alpha is None else alpha], -1)
 
 
-class _RenderSettings:
+class _RenderSettings(SavedAttributes):
     """Cycles + linear EXR output for the band renders; restored on exit."""
 
     def __init__(self, scene: bpy.types.Scene):
         self.scene = scene
         self.saved: list[tuple[object, str, object]] = []
-
-    def _set(self, owner, attr: str, value) -> None:
-        self.saved.append((owner, attr, getattr(owner, attr)))
-        setattr(owner, attr, value)
 
     def __enter__(self) -> "_RenderSettings":
         sc = self.scene
@@ -89,11 +85,7 @@ class _RenderSettings:
         return self
 
     def __exit__(self, *exc) -> None:
-        for owner, attr, value in reversed(self.saved):
-            try:
-                setattr(owner, attr, value)
-            except (ReferenceError, AttributeError, TypeError):
-                pass
+        self._restore_attributes()
 
 
 @dataclass
