@@ -15,7 +15,8 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from ..metrics import PEAK_PERCENTILE
+from ..errors import SpecGenError
+from ..metrics import normalisation_scale
 
 
 @dataclass(frozen=True)
@@ -31,12 +32,12 @@ class Reproduction:
 
 
 def photo_scale(photo_rows: np.ndarray) -> float:
-    """The normalising level: the photo's 99.9th percentile over observed pixels and channels."""
-    rows = np.asarray(photo_rows, dtype=np.float64)
-    scale = float(np.percentile(rows, PEAK_PERCENTILE)) if rows.size else 0.0
-    if not scale > 0:
-        scale = float(rows.max()) if rows.size else 0.0
-    return scale if scale > 0 else 1.0
+    """The normalising level: :func:`specgen_addon.metrics.normalisation_scale` of the photo's
+    observed pixels (its 99.9th percentile), or 1 for a black photo (nothing to normalise)."""
+    try:
+        return normalisation_scale(np.asarray(photo_rows, dtype=np.float64))
+    except SpecGenError:
+        return 1.0
 
 
 def rgb_psnr(photo_rows: np.ndarray, render_rows: np.ndarray, scale: float | None = None) -> float:
