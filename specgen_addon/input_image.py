@@ -75,7 +75,12 @@ def _is_rgb_only(brdf) -> bool:
 
 def _render(brdf, env_name: str, rotation_rad: float, exposure: float, size: int,
             progress=None) -> np.ndarray:
-    scene = _scene(env_name, float(rotation_rad), int(size))
+    return photo_in_scene(brdf, _scene(env_name, float(rotation_rad), int(size)), exposure, progress)
+
+
+def photo_in_scene(brdf, scene, exposure: float, progress=None) -> np.ndarray:
+    """The photo of ``brdf`` in a prepared renderer scene: linear sRGB × ``exposure``, float32
+    (spectral BRDFs at the default bands, RGB-only ones through ``eval_rgb``)."""
     if _is_rgb_only(brdf):
         rgb = scene.render_rgb(brdf, progress=progress).rgb
     else:

@@ -18,7 +18,7 @@ from typing import Any, Callable, Sequence
 
 import numpy as np
 
-from .. import metrics, spectra
+from .. import metrics
 
 RESOLUTION = 128
 
@@ -30,11 +30,7 @@ def photo_under(brdf, lighting) -> np.ndarray:
     if lighting.is_canonical:
         return input_image.render_input(brdf).astype(np.float64)
     scene = lighting.scene(input_image.CANONICAL_SIZE)
-    if input_image._is_rgb_only(brdf):
-        rgb = scene.render_rgb(brdf).rgb
-    else:
-        rgb = scene.render_spectral(brdf, spectra.DEFAULT_WAVELENGTHS_NM).rgb
-    return np.clip(rgb, 0.0, None) * lighting.image_exposure
+    return input_image.photo_in_scene(brdf, scene, lighting.image_exposure).astype(np.float64)
 
 
 def _novel_scores(truth, network, refined, rgb_only: bool, envs: Sequence[str]) -> dict[str, dict]:
