@@ -80,7 +80,7 @@ def on_hard_stop(cleanup) -> Iterator[None]:
 #: Wakeup pipes of the active :func:`stop_on_signals` blocks. A process forked while one is active
 #: (a multiprocessing or Dask worker) inherits the pipe *and* the wakeup fd: a signal to that child
 #: would write its number into our pipe and our watcher would end this process. Forked children
-#: drop both (:func:`_forget_wakeup_in_child`).
+#: drop both, and get the default SIGINT/SIGTERM actions back (:func:`_forget_wakeup_in_child`).
 _WAKEUP_PIPES: list[tuple[int, int]] = []
 
 
@@ -89,6 +89,11 @@ def _forget_wakeup_in_child() -> None:
         return
     with contextlib.suppress(Exception):
         signal.set_wakeup_fd(-1)
+    # The parent stops its workers with SIGTERM (Pool.terminate) or they share its Ctrl-C: a
+    # worker ends quietly by the default action instead of printing our Interrupted traceback.
+    for signum in (signal.SIGINT, signal.SIGTERM):
+        with contextlib.suppress(Exception):
+            signal.signal(signum, signal.SIG_DFL)
     for fds in _WAKEUP_PIPES:
         for fd in fds:
             with contextlib.suppress(OSError):
@@ -96,8 +101,34 @@ def _forget_wakeup_in_child() -> None:
     _WAKEUP_PIPES.clear()
 
 
+#: The parent's wakeup fd, set aside while it forks (:func:`_pause_wakeup_for_fork`).
+_PAUSED_WAKEUP: list[int] = []
+
+
+def _pause_wakeup_for_fork() -> None:
+    """Before a fork, the parent unsets its wakeup fd, so a signal that reaches the child before the
+    child's own at-fork hook has run cannot write into the parent's pipe (that ended the parent)."""
+    if not _WAKEUP_PIPES or threading.current_thread() is not threading.main_thread():
+        return
+    with contextlib.suppress(Exception):
+        _PAUSED_WAKEUP.append(signal.set_wakeup_fd(-1))
+
+
+def _resume_wakeup_after_fork() -> None:
+    while _PAUSED_WAKEUP:
+        fd = _PAUSED_WAKEUP.pop()
+        with contextlib.suppress(Exception):
+            signal.set_wakeup_fd(fd, warn_on_full_buffer=False)
+
+
+def _child_after_fork() -> None:
+    _PAUSED_WAKEUP.clear()
+    _forget_wakeup_in_child()
+
+
 if hasattr(os, "register_at_fork"):
-    os.register_at_fork(after_in_child=_forget_wakeup_in_child)
+    os.register_at_fork(before=_pause_wakeup_for_fork, after_in_parent=_resume_wakeup_after_fork,
+                        after_in_child=_child_after_fork)
 
 
 @contextlib.contextmanager
