@@ -245,3 +245,21 @@ def test_a_coarse_table_is_scored_on_the_fine_render_grid(ramp_table):
     photo = render_under(truth, light.scene(SIZE), light.image_exposure)
     res = refine_brdf(coarse, photo, light, RefineOptions(clip_level=None))
     assert res.after.psnr_db > 40.0, res.summary()
+
+
+def test_default_spectral_correction_is_mallett_2019_as_colour_science_has_it():
+    """The three spectral functions are colour-science's Mallett & Yuksel basis (blue, green, red),
+    a partition of unity (so the identity correction is x = 1); 'hats' stays available."""
+    colour = pytest.importorskip("colour")
+    wl = np.arange(380.0, 781.0, 20.0)
+    s = CorrectionBasis().spectral_hats(wl)
+    reference = colour.recovery.MSDS_BASIS_FUNCTIONS_sRGB_MALLETT2019.copy().align(
+        colour.SpectralShape(380, 780, 5))
+    expected = np.stack([np.interp(wl, reference.wavelengths, reference.values[:, c]) for c in (2, 1, 0)], 1)
+    np.testing.assert_allclose(s, expected, atol=1e-6)
+    np.testing.assert_allclose(s.sum(axis=1), 1.0, atol=1e-4)
+    hats = CorrectionBasis(spectral="hats").spectral_hats(wl)
+    np.testing.assert_allclose(hats.sum(axis=1), 1.0)
+    assert np.count_nonzero(hats[:, 0]) < wl.size            # hats are local, Mallett's are not
+    with pytest.raises(SpecGenError, match="spectral correction basis"):
+        CorrectionBasis(spectral="otsu")

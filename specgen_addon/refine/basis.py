@@ -8,9 +8,15 @@ The refined table is (see :mod:`specgen_addon.refine`)
 
 where ``c(λ)`` is the network table's diffuse floor (its Lambertian part), ``h_a`` are hats over the
 MERL θh index (the √ warp puts half the knots inside the first 15° where specular lobes live),
-``g_b`` hats over θd (Fresnel bands) and ``s_l`` hats over wavelength. Every hat family is a
-partition of unity, so ``x = y = 1, z = 0`` is the identity and ``x, y, z ≥ 0`` keeps ``Φ`` and ``c'``
-non-negative.
+``g_b`` hats over θd (Fresnel bands) and ``s_l`` three spectral functions: by default Mallett &
+Yuksel's (2019) reflectance basis (colour-science's, precomputed in ``colour_tables``), smooth
+spectra of real reflectance shape whose blue, green and red members uplift the sRGB primaries;
+``spectral="hats"`` gives piecewise-linear hats at 450, 550 and 630 nm instead. A photo constrains
+three spectral degrees of freedom, and a correction in the Mallett basis spends them on the
+smoothest, most reflectance-like change of the network's spectra that explains it; hats bend the
+spectra piecewise-linearly, which matched the photo as well but cost spectral accuracy in other
+lighting (docs/refinement.md). Every family is a partition of unity, so ``x = y = 1, z = 0`` is
+the identity and ``x, y, z ≥ 0`` keeps ``Φ`` and ``c'`` non-negative.
 
 * tinting the specular lobe apart from the diffuse body: ``x`` (lobe) and ``y, z`` (body) are separate;
 * overall brightness: all of them;
@@ -31,9 +37,11 @@ from ..table import N_THETA_D, N_THETA_H
 THETA_H_KNOTS = (0, 2, 4, 7, 10, 14, 19, 25, 32, 41, 51, 65, 89)
 #: θd knots as grid indices (index j ↔ θd = j · 1°): 0°, 30°, 50°, 65°, 77°, 89°.
 THETA_D_KNOTS = (0, 30, 50, 65, 77, 89)
-#: Wavelength knots (nm) near the peaks of the sRGB primaries' sensitivities: a photo constrains
-#: three spectral degrees of freedom, so three hats are what it can resolve.
+#: Wavelength knots (nm) of ``spectral="hats"``, near the peaks of the sRGB primaries' sensitivities:
+#: a photo constrains three spectral degrees of freedom, so three functions are what it can resolve.
 WAVELENGTH_KNOTS_NM = (450.0, 550.0, 630.0)
+#: Spectral functions of the correction: ``"mallett2019"`` (default) or ``"hats"``.
+SPECTRAL_BASES = ("mallett2019", "hats")
 
 
 def hat_matrix(x: np.ndarray, knots: np.ndarray) -> np.ndarray:
@@ -50,11 +58,19 @@ def hat_matrix(x: np.ndarray, knots: np.ndarray) -> np.ndarray:
 
 @dataclass(frozen=True)
 class CorrectionBasis:
-    """Knots of the three hat families (θh and θd as MERL grid indices, λ in nm)."""
+    """Knots of the θh and θd hat families (MERL grid indices) and the spectral functions (λ in nm)."""
 
     theta_h_knots: tuple[float, ...] = THETA_H_KNOTS
     theta_d_knots: tuple[float, ...] = THETA_D_KNOTS
     wavelength_knots_nm: tuple[float, ...] = WAVELENGTH_KNOTS_NM
+    spectral: str = "mallett2019"
+
+    def __post_init__(self) -> None:
+        if self.spectral not in SPECTRAL_BASES:
+            raise SpecGenError(f"unknown spectral correction basis {self.spectral!r} "
+                               f"(choose from {', '.join(SPECTRAL_BASES)})")
+        if self.spectral == "mallett2019" and len(self.wavelength_knots_nm) != 3:
+            raise SpecGenError("the Mallett 2019 spectral basis has three members (blue, green, red)")
 
     @property
     def shape(self) -> tuple[int, int, int]:
@@ -75,8 +91,16 @@ class CorrectionBasis:
         return hat_matrix(np.arange(N_THETA_D), self.theta_d_knots)
 
     def spectral_hats(self, wavelengths_nm: np.ndarray) -> np.ndarray:
-        """(Λ, L) hat values at the table's wavelengths (nm)."""
-        return hat_matrix(wavelengths_nm, self.wavelength_knots_nm)
+        """(Λ, L) spectral functions at the table's wavelengths (nm), rows summing to 1; for the
+        Mallett basis in the order blue, green, red (like the hat knots), held beyond 380–780 nm."""
+        if self.spectral == "hats":
+            return hat_matrix(wavelengths_nm, self.wavelength_knots_nm)
+        from ..colour_tables import tables
+
+        t = tables()
+        w = np.asarray(wavelengths_nm, dtype=np.float64)
+        return np.stack([np.interp(w, t["mallett2019_wavelengths_nm"], t["mallett2019_values"][:, c])
+                         for c in (2, 1, 0)], axis=1)
 
     def lobe_factor(self, x: np.ndarray, wavelengths_nm: np.ndarray) -> np.ndarray:
         """Φ on the grid nodes, (90, 90, Λ), for lobe coefficients ``x`` (Na, Nb, L)."""
