@@ -9,6 +9,7 @@ import bpy
 from bpy.props import (BoolProperty, EnumProperty, FloatProperty, IntProperty, PointerProperty,
                        StringProperty)
 
+from ..specgen_addon.bake import DEFAULT_TOLERANCE
 from ..specgen_addon.spectra import DEFAULT_BAND_COUNT, DEFAULT_RANGE_NM
 
 LOOKUP_RESOLUTIONS = (
@@ -73,9 +74,10 @@ class SpecGenSettings(bpy.types.PropertyGroup):
                        description="Number of wavelength bands in the spectral output")
     lookup_resolution: EnumProperty(name="Lookup", items=LOOKUP_RESOLUTIONS, default="180",
                                     description="Resolution of the baked BRDF lookup textures")
-    basis_tolerance: FloatProperty(name="Basis Tolerance", default=1e-3, min=0.0, max=0.1,
-                                   precision=4, description="Relative error allowed when the "
-                                   "spectra are compressed to a basis (0 = exact, more renders)")
+    basis_tolerance: FloatProperty(name="Basis Tolerance", default=DEFAULT_TOLERANCE, min=0.0, max=0.1,
+                                   precision=4, description="Relative RMS spectral error per table "
+                                   "entry allowed when the spectra are compressed to a basis "
+                                   "(0 = exact; each 4 more coefficients cost one more render)")
     render_mode: EnumProperty(name="Mode", items=RENDER_MODES, default="FULL_SCENE",
                               description="What Render Spectral Stack renders")
     samples: IntProperty(name="Samples", default=16, min=1, max=4096,

@@ -148,6 +148,7 @@ def make_material(name: str, atlas: bake.AtlasInfo) -> bpy.types.Material:
     mat["specgen_atlas_groups"] = [str(p) for p in atlas.group_paths]
     mat["specgen_basis"] = [float(x) for x in atlas.basis.ravel()]
     mat["specgen_offsets"] = [float(x) for x in atlas.offsets]
+    mat["specgen_atlas_version"] = bake.ATLAS_VERSION
     mat["specgen_basis_error"] = float(atlas.rel_error)
     return mat
 
@@ -550,6 +551,10 @@ class SpectralRenderJob(RenderJobOutputs):
         mats = specgen_materials(self.scene)
         if not mats:
             raise SpecGenError("no render-visible object uses a SpecGen material (Apply one first)")
+        stale = [m.name for m in mats if m.get("specgen_atlas_version") != bake.ATLAS_VERSION]
+        if stale:
+            raise SpecGenError(f"SpecGen material {stale[0]!r} was baked by an older SpecGen; "
+                               "generate it again")
         bands = {tuple(m["specgen_wavelengths_nm"]) for m in mats}
         if len(bands) != 1:
             raise SpecGenError("SpecGen materials in the scene have different wavelength bands; "
@@ -600,7 +605,7 @@ class SpectralRenderJob(RenderJobOutputs):
             h, w = self.resolution[1], self.resolution[0]
             uplift = _uplift(wl)
             plan = [(g, r) for g, (basis, _, _) in enumerate(self.groups)
-                    for r in range(-(-(basis.shape[0] + 1) // bake.COEFFS_PER_RENDER))]
+                    for r in range(-(-basis.shape[0] // bake.COEFFS_PER_RENDER))]
             images = [np.zeros((h, w, len([p for p in plan if p[0] == g]) * bake.COEFFS_PER_RENDER, 3),
                                np.float32) for g in range(len(self.groups))]
             t_render = 0.0

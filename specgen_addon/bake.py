@@ -14,10 +14,14 @@ reference renderer's convention). Then the spectral radiance is
 and Cycles only renders the images ``I_ck``: four coefficient slots (one RGBA lookup group, two
 bilinear taps for the trilinear interpolation) per Cycles render, RGB each, out through four colour
 passes. Cycles drops or clamps negative closure weights (only Emission keeps them), so the signed
-coefficients are stored shifted, ``c_k + o_k ≥ 0``, and slot 0 holds the constant 1 whose image
-``I_c1`` removes the shift afterwards: ``I_ck = I'_ck − o_k I_c1`` (exact, linear). ``K`` is the
-smallest of 3, 7, 11, … (filling whole renders) whose truncation error is below a tolerance, or Λ
-(exact), so 21 bands usually need one or two renders instead of Λ/3.
+coefficients are stored shifted *in proportion to the first one*: ``B_0 ≥ 0`` (the Perron vector
+of a non-negative Gram matrix), so ``c_0 ≥ 0``, and slot ``k`` holds ``c_k + o_k c_0 ≥ 0`` with
+``o_k = max(−c_k / c_0)`` (``o_0 = 0``); the images then give ``I_ck = I'_ck − o_k I'_c0`` (exact,
+linear). A shift proportional to each entry keeps float32 precision everywhere: a constant shift
+``c_k + o_k`` must cover the brightest specular peak (``o_k`` reached 10⁴–10⁵ sr⁻¹ on generated
+tables) and left the dim body colour below float32 resolution. ``K`` is the smallest of 4, 8,
+12, … (filling whole renders) whose truncation error is below a tolerance, or Λ (exact), so 21
+bands usually need one or two renders instead of Λ/3.
 
 Files (float32 OpenEXR):
 
@@ -44,8 +48,10 @@ from .io_utils import atomic_write
 from .table import N_PHI_D, N_THETA_D, N_THETA_H
 
 COEFFS_PER_RENDER = 4   # coefficient slots per Cycles render: one RGBA lookup group, 4 passes
+#: Atlas layout: 2 = slots c_k + o_k c_0 (1 had a constant slot 0 and absolute shifts).
+ATLAS_VERSION = 2
 DEFAULT_TOLERANCE = 1e-2  # relative RMS spectral error per entry, see spectral_basis
-SHAPE_FLOOR = 1e-3       # entries below this fraction of the brightest count as that dark
+SHAPE_FLOOR = 1e-3       # entries below this fraction of the median count as that dark
 MAX_LIGHTS = 4  # lights the shader takes as sockets (Light0… Light3)
 ENV_LIST_WIDTH = 256
 
@@ -69,8 +75,8 @@ def group_path(base: Path, group: int) -> Path:
 class AtlasInfo:
     """What :func:`bake_atlas` wrote.
 
-    ``basis`` (K, Λ) holds the spectral basis ``B_k(λ)`` at ``wavelengths_nm`` and ``offsets`` (K,)
-    the shifts ``o_k``. Slot 0 is the constant 1, slot ``k + 1`` holds ``c_k + o_k``; group file
+    ``basis`` (K, Λ) holds the spectral basis ``B_k(λ)`` at ``wavelengths_nm`` (``B_0 ≥ 0``) and
+    ``offsets`` (K,) the relative shifts ``o_k`` (``o_0 = 0``): slot ``k`` holds ``c_k + o_k c_0``; group file
     ``g`` holds slots ``4g … 4g+3`` in R, G, B, A. ``rel_error`` is the basis' relative RMS
     spectral error per table entry (:func:`spectral_basis`; 0 when exact). ``closures`` is the table's
     Lambert + GGX fit (:mod:`specgen_addon.fit.closures`) that the full-scene render uses.
@@ -93,7 +99,7 @@ class AtlasInfo:
 
     @property
     def n_slots(self) -> int:
-        return self.n_coeffs + 1
+        return self.n_coeffs
 
     @property
     def n_renders(self) -> int:
@@ -134,46 +140,90 @@ def resample_phi_d(values: np.ndarray, n_phi_d: int) -> np.ndarray:
 
 
 def spectral_basis(values: np.ndarray, tolerance: float = DEFAULT_TOLERANCE,
-                   max_coeffs: int | None = None) -> tuple[np.ndarray, float]:
+                   max_coeffs: int | None = None,
+                   reachable: np.ndarray | None = None) -> tuple[np.ndarray, float]:
     """Principal spectral basis of table entries ``values`` (…, Λ): ``(B (K, Λ), rel_error)``.
 
     The basis fits the *shape* of every entry's spectrum, not its energy: ``B``'s rows are the
-    leading orthonormal eigenvectors of ``G = Σ_i w_i m_i m_iᵀ`` with ``w_i = 1 / (‖m_i‖² + ε²)``,
-    ``ε = SHAPE_FLOOR · max_i ‖m_i‖`` (a PCA of the entries' spectra normalised to unit length;
-    entries darker than the floor count as that dark). An energy-weighted PCA (``w_i = 1``) spends
+    leading orthonormal eigenvectors of ``G = Σ_i w_i m_i m_iᵀ`` with ``w_i = r_i / (‖m_i‖² + ε²)``,
+    ``ε = SHAPE_FLOOR · median_i ‖m_i‖`` (a PCA of the entries' spectra normalised to unit length;
+    entries darker than the floor count as that dark) and ``r_i`` = 1 for entries a render can
+    reach, 0 for the rest (``reachable``, same leading shape as ``values``: table entries whose
+    directions lie below the horizon are never looked up, yet a generated table fills them, up to
+    10⁵ sr⁻¹ at grazing angles, which a maximum-based floor or an energy weighting would chase). An energy-weighted PCA (``w_i = 1``) spends
     its few components on the bright specular peak and loses the body colour, which covers most
     pixels of a render: on the refined demo table its 3 components left a mean ΔE2000 of 2.8 in
     the reference render, against 0.4 for these (docs/blender.md).
 
-    ``rel_error`` is the weighted relative RMS residual ``√(Σ w_i ‖m_i − m_i BᵀB‖² / Σ w_i ‖m_i‖²)``
+    ``B_0`` is made non-negative (see :func:`bake_atlas`'s shifts). ``rel_error`` is the weighted relative RMS residual ``√(Σ w_i ‖m_i − m_i BᵀB‖² / Σ w_i ‖m_i‖²)``
     (the tail of ``G``'s eigenvalues): the typical relative spectral error of one entry. ``K`` is
-    the smallest of 3, 7, 11, … (with the constant slot, whole groups of four) whose error is
+    the smallest of 4, 8, 12, … (whole groups of four slots) whose error is
     ≤ ``tolerance``, capped at Λ where the basis is complete and exact; ``max_coeffs`` caps K.
     """
     lam = values.shape[-1]
     m = values.reshape(-1, lam)
-    peak2 = 0.0
-    for start in range(0, m.shape[0], 1 << 18):
-        chunk = m[start:start + (1 << 18)].astype(np.float64)
-        peak2 = max(peak2, float(np.max(np.einsum("nl,nl->n", chunk, chunk), initial=0.0)))
-    eps2 = max(SHAPE_FLOOR ** 2 * peak2, 1e-300)
+    r = None if reachable is None else np.broadcast_to(reachable, values.shape[:-1]).reshape(-1)
+    norms2 = np.concatenate([np.einsum("nl,nl->n", *(2 * (m[s:s + (1 << 18)].astype(np.float64),)))
+                             for s in range(0, m.shape[0], 1 << 18)])
+    seen = norms2 > 0 if r is None else (norms2 > 0) & r
+    eps2 = max(SHAPE_FLOOR ** 2 * float(np.median(norms2[seen])) if np.any(seen) else 0.0, 1e-300)
     gram = np.zeros((lam, lam))
     for start in range(0, m.shape[0], 1 << 18):
         chunk = m[start:start + (1 << 18)].astype(np.float64)
-        w = 1.0 / (np.einsum("nl,nl->n", chunk, chunk) + eps2)
+        w = 1.0 / (norms2[start:start + (1 << 18)] + eps2)
+        if r is not None:
+            w = w * r[start:start + (1 << 18)]
         gram += (chunk * w[:, None]).T @ chunk
     eig, vec = np.linalg.eigh(gram)
     order = np.argsort(eig)[::-1]
     eig, vec = np.clip(eig[order], 0.0, None), vec[:, order]
+    if vec[:, 0].sum() < 0:            # the Perron vector, made non-negative
+        vec[:, 0] = -vec[:, 0]
+    vec[:, 0] = np.clip(vec[:, 0], 0.0, None)
     total = max(float(eig.sum()), 1e-300)
     limit = lam if max_coeffs is None else max(1, min(lam, max_coeffs))
-    k = COEFFS_PER_RENDER - 1
+    k = COEFFS_PER_RENDER
     while True:
         k = min(k, limit)
         rel = float(np.sqrt(eig[k:].sum() / total)) if k < lam else 0.0
         if rel <= tolerance or k >= limit:
             return vec[:, :k].T.copy(), rel
         k += COEFFS_PER_RENDER
+
+
+def reachable_entries(n_phi_d: int = N_PHI_D) -> np.ndarray:
+    """(90, 90, n_phi_d) bool: grid entries whose (ωi, ωo) both lie above the horizon, allowing
+    the one-cell reach of the trilinear lookup (a neighbour of a reachable node counts)."""
+    from .rusinkiewicz import io_from_half_diff
+    from .table import grid_angles
+
+    th, td, _ = grid_angles()
+    pd = np.arange(n_phi_d) / n_phi_d * np.pi
+    wi, wo = io_from_half_diff(th[:, None, None], td[None, :, None], pd[None, None, :])
+    above = (wi[..., 2] > 0) & (wo[..., 2] > 0)
+    grown = above.copy()
+    for axis in range(3):
+        grown |= np.roll(above, 1, axis) | np.roll(above, -1, axis)
+    return grown
+
+
+def shifted_coefficients(coeffs: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """Slots ``c_k + o_k c_0 ≥ 0`` of coefficients ``coeffs`` (…, K) and the shifts ``o`` (K,).
+
+    Cycles keeps only non-negative closure weights. ``c_0`` (on the non-negative ``B_0``) is ≥ 0
+    up to rounding; ``o_k = max(0, max(−c_k / c_0))`` over every entry with ``c_0 > 0`` (however
+    dim: the body of a table whose peak is 10⁵ sr⁻¹ sits far below any fixed fraction of it),
+    ``o_0 = 0``. Only entries with ``c_0 ≤ 0`` (zero spectra) are clipped.
+    """
+    c = np.asarray(coeffs, dtype=np.float64)
+    c0 = np.maximum(c[..., :1], 0.0)
+    k = c.shape[-1]
+    offsets = np.zeros(k, np.float64)
+    live = c0[..., 0] > 0.0
+    if k > 1 and np.any(live):
+        offsets[1:] = np.maximum(0.0, (-c[live][:, 1:] / c0[live]).max(axis=0))
+    slots = np.concatenate([c0, c[..., 1:] + offsets[1:] * c0], axis=-1)
+    return np.maximum(slots, 0.0).astype(np.float32), offsets
 
 
 def bake_atlas(table, path: str | os.PathLike, wavelengths_nm: np.ndarray | None = None,
@@ -210,15 +260,10 @@ def bake_atlas(table, path: str | os.PathLike, wavelengths_nm: np.ndarray | None
         weights = table.wavelength_weights(wl).astype(np.float32)       # (C, Λ)
         values = np.tensordot(values, weights, axes=([3], [0]))
     values = resample_phi_d(np.maximum(values, 0.0), n_phi_d).astype(np.float32)  # (90, 90, P, Λ)
-    basis, rel = spectral_basis(values, tolerance, max_coeffs)
+    basis, rel = spectral_basis(values, tolerance, max_coeffs, reachable=reachable_entries(n_phi_d))
     if progress is not None:
         progress(0.2)
-    # slot 0: the constant 1; slot k+1: c_k + o_k ≥ 0 (Cycles keeps only non-negative weights)
-    coeffs = values @ basis.T.astype(np.float32)                         # (90, 90, P, K)
-    offsets = np.maximum(0.0, -coeffs.min(axis=(0, 1, 2))).astype(np.float64)
-    slots = np.concatenate([np.ones(coeffs.shape[:3] + (1,), np.float32),
-                            coeffs + offsets.astype(np.float32)], axis=-1)
-    del coeffs
+    slots, offsets = shifted_coefficients(values @ basis.T.astype(np.float32))  # (90, 90, P, K)
     tiles_x, tiles_y = atlas_layout(n_phi_d)
     info = AtlasInfo(Path(path), wl, basis, offsets, n_phi_d, tiles_x, tiles_y, rel,
                      fit_closures(table, None if wavelengths_nm is None else wl))
@@ -271,7 +316,7 @@ def atlas_lookup_reference(atlas: np.ndarray, info: AtlasInfo, theta_h: np.ndarr
         return (1 - ty) * ((1 - tx) * a + tx * b) + ty * ((1 - tx) * c + tx * d)
 
     slots = (1 - tk) * bilinear(k0) + tk * bilinear(k1)
-    coeffs = slots[:, 1:info.n_slots] - slots[:, :1] * info.offsets[None]
+    coeffs = slots[:, :info.n_slots] - slots[:, :1] * info.offsets[None]
     return coeffs @ info.basis
 
 
@@ -290,12 +335,12 @@ def assemble_spectrum(images: np.ndarray, basis: np.ndarray, offsets: np.ndarray
                       uplift: np.ndarray) -> np.ndarray:
     """Spectral radiance (H, W, Λ) from the rendered slot images.
 
-    ``images`` (H, W, S ≥ K+1, 3): slot s lit by the R, G, B parts of the lighting (slot 0 = the
-    constant 1); ``basis`` (K, Λ) = ``B_k(λ)``; ``offsets`` (K,) = ``o_k``; ``uplift`` (3, Λ) =
-    ``U_c(λ)``. ``L(λ) = Σ_c Σ_k U_c(λ) B_k(λ) (I'_{c,k+1} − o_k I'_{c,0})``.
+    ``images`` (H, W, S ≥ K, 3): slot s lit by the R, G, B parts of the lighting; ``basis`` (K, Λ)
+    = ``B_k(λ)``; ``offsets`` (K,) = ``o_k`` (``o_0 = 0``); ``uplift`` (3, Λ) = ``U_c(λ)``.
+    ``L(λ) = Σ_c Σ_k U_c(λ) B_k(λ) (I'_{c,k} − o_k I'_{c,0})``.
     """
     k = basis.shape[0]
-    coeff = images[:, :, 1:k + 1, :].astype(np.float64) - \
+    coeff = images[:, :, :k, :].astype(np.float64) - \
         np.asarray(offsets, np.float64)[None, None, :, None] * images[:, :, :1, :].astype(np.float64)
     return np.einsum("hwkc,cl,kl->hwl", coeff, uplift, basis, optimize=True).astype(np.float32)
 
@@ -397,7 +442,7 @@ def save_atlas_info(info: AtlasInfo, path: str | os.PathLike) -> Path:
     """Write the atlas description (JSON beside the textures) so a later session can apply it."""
     import json
 
-    data = {"format": "specgen-atlas", "version": 1, "path": str(info.path),
+    data = {"format": "specgen-atlas", "version": ATLAS_VERSION, "path": str(info.path),
             "wavelengths_nm": [float(w) for w in info.wavelengths_nm],
             "basis": info.basis.tolist(), "offsets": info.offsets.tolist(), "n_phi_d": info.n_phi_d, "tiles_x": info.tiles_x,
             "tiles_y": info.tiles_y, "rel_error": info.rel_error,
@@ -416,6 +461,8 @@ def load_atlas_info(path: str | os.PathLike) -> AtlasInfo:
         data = json.loads(path.read_text())
         if data.get("format") != "specgen-atlas":
             raise ValueError("not a SpecGen atlas description")
+        if data.get("version") != ATLAS_VERSION:
+            raise ValueError(f"baked by an older SpecGen (format {data.get('version')}); generate it again")
         info = AtlasInfo(Path(data["path"]), np.asarray(data["wavelengths_nm"], float),
                          np.asarray(data["basis"], float), np.asarray(data["offsets"], float),
                          int(data["n_phi_d"]), int(data["tiles_x"]),

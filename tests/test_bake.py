@@ -36,12 +36,47 @@ def test_atlas_lookup_reproduces_the_tables_trilinear_interpolation(rich_table, 
     table = rich_table
     info = bake.bake_atlas(table, tmp_path / "a.exr", tolerance=1e-6)
     assert info.n_coeffs == 6 and info.rel_error == 0.0  # five components > 3: complete (Λ = 6)
-    assert info.n_renders == 2                           # constant slot + 6 coefficients
+    assert info.n_renders == 2                           # 6 coefficients, four per render
     rng = np.random.default_rng(3)
     th, td, pd = rng.uniform(0, np.pi / 2, 500), rng.uniform(0, np.pi / 2, 500), rng.uniform(-np.pi, np.pi, 500)
     got = bake.atlas_lookup_reference(bake.read_atlas(info), info, th, td, pd)
     # float32 storage of the shifted coefficients: errors ~1e-7 of the table's peak
     np.testing.assert_allclose(got, table.eval_hd(th, td, pd), rtol=2e-4, atol=2e-7 * table.values.max())
+
+
+def test_shifts_follow_the_first_coefficient_so_a_dim_body_keeps_float32_precision(tmp_path):
+    """A peak 10⁵ times brighter than the body: with shifts proportional to c_0 the body's
+    spectrum comes back from the float32 atlas to 1e-5, where a constant shift lost it."""
+    wl = np.linspace(400, 700, 7)
+    body = 0.05 + 0.1 * np.exp(-0.5 * ((wl - 620) / 40) ** 2)
+    peak = 0.5 + 0.5 * np.linspace(1, 0, wl.size)
+
+    def fn(th, td, pd):
+        wi, wo = io_from_half_diff(th, td, pd)
+        above = ((wi[:, 2] > 0) & (wo[:, 2] > 0)).astype(float)
+        lobe = 1e5 * np.exp(-(th / 0.01) ** 2)
+        return above[:, None] * (body[None] + lobe[:, None] * peak[None])
+    table = BRDFTable.tabulate(fn, wl)
+    info = bake.bake_atlas(table, tmp_path / "a.exr", tolerance=1e-9)
+    slots = bake.read_atlas(info)
+    assert np.all(slots >= 0) and info.offsets[0] == 0.0 and np.all(np.isfinite(info.offsets))
+    rng = np.random.default_rng(5)
+    th, td, pd = rng.uniform(0.3, 1.0, 300), rng.uniform(0.1, 1.0, 300), rng.uniform(0, np.pi, 300)
+    keep = np.all(table.eval_hd(th, td, pd) > 0, axis=1)
+    got = bake.atlas_lookup_reference(slots, info, th[keep], td[keep], pd[keep])
+    np.testing.assert_allclose(got, table.eval_hd(th[keep], td[keep], pd[keep]), rtol=1e-4)
+
+
+def test_an_atlas_of_the_older_format_is_refused_with_a_clear_message(rich_table, tmp_path):
+    import json
+
+    info = bake.bake_atlas(rich_table, tmp_path / "a.exr")
+    path = bake.save_atlas_info(info, tmp_path / "a.json")
+    data = json.loads(path.read_text())
+    data["version"] = 1
+    path.write_text(json.dumps(data))
+    with pytest.raises(bake.SpecGenError, match="older SpecGen"):
+        bake.load_atlas_info(path)
 
 
 def test_atlas_description_keeps_the_closure_fit(rich_table, tmp_path):
@@ -58,13 +93,14 @@ def test_spectral_basis_is_exact_for_low_rank_spectra_and_reports_truncation():
     coeffs = rng.random((5000, 3))
     spectra = rng.random((3, 9))
     basis, err = bake.spectral_basis(coeffs @ spectra, tolerance=1e-6)
-    assert basis.shape == (3, 9) and err < 1e-6       # rank 3 + the constant slot: one render
-    np.testing.assert_allclose(basis @ basis.T, np.eye(3), atol=1e-12)
+    assert basis.shape == (4, 9) and err < 1e-6       # rank 3 ≤ four slots: one render
+    np.testing.assert_allclose(basis @ basis.T, np.eye(4), atol=1e-12)
+    assert np.all(basis[0] >= 0)                      # B_0: the non-negative Perron vector
     full_rank = rng.random((5000, 9))
     basis, err = bake.spectral_basis(full_rank, tolerance=1e-6)
     assert basis.shape == (9, 9) and err == 0.0        # nothing smaller fits: complete, exact
     basis, err = bake.spectral_basis(full_rank, tolerance=1.0)
-    assert basis.shape == (3, 9) and 0 < err <= 1.0     # loose tolerance: truncated, error reported
+    assert basis.shape == (4, 9) and 0 < err <= 1.0     # loose tolerance: truncated, error reported
     # the reported error is the relative RMS residual of the entries' normalised spectra
     approx = (full_rank @ basis.T) @ basis
     norm2 = np.sum(full_rank ** 2, axis=1)
