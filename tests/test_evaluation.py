@@ -166,9 +166,12 @@ def test_paper_tables_smoke_run_writes_every_table_and_resumes(tmp_path, monkeyp
     args = ["paper-tables", "--out", str(out), "--smoke", "--quiet", "--weights", str(weights)]
     assert main(args) == 0
     text = out.read_text()
-    for heading in ("## (a)", "## (b)", "## (c)", "## (e)", "## (f) Photo-only", "## Real data", "## Targets"):
+    for heading in ("## (a)", "## (b)", "## (c)", "## (e)", "## (f) Photo-only", "## (g) Per corpus family",
+                    "## Real data", "## Targets"):
         assert heading in text
     assert "(d)" in text and "Hadamard" in text
+    for family in ("classic", "tinted_coat", "car_paint", "thin_film", "sheen", "lobes", "mean (synthetic)"):
+        assert f"| {family}" in text or f"| **{family}**" in text
     for png in ("psnr_per_wavelength.png", "gt_vs_specgen_wavelengths.png", "spectral_curves.png"):
         assert (docs / "img" / png).read_bytes()[:8] == b"\x89PNG\r\n\x1a\n"
     cells = sorted((docs / ".cache").rglob("cells/**/*.json"))

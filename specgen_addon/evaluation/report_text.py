@@ -22,7 +22,8 @@ def _rel(path: Path, start: Path) -> str:
 
 def compose(h: tables.Harness, mats: Sequence[Any], specgen_arm: str, weights: Path, arms: dict,
             abl_settings: Any, real: dict, real_note: str, figures: dict[str, Path], out: Path,
-            smoke: bool, runs: list[dict], machine: str, commit: str, photo_only: bool = False) -> str:
+            smoke: bool, runs: list[dict], machine: str, commit: str, photo_only: bool = False,
+            families: dict | None = None) -> str:
     from .. import metrics
 
     names = [m.name for m in mats]
@@ -264,6 +265,18 @@ def compose(h: tables.Harness, mats: Sequence[Any], specgen_arm: str, weights: P
         add(report.md_table(header, rows))
     add("")
 
+    # (g) ----------------------------------------------------------------------------------------
+    if families is not None:
+        section("## (g) Per corpus family: the mixed test split, network alone")
+        add("")
+        add("Issue 11's families (`specgen_addon/corpus/families/`): the first materials of each family "
+            "in the mixed corpus' test split (their spectra and metals never occur in training), canonical "
+            "sphere input, network alone (no refinement), 20 bands; the real RGL files in RGB under the "
+            "distant lights. Same numbers as `python -m specgen_addon evaluate --families N`.")
+        add("")
+        add(family_table(families))
+        add("")
+
     # Figures ------------------------------------------------------------------------------------
     section("## Figures")
     add("")
@@ -292,3 +305,21 @@ def compose(h: tables.Harness, mats: Sequence[Any], specgen_arm: str, weights: P
 def _lighting(scene: protocol.Scene) -> str:
     return scene.lighting_label
 
+
+
+def family_table(res: dict) -> str:
+    """Markdown of :func:`specgen_addon.train.evaluate.evaluate_families`' summary: PSNR / SSIM per
+    family and scene, then the mean over the synthetic families."""
+    labels = res["scenes"]
+    header = ["Family", "n"] + [f"{lab} PSNR / SSIM" for lab in labels]
+
+    def cells(s: dict) -> list[str]:
+        return [f"{s[f'psnr_{lab}']:.2f} / {s[f'ssim_{lab}']:.4f}" if f"psnr_{lab}" in s else "—" for lab in labels]
+
+    # a fixed order (the cached JSON comes back with sorted keys): synthetic families, then real files
+    order = sorted(res["families"], key=lambda f: (f.startswith("rgl"), f))
+    rows = [[fam, str(res["families"][fam]["n"])] + cells(res["families"][fam]) for fam in order]
+    if res.get("means"):
+        n = sum(s["n"] for f, s in res["families"].items() if not f.startswith("rgl"))
+        rows.append(["**mean (synthetic)**", str(n)] + cells(res["means"]))
+    return report.md_table(header, rows)

@@ -186,12 +186,17 @@ def run_paper_tables(out: Path, img_dir: Path | None = None, smoke: bool = False
     else:
         real_note = f"(skipped: {REAL_RGL_DIR} not found)"
 
+    # 3b. Per corpus family (issue 11), network alone.
+    families = None if photo_only else (read_json(cache / "families" / f"{specgen_arm}.json") if report_only
+                                        else h.run_families(weights_path, specgen_arm,
+                                                            REAL_RGL_DIR if REAL_RGL_DIR.is_dir() else None))
+
     # 4. Figures and report.
     figures = {} if photo_only else make_figures(h, mats, specgen_arm, img_dir)
     runs = (read_json(cache / "runs.json") or []) if report_only else \
         record_run(cache, "photo-only" if photo_only else "full", time.perf_counter() - t_start)
     text = build_report(h, mats, specgen_arm, weights_path, arms, abl_settings, real, real_note,
-                        figures, out, smoke, runs, photo_only)
+                        figures, out, smoke, runs, photo_only, families)
     with atomic_write(out, overwrite=True) as tmp:
         tmp.write_text(text, encoding="utf-8")
     log(f"paper-tables: wrote {out} ({time.perf_counter() - t_start:.0f} s)")
@@ -279,12 +284,12 @@ def _labels(specgen_arm: str) -> dict[str, str]:
 def build_report(h: tables.Harness, mats: Sequence[Any], specgen_arm: str, weights: Path,
                  arms: dict[str, "abl.ArmResult"], abl_settings: Any, real: dict, real_note: str,
                  figures: dict[str, Path], out: Path, smoke: bool, runs: list[dict],
-                 photo_only: bool = False) -> str:
+                 photo_only: bool = False, families: dict | None = None) -> str:
     """The markdown of docs/results.md (or of the photo-only part alone)."""
     from .report_text import compose
 
     return compose(h, mats, specgen_arm, weights, arms, abl_settings, real, real_note, figures, out,
-                   smoke, runs, machine_description(), git_commit(), photo_only)
+                   smoke, runs, machine_description(), git_commit(), photo_only, families)
 
 
 def record_run(cache: Path, mode: str, seconds: float) -> list[dict]:

@@ -353,6 +353,21 @@ class Harness:
             np.savez(imgs, gt=gt.rgb.astype(np.float32), pred=pred.rgb.astype(np.float32), mask=gt.mask)
         return out
 
+    def run_families(self, weights: Path | None, arm: str, rgl_dir: Path | None) -> dict[str, Any]:
+        """Per-family scores of the mixed corpus' test split, network alone (issue 11), cached per
+        arm: :func:`specgen_addon.train.evaluate.evaluate_families` with 3 materials per family
+        and the held-out maps (1 material and distant lights only in the smoke run)."""
+        path = self.cache / "families" / f"{arm}.json"
+        done = read_json(path)
+        if done is not None:
+            return done
+        from ..train.evaluate import evaluate_families
+
+        res = evaluate_families(weights=weights, per_family=1 if self.s.smoke else 3, envs=not self.s.smoke,
+                                rgl_dir=rgl_dir)
+        write_json(path, res)
+        return res
+
     # -- images kept for figures -------------------------------------------------------------
     def figure_material_names(self, materials: Sequence[Any]) -> list[str]:
         """The first material, then the first of the other family (metal / dielectric), then more
