@@ -54,6 +54,10 @@ def add_parser(sub: argparse._SubParsersAction) -> argparse.ArgumentParser:
     p.add_argument("--json", type=Path, default=None, help="also write the results as JSON")
     p.add_argument("--overwrite", action="store_true", help="replace an existing --json file")
     p.add_argument("--backend", choices=("torch", "onnx"), default="torch")
+    p.add_argument("--refine", action=argparse.BooleanOptionalAction, default=True,
+                   help="also refine each table to its input photo and report the refined PSNR/SSIM "
+                        "and both tables' self-reproduction (RGB PSNR, ΔE2000 under the input "
+                        "lighting; default: on)")
     p.add_argument("--families", type=int, default=0, metavar="N",
                    help="also score N test materials per corpus family (mixed corpus of "
                         "configs/default.json) under the distant lights and the held-out maps, and "
@@ -197,7 +201,7 @@ def run_evaluate(args: argparse.Namespace) -> int:
         raise SpecGenError(f"{args.weights}: weights file not found")
     with progress_bar("evaluate", enabled=not args.quiet) as update:
         res = evaluate_test_split(weights=args.weights, limit=args.limit, backend=args.backend,
-                                  progress=update)
+                                  progress=update, refine=args.refine)
     print(format_results(res))
     if args.families:
         from .train import SHARED_RGL_DIR

@@ -4,6 +4,11 @@ For each test material: render its canonical sphere input image, generate the sp
 from it, and render the sphere from the predicted table and from the true analytic BRDF under
 the protocol's distant lights at its 20 wavelengths (:mod:`specgen_addon.evaluation.protocol`).
 PSNR/SSIM come from :mod:`specgen_addon.metrics` (one normalisation used project-wide).
+
+With ``refine`` (the CLI's default) the table is also refined to its input photo
+(:func:`specgen_addon.refine.refine_brdf`, canonical lighting) and scored the same way, and both
+tables' *self-reproduction* is reported: rendered under the input's lighting against the input
+image, RGB PSNR and mean ΔE2000 (issue 10: every fidelity figure comes with it).
 """
 
 from __future__ import annotations
@@ -19,8 +24,10 @@ RESOLUTION = 128
 
 def evaluate_test_split(weights: str | Path | None = None, limit: int | None = None,
                         backend: str = "torch", resolution: int = RESOLUTION,
-                        progress: Callable[[float], None] | None = None) -> dict[str, Any]:
-    """Per-material and mean PSNR (dB) / SSIM over the test split; returns a JSON-able dict."""
+                        progress: Callable[[float], None] | None = None,
+                        refine: bool = False) -> dict[str, Any]:
+    """Per-material and mean PSNR (dB) / SSIM over the test split; returns a JSON-able dict
+    (with ``refine``: also the refined table's PSNR/SSIM and both tables' self-reproduction)."""
     from .. import input_image, metrics
     from ..corpus import generate_corpus
     from ..evaluation.protocol import CORPUS_SEED, CORPUS_SIZE, DISTANT_LIGHTS, WAVELENGTHS_NM
@@ -41,13 +48,27 @@ def evaluate_test_split(weights: str | Path | None = None, limit: int | None = N
         gt = render_spectral(mat, geo, lights=DISTANT_LIGHTS, wavelengths_nm=WAVELENGTHS_NM).spectral
         pred = render_spectral(table, geo, lights=DISTANT_LIGHTS, wavelengths_nm=WAVELENGTHS_NM).spectral
         res = metrics.spectral_metrics(gt, pred, geo.mask)
-        rows.append({"material": mat.name, "kind": mat.kind, "psnr": float(res.psnr_mean),
-                     "ssim": float(res.ssim_mean)})
+        row = {"material": mat.name, "kind": mat.kind, "psnr": float(res.psnr_mean),
+               "ssim": float(res.ssim_mean)}
+        if refine:
+            from ..refine import RefineOptions, refine_brdf
+
+            fit = refine_brdf(table, image, options=RefineOptions(clip_level=None))
+            ref = render_spectral(fit.table, geo, lights=DISTANT_LIGHTS, wavelengths_nm=WAVELENGTHS_NM).spectral
+            res_r = metrics.spectral_metrics(gt, ref, geo.mask)
+            row |= {"psnr_refined": float(res_r.psnr_mean), "ssim_refined": float(res_r.ssim_mean),
+                    "self_psnr_network": fit.before.psnr_db, "self_de_network": fit.before.delta_e2000,
+                    "self_psnr_refined": fit.after.psnr_db, "self_de_refined": fit.after.delta_e2000}
+        rows.append(row)
         if progress is not None:
             progress((i + 1) / len(test))
     psnr = np.array([r["psnr"] for r in rows])
     ssim = np.array([r["ssim"] for r in rows])
-    return {"materials": rows, "psnr_mean": float(psnr.mean()), "ssim_mean": float(ssim.mean()),
+    means = {f"{k}_mean": float(np.mean([r[k] for r in rows])) for k in
+             ("psnr_refined", "ssim_refined", "self_psnr_network", "self_psnr_refined",
+              "self_de_network", "self_de_refined")
+             if rows and all(r.get(k) is not None for r in rows)}
+    return {"materials": rows, "psnr_mean": float(psnr.mean()), "ssim_mean": float(ssim.mean()), **means,
             "psnr_median": float(np.median(psnr)), "n": len(rows),
             "wavelengths_nm": [float(w) for w in WAVELENGTHS_NM], "resolution": resolution,
             "weights": str(weights) if weights else "default", "backend": backend,
@@ -56,12 +77,26 @@ def evaluate_test_split(weights: str | Path | None = None, limit: int | None = N
 
 
 def format_results(res: dict[str, Any]) -> str:
-    """A plain table: material, kind, PSNR, SSIM, then the means."""
-    lines = [f"{'material':<12} {'kind':<20} {'PSNR dB':>8} {'SSIM':>7}"]
+    """A plain table: material, kind, PSNR, SSIM (network alone; refined and self-reproduction
+    network → refined when present), then the means."""
+    refined = "psnr_refined_mean" in res
+    head = f"{'material':<12} {'kind':<20} {'PSNR dB':>8} {'SSIM':>7}"
+    if refined:
+        head += f" {'refined dB':>10} {'SSIM':>7}   {'self-reproduction dB (ΔE2000)':<34}"
+    lines = [head]
+
+    def tail(r: dict, suffix: str = "") -> str:
+        if not refined:
+            return ""
+        de = "" if r[f"self_de_network{suffix}"] is None else \
+            f" ({r[f'self_de_network{suffix}']:.2f} → {r[f'self_de_refined{suffix}']:.2f})"
+        return (f" {r[f'psnr_refined{suffix}']:10.2f} {r[f'ssim_refined{suffix}']:7.4f}   "
+                f"{r[f'self_psnr_network{suffix}']:.1f} → {r[f'self_psnr_refined{suffix}']:.1f}{de}")
+
     for r in res["materials"]:
-        lines.append(f"{r['material']:<12} {r['kind']:<20} {r['psnr']:8.2f} {r['ssim']:7.4f}")
-    lines.append(f"{'mean':<12} {'':<20} {res['psnr_mean']:8.2f} {res['ssim_mean']:7.4f}   "
-                 f"({res['n']} test materials, {len(res['wavelengths_nm'])} bands, distant lights)")
+        lines.append(f"{r['material']:<12} {r['kind']:<20} {r['psnr']:8.2f} {r['ssim']:7.4f}" + tail(r))
+    lines.append(f"{'mean':<12} {'':<20} {res['psnr_mean']:8.2f} {res['ssim_mean']:7.4f}" + tail(res, "_mean")
+                 + f"   ({res['n']} test materials, {len(res['wavelengths_nm'])} bands, distant lights)")
     return "\n".join(lines)
 
 
