@@ -133,8 +133,10 @@ def _brdf_group(name: str) -> bpy.types.NodeTree:
             or group.library is not None:
         group = bpy.data.node_groups.new(name, "ShaderNodeTree")
     group.nodes.clear()
-    group.interface.clear()
-    group.interface.new_socket("BSDF", in_out="OUTPUT", socket_type="NodeSocketShader")
+    sockets = [(i.in_out, i.name, i.socket_type) for i in group.interface.items_tree if i.item_type == "SOCKET"]
+    if sockets != [("OUTPUT", "BSDF", "NodeSocketShader")]:  # kept if right: users' links survive
+        group.interface.clear()
+        group.interface.new_socket("BSDF", in_out="OUTPUT", socket_type="NodeSocketShader")
     group[MATERIAL_TAG] = True
     return group
 

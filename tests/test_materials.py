@@ -106,13 +106,20 @@ def test_two_generates_make_two_material_sets_and_apply_assigns_the_chosen_one(t
         labels = [r.label for r in rows if r.kind == "label"]
         assert "Refinement residual: 0.0123" in labels and "SpecGen sphere" in labels
         assert any(r.kind == "template" and r.value == "SpecGen sphere.001" for r in rows)
+        user = bpy.data.materials.new("user's mix")                   # the group used elsewhere
+        user_node = user.node_tree.nodes.new("ShaderNodeGroup")
+        user_node.node_tree = groups["SpecGen sphere"]
+        user.node_tree.links.new(user_node.outputs["BSDF"], render.material_output(user).inputs["Surface"])
         s.overwrite = True                                            # Overwrite on: same names
         s.material = first
         assert bpy.ops.specgen.generate_brdf() == {"FINISHED"}
         assert s.material.name == "SpecGen sphere" and len([m for m in bpy.data.materials if m.get("specgen")]) == 2
         assert s.material == first and _group_of(first) == groups["SpecGen sphere"]   # reused, in place
         assert len([g for g in bpy.data.node_groups if g.get("specgen")]) == 2
-        assert groups["SpecGen sphere"].users == 1 and _group_of(second) == groups["SpecGen sphere.001"]
+        assert groups["SpecGen sphere"].users == 2 and _group_of(second) == groups["SpecGen sphere.001"]
+        assert render.material_output(user).inputs["Surface"].links[0].from_node == user_node  # still linked
+        assert not render.is_specgen_material(user)
+        bpy.data.materials.remove(user)
         # deleting a material leaves its node group unused: Blender's orphan purge removes it
         b.data.materials.clear()
         bpy.data.materials.remove(second)
