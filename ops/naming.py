@@ -2,14 +2,14 @@
 
 Each Generate makes one *set*, found from its stem ``<stem>`` (e.g. ``sphere``, ``sphere.001``):
 
-* material ``SpecGen <stem>`` (its OSL node reads the lookups; its custom properties hold the
-  spectral basis);
+* material ``SpecGen <stem>`` (its custom properties hold the spectral basis) and a shader node
+  group of the same name (:func:`group_name`) whose OSL Script node reads the lookups;
 * preview image ``SpecGen <stem> preview`` (the numpy-rendered sphere, :mod:`specgen_addon.preview`);
 * files in the output folder: ``<stem>_lookup.gNN.exr`` (lookups), ``<stem>_lookup.json`` (basis
   and layout), ``<stem>_preview.png``, and ``<stem>.npz`` only when the table is exported.
 
-With *Overwrite* off a new Generate never reuses a stem that has a material or files; with it on,
-the stem of the input is reused and its set replaced.
+With *Overwrite* off a new Generate never reuses a stem that has a material, a node group or
+files; with it on, the stem of the input is reused and its set replaced.
 """
 
 from __future__ import annotations
@@ -31,6 +31,12 @@ def clean_stem(raw: str) -> str:
 
 def material_name(stem: str) -> str:
     return f"{PREFIX} {stem}"
+
+
+def group_name(stem: str) -> str:
+    """The set's node group: named as its material (materials and node groups are separate
+    namespaces in Blender)."""
+    return material_name(stem)
 
 
 def preview_name(stem: str) -> str:
@@ -66,11 +72,12 @@ def unique_stem(base: str, taken: Callable[[str], bool]) -> str:
 
 
 def stem_for_generate(source: str, out_dir: str | Path, overwrite: bool,
-                      material_names: Iterable[str]) -> str:
+                      material_names: Iterable[str], group_names: Iterable[str] = ()) -> str:
     """The stem a Generate of ``source`` uses: the input's own with Overwrite on, else the first
-    whose material and files do not exist yet."""
+    whose material, node group and files do not exist yet."""
     base = clean_stem(source)
     if overwrite:
         return base
-    names = set(material_names)
-    return unique_stem(base, lambda s: material_name(s) in names or bool(files_of(out_dir, s)))
+    materials, groups = set(material_names), set(group_names)
+    return unique_stem(base, lambda s: material_name(s) in materials or group_name(s) in groups
+                       or bool(files_of(out_dir, s)))

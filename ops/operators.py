@@ -110,8 +110,9 @@ class SPECGEN_OT_generate_brdf(_Modal, bpy.types.Operator):
         image = _image_input(s)
         out = output_dir(s)
         source = s.image.name if s.image is not None else bpy.path.basename(s.image_path)
-        specgen_names = [m.name for m in bpy.data.materials if m.get("specgen")]
-        self._stem = naming.stem_for_generate(source, out, s.overwrite, specgen_names)
+        self._stem = naming.stem_for_generate(source, out, s.overwrite,
+                                              [m.name for m in bpy.data.materials],
+                                              [g.name for g in bpy.data.node_groups])
         self._out = out
         return dict(image=image, out_dir=out, wavelengths_nm=_wavelengths(s), weights=weights,
                     n_phi_d=int(s.lookup_resolution), tolerance=s.basis_tolerance, name=self._stem,

@@ -42,7 +42,11 @@ SHADER_TEXT_NAME = "specgen_brdf.osl"
 MATERIAL_TAG = "specgen"
 PASSES = (("Emission", "emit"), ("Diffuse Color", "diffuse_color"),
           ("Glossy Color", "glossy_color"), ("Transmission Color", "transmission_color"))
-SCRIPT_NODE_NAME = "SpecGen BRDF"
+#: The material's node whose "BSDF" output is the exact shader: a Group node using the material's
+#: own node group (``SpecGen <stem>``, see :mod:`.naming`), which holds the OSL Script node.
+BRDF_NODE_NAME = "SpecGen BRDF"
+#: The OSL Script node inside that group (the exact-mode driver sets its inputs per render).
+SCRIPT_NODE_NAME = "SpecGen OSL"
 
 
 def ensure_oslquery() -> None:
@@ -121,22 +125,52 @@ def compile_script_node(node: bpy.types.Node) -> None:
         raise SpecGenError("the SpecGen OSL shader did not compile (is Cycles built with OSL?)")
 
 
+def _brdf_group(name: str) -> bpy.types.NodeTree:
+    """The node group ``name`` (a SpecGen one is rebuilt in place, so a material reusing it keeps
+    its link); a foreign group of that name is left alone and a new one is numbered by Blender."""
+    group = bpy.data.node_groups.get(name)
+    if group is None or group.bl_idname != "ShaderNodeTree" or not group.get(MATERIAL_TAG) \
+            or group.library is not None:
+        group = bpy.data.node_groups.new(name, "ShaderNodeTree")
+    group.nodes.clear()
+    sockets = [(i.in_out, i.name, i.socket_type) for i in group.interface.items_tree if i.item_type == "SOCKET"]
+    if sockets != [("OUTPUT", "BSDF", "NodeSocketShader")]:  # kept if right: users' links survive
+        group.interface.clear()
+        group.interface.new_socket("BSDF", in_out="OUTPUT", socket_type="NodeSocketShader")
+    group[MATERIAL_TAG] = True
+    return group
+
+
 def make_material(name: str, atlas: bake.AtlasInfo) -> bpy.types.Material:
-    """A material whose surface is the SpecGen OSL shader reading ``atlas``."""
+    """A material whose surface is the SpecGen OSL shader reading ``atlas``.
+
+    The material owns a node group of its own name (``SpecGen <stem>``) holding the Script node
+    with the lookups' paths and layout; the material's Group node ``SpecGen BRDF`` uses it. With a
+    closure fit the material's output shows the native stand-in stack instead (:mod:`.closures`)
+    and the exact mode links the group in for its renders. Rebuilding a material of the same
+    name (Overwrite) reuses its group; a new name makes a new group, so sets never share nodes.
+    """
     mat = bpy.data.materials.get(name) or bpy.data.materials.new(name)
     tree = mat.node_tree
     for node in list(tree.nodes):
         tree.nodes.remove(node)
+    group = _brdf_group(mat.name)
+    script = group.nodes.new("ShaderNodeScript")
+    script.name = script.label = SCRIPT_NODE_NAME
+    compile_script_node(script)
+    script.inputs["Atlas"].default_value = str(atlas.group_paths[0])
+    script.inputs["PhiD"].default_value = int(atlas.n_phi_d)
+    script.inputs["TilesX"].default_value = int(atlas.tiles_x)
+    script.inputs["TilesY"].default_value = int(atlas.tiles_y)
+    group_out = group.nodes.new("NodeGroupOutput")
+    group_out.location = (300, 0)
+    group.links.new(script.outputs["BSDF"], group_out.inputs["BSDF"])
     out = tree.nodes.new("ShaderNodeOutputMaterial")
     out.location = (300, 0)
-    node = tree.nodes.new("ShaderNodeScript")
-    node.name = node.label = SCRIPT_NODE_NAME
-    compile_script_node(node)
+    node = tree.nodes.new("ShaderNodeGroup")
+    node.node_tree = group
+    node.name = node.label = BRDF_NODE_NAME
     tree.links.new(node.outputs["BSDF"], out.inputs["Surface"])
-    node.inputs["Atlas"].default_value = str(atlas.group_paths[0])
-    node.inputs["PhiD"].default_value = int(atlas.n_phi_d)
-    node.inputs["TilesX"].default_value = int(atlas.tiles_x)
-    node.inputs["TilesY"].default_value = int(atlas.tiles_y)
     if atlas.closures is not None:  # F12/viewport and the full-scene mode use the native stack
         from .closures import build_closure_stack
 
@@ -159,8 +193,33 @@ def material_output(mat: bpy.types.Material) -> bpy.types.Node:
     return tree.get_output_node("CYCLES") or next(n for n in tree.nodes if n.type == "OUTPUT_MATERIAL")
 
 
+def brdf_node(mat: bpy.types.Material) -> bpy.types.Node | None:
+    """The material's node whose "BSDF" output is the exact SpecGen shader."""
+    return mat.node_tree.nodes.get(BRDF_NODE_NAME) if mat.node_tree is not None else None
+
+
+def script_node(mat: bpy.types.Material) -> bpy.types.Node | None:
+    """The OSL Script node of a SpecGen material: inside its node group (or, in a material built
+    before node groups, the ``SpecGen BRDF`` node itself)."""
+    node = brdf_node(mat)
+    if node is None or node.type == "SCRIPT":
+        return node
+    group = node.node_tree if node.type == "GROUP" else None
+    return None if group is None else group.nodes.get(SCRIPT_NODE_NAME)
+
+
+def touch(mat: bpy.types.Material) -> None:
+    """Make Cycles re-sync ``mat`` after a Script-node input edit (a string-socket edit alone,
+    inside a group even less, does not)."""
+    node = brdf_node(mat)
+    if node is not None and node.type == "GROUP" and node.node_tree is not None:
+        node.node_tree.update_tag()
+    mat.node_tree.update_tag()
+    mat.update_tag()
+
+
 def is_specgen_material(mat: bpy.types.Material | None) -> bool:
-    return mat is not None and bool(mat.get(MATERIAL_TAG)) and SCRIPT_NODE_NAME in mat.node_tree.nodes
+    return mat is not None and bool(mat.get(MATERIAL_TAG)) and script_node(mat) is not None
 
 
 def specgen_materials(scene: bpy.types.Scene) -> list[bpy.types.Material]:
@@ -458,7 +517,7 @@ class _SceneState(SavedAttributes):
             surface = material_output(mat).inputs["Surface"]
             self.relinked.append((mat.node_tree, surface,
                                   surface.links[0].from_socket if surface.is_linked else None))
-            mat.node_tree.links.new(mat.node_tree.nodes[SCRIPT_NODE_NAME].outputs["BSDF"], surface)
+            mat.node_tree.links.new(brdf_node(mat).outputs["BSDF"], surface)
         return self
 
     def __exit__(self, *exc) -> None:
@@ -591,7 +650,7 @@ class SpectralRenderJob(RenderJobOutputs):
                 m, l = bake.bake_environment(lights.environment, work / "env.exr", work / "env_list.exr")
                 env_map, env_list = str(m), str(l)
             for mat in mats:
-                node = mat.node_tree.nodes[SCRIPT_NODE_NAME]
+                node = script_node(mat)
                 for i, light in enumerate(slots):
                     for key, value in bake.light_socket_values(light).items():
                         node.inputs[f"Light{i}{key}"].default_value = value
@@ -615,12 +674,10 @@ class SpectralRenderJob(RenderJobOutputs):
                 out_dir.mkdir()
                 for other, (_, _, group_mats) in enumerate(self.groups):
                     for mat in group_mats:
-                        node = mat.node_tree.nodes[SCRIPT_NODE_NAME]
                         # other bases' materials are muted (an empty Atlas shades black)
-                        node.inputs["Atlas"].default_value = \
+                        script_node(mat).inputs["Atlas"].default_value = \
                             list(mat["specgen_atlas_groups"])[r] if other == g else ""
-                        mat.node_tree.update_tag()  # a string-socket edit alone does not re-sync Cycles
-                        mat.update_tag()
+                        touch(mat)
                 t = time.perf_counter()
                 with _SceneState(self.scene, self.samples, self.resolution, out_dir):
                     bpy.ops.render.render(write_still=False, scene=self.scene.name)
@@ -651,14 +708,14 @@ class SpectralRenderJob(RenderJobOutputs):
             yield 1.0
         finally:
             for mat in mats:  # no dangling paths to the deleted temporary lighting files
-                node = mat.node_tree.nodes.get(SCRIPT_NODE_NAME)
+                node = script_node(mat)
                 if node is not None:
                     node.inputs["EnvMap"].default_value = ""
                     node.inputs["EnvList"].default_value = ""
             shutil.rmtree(work, ignore_errors=True)
             for mat in mats:  # unmute: every material shows its own first lookup again
-                mat.node_tree.nodes[SCRIPT_NODE_NAME].inputs["Atlas"].default_value = \
-                    list(mat["specgen_atlas_groups"])[0]
+                script_node(mat).inputs["Atlas"].default_value = list(mat["specgen_atlas_groups"])[0]
+                touch(mat)
 
     def run(self, progress: Callable[[float], None] | None = None) -> np.ndarray:
         """Run all steps; returns the spectral stack (H, W, Λ)."""

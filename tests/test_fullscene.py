@@ -282,7 +282,7 @@ def test_f12_after_apply_shows_the_rgb_standin_and_exact_mode_leaves_no_temp_pat
     stack = fullscene.FullSceneRenderJob(sc, None, RGB_WL).run()
     assert _psnr(f12, spectra.spectral_to_linear_srgb(stack, RGB_WL)) >= 35.0  # stand-in = spectral
     render.SpectralRenderJob(sc, None, samples=1, resolution=(8, 8)).run()   # exact, with a world
-    node = mat.node_tree.nodes[render.SCRIPT_NODE_NAME]
+    node = render.script_node(mat)
     assert node.inputs["EnvMap"].default_value == "" and node.inputs["EnvList"].default_value == ""
     out = render.material_output(mat)
-    assert out.inputs["Surface"].links[0].from_node.name != render.SCRIPT_NODE_NAME  # stack again
+    assert out.inputs["Surface"].links[0].from_node.name != render.BRDF_NODE_NAME  # stack again

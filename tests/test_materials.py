@@ -54,6 +54,15 @@ def test_generate_names_never_collide_unless_overwrite(tmp_path):
     assert naming.stem_for_generate("sphere.png", tmp_path, False, []) == "sphere.001"
     assert naming.stem_for_generate("sphere.png", tmp_path, False, ["SpecGen sphere.001"]) == "sphere.002"
     assert naming.stem_for_generate("sphere.png", tmp_path, True, ["SpecGen sphere"]) == "sphere"
+    # a node group of the set's name (e.g. the user's copy of it) also makes a new stem
+    assert naming.stem_for_generate("sphere.png", tmp_path, False, [], ["SpecGen sphere.001"]) == "sphere.002"
+    assert naming.group_name("sphere.001") == naming.material_name("sphere.001")
+
+
+def _group_of(mat):
+    node = mat.node_tree.nodes[render.BRDF_NODE_NAME]
+    assert node.type == "GROUP" and render.script_node(mat).id_data == node.node_tree
+    return node.node_tree
 
 
 def test_two_generates_make_two_material_sets_and_apply_assigns_the_chosen_one(tmp_path):
@@ -80,6 +89,11 @@ def test_two_generates_make_two_material_sets_and_apply_assigns_the_chosen_one(t
         assert (tmp_path / "sphere_lookup.json").is_file() and (tmp_path / "sphere.001_lookup.json").is_file()
         assert not list(tmp_path.glob("*.npz"))                       # the table only on request
         assert first["specgen_atlas_groups"][0] != second["specgen_atlas_groups"][0]
+        groups = {m.name: _group_of(m) for m in (first, second)}       # one node group per set
+        assert [g.name for g in groups.values()] == ["SpecGen sphere", "SpecGen sphere.001"]
+        for mat, group in zip((first, second), groups.values()):
+            assert group.users == 1                                   # used by its material only
+            assert render.script_node(mat).inputs["Atlas"].default_value == mat["specgen_atlas_groups"][0]
         for obj, mat in ((a, first), (b, second)):
             s.material = mat
             bpy.ops.object.select_all(action="DESELECT")
@@ -92,12 +106,30 @@ def test_two_generates_make_two_material_sets_and_apply_assigns_the_chosen_one(t
         labels = [r.label for r in rows if r.kind == "label"]
         assert "Refinement residual: 0.0123" in labels and "SpecGen sphere" in labels
         assert any(r.kind == "template" and r.value == "SpecGen sphere.001" for r in rows)
+        user = bpy.data.materials.new("user's mix")                   # the group used elsewhere
+        user_node = user.node_tree.nodes.new("ShaderNodeGroup")
+        user_node.node_tree = groups["SpecGen sphere"]
+        user.node_tree.links.new(user_node.outputs["BSDF"], render.material_output(user).inputs["Surface"])
         s.overwrite = True                                            # Overwrite on: same names
         s.material = first
         assert bpy.ops.specgen.generate_brdf() == {"FINISHED"}
         assert s.material.name == "SpecGen sphere" and len([m for m in bpy.data.materials if m.get("specgen")]) == 2
+        assert s.material == first and _group_of(first) == groups["SpecGen sphere"]   # reused, in place
+        assert len([g for g in bpy.data.node_groups if g.get("specgen")]) == 2
+        assert groups["SpecGen sphere"].users == 2 and _group_of(second) == groups["SpecGen sphere.001"]
+        assert render.material_output(user).inputs["Surface"].links[0].from_node == user_node  # still linked
+        assert not render.is_specgen_material(user)
+        bpy.data.materials.remove(user)
+        # deleting a material leaves its node group unused: Blender's orphan purge removes it
+        b.data.materials.clear()
+        bpy.data.materials.remove(second)
+        assert groups["SpecGen sphere.001"].users == 0
+        bpy.data.orphans_purge(do_recursive=True)
+        assert [g.name for g in bpy.data.node_groups if g.get("specgen")] == ["SpecGen sphere"]
     finally:
         PKG.unregister()
+    # unregistering the add-on keeps the user's data (materials and their groups) intact
+    assert render.is_specgen_material(first) and _group_of(first).users == 1
 
 
 @pytest.mark.slow
@@ -132,7 +164,8 @@ def test_two_materials_with_different_bases_render_side_by_side_keeping_their_co
     assert stack[2, 22].max() == 0                                      # gap between them: black
     # the materials show their own lookups again afterwards
     for mat in mats.values():
-        node = mat.node_tree.nodes[render.SCRIPT_NODE_NAME]
+        node = render.script_node(mat)
+        assert node.id_data == bpy.data.node_groups[mat.name]            # in the material's own group
         assert node.inputs["Atlas"].default_value == mat["specgen_atlas_groups"][0]
 
 
