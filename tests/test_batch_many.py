@@ -285,3 +285,41 @@ def test_prepare_renders_rgb_brdfs_to_their_photo_and_passes_spectral_tables(tmp
     assert prepare.main([str(tmp_path / "junk.binary"), str(tmp_path / "w")]) == prepare.EXIT_BAD_INPUT
     err = capsys.readouterr().err.strip().splitlines()
     assert len(err) == 1 and err[0].startswith("prepare: error:")
+
+
+FAKE_BLENDER = '''#!/bin/sh
+# Stand-in for a Blender executable: checks Blender's own command line
+# (--background --factory-startup --python SCRIPT -- ARGS), records it, then runs SCRIPT the way
+# Blender's Python would see it: sys.argv holds the whole command line, "--" included.
+[ "$1" = --background ] && [ "$2" = --factory-startup ] && [ "$3" = --python ] && [ "$5" = -- ] || exit 9
+echo "$@" > "$(dirname "$0")/argv.txt"
+script="$4"
+shift 4
+exec {python} "$script" "$@"
+'''
+
+
+@pytest.mark.slow
+@pytest.mark.blender
+def test_an_item_runs_through_a_blender_executable_with_its_command_line(tmp_path):
+    """``batch-many --blender EXE``: the worker starts EXE with Blender's command line and
+    batch.py reads its arguments after "--", as inside a real Blender."""
+    pytest.importorskip("bpy")
+    from specgen_addon.scale.batch_many import BatchManyOptions, batch_command
+
+    exe = tmp_path / "blender"
+    exe.write_text(FAKE_BLENDER.format(python=sys.executable))
+    exe.chmod(0o755)
+    (tmp_path / "in").mkdir()
+    src = _spectral_npz(tmp_path / "in" / "ramp.npz")
+    out = tmp_path / "out"
+    out.mkdir()
+    item = items_mod.make_items([src])[0]
+    args = ["--resolution", "16", "--samples", "1", "--bands", "4"]
+    cmd = batch_command(BatchManyOptions(inputs=[src], out=out, blender=str(exe)))
+    rec = run_item(item.to_dict(), str(out), "r1", cmd, args, str(REPO), item.fingerprint(args))
+    assert rec["status"] == "done", rec
+    argv = (tmp_path / "argv.txt").read_text().split()
+    assert argv[:5] == ["--background", "--factory-startup", "--python", str(DEFAULT_BATCH_SCRIPT.resolve()), "--"]
+    assert "--brdf" in argv and "--resolution" in argv
+    assert (out / "ramp" / "ramp_sphere_studio.exr").is_file()
