@@ -71,22 +71,26 @@ def ggx_lobe(wi: np.ndarray, wo: np.ndarray, roughness: float) -> np.ndarray:
 
     ``wi``, ``wo`` (N, 3) unit vectors in the local frame (z = normal); zero below the horizon.
     """
-    wi, wo = np.atleast_2d(wi), np.atleast_2d(wo)
-    a2 = float(roughness) ** 4  # α = r², α²
-    ci, co = wi[:, 2], wo[:, 2]
-    h = wi + wo
-    h = h / np.maximum(np.linalg.norm(h, axis=-1, keepdims=True), 1e-12)
-    ch = np.clip(h[:, 2], 0.0, 1.0)
-    d = a2 / (np.pi * (ch * ch * (a2 - 1.0) + 1.0) ** 2)
+    return _ggx_cosines(*_lobe_cosines(wi, wo), roughness)
 
-    above = (ci > 0) & (co > 0)
+
+def _lobe_cosines(wi: np.ndarray, wo: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """``(cos² θh, cos θi, cos θo)`` of direction pairs, the cosines clipped to [0, 1]."""
+    wi, wo = np.atleast_2d(wi), np.atleast_2d(wo)
+    h = wi + wo
+    ch = np.clip(h[:, 2], 0.0, None) / np.sqrt(np.maximum(np.einsum("ij,ij->i", h, h), 1e-24))
+    return np.minimum(ch, 1.0) ** 2, np.clip(wi[:, 2], 0.0, 1.0), np.clip(wo[:, 2], 0.0, 1.0)
+
+
+def _ggx_cosines(ch2: np.ndarray, ci: np.ndarray, co: np.ndarray, roughness: float) -> np.ndarray:
+    """:func:`ggx_lobe` from :func:`_lobe_cosines` (zero where either cosine is 0)."""
+    a2 = float(roughness) ** 4  # α = r², α²
+    d = a2 / (np.pi * (ch2 * (a2 - 1.0) + 1.0) ** 2)
     # G₂ / (4 cos θi cos θo) in the stable "visibility" form of the height-correlated Smith term
     # (Heitz 2014, eq. 99): ½ / (cos θo √(α² + (1−α²) cos² θi) + cos θi √(α² + (1−α²) cos² θo)).
-    cip, cop = np.clip(ci, 0.0, 1.0), np.clip(co, 0.0, 1.0)
-    denom = cop * np.sqrt(a2 + (1.0 - a2) * cip ** 2) + cip * np.sqrt(a2 + (1.0 - a2) * cop ** 2)
-    out = np.zeros(ci.shape)
-    out[above] = d[above] * 0.5 / denom[above]
-    return out
+    denom = co * np.sqrt(a2 + (1.0 - a2) * ci * ci) + ci * np.sqrt(a2 + (1.0 - a2) * co * co)
+    above = (ci > 0) & (co > 0)
+    return np.where(above, d * 0.5 / np.where(above, denom, 1.0), 0.0)
 
 
 def fresnel_dielectric(cos_theta: np.ndarray, ior: float) -> np.ndarray:
@@ -169,11 +173,12 @@ class ClosureFit:
         above = ((wi[:, 2] > 0) & (wo[:, 2] > 0)).astype(float)
         f = fresnel_dielectric(wo[:, 2], self.ior)[:, None]
         out = above[:, None] * (self.diffuse[None] + self.diffuse_fresnel[None] * (1 - f)) / np.pi
+        cosines = _lobe_cosines(wi, wo)
         for r, s, sf in zip(self.roughness, self.specular, self.specular_fresnel):
             tint = s[None] + sf[None] * f
             for value in np.unique(r):
                 bands = r == value
-                out[:, bands] += ggx_lobe(wi, wo, value)[:, None] * tint[:, bands]
+                out[:, bands] += _ggx_cosines(*cosines, value)[:, None] * tint[:, bands]
         return out
 
     def at(self, wavelengths_nm: np.ndarray) -> "ClosureFit":
@@ -380,8 +385,10 @@ def _nnls_choices(gram: np.ndarray, rhs: np.ndarray, tt: np.ndarray,
 
 @dataclass
 class _Samples:
-    """The table entries the fit weighs: directions, weights ``(cos θi cos θo)²``, the target
-    (N, Λ), the view direction's Fresnel weight and ``tt`` (Λ,), the target's weighted energy."""
+    """The table entries the fit weighs, as the rows of a least-squares problem scaled by
+    ``√w = cos θi cos θo``: directions, the target (N, Λ), the view direction's Fresnel weight,
+    and ``tt`` (Λ,), the target's weighted energy. Lobes' columns and their products with the
+    diffuse columns and the target are kept per roughness (the last 64)."""
 
     wi: np.ndarray
     wo: np.ndarray
@@ -389,28 +396,35 @@ class _Samples:
     target: np.ndarray
     fres: np.ndarray
     tt: np.ndarray
-    _ggx: dict[float, np.ndarray] = field(default_factory=dict, repr=False)
+    _lobes: dict[float, tuple[np.ndarray, ...]] = field(default_factory=dict, repr=False)
 
-    @property
-    def base(self) -> np.ndarray:
-        """(2, N) columns of the diffuse terms: Lambert, Lambert (1 − F)."""
-        return np.stack([np.full(len(self.weight), 1.0 / np.pi), (1.0 - self.fres) / np.pi])
+    def __post_init__(self) -> None:
+        self._cosines = _lobe_cosines(self.wi, self.wo)
+        self._sqrt_w = np.sqrt(self.weight)
+        #: (2, N) diffuse columns, Lambert and Lambert (1 − F), and the target (Λ, N), scaled by √w
+        self.base = np.stack([np.full(len(self.weight), 1.0 / np.pi), (1.0 - self.fres) / np.pi]) * self._sqrt_w
+        self.target_w = np.ascontiguousarray((self.target * self._sqrt_w[:, None]).T)
+        self._known = np.concatenate([self.base, self.target_w])   # what a lobe is multiplied with
+        self.base_gram, self.base_rhs = self.base @ self.base.T, self.base @ self.target_w.T
 
-    def lobe(self, roughness: float) -> np.ndarray:
-        """(2, N) columns of one GGX lobe: plain and F-weighted (the last 128 lobes are kept)."""
+    def lobe(self, roughness: float) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
+        """One GGX lobe (plain and F-weighted): its columns (2, N) scaled by √w, their products
+        with the diffuse columns (2, 2), with themselves (2, 2) and with the target (2, Λ)."""
         r = float(roughness)
-        if r not in self._ggx:
-            if len(self._ggx) >= 128:
-                self._ggx.pop(next(iter(self._ggx)))
-            self._ggx[r] = ggx_lobe(self.wi, self.wo, r)
-        g = self._ggx[r]
-        return np.stack([g, g * self.fres])
+        if r not in self._lobes:
+            if len(self._lobes) >= 64:
+                self._lobes.pop(next(iter(self._lobes)))
+            g = _ggx_cosines(*self._cosines, r) * self._sqrt_w
+            cols = np.stack([g, g * self.fres])
+            # einsum, not BLAS: (2, N)·(N, 2 + Λ) is too thin to gain from (busy) BLAS threads
+            known = np.einsum("in,jn->ij", cols, self._known)
+            self._lobes[r] = (cols, known[:, :2], np.einsum("in,jn->ij", cols, cols), known[:, 2:])
+        return self._lobes[r]
 
     def normal_equations(self, roughness: list[float]) -> tuple[np.ndarray, np.ndarray]:
         """Gram (K, K) and right-hand sides (K, Λ) of the diffuse terms and these lobes."""
-        phi = np.concatenate([self.base] + [self.lobe(r) for r in roughness])
-        pw = phi * self.weight
-        return pw @ phi.T, pw @ self.target
+        phi = np.concatenate([self.base] + [self.lobe(r)[0] for r in roughness])
+        return phi @ phi.T, phi @ self.target_w.T
 
     def score(self, obj: np.ndarray, bands: np.ndarray | None = None) -> np.ndarray:
         """Relative squared error per band of NNLS objectives ``obj`` (at ``bands``, default all)."""
@@ -492,15 +506,20 @@ def _smoothest_path(cost: np.ndarray, log_r: np.ndarray, mu: float) -> np.ndarra
 def _band_equations(s: _Samples, roughness: np.ndarray,
                     bands: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
     """Per-band gram (B, K, K) and right-hand sides (K, B) for lobes of per-band ``roughness``
-    (L, Λ), at the band indices ``bands``."""
-    phi = np.empty((len(bands), 2 + 2 * roughness.shape[0], len(s.weight)))
-    phi[:, :2] = s.base
+    (L, Λ), at the band indices ``bands`` (from the products :meth:`_Samples.lobe` keeps)."""
+    k = 2 + 2 * roughness.shape[0]
+    gram, rhs = np.empty((len(bands), k, k)), np.empty((k, len(bands)))
+    gram[:, :2, :2], rhs[:2] = s.base_gram, s.base_rhs[:, bands]
     for i, band in enumerate(bands):
-        for lobe, r in enumerate(roughness[:, band]):
-            phi[i, 2 + 2 * lobe:4 + 2 * lobe] = s.lobe(r)
-    pw = phi * s.weight
-    gram = pw @ phi.transpose(0, 2, 1)
-    rhs = np.einsum("bkn,nb->kb", pw, s.target[:, bands])
+        lobes = [s.lobe(r) for r in roughness[:, band]]
+        for a, (cols, with_base, with_self, with_target) in enumerate(lobes):
+            ia = slice(2 + 2 * a, 4 + 2 * a)
+            gram[i, ia, :2], gram[i, :2, ia], gram[i, ia, ia] = with_base, with_base.T, with_self
+            rhs[ia, i] = with_target[:, band]
+            for b in range(a):
+                ib = slice(2 + 2 * b, 4 + 2 * b)
+                gram[i, ia, ib] = np.einsum("in,jn->ij", cols, lobes[b][0])
+                gram[i, ib, ia] = gram[i, ia, ib].T
     return gram, rhs
 
 
@@ -519,12 +538,13 @@ def _moved(rough: np.ndarray, lobe: int, bands: np.ndarray, log_r: np.ndarray) -
     return out
 
 
-def _fit_per_band(s: _Samples, shared: list[float], mu: float,
-                  grid: np.ndarray = PER_BAND_GRID) -> np.ndarray:
+def _fit_per_band(s: _Samples, shared: list[float], shared_obj: np.ndarray, mu: float,
+                  grid: np.ndarray = PER_BAND_GRID) -> np.ndarray | None:
     """Per-band roughnesses (L, Λ) from the shared ones: alternating over lobes, each lobe's
     path through ``grid`` ∪ shared values (:func:`_smoothest_path`, the other lobes held), then
-    a red-black coordinate search per band (odd bands held while even ones move and vice versa,
-    so every step sees fixed neighbours) with shrinking steps in ``ln r``."""
+    parabolic steps in ``ln r`` per band, red-black (odd bands held while even ones move and vice
+    versa, so every step sees fixed neighbours). None when the grid paths do not lower the
+    summed error by half of :data:`PER_BAND_GAIN` (the refinement would not pay)."""
     lam, n_lobes = s.tt.size, len(shared)
     cand = np.unique(np.concatenate([np.asarray(grid, np.float64), shared]))
     log_c = np.log(cand)
@@ -541,9 +561,12 @@ def _fit_per_band(s: _Samples, shared: list[float], mu: float,
             idx = np.concatenate([np.zeros((cand.size, 1, lam), int), np.ones((cand.size, 1, lam), int),
                                   cols], 1).transpose(0, 2, 1)
             _, obj = _nnls_choices(gram, rhs, s.tt, idx)
-            path[lobe] = _smoothest_path(s.score(obj), log_c, mu)
+            cost = s.score(obj)
+            path[lobe] = _smoothest_path(cost, log_c, mu)
         if n_lobes == 1 or np.array_equal(path, before):
             break
+    if cost[path[-1], bands].sum() > (1 - PER_BAND_GAIN / 2) * s.score(shared_obj).sum():
+        return None
     rough = cand[path]
 
     def local(r: np.ndarray, which: np.ndarray) -> np.ndarray:
@@ -557,10 +580,10 @@ def _fit_per_band(s: _Samples, shared: list[float], mu: float,
         return s.score(obj, which) + pen
 
     step = float(np.mean(np.diff(np.log(grid)))) / 2
-    for _ in range(4):  # parabolic steps in ln r: three points, the vertex, the best of four
+    for _ in range(2):  # parabolic steps in ln r: three points, the vertex, the best of four
         for parity in (0, 1):
             which = bands[parity::2]
-            current = local(rough, which)
+            current = local(rough, which)   # its neighbours may have moved
             for lobe in range(n_lobes):
                 log_r = np.log(rough[lobe, which])
                 moves = [np.full(len(which), -step), np.full(len(which), step)]
@@ -596,8 +619,8 @@ def fit_closures(table, wavelengths_nm: np.ndarray | None = None, max_lobes: int
     rs, x, obj = _fit_shared(s, max_lobes, roughness_grid)
     rough = np.repeat(np.asarray(rs, np.float64)[:, None], wl.size, axis=1)
     if per_band and rs and wl.size > 1 and np.max(s.score(obj)) > PER_BAND_MIN_ERROR ** 2:
-        varied = _fit_per_band(s, rs, smoothness)
-        for lobe in range(len(rs)):  # keep a lobe's per-band roughness only where it pays
+        varied = _fit_per_band(s, rs, obj, smoothness)
+        for lobe in range(len(rs) if varied is not None else 0):  # keep it only where it pays
             trial = rough.copy()
             trial[lobe] = varied[lobe]
             t_x, t_obj = _solve_bands(s, trial)
