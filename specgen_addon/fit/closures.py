@@ -21,6 +21,10 @@ roughnesses are fixed (:func:`_nnls_small`, exact, all bands at once):
    ``SMOOTHNESS · (Δ ln r)²`` between neighbouring bands, then refined continuously band by band;
 3. a lobe keeps per-band roughness only if that lowers the error summed over bands by
    ``PER_BAND_GAIN``; otherwise it keeps the shared value (and costs one closure per render).
+   A varying lobe costs three closures, so its plain or Fresnel part is dropped when the fit
+   without it is as good (error within ``PER_BAND_GAIN``, or every band within
+   ``PER_BAND_MIN_ERROR``), and where two lobes vary, one varying lobe is fitted as well and
+   taken instead when it is as good.
    Step 2 is skipped when the shared fit is already within ``PER_BAND_MIN_ERROR``.
 
 A render packs three bands into one closure's R, G, B, so a lobe whose roughness varies is built
@@ -523,12 +527,16 @@ def _band_equations(s: _Samples, roughness: np.ndarray,
     return gram, rhs
 
 
-def _solve_bands(s: _Samples, roughness: np.ndarray,
-                 bands: np.ndarray | None = None) -> tuple[np.ndarray, np.ndarray]:
-    """NNLS weights (2 + 2L, B) and objectives (B,) with per-band ``roughness`` (L, Λ)."""
+def _solve_bands(s: _Samples, roughness: np.ndarray, bands: np.ndarray | None = None,
+                 without: tuple[int, ...] = ()) -> tuple[np.ndarray, np.ndarray]:
+    """NNLS weights (2 + 2L, B) and objectives (B,) with per-band ``roughness`` (L, Λ), the
+    columns ``without`` held at zero."""
     bands = np.arange(s.tt.size) if bands is None else np.asarray(bands)
     gram, rhs = _band_equations(s, roughness, bands)
-    return _nnls_small(gram, rhs, s.tt[bands])
+    keep = [i for i in range(rhs.shape[0]) if i not in without]
+    x = np.zeros_like(rhs)
+    x[keep], obj = _nnls_small(gram[:, keep][:, :, keep], rhs[keep], s.tt[bands])
+    return x, obj
 
 
 def _moved(rough: np.ndarray, lobe: int, bands: np.ndarray, log_r: np.ndarray) -> np.ndarray:
@@ -600,6 +608,37 @@ def _fit_per_band(s: _Samples, shared: list[float], shared_obj: np.ndarray, mu: 
     return rough
 
 
+def _per_band_model(s: _Samples, rs: list[float], x: np.ndarray, obj: np.ndarray,
+                    mu: float) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """From a shared fit ``(rs, x, obj)``: roughness (L, Λ), weights and objectives with each
+    lobe's per-band roughness kept only where it lowers the summed error by :data:`PER_BAND_GAIN`."""
+    rough = np.repeat(np.asarray(rs, np.float64)[:, None], s.tt.size, axis=1)
+    if not rs or s.tt.size < 2 or np.max(s.score(obj)) <= PER_BAND_MIN_ERROR ** 2:
+        return rough, x, obj
+    varied = _fit_per_band(s, rs, obj, mu)
+    for lobe in range(len(rs) if varied is not None else 0):
+        trial = rough.copy()
+        trial[lobe] = varied[lobe]
+        t_x, t_obj = _solve_bands(s, trial)
+        if np.sum(s.score(t_obj)) < (1 - PER_BAND_GAIN) * np.sum(s.score(obj)):
+            rough, x, obj = trial, t_x, t_obj
+    dropped: tuple[int, ...] = ()
+    for lobe in range(len(rs)):  # a varying lobe's plain or Fresnel part costs three closures too
+        for col in (3 + 2 * lobe, 2 + 2 * lobe):
+            if _varies(rough[lobe]) and np.any(x[col] > 0):
+                t_x, t_obj = _solve_bands(s, rough, without=dropped + (col,))
+                if _as_good(s, t_obj, obj):
+                    dropped, x, obj = dropped + (col,), t_x, t_obj
+    return rough, x, obj
+
+
+def _as_good(s: _Samples, simpler: np.ndarray, obj: np.ndarray) -> bool:
+    """Whether objectives ``simpler`` are within :data:`PER_BAND_GAIN` of ``obj`` summed over the
+    bands, or within :data:`PER_BAND_MIN_ERROR` in every band."""
+    return bool(np.sum(s.score(simpler)) <= (1 + PER_BAND_GAIN) * np.sum(s.score(obj))
+                or np.max(s.score(simpler)) <= PER_BAND_MIN_ERROR ** 2)
+
+
 def fit_closures(table, wavelengths_nm: np.ndarray | None = None, max_lobes: int = 2,
                  roughness_grid: np.ndarray = ROUGHNESS_GRID, ior: float = DEFAULT_IOR,
                  per_band: bool = True, smoothness: float = SMOOTHNESS) -> ClosureFit:
@@ -618,15 +657,14 @@ def fit_closures(table, wavelengths_nm: np.ndarray | None = None, max_lobes: int
     s = _samples(table, wl, wavelengths_nm is not None, ior)
     rs, x, obj = _fit_shared(s, max_lobes, roughness_grid)
     rough = np.repeat(np.asarray(rs, np.float64)[:, None], wl.size, axis=1)
-    if per_band and rs and wl.size > 1 and np.max(s.score(obj)) > PER_BAND_MIN_ERROR ** 2:
-        varied = _fit_per_band(s, rs, obj, smoothness)
-        for lobe in range(len(rs) if varied is not None else 0):  # keep it only where it pays
-            trial = rough.copy()
-            trial[lobe] = varied[lobe]
-            t_x, t_obj = _solve_bands(s, trial)
-            if np.sum(s.score(t_obj)) < (1 - PER_BAND_GAIN) * np.sum(s.score(obj)):
-                rough, x, obj = trial, t_x, t_obj
+    if per_band:
+        rough, x, obj = _per_band_model(s, rs, x, obj, smoothness)
+        if rough.shape[0] == 2 and any(_varies(r) for r in rough):
+            # three closures a render per varying lobe: one lobe may do as well once it varies
+            one = _per_band_model(s, *_fit_shared(s, 1, roughness_grid), smoothness)
+            if _as_good(s, one[2], obj):
+                rough, x, obj = one
     spec, spec_f = x[2::2], x[3::2]
-    used = [i for i in range(len(rs)) if np.any(spec[i] > 0) or np.any(spec_f[i] > 0)]
+    used = [i for i in range(rough.shape[0]) if np.any(spec[i] > 0) or np.any(spec_f[i] > 0)]
     return ClosureFit(wl, x[0], rough[used], spec[used], np.sqrt(s.score(obj)), x[1],
                       spec_f[used], float(ior))
