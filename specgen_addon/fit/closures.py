@@ -20,7 +20,8 @@ roughnesses are fixed (:func:`_nnls_small`, exact, all bands at once):
    grid (dynamic programming over the bands) of the per-band relative squared error plus
    ``SMOOTHNESS · (Δ ln r)²`` between neighbouring bands, then refined continuously band by band;
 3. a lobe keeps per-band roughness only if that lowers the error summed over bands by
-   ``PER_BAND_GAIN``; otherwise it keeps the shared value (and costs one closure per render).
+   ``PER_BAND_GAIN``, and a constant at its mean ``ln r`` is not as good; otherwise it keeps a
+   shared value (and costs one closure per render).
    A varying lobe costs three closures, so its plain or Fresnel part is dropped when the fit
    without it is as good (error within ``PER_BAND_GAIN``, or every band within
    ``PER_BAND_MIN_ERROR``), and where two lobes vary, one varying lobe is fitted as well and
@@ -622,6 +623,13 @@ def _per_band_model(s: _Samples, rs: list[float], x: np.ndarray, obj: np.ndarray
         t_x, t_obj = _solve_bands(s, trial)
         if np.sum(s.score(t_obj)) < (1 - PER_BAND_GAIN) * np.sum(s.score(obj)):
             rough, x, obj = trial, t_x, t_obj
+            # the search may just have found a better shared value: its tint-weighted mean in ln r
+            w = x[2 + 2 * lobe] + x[3 + 2 * lobe] + 1e-12
+            trial = rough.copy()
+            trial[lobe] = np.exp(np.sum(w * np.log(rough[lobe])) / np.sum(w))
+            t_x, t_obj = _solve_bands(s, trial)
+            if _as_good(s, t_obj, obj):
+                rough, x, obj = trial, t_x, t_obj
     dropped: tuple[int, ...] = ()
     for lobe in range(len(rs)):  # a varying lobe's plain or Fresnel part costs three closures too
         for col in (3 + 2 * lobe, 2 + 2 * lobe):
