@@ -1,53 +1,66 @@
 """Node building for the SpecGen material's native closure stack (Lambert + GGX lobes, each
 optionally weighted by the view-dependent dielectric Fresnel of a Fresnel node).
 
-The numbers come from :mod:`specgen_addon.fit.closures`; this module only builds and sets nodes.
-A SpecGen material holds two surfaces: the exact OSL shader (used by the exact render mode) and
-this stack, which is what the Output node shows: F12 and the viewport render the stack with the
-fit's RGB colours (an RGB stand-in), and the full-scene spectral render sets it per band group.
+The numbers and the layout come from :mod:`specgen_addon.fit.closures`; this module only builds
+and sets nodes. A SpecGen material holds two surfaces: the exact OSL shader (used by the exact
+render mode) and this stack, which is what the Output node shows: F12 and the viewport render the
+stack with the fit's RGB colours (an RGB stand-in), and the full-scene spectral render sets it per
+band group. A lobe whose roughness varies with wavelength is three Glossy nodes, one per RGB
+channel of a band group (``SpecGen Lobe 1 (R)`` …), summed before its Fresnel mix.
 """
 
 from __future__ import annotations
 
 import bpy
-import numpy as np
 
 from ..specgen_addon.errors import SpecGenError
-from ..specgen_addon.fit import ClosureFit, rgb_standin
+from ..specgen_addon.fit import ClosureFit, StackClosure, stack_layout, standin_closures
 
 FIT_PROP = "specgen_closures"
 PREFIX = "SpecGen "
 STACK_OUTPUT = "SpecGen Stack"  # the node whose first output is the whole stack
 
 
+def _sum(tree: bpy.types.NodeTree, outputs: list, y: float) -> bpy.types.NodeSocket:
+    """Add Shader chain of ``outputs`` (one output stays as it is)."""
+    last = outputs[0]
+    for i, nxt in enumerate(outputs[1:]):
+        add = tree.nodes.new("ShaderNodeAddShader")
+        add.location = (-150 + 150 * i, y)
+        tree.links.new(last, add.inputs[0])
+        tree.links.new(nxt, add.inputs[1])
+        last = add.outputs["Shader"]
+    return last
+
+
 def build_closure_stack(mat: bpy.types.Material, fit: ClosureFit, output: bpy.types.Node) -> None:
-    """One Diffuse/Glossy (GGX) node per fitted closure (``SpecGen <term>``); Fresnel-weighted
-    ones go through a Mix Shader whose factor is a Fresnel node (``(1 − F)`` for the diffuse,
-    ``F`` for a lobe); all summed by Add Shaders into ``output``'s Surface. Sets the RGB stand-in
-    colours and keeps the fit on the material (JSON custom property)."""
+    """One Diffuse/Glossy (GGX) node per closure of :func:`stack_layout` (``SpecGen <name>``);
+    a term's closures are added, Fresnel-weighted terms go through a Mix Shader whose factor is a
+    Fresnel node (``(1 − F)`` for the diffuse, ``F`` for a lobe); all summed into ``output``'s
+    Surface. Sets the RGB stand-in and keeps the fit on the material (JSON custom property)."""
     tree = mat.node_tree
     fresnel = None
-    shaders = []
-    for i, (name, roughness, weighted, _) in enumerate(fit.terms()):
-        if roughness is None:
-            node = tree.nodes.new("ShaderNodeBsdfDiffuse")
-        else:
-            node = tree.nodes.new("ShaderNodeBsdfGlossy")
+    terms: dict[str, tuple[StackClosure, list]] = {}
+    for i, c in enumerate(stack_layout(fit)):
+        node = tree.nodes.new("ShaderNodeBsdfGlossy" if c.glossy else "ShaderNodeBsdfDiffuse")
+        if c.glossy:
             node.distribution = "GGX"  # the fit's model: plain GGX, height-correlated Smith G
-            node.inputs["Roughness"].default_value = roughness
-        node.name = node.label = PREFIX + name
-        node.location = (-400, -300 - 150 * i)
-        out = node.outputs["BSDF"]
-        if weighted:
+        node.name = node.label = PREFIX + c.name
+        node.location = (-600, -300 - 150 * i)
+        terms.setdefault(c.term, (c, []))[1].append(node.outputs["BSDF"])
+    shaders = []
+    for i, (c, outputs) in enumerate(terms.values()):
+        out = _sum(tree, outputs, -300 - 150 * i)
+        if c.fresnel:
             if fresnel is None:
                 fresnel = tree.nodes.new("ShaderNodeFresnel")
                 fresnel.name = fresnel.label = PREFIX + "Fresnel"
                 fresnel.inputs["IOR"].default_value = float(fit.ior)
-                fresnel.location = (-600, -300)
+                fresnel.location = (-800, -300)
             mix = tree.nodes.new("ShaderNodeMixShader")  # (1 − fac)·A + fac·B, one side empty
             mix.location = (-200, -300 - 150 * i)
             tree.links.new(fresnel.outputs["Fac"], mix.inputs["Fac"])
-            tree.links.new(out, mix.inputs[1 if roughness is None else 2])
+            tree.links.new(out, mix.inputs[2 if c.glossy else 1])
             out = mix.outputs["Shader"]
         shaders.append(out)
     if not shaders:  # a black BRDF
@@ -55,21 +68,14 @@ def build_closure_stack(mat: bpy.types.Material, fit: ClosureFit, output: bpy.ty
         node.name = node.label = PREFIX + "Diffuse"
         node.inputs["Color"].default_value = (0.0, 0.0, 0.0, 1.0)
         shaders.append(node.outputs["BSDF"])
-    last = shaders[0]
-    for i, nxt in enumerate(shaders[1:]):
-        add = tree.nodes.new("ShaderNodeAddShader")
-        add.location = (0, -300 - 150 * i)
-        tree.links.new(last, add.inputs[0])
-        tree.links.new(nxt, add.inputs[1])
-        last = add.outputs["Shader"]
     stack = tree.nodes.new("NodeReroute")
     stack.name = stack.label = STACK_OUTPUT
     stack.location = (150, -300)
-    tree.links.new(last, stack.inputs[0])
+    tree.links.new(_sum(tree, shaders, -100), stack.inputs[0])
     tree.links.new(stack.outputs[0], output.inputs["Surface"])
     mat[FIT_PROP] = fit.to_json()
     mat["specgen_fit_error"] = fit.max_error  # shown in the panel
-    set_stack_colours(mat, rgb_standin(fit))
+    set_stack(mat, standin_closures(fit, stack_layout(fit)))
 
 
 def material_fit(mat: bpy.types.Material) -> ClosureFit:
@@ -80,11 +86,14 @@ def material_fit(mat: bpy.types.Material) -> ClosureFit:
     return ClosureFit.from_json(text)
 
 
-def set_stack_colours(mat: bpy.types.Material, colours: dict[str, np.ndarray]) -> None:
-    """Colour of each closure by term name (three values: RGB, or a render's three bands)."""
+def set_stack(mat: bpy.types.Material, values: dict[str, tuple]) -> None:
+    """Colour (three values: RGB, or a render's three bands) and roughness (None for a diffuse
+    closure) of each closure by name, as :func:`~specgen_addon.fit.group_closures` gives them."""
     nodes = mat.node_tree.nodes
-    for name, c in colours.items():
+    for name, (colour, roughness) in values.items():
         node = nodes.get(PREFIX + name)
-        if node is not None:
-            node.inputs["Color"].default_value = (*(float(v) for v in c[:3]), 1.0)
-
+        if node is None:
+            continue
+        node.inputs["Color"].default_value = (*(float(v) for v in colour[:3]), 1.0)
+        if roughness is not None:
+            node.inputs["Roughness"].default_value = float(roughness)

@@ -13,7 +13,8 @@ the group's three wavelengths (maths in :mod:`specgen_addon.uplift`):
   Cycles does them; a Blackbody node feeding an emission colour directly gives Planck's spectrum;
 * lights: colour (and blackbody temperature) per band; strength, exposure, shape, angle and
   shadows untouched (Cycles honours them);
-* SpecGen materials: their native closure stack gets the fitted per-band albedo and lobe colours.
+* SpecGen materials: their native closure stack gets the fitted per-band albedo, lobe colours and
+  (for a lobe built per channel) roughnesses.
 
 :class:`SceneConversion` records every value, link and node it touches and :meth:`restore`
 puts them back; :func:`fingerprint` lets tests check that nothing changed.
@@ -27,7 +28,8 @@ import bpy
 import numpy as np
 
 from ..specgen_addon import uplift
-from .closures import material_fit, set_stack_colours
+from ..specgen_addon.fit import group_closures, stack_layout
+from .closures import material_fit, set_stack
 from .render import is_specgen_material
 
 REFLECTANCE, EMISSION = "reflectance", "emission"
@@ -77,7 +79,7 @@ class SceneConversion:
         self._links: list[tuple[object, object, object]] = []  # removed (tree, from, to)
         self._nodes: list[tuple[object, object]] = []          # added (tree, node)
         self._groups: dict[str, bpy.types.NodeTree] = {}
-        self._specgen: list[tuple[object, object]] = []        # (material, fit at our bands)
+        self._specgen: list[tuple[object, object, list]] = []  # (material, fit at our bands, layout)
         self._done_trees: set[int] = set()
         self.prepared = False
 
@@ -145,7 +147,8 @@ class SceneConversion:
             if mat.library is not None or mat.node_tree is None:
                 continue
             if is_specgen_material(mat):
-                self._specgen.append((mat, material_fit(mat).at(self.wavelengths_nm)))
+                fit = material_fit(mat)  # the nodes follow the stored fit's layout
+                self._specgen.append((mat, fit.at(self.wavelengths_nm), stack_layout(fit)))
                 continue
             self._convert_tree(mat.node_tree, f"material {mat.name!r}")
         if sc.world is not None and sc.world.node_tree is not None:
@@ -160,18 +163,21 @@ class SceneConversion:
                 light.use_temperature = False
             if light.node_tree is not None:
                 self._convert_tree(light.node_tree, f"light {light.name!r}", light_tree=True)
-        for mat, _ in self._specgen:
+        for mat, _, _ in self._specgen:
             nodes = mat.node_tree.nodes
             for node in nodes:
                 if node.name.startswith("SpecGen ") and node.type in ("BSDF_DIFFUSE", "BSDF_GLOSSY"):
                     self._values.append((node.inputs["Color"], "default_value",
                                          tuple(node.inputs["Color"].default_value)))
+                    if node.type == "BSDF_GLOSSY":
+                        self._values.append((node.inputs["Roughness"], "default_value",
+                                             float(node.inputs["Roughness"].default_value)))
         self.prepared = True
         return self
 
     def specgen_fits(self) -> list[tuple[bpy.types.Material, object]]:
         """(material, :class:`~specgen_addon.fit.ClosureFit` at the render's bands) per SpecGen material."""
-        return list(self._specgen)
+        return [(mat, fit) for mat, fit, _ in self._specgen]
 
     # ---------------------------------------------------------------- per group
     def set_group(self, group: np.ndarray) -> None:
@@ -193,9 +199,8 @@ class SceneConversion:
                 bb = np.asarray(uplift.group_values(
                     uplift.blackbody_spectrum(kelvin, self.wavelengths_nm), group))
                 light.color = tuple((mats[REFLECTANCE] @ rgb) * bb)
-        for mat, fit in self._specgen:
-            set_stack_colours(mat, {name: np.asarray(uplift.group_values(spectrum, group))
-                                    for name, _, _, spectrum in fit.terms(nonzero=False)})
+        for mat, fit, layout in self._specgen:
+            set_stack(mat, group_closures(fit, group, layout))
 
     # ---------------------------------------------------------------- restore
     def restore(self) -> None:

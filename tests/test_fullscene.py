@@ -84,27 +84,33 @@ def test_spectral_stack_projected_to_rgb_matches_a_plain_rgb_cycles_render():
     assert psnr >= 35.0, psnr
 
 
-@pytest.mark.parametrize("fresnel", [False, True], ids=["lambert+ggx", "fresnel-plastic"])
-def test_full_scene_mode_matches_the_exact_mode_on_a_specgen_only_scene(tmp_path, fresnel):
+@pytest.mark.parametrize("kind", ["lambert+ggx", "fresnel-plastic", "per-band-roughness"])
+def test_full_scene_mode_matches_the_exact_mode_on_a_specgen_only_scene(tmp_path, kind):
     from specgen_addon.fit.closures import fresnel_dielectric
 
     rho = np.interp(WL, [400, 550, 720], [0.15, 0.7, 0.35])
     spec = np.interp(WL, [400, 720], [0.9, 0.2])
+    rough = np.geomspace(0.15, 0.5, WL.size)                   # a lobe that widens with λ
 
     def brdf(th, td, pd):
         wi, wo = io_from_half_diff(th, td, pd)              # wi: light, wo: view (as the OSL)
         above = ((wi[:, 2] > 0) & (wo[:, 2] > 0))[:, None]
-        if fresnel:  # the Fresnel node / Mix Shader closures
+        if kind == "fresnel-plastic":  # the Fresnel node / Mix Shader closures
             f = fresnel_dielectric(wo[:, 2], 1.5)[:, None]
             return above * rho / np.pi * (1 - f) + ggx_lobe(wi, wo, 0.3)[:, None] * spec * f * 5
+        if kind == "per-band-roughness":  # one Glossy node per channel of a band group
+            return above * rho / np.pi + np.stack([ggx_lobe(wi, wo, r) for r in rough], -1) * spec
         return above * rho / np.pi + ggx_lobe(wi, wo, 0.35)[:, None] * spec
 
     info = bake.bake_atlas(BRDFTable.tabulate(brdf, WL), tmp_path / "a.exr", tolerance=1e-6)
     assert info.closures.max_error < 0.01
+    assert info.closures.per_band_lobes.any() == (kind == "per-band-roughness")
     bpy.ops.wm.read_factory_settings(use_empty=True)
     sc = bpy.context.scene
     scene_mod.add_camera(sc)
-    scene_mod.add_mesh(sc, "sphere").data.materials.append(render.make_material("SpecGen t", info))
+    mat = render.make_material("SpecGen t", info)
+    assert ("SpecGen Lobe 1 (G)" in mat.node_tree.nodes) == (kind == "per-band-roughness")
+    scene_mod.add_mesh(sc, "sphere").data.materials.append(mat)
     sc.cycles.filter_width = 0.01
     scene_mod.add_sun(sc, (0.35, 0.45, 0.82), irradiance=np.pi)
     scene_mod.add_sun(sc, (-0.6, 0.2, 0.5), irradiance=1.0)
