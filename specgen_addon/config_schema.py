@@ -142,7 +142,10 @@ def validate_train_config(path: str | os.PathLike, overrides: dict[str, Any] | N
     if unknown:
         raise SpecGenError(f"{path}: unknown section(s) {', '.join(unknown)} (expected model, train)")
     validate_section(Config, data.get("model", {}), f"{path}: model", MODEL_BOUNDS, (1, None))
-    train = {**data.get("train", {}), **(overrides or {})}
+    train = data.get("train", {})
+    if not isinstance(train, dict):
+        raise _type_error(f"{path}: train", "an object of settings", train)
+    train = {**train, **(overrides or {})}
     validate_section(TrainConfig, train, f"{path}: train", TRAIN_BOUNDS)
     try:
         Config.from_dict(data.get("model", {}))

@@ -34,6 +34,7 @@ BOUNDS: dict[str, tuple[float, float]] = {
     "corpus-index": (0, 99_999),    # render-input MATERIAL given as matNNNN or an index
     "ablation-steps": (1, 10_000_000),
     "budget-minutes": (0.01, 100_000.0),
+    "workers": (1, 256),            # corpus --inputs / batch-many: worker processes
 }
 #: Largest input image accepted, in pixels (width × height), checked from the header.
 MAX_IMAGE_PIXELS = 100_000_000
