@@ -69,7 +69,7 @@ class Case:
     argv: list[str]                    # after the interpreter; {fx} {work} {out} {repo} expanded
     expect: str = "refuse"             # "refuse" | "accept" | "either"
     mentions: tuple[str, ...] = ()     # the message must contain one of these (case-insensitive)
-    prepare: str = ""                  # a fixture copied into {out} before the run ("name->dest")
+    prepare: str = ""                  # fixtures copied into {out} first ("name->dest;name2->dest2")
     timeout: float = TIMEOUT_S
     measure_memory: bool = False
 
@@ -316,6 +316,10 @@ def make_fixtures(fx: Path, big: bool) -> None:
     (fx / "inputs_bad.json").write_text('["a", ')
     (fx / "a_file").write_text("I am a file\n")
     (fx / "corrupt_checkpoint.pt").write_bytes(b"PK\x03\x04garbage" * 10)
+    shutil.copy(REPO / "weights" / "specgen_default.pt", fx / "good.pt")
+    os.symlink(fx / "gone.npz", fx / "dangling.npz")
+    for name in ("fifo.png", "fifo.npz", "fifo.json", "fifo.obj"):   # reading a named pipe blocks
+        os.mkfifo(fx / name)
 
     if big:
         sys.path.insert(0, str(REPO / "bench"))
@@ -323,7 +327,8 @@ def make_fixtures(fx: Path, big: bool) -> None:
 
         Image.fromarray(sphere_photo(8000)).save(fx / "big8000.png", compress_level=1)
     for p in fx.iterdir():
-        os.chmod(p, 0o444)
+        if p.is_file() and not p.is_symlink():
+            os.chmod(p, 0o444)
 
 
 # ------------------------------------------------------------------------------------ cases
@@ -492,6 +497,10 @@ def cases(have_rgl: bool, big: bool) -> list[Case]:
     add(C("export-onnx --weights trunc", cli("export-onnx", "--weights", "{fx}/trunc.pt")))
     add(C("export-onnx --weights folder", cli("export-onnx", "--weights", "{fx}")))
     add(C("export-onnx --weights evil", cli("export-onnx", "--weights", "{fx}/evil.pt")))
+    add(C("export-onnx over existing graphs", cli("export-onnx", "--weights", "{out}/w.pt"),
+          prepare="good.pt->w.pt;a_file->w.tables.onnx", mentions=("exists",)))
+    add(C("export-onnx --weights nan", cli("export-onnx", "--weights", "{fx}/nan.pt"), mentions=("NaN",)))
+
 
     # ---- render-input
     ri = lambda mat, *a: cli("render-input", mat, "-o", "{out}/in.exr", "--quiet", *a)  # noqa: E731
@@ -573,6 +582,30 @@ def cases(have_rgl: bool, big: bool) -> list[Case]:
     add(C("batch --scene not a blend", batch("--scene", "{fx}/not_a.blend", "--out", "{out}/o")))
     add(C("batch --weights missing", bt("--weights", "{fx}/nope.pt", src=("--image", img))))
     add(C("batch no source", batch("--out", "{out}/o")))
+
+    # ---- special files and odd names
+    add(C("info /dev/zero", cli("info", "/dev/zero"), mentions=("not a regular file",)))
+    add(C("info /dev/null", cli("info", "/dev/null"), mentions=("not a regular file",)))
+    add(C("infer image /dev/zero", cli("infer", "/dev/zero", "-o", "{out}/b.npz")))
+    add(C("infer image /dev/null", cli("infer", "/dev/null", "-o", "{out}/b.npz")))
+    add(C("infer -o /dev/null", cli("infer", img, "-o", "/dev/null")))
+    add(C("info named pipe", cli("info", "{fx}/fifo.npz"), mentions=("not a regular file",)))
+    add(C("infer image named pipe", cli("infer", "{fx}/fifo.png", "-o", "{out}/b.npz"), mentions=("not a regular file",)))
+    add(C("train --config named pipe", tr("--config", "{fx}/fifo.json", "--steps", "1"), mentions=("not a regular file",)))
+    add(C("batch --mesh named pipe", bt("--mesh", "{fx}/fifo.obj"), mentions=("not a regular file",)))
+    add(C("batch --image named pipe", bt(src=("--image", "{fx}/fifo.png")), mentions=("not a regular file",)))
+    add(C("info unicode path", cli("info", "{out}/ünï cödé ✓.npz"), prepare="good.npz->ünï cödé ✓.npz",
+          expect="accept"))
+    add(C("info dangling symlink", cli("info", "{fx}/dangling.npz"), mentions=("not found", "no such")))
+    add(C("batch --image is a table", batch("--image", npz, "--out", "{out}/o")))
+    add(C("batch --brdf is a photo", batch("--brdf", img, "--out", "{out}/o")))
+    add(C("batch --image name with newline", batch("--image", "{out}/a\nb.png", "--out", "{out}/o"),
+          prepare="good.png->a\nb.png"))
+    add(C("render-input --manifest folder", ri("mat0001", "--manifest", "{fx}"), mentions=("folder",)))
+    add(C("evaluate --weights text", ev("--limit", "1", "--weights", "{fx}/text.pt")))
+    add(C("paper-tables --img-dir under a file", pt("--img-dir", "{fx}/a_file/img", "--report-only")))
+    add(C("corpus --tabulate dup name", co("--n", "2", "--tabulate", "mat0000", "--tabulate", "mat0000"),
+          expect="either"))
 
     # ---- Python API
     add(C("api generate_brdf missing path", api("""
@@ -707,8 +740,8 @@ def run_case(case: Case, base: Path, fx: Path) -> Result:
     work = base / "cases" / "".join(c if c.isalnum() else "_" for c in case.name)
     (work / "out").mkdir(parents=True)
     (work / "tmp").mkdir()
-    if case.prepare:
-        src, dest = case.prepare.split("->")
+    for step in filter(None, case.prepare.split(";")):
+        src, dest = step.split("->")
         (work / "out" / dest).parent.mkdir(parents=True, exist_ok=True)
         shutil.copy(fx / src, work / "out" / dest)
     argv = [PY, *[expand(a, work, fx) for a in case.argv]]

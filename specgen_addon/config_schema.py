@@ -109,8 +109,10 @@ def read_config_dict(path: str | os.PathLike) -> dict:
     path = Path(path)
     if path.is_dir():
         raise SpecGenError(f"{path}: is a folder, expected a config file (.json or .toml)")
-    if not path.is_file():
+    if not path.exists():
         raise SpecGenError(f"{path}: config file not found")
+    if not path.is_file():  # a device or a named pipe
+        raise SpecGenError(f"{path}: is not a regular file (config file)")
     try:
         text = path.read_text(encoding="utf-8")
     except PermissionError:

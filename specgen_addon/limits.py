@@ -95,6 +95,8 @@ def check_input_file(path: str | os.PathLike, what: str = "input file") -> Path:
         raise SpecGenError(f"{path}: is a folder, expected a file ({what})")
     if not path.exists():
         raise SpecGenError(f"{path}: {what} not found")
+    if not path.is_file():  # a device or a named pipe: reading it could block or never end
+        raise SpecGenError(f"{path}: is not a regular file ({what})")
     if not os.access(path, os.R_OK):
         raise SpecGenError(f"{path}: {what} is not readable (permission denied)")
     return path

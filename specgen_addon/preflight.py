@@ -126,6 +126,12 @@ def _evaluate(a) -> None:
 
 def _export(a) -> None:
     check_weights_file(a.weights)
+    from .infer import onnx_paths
+    from .model import DEFAULT_WEIGHTS
+
+    for p in onnx_paths(Path(a.weights) if a.weights is not None else DEFAULT_WEIGHTS):
+        if p.exists() and not a.overwrite:
+            raise OutputExistsError(f"{p}: already exists (pass --overwrite to replace it)")
 
 
 def _render_input(a) -> None:
