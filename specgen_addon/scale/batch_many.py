@@ -82,12 +82,13 @@ def check_batch_args(batch_script: Path, batch_args: list[str]) -> None:
     ns = parser.parse_args(["--image", sentinel, "--out", sentinel, *batch_args])
     if ns.image != sentinel or ns.out != sentinel or getattr(ns, "overwrite", False):
         raise SpecGenError(f"batch.py arguments: {', '.join(OWN_OPTIONS)} are set by batch-many per item")
-    from ..preflight import check_batch_settings
+    if Path(batch_script).resolve() == Path(DEFAULT_BATCH_SCRIPT).resolve():   # values, as batch.py checks them
+        from ..preflight import check_batch_settings
 
-    try:
-        check_batch_settings(ns)
-    except SpecGenError as exc:
-        refuse(str(exc))
+        try:
+            check_batch_settings(ns)
+        except SpecGenError as exc:
+            refuse(str(exc))
 
 
 def batch_command(opts: BatchManyOptions) -> list[str]:
