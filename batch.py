@@ -227,10 +227,13 @@ def run_scene(args) -> Path:
         if p.exists() and not args.overwrite:
             raise errors.OutputExistsError(f"{p}: already exists (pass --overwrite to replace it)")
     if Path(bpy.data.filepath or "").resolve() != blend:
+        quiet = import_module(f"{pkg.__name__}.specgen_addon.quiet")
         try:
-            bpy.ops.wm.open_mainfile(filepath=str(blend), load_ui=False)
+            with quiet.native_stdout_silenced(not args.verbose):  # Blender's "Read blend: ..." lines
+                bpy.ops.wm.open_mainfile(filepath=str(blend), load_ui=False)
         except RuntimeError as exc:
-            raise errors.SpecGenError(f"{blend}: cannot open the .blend file ({exc})") from None
+            reason = " ".join(str(exc).split()).removeprefix("Error: ")  # Blender's text ends in "\n"
+            raise errors.SpecGenError(f"{blend}: cannot open the .blend file ({reason})") from None
     scene = bpy.context.scene
     if args.samples is not None:
         scene.cycles.samples = args.samples

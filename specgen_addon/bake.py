@@ -45,6 +45,7 @@ import numpy as np
 
 from .errors import Cancelled, OutputExistsError, SpecGenError
 from .io_utils import atomic_write
+from .limits import check_output_dir
 from .table import N_PHI_D, N_THETA_D, N_THETA_H
 
 COEFFS_PER_RENDER = 4   # coefficient slots per Cycles render: one RGBA lookup group, 4 passes
@@ -254,6 +255,11 @@ def bake_atlas(table, path: str | os.PathLike, wavelengths_nm: np.ndarray | None
 
     if not getattr(table, "is_spectral", False):
         raise SpecGenError("the Blender bake needs a spectral BRDF table (wavelengths in nm)")
+    if not (isinstance(tolerance, (int, float, np.floating)) and 0.0 <= tolerance <= 1.0):
+        raise SpecGenError(f"tolerance must be a number between 0 and 1, got {tolerance!r}")
+    if max_coeffs is not None and not (isinstance(max_coeffs, (int, np.integer)) and max_coeffs >= 1):
+        raise SpecGenError(f"max_coeffs must be a whole number ≥ 1, got {max_coeffs!r}")
+    check_output_dir(Path(path).parent, create=False)   # a file in the way: refused before the work
     wl = np.asarray(table.wavelengths if wavelengths_nm is None else wavelengths_nm, dtype=np.float64)
     values = table.values
     if wavelengths_nm is not None:
@@ -267,7 +273,7 @@ def bake_atlas(table, path: str | os.PathLike, wavelengths_nm: np.ndarray | None
     tiles_x, tiles_y = atlas_layout(n_phi_d)
     info = AtlasInfo(Path(path), wl, basis, offsets, n_phi_d, tiles_x, tiles_y, rel,
                      fit_closures(table, None if wavelengths_nm is None else wl))
-    info.path.parent.mkdir(parents=True, exist_ok=True)
+    check_output_dir(info.path.parent, create=True)
     shape = (tiles_y * N_THETA_D, tiles_x * N_THETA_H)
     for g, target in enumerate(info.group_paths):
         if cancel is not None and cancel():

@@ -13,7 +13,7 @@ from pathlib import Path
 from typing import Callable, Sequence
 
 from . import __version__
-from .errors import SpecGenError
+from .errors import SpecGenError, one_line_warnings
 
 #: Modules (relative to this package) that contribute sub-commands, in help order.
 COMMAND_MODULES = [
@@ -91,7 +91,7 @@ def run_guarded(what: str | Callable[[], str], work, outputs=([], []), verbose: 
                f"{guard.left_behind()}"
 
     try:
-        with stop_on_signals(stopped), on_hard_stop(remove_new_files):
+        with stop_on_signals(stopped), on_hard_stop(remove_new_files), one_line_warnings(verbose):
             try:
                 with guard:
                     code = int(work() or 0)

@@ -7,6 +7,7 @@ from pathlib import Path
 
 from .corpus import find_material, generate_corpus, load_manifest, save_manifest
 from .errors import OutputExistsError, SpecGenError
+from .limits import check_number
 from .progress import progress_bar
 from .spectra import DEFAULT_BAND_COUNT, DEFAULT_RANGE_NM, wavelength_grid
 
@@ -72,8 +73,7 @@ def run(args: argparse.Namespace) -> int:
         raise SpecGenError(f"--seed must be ≥ 0, got {args.seed}")
     if not 1 <= args.bands <= 401:
         raise SpecGenError(f"--bands must be between 1 and 401, got {args.bands}")
-    if args.workers < 1:
-        raise SpecGenError(f"--workers must be ≥ 1, got {args.workers}")
+    check_number("workers", args.workers)
     mix = parse_mix(args.families)
     out: Path = args.out
     if out.exists() and not out.is_dir():

@@ -71,6 +71,7 @@ def add_parser(sub: argparse._SubParsersAction) -> argparse.ArgumentParser:
     p = sub.add_parser("export-onnx", help="export weights to ONNX graphs for onnxruntime",
                        description="Writes <stem>.tables.onnx and <stem>.head.onnx beside the weights.")
     p.add_argument("--weights", type=Path, default=None, help="weights (.pt); default: shipped")
+    p.add_argument("--overwrite", action="store_true", help="replace existing .onnx graphs")
     p.set_defaults(func=run_export)
     return p
 
@@ -223,6 +224,6 @@ def run_evaluate(args: argparse.Namespace) -> int:
 def run_export(args: argparse.Namespace) -> int:
     from .model.export_onnx import export_onnx
 
-    for p in export_onnx(args.weights):
+    for p in export_onnx(args.weights, overwrite=args.overwrite):
         print(f"{p}: {p.stat().st_size / 1e6:.1f} MB")
     return 0

@@ -109,8 +109,10 @@ def read_config_dict(path: str | os.PathLike) -> dict:
     path = Path(path)
     if path.is_dir():
         raise SpecGenError(f"{path}: is a folder, expected a config file (.json or .toml)")
-    if not path.is_file():
+    if not path.exists():
         raise SpecGenError(f"{path}: config file not found")
+    if not path.is_file():  # a device or a named pipe
+        raise SpecGenError(f"{path}: is not a regular file (config file)")
     try:
         text = path.read_text(encoding="utf-8")
     except PermissionError:
@@ -142,7 +144,10 @@ def validate_train_config(path: str | os.PathLike, overrides: dict[str, Any] | N
     if unknown:
         raise SpecGenError(f"{path}: unknown section(s) {', '.join(unknown)} (expected model, train)")
     validate_section(Config, data.get("model", {}), f"{path}: model", MODEL_BOUNDS, (1, None))
-    train = {**data.get("train", {}), **(overrides or {})}
+    train = data.get("train", {})
+    if not isinstance(train, dict):
+        raise _type_error(f"{path}: train", "an object of settings", train)
+    train = {**train, **(overrides or {})}
     validate_section(TrainConfig, train, f"{path}: train", TRAIN_BOUNDS)
     try:
         Config.from_dict(data.get("model", {}))

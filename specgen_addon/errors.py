@@ -2,7 +2,12 @@
 
 from __future__ import annotations
 
+import contextlib
+import os
+import sys
+import warnings
 from os import PathLike
+from typing import Iterator
 
 
 class SpecGenError(Exception):
@@ -32,3 +37,22 @@ class OutputExistsError(SpecGenError):
 
 class Cancelled(SpecGenError):
     """Long work was cancelled by the user; nothing partial was written."""
+
+
+@contextlib.contextmanager
+def one_line_warnings(verbose: bool = False) -> Iterator[None]:
+    """Show SpecGen's own warnings (e.g. "grayscale converted to RGB") as ``warning: <text>``,
+    without Python's file name and source line; other libraries' warnings keep their format."""
+    package = os.path.dirname(os.path.abspath(__file__))
+    previous = warnings.showwarning
+
+    def show(message, category, filename, lineno, file=None, line=None):
+        if verbose or not os.path.abspath(filename).startswith(package + os.sep):
+            return previous(message, category, filename, lineno, file, line)
+        print(f"warning: {message}", file=file or sys.stderr)
+
+    warnings.showwarning = show
+    try:
+        yield
+    finally:
+        warnings.showwarning = previous

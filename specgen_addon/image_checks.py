@@ -37,7 +37,11 @@ def image_size(path: str | Path) -> tuple[int, int] | None:
 
             inp = oiio.ImageInput.open(str(path))
             if inp is None:
-                raise OSError(oiio.geterror() or "unrecognised image file")
+                reason = oiio.geterror() or "unrecognised image file"
+                size = _pil_header_size(path)   # libpng refuses huge headers; Pillow reads them
+                if size is None:
+                    raise OSError(reason)
+                return size
             try:
                 spec = inp.spec()
                 return int(spec.width), int(spec.height)
@@ -61,6 +65,18 @@ def image_size(path: str | Path) -> tuple[int, int] | None:
     except Exception as exc:  # unreadable header: one line naming the file
         first = (str(exc).strip().splitlines() or [type(exc).__name__])[0]
         raise ImageInputError(f"{path}: cannot read image ({first})") from None
+
+
+def _pil_header_size(path: Path) -> tuple[int, int] | None:
+    """(width, height) from Pillow's lazy open, or None when Pillow is absent or cannot read it."""
+    try:
+        from PIL import Image
+
+        with _unlimited_pil():
+            with Image.open(path) as im:
+                return im.size
+    except Exception:  # noqa: BLE001 - the caller reports the first reader's error
+        return None
 
 
 class _unlimited_pil:

@@ -256,7 +256,7 @@ def generate_brdf(image, weights=None, wavelengths_nm=None, backend: str = "torc
     be = get_backend(weights, backend)
     cfg = be.cfg
     wl = np.asarray(DEFAULT_WAVELENGTHS_NM if wavelengths_nm is None else wavelengths_nm, dtype=np.float64)
-    if wl.ndim != 1 or wl.size == 0 or np.any(np.diff(wl) <= 0):
+    if wl.ndim != 1 or wl.size == 0 or not np.all(np.isfinite(wl)) or np.any(np.diff(wl) <= 0):
         raise SpecGenError("wavelengths must be a non-empty increasing list (nm)")
     if wl[0] < cfg.lambda_min_nm - 1e-6 or wl[-1] > cfg.lambda_max_nm + 1e-6:
         raise SpecGenError(f"wavelengths {wl[0]:g}–{wl[-1]:g} nm fall outside the model's "

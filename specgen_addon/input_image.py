@@ -255,7 +255,12 @@ def load_sphere_image(path: str | Path, size: int = CANONICAL_SIZE) -> np.ndarra
 
 def prepare_sphere_array(arr: np.ndarray, size: int = CANONICAL_SIZE) -> np.ndarray:
     """Find, crop and resample the sphere of a linear RGB/RGBA array (H, W, 3|4) to (size, size, 3)."""
-    arr = np.asarray(arr, dtype=np.float64)
+    raw = np.asarray(arr)
+    if raw.dtype.kind not in "biuf":
+        raise ImageInputError(f"expected an array of numbers, got dtype {raw.dtype}")
+    arr = raw.astype(np.float64, copy=False)
+    if arr.ndim == 3 and min(arr.shape[:2]) < 2 * MIN_SPHERE_RADIUS_PX:
+        raise ImageInputError(f"image of {arr.shape[1]}×{arr.shape[0]} pixels is too small to hold a sphere")
     if arr.ndim != 3 or arr.shape[-1] not in (3, 4):
         channels = arr.shape[-1] if arr.ndim == 3 else 1
         raise ImageInputError(f"expected an RGB or RGBA image, got {channels} channel(s) "

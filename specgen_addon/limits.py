@@ -34,6 +34,7 @@ BOUNDS: dict[str, tuple[float, float]] = {
     "corpus-index": (0, 99_999),    # render-input MATERIAL given as matNNNN or an index
     "ablation-steps": (1, 10_000_000),
     "budget-minutes": (0.01, 100_000.0),
+    "workers": (1, 256),            # corpus --inputs / batch-many: worker processes
 }
 #: Largest input image accepted, in pixels (width × height), checked from the header.
 MAX_IMAGE_PIXELS = 100_000_000
@@ -94,6 +95,8 @@ def check_input_file(path: str | os.PathLike, what: str = "input file") -> Path:
         raise SpecGenError(f"{path}: is a folder, expected a file ({what})")
     if not path.exists():
         raise SpecGenError(f"{path}: {what} not found")
+    if not path.is_file():  # a device or a named pipe: reading it could block or never end
+        raise SpecGenError(f"{path}: is not a regular file ({what})")
     if not os.access(path, os.R_OK):
         raise SpecGenError(f"{path}: {what} is not readable (permission denied)")
     return path

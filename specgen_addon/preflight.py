@@ -126,6 +126,12 @@ def _evaluate(a) -> None:
 
 def _export(a) -> None:
     check_weights_file(a.weights)
+    from .infer import onnx_paths
+    from .model import DEFAULT_WEIGHTS
+
+    for p in onnx_paths(Path(a.weights) if a.weights is not None else DEFAULT_WEIGHTS):
+        if p.exists() and not a.overwrite:
+            raise OutputExistsError(f"{p}: already exists (pass --overwrite to replace it)")
 
 
 def _render_input(a) -> None:
@@ -157,7 +163,7 @@ def _paper_tables(a) -> None:
     if a.materials is not None:
         spec = a.materials.strip()
         if spec.isdigit():
-            limits.check_number("limit", int(spec), bounds=(1, 1000))
+            limits.check_number("materials", int(spec), bounds=(1, 1000))
         elif not [s for s in spec.split(",") if s.strip()]:
             raise SpecGenError("--materials needs a count or comma-separated material names")
         else:
@@ -213,14 +219,24 @@ def check_env_name(name: str) -> None:
         raise SpecGenError(f"no environment map named {name!r}; available: {', '.join(names)}")
 
 
-def check_batch(args: argparse.Namespace) -> None:
-    """Everything batch.py needs, checked before the network runs: sizes, files, mesh, names,
-    output folder and existing outputs (``lookup/`` included)."""
+def check_batch_settings(args: argparse.Namespace) -> None:
+    """batch.py's settings other than its input and output: sizes, wavelengths, weights, mesh and
+    environment name (also what ``batch-many --batch-args`` is checked with, before any item runs)."""
     from .mesh_checks import check_obj
 
     limits.check_numbers({"resolution": args.resolution, "samples": args.samples,
                           "env-samples": args.env_samples})
     limits.check_wavelength_range(args.wl_min, args.wl_max, args.bands)
+    check_weights_file(args.weights)
+    if args.mesh not in ("sphere", "suzanne"):
+        check_obj(args.mesh)
+    check_env_name(args.env)
+
+
+def check_batch(args: argparse.Namespace) -> None:
+    """Everything batch.py needs, checked before the network runs: sizes, files, mesh, names,
+    output folder and existing outputs (``lookup/`` included)."""
+    check_batch_settings(args)
     if args.image:
         check_image_file(args.image)
         source = Path(args.image)
@@ -228,10 +244,6 @@ def check_batch(args: argparse.Namespace) -> None:
         limits.check_input_file(args.brdf, "BRDF table")
         source = Path(args.brdf)
     limits.safe_name(source.stem, "input file name")
-    check_weights_file(args.weights)
-    if args.mesh not in ("sphere", "suzanne"):
-        check_obj(args.mesh)
-    check_env_name(args.env)
     out = limits.check_output_dir(args.out, create=False)
     mesh_tag = args.mesh if args.mesh in ("sphere", "suzanne") else Path(args.mesh).stem
     target = out / f"{source.stem}_{mesh_tag}_{args.env}.exr"

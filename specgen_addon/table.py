@@ -97,8 +97,9 @@ class BRDFTable:
         n = self.values.shape[3]
         if self.wavelengths is not None:
             self.wavelengths = np.asarray(self.wavelengths, dtype=np.float64)
-            if self.wavelengths.shape != (n,) or np.any(np.diff(self.wavelengths) <= 0):
-                raise SpecGenError("wavelengths must be increasing, one per column")
+            if (self.wavelengths.shape != (n,) or not np.all(np.isfinite(self.wavelengths))
+                    or np.any(np.diff(self.wavelengths) <= 0)):
+                raise SpecGenError("wavelengths must be finite and increasing (nm), one per column")
             if not self.channels:
                 self.channels = tuple(f"{w:g}nm" for w in self.wavelengths)
         elif not self.channels:
@@ -163,6 +164,8 @@ class BRDFTable:
             raise SpecGenError("an RGB table has no wavelength axis; use eval_rgb")
         w = np.atleast_1d(np.asarray(wavelengths_nm, dtype=np.float64))
         lo, hi = self.wavelengths[0], self.wavelengths[-1]
+        if w.size == 0 or not np.all(np.isfinite(w)):
+            raise SpecGenError(f"wavelengths must be finite numbers (nm), got {w.tolist()}")
         if np.any(w < lo - 1e-6) or np.any(w > hi + 1e-6):
             raise SpecGenError(f"wavelengths {w.min():g}–{w.max():g} nm fall outside the table's "
                                f"{lo:g}–{hi:g} nm")

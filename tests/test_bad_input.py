@@ -174,7 +174,32 @@ MAKERS = {
     "cfg_broken": lambda r: _cfg(r, "broken.json", "{not json"),
     "run_dir": lambda r: _run_dir(r, b"not a checkpoint"),
     "weights_nan": lambda r: _nan_weights(r / "nan.pt"),
+    # found by the fresh campaign (scripts/bad_input_campaign.py)
+    "npz_wl_nan": lambda r: _npz_wavelengths(r / "wlnan.npz", np.array([400.0, np.nan, 600.0, 700.0])),
+    "rgl_version_fraction": lambda r: _rgl(r / "ver15.bsdf", version=np.array([1.5, 0.0], np.float32)),
+    "cfg_train_null": lambda r: _cfg(r, "trainnull.json", {"train": None}),
+    "png_over_libpng_limit": lambda r: _png_header_only(r / "huge100k.png", 100_000, 100_000),
+    "blend_bad": lambda r: ((r / "bad.blend").write_bytes(b"BLENDER-v300" + bytes(50)), r / "bad.blend")[1],
+    "fifo": lambda r: (os.mkfifo(r / "pipe.png"), r / "pipe.png")[1],   # reading it would block
+    "weights_with_graphs": lambda r: _weights_with_graphs(r),
 }
+
+
+def _weights_with_graphs(root: Path) -> Path:
+    """A copy of the shipped weights with a ``.tables.onnx`` already beside it."""
+    (root / "w.pt").write_bytes(WEIGHTS.read_bytes())
+    _touch(root / "w.tables.onnx")
+    return root / "w.pt"
+
+
+def _npz_wavelengths(path: Path, wavelengths: np.ndarray) -> Path:
+    """A table file whose wavelength axis is ``wavelengths`` (values fine)."""
+    values = np.full(GRID_SHAPE + (wavelengths.size,), 0.1, np.float32)
+    header = {"format": "specgen-brdf-table", "version": 1, "channels": ["c"] * wavelengths.size, "metadata": {}}
+    with open(path, "wb") as fh:
+        np.savez(fh, values=values, wavelengths=wavelengths,
+                 header=np.frombuffer(json.dumps(header).encode(), dtype=np.uint8))
+    return path
 
 
 def _flat_png(path: Path) -> Path:
@@ -288,6 +313,21 @@ CLI_CASES = {
     "paper-tables-out-folder-missing": (lambda w: ["paper-tables", "--out", str(w.root / "no" / "r.md"), Q], "does not exist"),
     "paper-tables-ablation-steps-0": (lambda w: ["paper-tables", "--out", str(w.out / "r.md"), "--ablation-steps", "0", Q], "--ablation-steps"),
     "export-onnx-missing-weights": (lambda w: ["export-onnx", "--weights", str(w.root / "w.pt")], "not found"),
+    # found by the fresh campaign (scripts/bad_input_campaign.py)
+    "info-npz-nan-wavelengths": (lambda w: ["info", str(w.npz_wl_nan)], "finite and increasing"),
+    "info-rgl-version-fraction": (lambda w: ["info", str(w.rgl_version_fraction)], "whole numbers"),
+    "train-config-train-null": (lambda w: ["train", "--config", str(w.cfg_train_null), "--out", str(w.out / "t"), Q], "train must be an object"),
+    "corpus-workers-100000": (lambda w: ["corpus", "--n", "3", "--inputs", "--workers", "100000", "--out", str(w.out / "c"), Q], "--workers"),
+    "infer-image-over-libpng-limit": (lambda w: ["infer", str(w.png_over_libpng_limit), "-o", str(w.out / "b.npz"), Q], "megapixels"),
+    "paper-tables-materials-0": (lambda w: ["paper-tables", "--out", str(w.out / "r.md"), "--materials", "0", Q], "--materials"),
+    "paper-tables-report-only-empty-cache": (lambda w: ["paper-tables", "--out", str(w.out / "r.md"), "--report-only", Q], "nothing is cached"),
+    "batch-many-timeout-nan": (lambda w: ["batch-many", "--out", str(w.out / "bm"), "--timeout", "nan", str(EXAMPLE), Q], "--timeout"),
+    "batch-many-workers-100000": (lambda w: ["batch-many", "--out", str(w.out / "bm"), "--workers", "100000", str(EXAMPLE), Q], "--workers"),
+    "info-named-pipe": (lambda w: ["info", str(w.fifo)], "not a regular file"),
+    "infer-image-named-pipe": (lambda w: ["infer", str(w.fifo), "-o", str(w.out / "b.npz"), Q], "not a regular file"),
+    "train-config-named-pipe": (lambda w: ["train", "--config", str(w.fifo), "--out", str(w.out / "t"), Q], "not a regular file"),
+    "export-onnx-existing-graphs": (lambda w: ["export-onnx", "--weights", str(w.weights_with_graphs)], "already exists"),
+    "batch-many-batch-args-resolution-0": (lambda w: ["batch-many", "--out", str(w.out / "bm"), "--batch-args=--resolution 0", str(EXAMPLE), Q], "--resolution"),
 }
 
 
@@ -386,6 +426,7 @@ BATCH_CASES = {
     "existing-lookup-folder": (lambda w: _batch_args(w) if _touch_lookup(w) else [], "--overwrite"),
     "existing-output": (lambda w: _batch_args(w) if _touch(w.out / "sphere_sphere_studio.exr") else [], "already exists"),
     "existing-preview": (lambda w: _batch_args(w) if _touch(w.out / "sphere_sphere_studio_preview.png") else [], "already exists"),
+    "scene-not-a-blend": (lambda w: ["--scene", str(w.blend_bad), "--out", str(w.out)], "cannot open the .blend"),
 }
 
 
@@ -430,7 +471,19 @@ API_CASES = {
     "safe-name-dotdot": (lambda w: __import__("specgen_addon.limits", fromlist=["x"]).safe_name("../x.exr"), SpecGenError, "plain file name"),
     "safe-name-absolute": (lambda w: __import__("specgen_addon.limits", fromlist=["x"]).safe_name("/tmp/x.exr"), SpecGenError, "plain file name"),
     "config-lr-nan": (lambda w: __import__("specgen_addon.config_schema", fromlist=["x"]).validate_train_config(w.cfg_lr_nan), SpecGenError, "finite"),
+    # found by the fresh campaign (scripts/bad_input_campaign.py)
+    "table-load-nan-wavelengths": (lambda w: BRDFTable.load(w.npz_wl_nan), SpecGenError, "finite"),
+    "refine-not-a-table": (lambda w: _api("refine").refine_brdf("t.npz", np.full((64, 64, 3), 0.1)), SpecGenError, "BRDFTable"),
+    "bake-negative-tolerance": (lambda w: _api("bake").bake_atlas(BRDFTable.load(w.npz_good), w.out / "a.exr", tolerance=-1), SpecGenError, "tolerance"),
+    "bake-nan-wavelengths": (lambda w: _api("bake").bake_atlas(BRDFTable.load(w.npz_good), w.out / "a.exr", wavelengths_nm=np.array([np.nan, 500.0])), SpecGenError, "finite"),
+    "bake-path-under-file": (lambda w: _api("bake").bake_atlas(BRDFTable.load(w.npz_good), w.blocker / "a.exr"), SpecGenError, "is a file"),
+    "sphere-array-empty": (lambda w: _api("input_image").prepare_sphere_array(np.zeros((0, 0, 3))), ImageInputError, "too small"),
+    "sphere-array-strings": (lambda w: _api("input_image").prepare_sphere_array(np.array([["a"]])), ImageInputError, "array of numbers"),
 }
+
+
+def _api(module: str):
+    return __import__(f"specgen_addon.{module}", fromlist=["x"])
 
 
 @pytest.mark.parametrize("name", sorted(API_CASES))
@@ -485,6 +538,19 @@ def test_ordinary_photos_are_read_and_their_sphere_found(mode, tmp_path):
     assert np.mean((got.max(-1) > 0) == (reference.max(-1) > 0)) > 0.97
     if mode not in ("RGBA", "JPEG q95"):
         assert any("converted" in str(w.message) for w in caught), [str(w.message) for w in caught]
+
+
+def test_conversion_notes_print_as_one_warning_line(tmp_path, capsys):
+    from specgen_addon import input_image
+    from specgen_addon.errors import one_line_warnings
+
+    path = _photo_variants(tmp_path)["L"]
+    with warnings.catch_warnings(), one_line_warnings():
+        warnings.simplefilter("always")
+        input_image.load_sphere_image(path)
+    err = capsys.readouterr().err
+    assert err.startswith("warning: ") and "converted" in err, err
+    assert all(line.startswith("warning: ") for line in err.splitlines()), err  # no source lines
 
 
 def test_negative_exr_pixels_are_clamped_with_a_count(tmp_path):

@@ -112,6 +112,9 @@ def run_paper_tables(out: Path, img_dir: Path | None = None, smoke: bool = False
                                band_count=conf["band_count"], smoke=smoke)
     root = out.parent / ".cache" / "paper-tables"
     cache = root / f"{'smoke' if smoke else 'full'}-{_key(settings.describe())}"
+    if report_only and (fresh or not (cache.is_dir() and any(p.name != "settings.json" for p in cache.iterdir()))):
+        raise SpecGenError(f"--report-only: nothing is cached for these settings in {cache} "
+                           "(run paper-tables without --report-only first)")
     if fresh:
         tables.clear_cache(cache)
     cache.mkdir(parents=True, exist_ok=True)

@@ -19,8 +19,10 @@ def detect_format(path: str | Path) -> str:
     path = Path(path)
     if path.is_dir():
         raise BRDFFormatError(path, "is a folder, expected a BRDF file")
-    if not path.is_file():
+    if not path.exists():
         raise BRDFFormatError(path, "no such file")
+    if not path.is_file():  # a device or a named pipe
+        raise BRDFFormatError(path, "is not a regular file, expected a BRDF file")
     try:
         with open(path, "rb") as fh:
             head = fh.read(12)

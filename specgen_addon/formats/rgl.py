@@ -376,8 +376,10 @@ class RGLBSDF:
             raise fail("sigma (projected area) must be positive")
         version = f.get("version")
         try:
-            version_str = ".".join(str(int(v)) for v in np.asarray(version).ravel()) \
-                if version is not None else "unknown"
+            parts = [] if version is None else np.asarray(version).ravel().tolist()
+            if any(isinstance(v, bool) or not float(v).is_integer() for v in parts):
+                raise ValueError("not whole")
+            version_str = ".".join(str(int(v)) for v in parts) if version is not None else "unknown"
         except (ValueError, TypeError, OverflowError):
             raise fail(f"field 'version' should hold whole numbers, got {np.asarray(version).tolist()}") from None
         text = bytes(description).decode("utf-8", errors="replace").rstrip("\0")

@@ -125,8 +125,9 @@ def refine_brdf(table: BRDFTable, photo: np.ndarray, lighting=None, options: Ref
     from ..input_lighting import InputLighting
 
     t0 = time.perf_counter()
-    if not table.is_spectral:
-        raise SpecGenError("refinement needs a spectral table (the network's output)")
+    if not isinstance(table, BRDFTable) or not table.is_spectral:
+        raise SpecGenError("refinement needs a spectral BRDFTable (the network's output), "
+                           f"got {type(table).__name__ if not isinstance(table, BRDFTable) else 'an RGB table'}")
     lighting = lighting or InputLighting()
     photo = np.asarray(photo, dtype=np.float64)
     if photo.ndim != 3 or photo.shape[2] != 3 or photo.shape[0] != photo.shape[1]:

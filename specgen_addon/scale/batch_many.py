@@ -13,6 +13,7 @@ from __future__ import annotations
 import contextlib
 import json
 import logging
+import math
 import operator
 import os
 import shutil
@@ -27,6 +28,7 @@ from pathlib import Path
 from typing import Callable, Iterator
 
 from ..errors import SpecGenError
+from ..limits import check_number
 from ..io_utils import atomic_write
 from . import items as items_mod
 from . import worker as worker_mod
@@ -80,6 +82,13 @@ def check_batch_args(batch_script: Path, batch_args: list[str]) -> None:
     ns = parser.parse_args(["--image", sentinel, "--out", sentinel, *batch_args])
     if ns.image != sentinel or ns.out != sentinel or getattr(ns, "overwrite", False):
         raise SpecGenError(f"batch.py arguments: {', '.join(OWN_OPTIONS)} are set by batch-many per item")
+    if Path(batch_script).resolve() == Path(DEFAULT_BATCH_SCRIPT).resolve():   # values, as batch.py checks them
+        from ..preflight import check_batch_settings
+
+        try:
+            check_batch_settings(ns)
+        except SpecGenError as exc:
+            refuse(str(exc))
 
 
 def batch_command(opts: BatchManyOptions) -> list[str]:
@@ -91,12 +100,11 @@ def batch_command(opts: BatchManyOptions) -> list[str]:
 
 
 def _validate(opts: BatchManyOptions) -> list[items_mod.Item]:
-    if opts.workers < 1:
-        raise SpecGenError(f"--workers must be at least 1, got {opts.workers}")
+    check_number("workers", opts.workers)
     if opts.retries < 0:
         raise SpecGenError(f"--retries must be 0 or more, got {opts.retries}")
-    if opts.timeout is not None and opts.timeout <= 0:
-        raise SpecGenError(f"--timeout must be positive, got {opts.timeout}")
+    if opts.timeout is not None and not (math.isfinite(opts.timeout) and opts.timeout > 0):
+        raise SpecGenError(f"--timeout must be a positive number of seconds, got {opts.timeout}")
     if opts.scheduler is not None and "://" not in opts.scheduler:
         raise SpecGenError(f"--scheduler {opts.scheduler}: expected an address like tcp://HOST:8786")
     if opts.blender and not Path(opts.blender).is_file() and not shutil.which(opts.blender):
