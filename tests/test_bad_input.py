@@ -19,6 +19,7 @@ import sys
 import time
 import warnings
 import zlib
+from importlib import import_module
 from pathlib import Path
 
 import numpy as np
@@ -617,6 +618,21 @@ def test_operators_report_one_sentence_and_write_nothing(name, addon, ws):
     assert len([l for l in text.splitlines() if l.strip()]) == 1, text
     assert snapshot(ws.root) == before
     assert not Path("/tmp/specgen_x.exr").exists()
+
+
+def test_an_image_datablock_over_the_pixel_limit_is_refused_before_its_pixels_are_copied(addon, monkeypatch):
+    """A photo already loaded in Blender (no file to read a header from): its size is checked
+    against the same limit before the operator copies its pixels."""
+    bpy, s = addon
+    import batch
+
+    limits_mod = import_module(f"{batch.load_package().__name__}.specgen_addon.limits")
+    monkeypatch.setattr(limits_mod, "MAX_IMAGE_PIXELS", 1000)
+    s.image = bpy.data.images.new("big photo", 64, 64)      # 4096 pixels, no file behind it
+    with pytest.raises(RuntimeError) as info:
+        bpy.ops.specgen.generate_brdf()
+    text = str(info.value)
+    assert "64×64 pixels" in text and "megapixels" in text and "Traceback" not in text, text
 
 
 # ------------------------------------------------------------------------------------ interrupts
