@@ -12,6 +12,7 @@ from __future__ import annotations
 import json
 import os
 import re
+import shutil
 import signal
 import struct
 import subprocess
@@ -384,6 +385,40 @@ def test_unreadable_files_are_named_as_unreadable(kind, ws, capsys):
     code, text = run_cli(argv, capsys)
     assert code == 2 and "Traceback" not in text and ("permission" in text.lower() or "not readable" in text)
     assert sorted(p.name for p in ws.root.rglob("*")) == before == snapshot_names
+
+
+SETPRIV = shutil.which("setpriv")
+
+
+@pytest.mark.skipif(os.geteuid() != 0 or SETPRIV is None, reason="needs root and setpriv to drop to 'nobody'")
+@pytest.mark.parametrize("kind", ["merl", "rgl", "config"])
+def test_unreadable_files_are_named_as_unreadable_for_an_unprivileged_user(kind, ws):
+    """The permission cases where CI runs as root: the CLI runs as 'nobody' (setpriv) on a file
+    only root may read (the repository and .venv are world-readable)."""
+    import tempfile
+
+    src = {"merl": ws.merl_nan, "rgl": ws.rgl_lum_nan, "config": ws.cfg_unknown}[kind]
+    shared = Path(tempfile.mkdtemp(prefix="specgen_perm_", dir="/tmp"))
+    try:
+        shared.chmod(0o777)
+        path = shared / src.name
+        shutil.copyfile(src, path)
+        path.chmod(0)
+        argv = ["info", str(path)] if kind != "config" else \
+            ["train", "--config", str(path), "--out", str(shared / "t")]
+        env = {**os.environ, "HOME": str(shared), "SPECGEN_CACHE_DIR": str(shared / "cache"),
+               "TMPDIR": str(shared), "PYTHONDONTWRITEBYTECODE": "1"}
+        done = subprocess.run([SETPRIV, "--reuid=65534", "--regid=65534", "--clear-groups",
+                               sys.executable, "-m", "specgen_addon", *argv, "--quiet"] if kind == "config" else
+                              [SETPRIV, "--reuid=65534", "--regid=65534", "--clear-groups",
+                               sys.executable, "-m", "specgen_addon", *argv],
+                              cwd=REPO, env=env, capture_output=True, text=True, timeout=300)
+        text = done.stdout + done.stderr
+        assert done.returncode == 2 and "Traceback" not in text, text
+        assert "permission" in text.lower() or "not readable" in text, text
+        assert sorted(p.name for p in shared.iterdir()) == [path.name]
+    finally:
+        shutil.rmtree(shared, ignore_errors=True)
 
 
 # ------------------------------------------------------------------------------------ batch.py
