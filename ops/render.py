@@ -555,6 +555,8 @@ class RenderJobOutputs:
     """Cancel flag and output paths shared by the render jobs (``output``: the EXR or None)."""
 
     output: object
+    overwrite: bool
+    preview_png: bool
     _cancelled: bool
 
     def cancel(self) -> None:
@@ -569,6 +571,18 @@ class RenderJobOutputs:
             return None
         exr = Path(self.output)
         return exr, exr.with_name(exr.stem + "_preview.png")
+
+    def _check_outputs(self) -> None:
+        """Before any work: the EXR (and preview) may be written — not there unless ``overwrite``,
+        and the folder exists and is writable."""
+        outs = self._outputs()
+        if outs is not None:
+            for p in outs if self.preview_png else outs[:1]:
+                if p.exists() and not self.overwrite:
+                    raise OutputExistsError(f"{p}: already exists (pass overwrite to replace it)")
+            parent = outs[0].parent
+            if not parent.is_dir() or not os.access(parent, os.W_OK):
+                raise SpecGenError(f"{parent}: output folder does not exist or is not writable")
 
 
 @dataclass
@@ -599,14 +613,7 @@ class SpectralRenderJob(RenderJobOutputs):
     _cancelled: bool = field(default=False, init=False)
 
     def _preflight(self) -> list[bpy.types.Material]:
-        outs = self._outputs()
-        if outs is not None:
-            for p in outs if self.preview_png else outs[:1]:
-                if p.exists() and not self.overwrite:
-                    raise OutputExistsError(f"{p}: already exists (pass overwrite to replace it)")
-            parent = outs[0].parent
-            if not parent.is_dir() or not os.access(parent, os.W_OK):
-                raise SpecGenError(f"{parent}: output folder does not exist or is not writable")
+        self._check_outputs()
         mats = specgen_materials(self.scene)
         if not mats:
             raise SpecGenError("no render-visible object uses a SpecGen material (Apply one first)")

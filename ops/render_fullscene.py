@@ -16,7 +16,6 @@ transfer; not Blender's view transform).
 
 from __future__ import annotations
 
-import os
 import shutil
 import tempfile
 import time
@@ -28,7 +27,7 @@ import bpy
 import numpy as np
 
 from ..specgen_addon import uplift
-from ..specgen_addon.errors import Cancelled, OutputExistsError, SpecGenError
+from ..specgen_addon.errors import SpecGenError
 from .render import RenderJobOutputs, SavedAttributes
 from .scene_convert import SceneConversion
 
@@ -114,14 +113,7 @@ class FullSceneRenderJob(RenderJobOutputs):
         self.wavelengths_nm = np.asarray(self.wavelengths_nm, np.float64).reshape(-1)
         if self.wavelengths_nm.size < 1 or np.any(np.diff(self.wavelengths_nm) <= 0):
             raise SpecGenError("the band grid must be one or more increasing wavelengths (nm)")
-        outs = self._outputs()
-        if outs is not None:
-            for p in outs if self.preview_png else outs[:1]:
-                if p.exists() and not self.overwrite:
-                    raise OutputExistsError(f"{p}: already exists (pass overwrite to replace it)")
-            parent = outs[0].parent
-            if not parent.is_dir() or not os.access(parent, os.W_OK):
-                raise SpecGenError(f"{parent}: output folder does not exist or is not writable")
+        self._check_outputs()
         if self.scene.camera is None:
             raise SpecGenError(f"scene {self.scene.name!r} has no camera")
         _render_layer(self.scene)

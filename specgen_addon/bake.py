@@ -164,17 +164,18 @@ def spectral_basis(values: np.ndarray, tolerance: float = DEFAULT_TOLERANCE,
     lam = values.shape[-1]
     m = values.reshape(-1, lam)
     r = None if reachable is None else np.broadcast_to(reachable, values.shape[:-1]).reshape(-1)
-    norms2 = np.concatenate([np.einsum("nl,nl->n", *(2 * (m[s:s + (1 << 18)].astype(np.float64),)))
-                             for s in range(0, m.shape[0], 1 << 18)])
+    step = 1 << 18                     # entries per float64 chunk (bounded memory)
+
+    def chunks():
+        return ((s, m[s:s + step].astype(np.float64)) for s in range(0, m.shape[0], step))
+
+    norms2 = np.concatenate([np.einsum("nl,nl->n", c, c) for _, c in chunks()])
     seen = norms2 > 0 if r is None else (norms2 > 0) & r
     eps2 = max(SHAPE_FLOOR ** 2 * float(np.median(norms2[seen])) if np.any(seen) else 0.0, 1e-300)
+    w_all = 1.0 / (norms2 + eps2) if r is None else r / (norms2 + eps2)
     gram = np.zeros((lam, lam))
-    for start in range(0, m.shape[0], 1 << 18):
-        chunk = m[start:start + (1 << 18)].astype(np.float64)
-        w = 1.0 / (norms2[start:start + (1 << 18)] + eps2)
-        if r is not None:
-            w = w * r[start:start + (1 << 18)]
-        gram += (chunk * w[:, None]).T @ chunk
+    for start, chunk in chunks():
+        gram += (chunk * w_all[start:start + step, None]).T @ chunk
     eig, vec = np.linalg.eigh(gram)
     order = np.argsort(eig)[::-1]
     eig, vec = np.clip(eig[order], 0.0, None), vec[:, order]

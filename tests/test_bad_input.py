@@ -405,12 +405,10 @@ def test_unreadable_files_are_named_as_unreadable_for_an_unprivileged_user(kind,
         shutil.copyfile(src, path)
         path.chmod(0)
         argv = ["info", str(path)] if kind != "config" else \
-            ["train", "--config", str(path), "--out", str(shared / "t")]
+            ["train", "--config", str(path), "--out", str(shared / "t"), "--quiet"]
         env = {**os.environ, "HOME": str(shared), "SPECGEN_CACHE_DIR": str(shared / "cache"),
                "TMPDIR": str(shared), "PYTHONDONTWRITEBYTECODE": "1"}
         done = subprocess.run([SETPRIV, "--reuid=65534", "--regid=65534", "--clear-groups",
-                               sys.executable, "-m", "specgen_addon", *argv, "--quiet"] if kind == "config" else
-                              [SETPRIV, "--reuid=65534", "--regid=65534", "--clear-groups",
                                sys.executable, "-m", "specgen_addon", *argv],
                               cwd=REPO, env=env, capture_output=True, text=True, timeout=300)
         text = done.stdout + done.stderr
