@@ -19,6 +19,7 @@ import signal
 import sys
 import tempfile
 import threading
+import time
 import traceback
 from pathlib import Path
 from typing import Iterable, Iterator
@@ -140,20 +141,27 @@ def stop_on_signals(message=None) -> Iterator[None]:
     itself (``signal.set_wakeup_fd``); if the main thread has not acted within
     :data:`HARD_STOP_GRACE_S`, the watcher runs the registered clean-ups (:func:`on_hard_stop`:
     new outputs and temporary folders removed), prints ``message(signal name)`` and ends the
-    process with 128 + signal number.
+    process with 128 + signal number. A signal that lands in an import (where raising is unsafe)
+    is instead delivered again once the main thread is back in ordinary code (within
+    :data:`IMPORT_GRACE_S`), so a lazy import of a large library still ends in the command's own
+    clean stop and message.
     """
     if threading.current_thread() is not threading.main_thread():
         yield
         return
     acted = threading.Event()
 
+    in_import = threading.Event()
+
     def handler(signum, frame):
-        first = not _requested
         _requested.append(signum)
-        if _inside_blender_python(frame):
-            return  # Blender would swallow the exception; the watcher stops the process instead
-        acted.set()
-        if first:
+        reason = _deferral_reason(frame)
+        if reason is not None:  # Blender would swallow the exception: the watcher acts instead
+            if reason == "import":
+                in_import.set()
+            return
+        if not acted.is_set():  # the first signal our code sees (a re-delivered one included)
+            acted.set()
             raise Interrupted(signum)
 
     previous = {s: signal.signal(s, handler) for s in (signal.SIGINT, signal.SIGTERM)}
@@ -172,6 +180,13 @@ def stop_on_signals(message=None) -> Iterator[None]:
                 return
             signum = data[0]
             if signum not in (signal.SIGINT, signal.SIGTERM) or acted.wait(HARD_STOP_GRACE_S):
+                continue
+            if in_import.is_set() and _wait_out_of_import(acted):
+                in_import.clear()
+                # the signal landed in an import (a lazy ``import onnxruntime``, say), where raising
+                # is unsafe; now the main thread is back in our code: deliver it again to raise there
+                with contextlib.suppress(OSError):
+                    os.kill(os.getpid(), signum)
                 continue
             for cleanup in reversed(list(_cleanups)):
                 with contextlib.suppress(Exception):
@@ -205,18 +220,51 @@ _BLENDER_SCRIPT_DIRS = tuple(os.sep + os.path.join("scripts", d) + os.sep
                              for d in ("addons_core", "modules", "startup", "addons"))
 
 
-def _inside_blender_python(frame) -> bool:
-    """True when the interrupted code is Blender's own Python (add-on registration, Cycles' engine
-    callbacks) or an import, reached before any of SpecGen's frames: Blender catches and prints
-    exceptions raised there instead of passing them on (or crashes, while bpy itself is being imported)."""
+#: Longest wait for the main thread to leave an import before a hard stop (seconds).
+IMPORT_GRACE_S = 30.0
+
+
+def _main_thread_in_import() -> bool:
+    """True while the main thread's innermost frames are an import (before any of SpecGen's own)."""
+    frame = sys._current_frames().get(threading.main_thread().ident)
     while frame is not None:
         name = frame.f_code.co_filename
-        if any(d in name for d in _BLENDER_SCRIPT_DIRS) or name.startswith("<frozen importlib"):
-            return True  # (an import may run inside bpy's C start-up, where raising crashes it)
+        if name.startswith("<frozen importlib"):
+            return True
         if name.startswith(_OWN_ROOT) and "site-packages" not in name:
             return False
         frame = frame.f_back
     return False
+
+
+def _wait_out_of_import(acted: threading.Event) -> bool:
+    """Wait (up to :data:`IMPORT_GRACE_S`) until the main thread is out of the import a signal
+    landed in; True when it is and nothing else has acted on the signal meanwhile."""
+    deadline = time.monotonic() + IMPORT_GRACE_S
+    while time.monotonic() < deadline:
+        if acted.wait(0.05):
+            return False
+        if not _main_thread_in_import():
+            return True
+    return False
+
+
+def _deferral_reason(frame) -> str | None:
+    """Why a signal must not raise in the interrupted code: ``"blender"`` for Blender's own Python
+    (add-on registration, Cycles' engine callbacks: Blender catches and prints exceptions raised
+    there instead of passing them on), ``"import"`` for an import (it may run inside bpy's C
+    start-up, where raising crashes it), reached before any of SpecGen's frames; None otherwise."""
+    while frame is not None:
+        name = frame.f_code.co_filename
+        if any(d in name for d in _BLENDER_SCRIPT_DIRS):
+            return "blender"
+        if name.startswith("<frozen importlib"):
+            return "import"
+        if name.startswith(_OWN_ROOT) and "site-packages" not in name:
+            return None
+        frame = frame.f_back
+    return None
+
 
 
 def as_interrupted(exc: BaseException) -> Interrupted:

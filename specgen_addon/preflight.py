@@ -175,10 +175,27 @@ def _paper_tables(a) -> None:
             test_materials(None, names)  # unknown names refused before any cache is made
 
 
+def _ablate(a) -> None:
+    from .evaluation.ablation import ARMS_BY_NAME
+
+    for f in (a.out, a.json):
+        if f is not None:
+            limits.check_output_file(f, overwrite=True)
+    limits.check_numbers({"steps": a.steps})
+    limits.check_number("workers", a.workers, bounds=(1, 64))
+    for s in a.seeds:
+        limits.check_number("seeds", s, bounds=(0, 2 ** 31 - 1))
+    if len(set(a.seeds)) != len(a.seeds):
+        raise SpecGenError(f"--seeds must be distinct, got {' '.join(map(str, a.seeds))}")
+    unknown = [x for x in a.arms if x not in ARMS_BY_NAME]
+    if unknown:
+        raise SpecGenError(f"unknown arm {unknown[0]!r}; available: {', '.join(ARMS_BY_NAME)}")
+
+
 CHECKS: dict[str, Callable[[argparse.Namespace], None]] = {
     "info": _info, "tabulate": _tabulate, "corpus": _corpus, "train": _train, "infer": _infer,
     "evaluate": _evaluate, "export-onnx": _export, "render-input": _render_input,
-    "paper-tables": _paper_tables,
+    "paper-tables": _paper_tables, "ablate": _ablate,
 }
 
 

@@ -744,7 +744,8 @@ sys.exit(130 if stopped else 0)
 
 @pytest.mark.slow
 @NEEDS_WEIGHTS
-def test_generate_operator_stops_cleanly_on_sigint(tmp_path):
+@pytest.mark.parametrize("delay", [0.2, 1.0, 2.0, 3.0])  # imports, network, refinement, bake
+def test_generate_operator_stops_cleanly_on_sigint(delay, tmp_path):
     pytest.importorskip("bpy")
     out = tmp_path / "out"
     out.mkdir()
@@ -753,7 +754,7 @@ def test_generate_operator_stops_cleanly_on_sigint(tmp_path):
     script = tmp_path / "gen.py"
     script.write_text(GENERATE_SCRIPT.format(repo=str(REPO), image=str(EXAMPLE), out=str(out)))
     code, text = _interrupt([sys.executable, str(script)], tmp_path, "GENERATE-START", signal.SIGINT,
-                            delay=2.0)
+                            delay=delay)
     assert code == 130, text
     assert "Traceback" not in text
     assert "cancelled by SIGINT; nothing partial was left" in text, text

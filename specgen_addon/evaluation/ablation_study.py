@@ -1,0 +1,142 @@
+"""Seeded ablation study (paper §4.4): AFF vs Hadamard fusion, joint vs spectral-only training.
+
+Each arm of :mod:`.ablation` is trained from scratch with several seeds at one equal step budget
+and scored, network alone, on the held-out mixed test split under the protocol's distant lights
+(the issue-11 measure: spectral PSNR in dB, first ``per_family`` test materials of each corpus
+family). An effect is the per-seed *paired* difference of two arms (the same seed gives both arms
+the same spectral batches), reported as mean ± sample standard deviation over seeds with its
+standard error; its sign is called only when the mean is at least two standard errors from zero.
+
+Arms train in separate processes (one torch thread each), so ``workers`` arms run at once on as
+many cores. Trained arms and their scores are cached under ``cache_root()/ablation``: a rerun
+trains and scores nothing it finds there, and a stopped run resumes from the arms' checkpoints.
+"""
+
+from __future__ import annotations
+
+import dataclasses
+import math
+from concurrent.futures import ProcessPoolExecutor
+from multiprocessing import get_context
+from pathlib import Path
+from typing import Any, Callable, Sequence
+
+import numpy as np
+
+from . import ablation as abl
+from .cache import cache_root, read_json, write_json
+
+#: Arms of the study: the shipped configuration (joint AFF) and one change each.
+STUDY_ARMS = ("joint-aff", "joint-hadamard", "spectral-aff")
+STUDY_SEEDS = (0, 1, 2)
+#: (effect label, arm with the paper's component, arm without it).
+EFFECTS = (("AFF − Hadamard (joint training)", "joint-aff", "joint-hadamard"),
+           ("joint − spectral-only (AFF)", "joint-aff", "spectral-aff"))
+PER_FAMILY = 3
+RESOLUTION = 64
+
+
+def study_settings(steps: int, seeds: Sequence[int] = STUDY_SEEDS,
+                   arms: Sequence[str] = STUDY_ARMS) -> abl.AblationSettings:
+    """Equal-budget settings of the shipped model's configuration, trained from scratch."""
+    model, train_d = abl._default_configs()
+    return abl.AblationSettings(steps=int(steps), seeds=tuple(int(s) for s in seeds), arms=tuple(arms),
+                                model=model, train=train_d, budget_note="(step budget given)")
+
+
+def _score_path(arm_dir: Path, per_family: int, resolution: int) -> Path:
+    return arm_dir / f"score_f{per_family}_r{resolution}.json"
+
+
+def run_arm(settings: abl.AblationSettings, arm: str, seed: int, cache_dir: str,
+            per_family: int = PER_FAMILY, resolution: int = RESOLUTION) -> dict[str, Any]:
+    """Train (or load) one arm with one seed and score it; a JSON-able record."""
+    import torch
+
+    from ..train.evaluate import evaluate_families
+
+    torch.set_num_threads(1)
+    one = dataclasses.replace(settings, seeds=(seed,), arms=(arm,))
+    res = abl.train_arms(one, Path(cache_dir), progress=False, log=lambda s: None)[f"{arm}/seed{seed}"]
+    score_path = _score_path(res.weights.parent, per_family, resolution)
+    score = read_json(score_path)
+    if score is None:
+        ev = evaluate_families(weights=res.weights, per_family=per_family, envs=False, resolution=resolution)
+        score = {"psnr_distant": ev["means"]["psnr_distant"], "ssim_distant": ev["means"]["ssim_distant"],
+                 "families": {f: s["psnr_distant"] for f, s in ev["families"].items()}}
+        write_json(score_path, score)
+    return {"arm": arm, "seed": seed, "key": res.key, "steps": res.steps, "wall_seconds": res.wall_seconds,
+            **score}
+
+
+def run_study(steps: int, seeds: Sequence[int] = STUDY_SEEDS, arms: Sequence[str] = STUDY_ARMS,
+              workers: int = 2, per_family: int = PER_FAMILY, resolution: int = RESOLUTION,
+              cache_dir: Path | None = None, log: Callable[[str], None] = print) -> dict[str, Any]:
+    """Train and score every (arm, seed); returns the records and the summary of :func:`summarise`."""
+    settings = study_settings(steps, seeds, arms)
+    cache = Path(cache_dir) if cache_dir is not None else cache_root() / "ablation"
+    jobs = [(a, s) for s in settings.seeds for a in settings.arms]
+    records: list[dict[str, Any]] = []
+    if workers <= 1:
+        for a, s in jobs:
+            records.append(run_arm(settings, a, s, str(cache), per_family, resolution))
+            log(f"ablate: {a} seed {s}: {records[-1]['psnr_distant']:.2f} dB")
+    else:
+        with ProcessPoolExecutor(max_workers=workers, mp_context=get_context("spawn")) as pool:
+            futures = [pool.submit(run_arm, settings, a, s, str(cache), per_family, resolution) for a, s in jobs]
+            for f in futures:
+                records.append(f.result())
+                r = records[-1]
+                log(f"ablate: {r['arm']} seed {r['seed']}: {r['psnr_distant']:.2f} dB")
+    return {"steps": settings.steps, "seeds": list(settings.seeds), "arms": list(settings.arms),
+            "per_family": per_family, "resolution": resolution, "records": records,
+            **summarise(records)}
+
+
+def paired_effect(a: Sequence[float], b: Sequence[float]) -> dict[str, float | str]:
+    """Mean ± sample std of the per-seed differences a − b, its standard error and the called sign."""
+    d = np.asarray(a, float) - np.asarray(b, float)
+    n = d.size
+    std = float(d.std(ddof=1)) if n > 1 else math.nan
+    se = std / math.sqrt(n) if n > 1 else math.nan
+    mean = float(d.mean())
+    if n < 2 or not math.isfinite(se):
+        sign = "undetermined (one seed)"
+    elif abs(mean) >= 2.0 * se:
+        sign = "positive" if mean > 0 else "negative"
+    else:
+        sign = "not resolved (|mean| < 2 standard errors)"
+    return {"mean": mean, "std": std, "se": se, "n": n, "sign": sign}
+
+
+def summarise(records: Sequence[dict[str, Any]]) -> dict[str, Any]:
+    """Per-arm mean ± std over seeds and the paired effects of :data:`EFFECTS`."""
+    by_arm: dict[str, dict[int, float]] = {}
+    for r in records:
+        by_arm.setdefault(r["arm"], {})[int(r["seed"])] = float(r["psnr_distant"])
+    arms = {a: {"mean": float(np.mean(list(v.values()))),
+                "std": float(np.std(list(v.values()), ddof=1)) if len(v) > 1 else math.nan,
+                "per_seed": {str(k): v[k] for k in sorted(v)}} for a, v in by_arm.items()}
+    effects = {}
+    for label, with_it, without in EFFECTS:
+        if with_it in by_arm and without in by_arm:
+            common = sorted(set(by_arm[with_it]) & set(by_arm[without]))
+            if common:
+                effects[label] = paired_effect([by_arm[with_it][s] for s in common],
+                                               [by_arm[without][s] for s in common])
+    return {"by_arm": arms, "effects": effects}
+
+
+def format_markdown(study: dict[str, Any]) -> str:
+    """The study as two markdown tables: arms (per seed, mean ± std) and effects (paired)."""
+    seeds = study["seeds"]
+    lines = ["| arm | " + " | ".join(f"seed {s}" for s in seeds) + " | mean ± std |",
+             "| --- | " + " | ".join("---:" for _ in seeds) + " | ---: |"]
+    for arm, s in study["by_arm"].items():
+        cells = [f"{s['per_seed'][str(k)]:.2f}" if str(k) in s["per_seed"] else "—" for k in seeds]
+        lines.append(f"| {arm} | " + " | ".join(cells) + f" | {s['mean']:.2f} ± {s['std']:.2f} |")
+    lines += ["", "| effect (paired by seed) | mean ± std (dB) | standard error | sign |",
+              "| --- | ---: | ---: | --- |"]
+    for label, e in study["effects"].items():
+        lines.append(f"| {label} | {e['mean']:+.2f} ± {e['std']:.2f} | {e['se']:.2f} | {e['sign']} |")
+    return "\n".join(lines) + "\n"
