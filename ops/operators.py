@@ -18,7 +18,8 @@ import numpy as np
 
 from ..specgen_addon.errors import SpecGenError
 from ..specgen_addon.spectra import wavelength_grid
-from ..specgen_addon import bake, limits
+from ..specgen_addon import bake
+from ..specgen_addon.image_checks import check_pixel_count
 from . import naming
 from .properties import input_lighting, output_dir
 from .reporting import check_generate_settings, check_render_settings, report_exception
@@ -34,11 +35,7 @@ def _image_input(settings):
         if path and os.path.isfile(path) and not img.is_dirty:
             return path
         w, h = img.size
-        if w == 0 or h == 0:
-            raise SpecGenError(f"image {img.name!r} has no pixels")
-        if w * h > limits.MAX_IMAGE_PIXELS:   # before copying its pixels (16 bytes each here)
-            raise SpecGenError(f"image {img.name!r} is {w}×{h} pixels, over the limit of "
-                               f"{limits.MAX_IMAGE_PIXELS / 1e6:g} megapixels (downscale it first)")
+        check_pixel_count(w, h, f"image {img.name!r}")   # before copying its pixels (16 bytes each here)
         px = np.empty(w * h * 4, np.float32)
         img.pixels.foreach_get(px)
         rgb = px.reshape(h, w, 4)[::-1, :, :3].astype(np.float64)

@@ -20,7 +20,8 @@ from pathlib import Path
 import numpy as np
 
 from .errors import ImageInputError
-from .limits import MAX_IMAGE_PIXELS, MAX_WORK_SIDE
+from . import limits
+from .limits import MAX_WORK_SIDE
 
 
 class ImageNote(UserWarning):
@@ -101,12 +102,19 @@ def check_image_header(path: str | Path) -> tuple[int, int] | None:
     if size is None:
         return None
     w, h = size
-    if w * h > MAX_IMAGE_PIXELS:
-        raise ImageInputError(f"{path}: image is {w}×{h} = {w * h / 1e6:.0f} megapixels; the limit "
-                              f"is {MAX_IMAGE_PIXELS / 1e6:.0f} megapixels (downscale it first)")
-    if w < 1 or h < 1:
-        raise ImageInputError(f"{path}: image has no pixels ({w}×{h})")
+    check_pixel_count(w, h, str(path))
     return w, h
+
+
+def check_pixel_count(w: int, h: int, what: str) -> None:
+    """Refuse an empty image or one over :data:`MAX_IMAGE_PIXELS` before its pixels are read;
+    ``what`` names it in the message (a path, or a Blender image's name)."""
+    limit = limits.MAX_IMAGE_PIXELS
+    if w * h > limit:
+        raise ImageInputError(f"{what}: image is {w}×{h} = {w * h / 1e6:.3g} megapixels; the limit "
+                              f"is {limit / 1e6:.3g} megapixels (downscale it first)")
+    if w < 1 or h < 1:
+        raise ImageInputError(f"{what}: image has no pixels ({w}×{h})")
 
 
 _SRGB_LUT: dict[int, np.ndarray] = {}

@@ -665,7 +665,7 @@ def test_an_image_datablock_over_the_pixel_limit_is_refused_before_its_pixels_ar
     with pytest.raises(RuntimeError) as info:
         bpy.ops.specgen.generate_brdf()
     text = str(info.value)
-    assert "64×64 pixels" in text and "megapixels" in text and "Traceback" not in text, text
+    assert "'big photo': image is 64×64" in text and "megapixels" in text and "Traceback" not in text, text
 
 
 # ------------------------------------------------------------------------------------ interrupts

@@ -308,18 +308,9 @@ def _lighting(scene: protocol.Scene) -> str:
 
 
 def family_table(res: dict) -> str:
-    """Markdown of :func:`specgen_addon.train.evaluate.evaluate_families`' summary: PSNR / SSIM per
-    family and scene, then the mean over the synthetic families."""
-    labels = res["scenes"]
-    header = ["Family", "n"] + [f"{lab} PSNR / SSIM" for lab in labels]
+    """Markdown of :func:`specgen_addon.train.evaluate.evaluate_families`' summary (the rows of
+    :func:`specgen_addon.train.evaluate.family_rows`)."""
+    from ..train.evaluate import family_rows
 
-    def cells(s: dict) -> list[str]:
-        return [f"{s[f'psnr_{lab}']:.2f} / {s[f'ssim_{lab}']:.4f}" if f"psnr_{lab}" in s else "—" for lab in labels]
-
-    # a fixed order (the cached JSON comes back with sorted keys): synthetic families, then real files
-    order = sorted(res["families"], key=lambda f: (f.startswith("rgl"), f))
-    rows = [[fam, str(res["families"][fam]["n"])] + cells(res["families"][fam]) for fam in order]
-    if res.get("means"):
-        n = sum(s["n"] for f, s in res["families"].items() if not f.startswith("rgl"))
-        rows.append(["**mean (synthetic)**", str(n)] + cells(res["means"]))
-    return report.md_table(header, rows)
+    header, rows = family_rows(res, mean_label="**mean (synthetic)**")
+    return report.md_table(["Family"] + header[1:], rows)

@@ -189,17 +189,27 @@ def evaluate_families(weights: str | Path | None = None, per_family: int = 4, en
             "metrics": getattr(metrics, "NORMALISATION_TEXT", "")}
 
 
-def format_family_results(res: dict[str, Any]) -> str:
-    """Per-family table: PSNR dB / SSIM per scene, then the mean over synthetic materials."""
+def family_rows(res: dict[str, Any], mean_label: str = "mean (synthetic)") -> tuple[list[str], list[list[str]]]:
+    """(header, rows) of :func:`evaluate_families`' summary: PSNR dB / SSIM per family and scene
+    (synthetic families first, then the real files), then the mean over the synthetic materials."""
     labels = res["scenes"]
-    head = f"{'family':<18} {'n':>3} " + " ".join(f"{lab:>22}" for lab in labels)
-    lines = [head]
-    for fam, s in res["families"].items():
-        cells = [f"{s[f'psnr_{lab}']:8.2f} dB / {s[f'ssim_{lab}']:.4f}" if f"psnr_{lab}" in s else f"{'—':>22}"
-                 for lab in labels]
-        lines.append(f"{fam:<18} {s['n']:>3} " + " ".join(f"{c:>22}" for c in cells))
-    if res["means"]:
-        cells = [f"{res['means'][f'psnr_{lab}']:8.2f} dB / {res['means'][f'ssim_{lab}']:.4f}" for lab in labels]
-        lines.append(f"{'mean (synthetic)':<18} {sum(s['n'] for f, s in res['families'].items() if not f.startswith('rgl')):>3} "
-                     + " ".join(f"{c:>22}" for c in cells))
-    return "\n".join(lines)
+    header = ["family", "n"] + [f"{lab} PSNR / SSIM" for lab in labels]
+
+    def cells(s: dict) -> list[str]:
+        return [f"{s[f'psnr_{lab}']:.2f} / {s[f'ssim_{lab}']:.4f}" if f"psnr_{lab}" in s else "—" for lab in labels]
+
+    # a fixed order (a cached JSON comes back with sorted keys): synthetic families, then real files
+    order = sorted(res["families"], key=lambda f: (f.startswith("rgl"), f))
+    rows = [[fam, str(res["families"][fam]["n"])] + cells(res["families"][fam]) for fam in order]
+    if res.get("means"):
+        n = sum(s["n"] for f, s in res["families"].items() if not f.startswith("rgl"))
+        rows.append([mean_label, str(n)] + cells(res["means"]))
+    return header, rows
+
+
+def format_family_results(res: dict[str, Any]) -> str:
+    """:func:`family_rows` as a plain fixed-width table for the terminal."""
+    header, rows = family_rows(res)
+    widths = [max(len(r[c]) for r in [header, *rows]) for c in range(len(header))]
+    return "\n".join("  ".join(cell.ljust(w) if c == 0 else cell.rjust(w) for c, (cell, w) in
+                               enumerate(zip(r, widths))) for r in [header, *rows])
