@@ -8,19 +8,16 @@ datablocks die with an undo (the file is reloaded from memory), so everything is
 
 from __future__ import annotations
 
-from importlib import import_module
 
 import numpy as np
 import pytest
 
 bpy = pytest.importorskip("bpy")
 
-import batch  # noqa: E402
-
-PKG = batch.load_package()
-bake = import_module(f"{PKG.__name__}.specgen_addon.bake")
-render = import_module(f"{PKG.__name__}.ops.render")
-scene_mod = import_module(f"{PKG.__name__}.ops.scene")
+from addon_modules import PKG, addon_module  # noqa: E402  (after the bpy skip)
+bake = addon_module("specgen_addon.bake")
+render = addon_module("ops.render")
+scene_mod = addon_module("ops.scene")
 
 from specgen_addon.fit import ggx_lobe  # noqa: E402
 from specgen_addon.rusinkiewicz import io_from_half_diff  # noqa: E402

@@ -11,7 +11,6 @@ import dataclasses
 import os
 import subprocess
 import sys
-from importlib import import_module
 from pathlib import Path
 
 import numpy as np
@@ -19,13 +18,12 @@ import pytest
 
 bpy = pytest.importorskip("bpy")
 
-import batch  # noqa: E402  (after the bpy skip: batch's package loader is what Blender mimics)
-
-PKG = batch.load_package()
-bake = import_module(f"{PKG.__name__}.specgen_addon.bake")
-render = import_module(f"{PKG.__name__}.ops.render")
-scene_mod = import_module(f"{PKG.__name__}.ops.scene")
-core_errors = import_module(f"{PKG.__name__}.specgen_addon.errors")
+import batch  # noqa: E402
+from addon_modules import PKG, addon_module, psnr as _psnr  # noqa: E402  (after the bpy skip)
+bake = addon_module("specgen_addon.bake")
+render = addon_module("ops.render")
+scene_mod = addon_module("ops.scene")
+core_errors = addon_module("specgen_addon.errors")
 
 from specgen_addon.render import DistantLight, Environment, EnvSampling, render_spectral, sphere_geometry  # noqa: E402
 from specgen_addon.rusinkiewicz import io_from_half_diff  # noqa: E402
@@ -87,10 +85,6 @@ def rich_table() -> BRDFTable:
     return _tabulate(_Lobes(rich=True))
 
 
-def _psnr(a: np.ndarray, ref: np.ndarray) -> float:
-    return float(10 * np.log10(ref.max() ** 2 / np.mean((a - ref) ** 2)))
-
-
 def _sphere_scene(atlas, resolution_filter: float = 0.01):
     bpy.ops.wm.read_factory_settings(use_empty=True)
     sc = bpy.context.scene
@@ -103,6 +97,7 @@ def _sphere_scene(atlas, resolution_filter: float = 0.01):
 
 # ------------------------------------------------------------------------- register / compile
 def test_register_unregister_leaves_nothing_behind():
+    bpy.ops.wm.read_factory_settings(use_empty=True)  # no panel values left by earlier tests
     before_types = set(dir(bpy.types))
     before_ops = set(dir(bpy.ops.specgen)) if hasattr(bpy.ops, "specgen") else set()
     PKG.register()

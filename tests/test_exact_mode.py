@@ -4,20 +4,17 @@ warns about by name, which lights it drops. Headless bpy; only the last test ren
 from __future__ import annotations
 
 import math
-from importlib import import_module
 
 import numpy as np
 import pytest
 
 bpy = pytest.importorskip("bpy")
 
-import batch  # noqa: E402
-
-PKG = batch.load_package()
-bake = import_module(f"{PKG.__name__}.specgen_addon.bake")
-render = import_module(f"{PKG.__name__}.ops.render")
-scene_mod = import_module(f"{PKG.__name__}.ops.scene")
-core_errors = import_module(f"{PKG.__name__}.specgen_addon.errors")
+from addon_modules import PKG, addon_module  # noqa: E402  (after the bpy skip)
+bake = addon_module("specgen_addon.bake")
+render = addon_module("ops.render")
+scene_mod = addon_module("ops.scene")
+core_errors = addon_module("specgen_addon.errors")
 
 
 def _light(sc, name, kind, energy, location=(0.0, 0.0, 5.0), collection=None, **props):

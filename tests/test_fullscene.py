@@ -9,7 +9,6 @@ blackbody colours, and the scene's datablocks before the render.
 from __future__ import annotations
 
 import os
-from importlib import import_module
 from pathlib import Path
 
 import numpy as np
@@ -18,15 +17,14 @@ import pytest
 bpy = pytest.importorskip("bpy")
 
 import batch  # noqa: E402
-
-PKG = batch.load_package()
-bake = import_module(f"{PKG.__name__}.specgen_addon.bake")
-render = import_module(f"{PKG.__name__}.ops.render")
-fullscene = import_module(f"{PKG.__name__}.ops.render_fullscene")
-convert = import_module(f"{PKG.__name__}.ops.scene_convert")
-scene_mod = import_module(f"{PKG.__name__}.ops.scene")
-demo = import_module(f"{PKG.__name__}.ops.demo_scenes")
-core_errors = import_module(f"{PKG.__name__}.specgen_addon.errors")
+from addon_modules import PKG, addon_module, psnr as _psnr  # noqa: E402  (after the bpy skip)
+bake = addon_module("specgen_addon.bake")
+render = addon_module("ops.render")
+fullscene = addon_module("ops.render_fullscene")
+convert = addon_module("ops.scene_convert")
+scene_mod = addon_module("ops.scene")
+demo = addon_module("ops.demo_scenes")
+core_errors = addon_module("specgen_addon.errors")
 
 from specgen_addon import spectra, uplift  # noqa: E402
 from specgen_addon.fit import ggx_lobe  # noqa: E402
@@ -35,10 +33,6 @@ from specgen_addon.table import BRDFTable  # noqa: E402
 
 WL = np.array([410.0, 480.0, 540.0, 600.0, 660.0, 720.0])
 RGB_WL = spectra.wavelength_grid(380.0, 780.0, 21)
-
-
-def _psnr(a: np.ndarray, ref: np.ndarray) -> float:
-    return float(10 * np.log10(ref.max() ** 2 / np.mean((a - ref) ** 2)))
 
 
 def _rgb_render(sc) -> np.ndarray:

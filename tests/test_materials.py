@@ -3,7 +3,6 @@ two materials with different spectral bases side by side."""
 
 from __future__ import annotations
 
-from importlib import import_module
 from pathlib import Path
 
 import numpy as np
@@ -11,13 +10,11 @@ import pytest
 
 bpy = pytest.importorskip("bpy")
 
-import batch  # noqa: E402
-
-PKG = batch.load_package()
-bake = import_module(f"{PKG.__name__}.specgen_addon.bake")
-naming = import_module(f"{PKG.__name__}.ops.naming")
-render = import_module(f"{PKG.__name__}.ops.render")
-scene_mod = import_module(f"{PKG.__name__}.ops.scene")
+from addon_modules import PKG, addon_module  # noqa: E402  (after the bpy skip)
+bake = addon_module("specgen_addon.bake")
+naming = addon_module("ops.naming")
+render = addon_module("ops.render")
+scene_mod = addon_module("ops.scene")
 
 from specgen_addon.rusinkiewicz import io_from_half_diff  # noqa: E402
 from specgen_addon.table import BRDFTable  # noqa: E402
@@ -172,7 +169,7 @@ def test_two_materials_with_different_bases_render_side_by_side_keeping_their_co
 def test_cancelled_generate_leaves_no_files_of_its_set(tmp_path):
     from specgen_addon.model import DEFAULT_WEIGHTS
 
-    Cancelled = import_module(f"{PKG.__name__}.specgen_addon.errors").Cancelled
+    Cancelled = addon_module("specgen_addon.errors").Cancelled
 
     if not Path(DEFAULT_WEIGHTS).is_file():
         pytest.skip(f"no shipped weights at {DEFAULT_WEIGHTS}")
