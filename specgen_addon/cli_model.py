@@ -13,7 +13,7 @@ from .progress import progress_bar
 
 def add_parser(sub: argparse._SubParsersAction) -> argparse.ArgumentParser:
     p = sub.add_parser("train", help="train SpecGen on the corpus (+ RGB BRDFs) from a config file",
-                       description="Joint spectral + RGB training (paper §3.3) on CPU. Writes OUT/"
+                       description="Joint spectral + RGB training (paper §3.3), on CPU by default (--device). Writes OUT/"
                                    "specgen.pt, checkpoint.pt, history.csv and loss_curve.png. Under "
                                    "torchrun (torchrun --nproc_per_node N -m specgen_addon train ...) "
                                    "each rank trains on a shard of every step's materials with DDP "
@@ -26,6 +26,9 @@ def add_parser(sub: argparse._SubParsersAction) -> argparse.ArgumentParser:
     p.add_argument("--steps", type=int, default=None, help="override the number of steps")
     p.add_argument("--max-minutes", type=float, default=None, help="stop (and save) after this long")
     p.add_argument("--seed", type=int, default=None, help="override the seed")
+    p.add_argument("--device", choices=("cpu", "cuda", "auto"), default=None,
+                   help="where the network trains (default: the config's, cpu); cuda: one GPU per "
+                        "rank, DDP over nccl")
     p.add_argument("--resume", action="store_true", help="continue OUT/checkpoint.pt")
     p.add_argument("--quiet", action="store_true", help="no progress bar")
     p.set_defaults(func=run_train)
@@ -125,7 +128,7 @@ def run_train(args: argparse.Namespace) -> int:
     cfg_path = args.config or DEFAULT_WEIGHTS.parents[1] / "configs" / "default.json"
     mcfg, tcfg = load_config(cfg_path)
     over = {k: v for k, v in (("steps", args.steps), ("max_minutes", args.max_minutes),
-                              ("seed", args.seed)) if v is not None}
+                              ("seed", args.seed), ("device", args.device)) if v is not None}
     if args.brdf_dir:
         over["brdf_dirs"] = list(tcfg.brdf_dirs) + [str(d) for d in args.brdf_dir]
     tcfg = dataclasses.replace(tcfg, **over).validate()
@@ -135,7 +138,7 @@ def run_train(args: argparse.Namespace) -> int:
     if (out / "specgen.pt").exists() and not args.resume:
         raise OutputExistsError(f"{out}/specgen.pt: exists (pass --resume to continue that run)")
     out.mkdir(parents=True, exist_ok=True)
-    dctx = ddp.init_from_env()  # under torchrun: join the process group; else one process
+    dctx = ddp.init_from_env(tcfg.device)  # under torchrun: join the process group; else one process
     say = print if dctx.is_main else ddp.silent  # rank 0 speaks for the job
     from .evaluation.cache import cache_root
 

@@ -76,9 +76,13 @@ def _train(a) -> None:
     if a.seed is not None and not 0 <= a.seed < 2**32:
         raise SpecGenError(f"--seed must be between 0 and {2**32 - 1}, got {a.seed}")
     cfg = a.config or DEFAULT_WEIGHTS.parents[1] / "configs" / "default.json"
-    over = {k: v for k, v in (("steps", a.steps), ("max_minutes", a.max_minutes), ("seed", a.seed))
-            if v is not None}
+    over = {k: v for k, v in (("steps", a.steps), ("max_minutes", a.max_minutes), ("seed", a.seed),
+                              ("device", a.device)) if v is not None}
     validate_train_config(cfg, over)
+    from .config_schema import read_config_dict
+    from .train.distributed import train_device
+
+    train_device(over.get("device", read_config_dict(cfg).get("train", {}).get("device", "cpu")))  # a GPU?
     for d in a.brdf_dir:
         if not Path(d).is_dir():
             raise SpecGenError(f"{d}: --brdf-dir is not a folder")

@@ -91,3 +91,40 @@ def test_torchrun_two_ranks_match_one_process_and_resume_exactly(tmp_path):
             for k in ("single", "ddp")]
     np.testing.assert_allclose(hist[1]["loss"], hist[0]["loss"], rtol=1e-6)
     assert not [p for p in (tmp_path / "ddp" / "rank1").rglob("*") if p.is_file()]  # rank 0 alone writes
+
+
+def test_the_backend_follows_the_training_device():
+    assert ddp.backend(torch.device("cpu")) == "gloo"
+    assert ddp.backend(torch.device("cuda", 0)) == "nccl"
+    assert ddp.train_device("cpu") == torch.device("cpu")
+    expected = "cuda" if torch.cuda.is_available() else "cpu"
+    assert ddp.train_device("auto").type == expected
+
+
+@pytest.mark.skipif(torch.cuda.is_available(), reason="checks the refusal on a machine without a GPU")
+def test_asking_for_cuda_without_a_gpu_is_refused_before_any_work(tmp_path):
+    with pytest.raises(SpecGenError, match="no CUDA GPU"):
+        ddp.train_device("cuda")
+    r = subprocess.run([sys.executable, "-m", "specgen_addon", "train", "--out", str(tmp_path / "run"),
+                        "--device", "cuda", "--steps", "1"], capture_output=True, text=True,
+                       cwd=HERE.parent, timeout=120)
+    assert r.returncode == 2 and "no CUDA GPU" in r.stderr and "Traceback" not in r.stderr, r.stderr
+    assert not (tmp_path / "run").exists()
+
+
+def test_an_unknown_training_device_is_a_config_error():
+    with pytest.raises(SpecGenError, match="device must be"):
+        TrainConfig.from_dict({"device": "tpu"})
+
+
+def test_training_on_auto_here_is_training_on_the_cpu_bit_for_bit(tmp_path):
+    """No GPU: "auto" must fall back to the CPU and change nothing (same weights, bit for bit)."""
+    if torch.cuda.is_available():
+        pytest.skip("this machine has a GPU: auto trains there")
+    spec, rgb, val = sets(4)
+    base = TrainConfig(**{**FAST, "steps": 3})
+    a = train(Config(**SMALL), base, spec, rgb, val, tmp_path / "cpu", show_progress=False)
+    b = train(Config(**SMALL), TrainConfig(**{**FAST, "steps": 3, "device": "auto"}), spec, rgb, val, tmp_path / "auto",
+              show_progress=False)
+    wa, wb = load_weights(a.weights).state_dict(), load_weights(b.weights).state_dict()
+    assert all(torch.equal(wa[k], wb[k]) for k in wa)

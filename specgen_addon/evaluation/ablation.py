@@ -83,7 +83,9 @@ class AblationSettings:
         import json
 
         mcfg, tcfg = self.configs(arm, seed)
-        blob = json.dumps({"m": mcfg.to_dict(), "t": dataclasses.asdict(tcfg)}, sort_keys=True, default=str)
+        t = dataclasses.asdict(tcfg)
+        t.pop("device")  # where an arm trains is not part of what it is (and keeps older keys valid)
+        blob = json.dumps({"m": mcfg.to_dict(), "t": t}, sort_keys=True, default=str)
         return f"{arm.name}-{hashlib.sha1(blob.encode()).hexdigest()[:10]}"
 
     def describe_markdown(self, results: dict[str, "ArmResult"]) -> str:

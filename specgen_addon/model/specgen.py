@@ -69,7 +69,7 @@ def save_weights(model: SpecGen, path: str | Path, meta: dict[str, Any] | None =
 
     ``half`` stores the tensors as float16 (half the size; loaded back as float32).
     """
-    state = {k: v.detach().clone() for k, v in model.state_dict().items()}
+    state = {k: v.detach().to("cpu", copy=True) for k, v in model.state_dict().items()}  # a GPU run too
     if half:
         state = {k: (v.half() if v.is_floating_point() else v) for k, v in state.items()}
     payload = {"format": WEIGHTS_FORMAT, "version": WEIGHTS_VERSION, "config": model.cfg.to_dict(),

@@ -13,8 +13,9 @@ single-process run of the same global batch up to float rounding; with ``W = 1``
 exactly 1) DDP training is plain :func:`~specgen_addon.train.loop.train`, bit for bit.
 
 Rank 0 alone writes checkpoints, history and weights; on ``--resume`` it reads the checkpoint and
-broadcasts it, so other nodes need no shared file system for it. Backend: gloo (the training loop
-runs on CPU); nccl is what DDP would use once the loop places the model on a GPU.
+broadcasts it, so other nodes need no shared file system for it. Backend: gloo when the network
+trains on the CPU, nccl when it trains on GPUs (``device = "cuda"``: rank ``LOCAL_RANK`` of a node
+uses GPU ``LOCAL_RANK``). Targets, inputs and their shards are made on the CPU either way.
 """
 
 from __future__ import annotations
@@ -51,17 +52,36 @@ class DistContext:
         return self.world_size > 1
 
 
-def backend() -> str:
-    """gloo: the training loop keeps the model on the CPU (nccl needs CUDA tensors)."""
-    return "gloo"
+def train_device(requested: str = "cpu") -> torch.device:
+    """The device this rank trains on: ``"cpu"``; ``"cuda"`` (GPU ``LOCAL_RANK``, refused without
+    one); ``"auto"``: cuda when available, else the CPU."""
+    if requested == "cpu" or (requested == "auto" and not torch.cuda.is_available()):
+        return torch.device("cpu")
+    if not torch.cuda.is_available():
+        raise SpecGenError("training device 'cuda' asked for, but torch sees no CUDA GPU "
+                           "(use --device cpu, or auto)")
+    # deterministic cuBLAS (torch.use_deterministic_algorithms needs it on CUDA)
+    os.environ.setdefault("CUBLAS_WORKSPACE_CONFIG", ":4096:8")
+    index = int(os.environ.get("LOCAL_RANK", "0"))
+    if index >= torch.cuda.device_count():
+        raise SpecGenError(f"rank {index} of this node has no GPU (only {torch.cuda.device_count()}): "
+                           "start at most one process per GPU")
+    torch.cuda.set_device(index)
+    return torch.device("cuda", index)
 
 
-def init_from_env() -> DistContext:
+def backend(device: torch.device) -> str:
+    """nccl for a model on GPUs, gloo for one on the CPU."""
+    return "nccl" if device.type == "cuda" else "gloo"
+
+
+def init_from_env(device: str = "cpu") -> DistContext:
     """Join the process group when started by ``torchrun`` (``WORLD_SIZE`` etc. in the
-    environment); a plain ``python -m specgen_addon train`` stays a single process."""
+    environment); a plain ``python -m specgen_addon train`` stays a single process. ``device`` is
+    the training config's: it picks the backend (:func:`backend`)."""
     if dist.is_available() and not dist.is_initialized() and "WORLD_SIZE" in os.environ \
             and "MASTER_ADDR" in os.environ:
-        dist.init_process_group(backend())
+        dist.init_process_group(backend(train_device(device)))
         atexit.register(shutdown)
     return context()
 
@@ -148,7 +168,9 @@ def step_losses(model: torch.nn.Module, group_loss: Callable, ctx: DistContext
     through DDP when there are several ranks (its backward then averages the gradients)."""
     if not ctx.group:
         return lambda *batches: [None if b is None else group_loss(model, b) for b in batches]
-    ddp = torch.nn.parallel.DistributedDataParallel(_StepLosses(model, group_loss))
+    dev = next(model.parameters()).device
+    ddp = torch.nn.parallel.DistributedDataParallel(_StepLosses(model, group_loss),
+                                                    device_ids=[dev.index] if dev.type == "cuda" else None)
     return lambda *batches: ddp(*[None if b is None else shard(b, ctx) for b in batches])
 
 
@@ -157,6 +179,8 @@ def mean_record(rec: dict[str, float], ctx: DistContext) -> dict[str, float]:
     if not ctx.group:
         return rec
     keys = [k for k in ("spec", "rgb", "tv", "loss") if k in rec]
-    t = torch.tensor([rec[k] for k in keys], dtype=torch.float64)
+    # nccl reduces CUDA tensors only: on the rank's GPU then, on the CPU for gloo
+    on = torch.device("cuda", torch.cuda.current_device()) if dist.get_backend() == "nccl" else "cpu"
+    t = torch.tensor([rec[k] for k in keys], dtype=torch.float64, device=on)
     dist.all_reduce(t)
     return {**rec, **{k: float(v) / ctx.world_size for k, v in zip(keys, t)}}

@@ -73,6 +73,9 @@ class TrainConfig:
     init_weights: str | None = None
     #: Processes rendering missing input images before training.
     render_workers: int = 2
+    #: Where the network trains: "cpu", "cuda" (one GPU per rank; DDP then uses nccl) or "auto"
+    #: (cuda when available). Targets and inputs are made on the CPU either way.
+    device: str = "cpu"
 
     @classmethod
     def from_dict(cls, d: dict[str, Any]) -> "TrainConfig":
@@ -109,6 +112,8 @@ class TrainConfig:
         if self.max_minutes is not None and not (isinstance(self.max_minutes, (int, float))
                                                  and self.max_minutes > 0):
             raise SpecGenError(f"training config: max_minutes must be > 0, got {self.max_minutes!r}")
+        if self.device not in ("cpu", "cuda", "auto"):
+            raise SpecGenError(f"training config: device must be 'cpu', 'cuda' or 'auto', got {self.device!r}")
         if self.lighting not in ("variants", "mix"):
             raise SpecGenError(f"training config: lighting must be 'variants' or 'mix', got {self.lighting!r}")
         if self.spectral_materials_per_step + self.rgb_materials_per_step == 0:
@@ -200,11 +205,17 @@ def _draw(rng: np.random.Generator, mset: MaterialSet, k: int, canonical_fractio
     return mats, imgs
 
 
-def _tensors(b: Batch) -> dict[str, torch.Tensor]:
+def _tensors(b: Batch, device: torch.device | None = None) -> dict[str, torch.Tensor]:
     t = {k: torch.from_numpy(getattr(b, k)) for k in ("images", "theta_h", "theta_d", "phi_d", "target")}
     t["valid"] = torch.from_numpy(b.valid.astype(np.float32))
     t["wavelength_nm"] = None if b.wavelength_nm is None else torch.from_numpy(b.wavelength_nm)
+    if device is not None and device.type != "cpu":
+        t = {k: None if v is None else v.to(device, non_blocking=True) for k, v in t.items()}
     return t
+
+
+def _device_of(model: torch.nn.Module) -> torch.device:
+    return next(model.parameters()).device
 
 
 def _masked_mse(pred: torch.Tensor, target: torch.Tensor, valid: torch.Tensor) -> torch.Tensor:
@@ -213,7 +224,7 @@ def _masked_mse(pred: torch.Tensor, target: torch.Tensor, valid: torch.Tensor) -
 
 def group_loss(model: SpecGen, b: Batch) -> tuple[torch.Tensor, torch.Tensor]:
     """(MSE in μ-law space, TV of the generated planes) for one batch group."""
-    t = _tensors(b)
+    t = _tensors(b, _device_of(model))
     planes = model.planes(t["images"])
     pred = model.query(planes, t["theta_h"], t["theta_d"], t["phi_d"], t["wavelength_nm"])
     return _masked_mse(pred, t["target"], t["valid"]), model.tv_loss(planes)
@@ -261,6 +272,8 @@ def train(mcfg: Config, tcfg: TrainConfig, spectral: MaterialSet, rgb: MaterialS
     torch.set_num_threads(tcfg.threads)
     torch.use_deterministic_algorithms(True)
     torch.manual_seed(tcfg.seed)
+    dctx = ddp.context()  # rank/world size under torchrun; 0 of 1 otherwise
+    device = ddp.train_device(tcfg.device)
     model = SpecGen(mcfg)
     if tcfg.init_weights is not None and not (resume and (out / "checkpoint.pt").is_file()):
         from ..model import load_weights
@@ -269,11 +282,11 @@ def train(mcfg: Config, tcfg: TrainConfig, spectral: MaterialSet, rgb: MaterialS
         if init.cfg.to_dict() != mcfg.to_dict():
             raise SpecGenError(f"{tcfg.init_weights}: weights were made with a different model config")
         model.load_state_dict({k: v.float() for k, v in init.state_dict().items()})
+    model.to(device)  # before the optimiser, so its state lives there too
     opt = torch.optim.Adam(model.parameters(), lr=tcfg.lr, betas=(0.9, 0.999))
     history: list[dict[str, float]] = []
     start_step, elapsed0 = 0, 0.0
     ckpt_path = out / "checkpoint.pt"
-    dctx = ddp.context()  # rank/world size under torchrun; 0 of 1 otherwise
     ddp.check_shardable({"spectral_materials_per_step": min(tcfg.spectral_materials_per_step, len(spectral)),
                          "rgb_materials_per_step": min(tcfg.rgb_materials_per_step, len(rgb))}, dctx)
     ck = ddp.broadcast(torch.load(ckpt_path, map_location="cpu", weights_only=True)
@@ -316,7 +329,7 @@ def train(mcfg: Config, tcfg: TrainConfig, spectral: MaterialSet, rgb: MaterialS
         b_spec, b_rgb = make_step_batches(tcfg, mcfg, spectral, rgb, step)
         model.train()
         opt.zero_grad(set_to_none=True)
-        loss = torch.zeros(())
+        loss = torch.zeros((), device=device)
         rec: dict[str, float] = {"step": step + 1, "lr": lr_at(tcfg, step)}
         tv_terms = []
         g_spec, g_rgb = step_losses(b_spec, b_rgb)
@@ -370,7 +383,7 @@ def evaluate_batch(model: SpecGen, b: Batch) -> float:
     """Masked μ-law MSE of ``model`` on a batch (eval mode, no gradients)."""
     was = model.training
     model.eval()
-    t = _tensors(b)
+    t = _tensors(b, _device_of(model))
     pred = model(t["images"], t["theta_h"], t["theta_d"], t["phi_d"], t["wavelength_nm"])
     model.train(was)
     return float(_masked_mse(pred, t["target"], t["valid"]))
@@ -380,7 +393,7 @@ def _tdict(tcfg: TrainConfig, ignore_budget: bool = False) -> dict[str, Any]:
     d = dataclasses.asdict(tcfg)
     if ignore_budget:  # a resumed run may extend its budget or change what it logs
         for k in ("steps", "max_minutes", "threads", "checkpoint_every", "val_every", "init_weights",
-                  "render_workers"):
+                  "render_workers", "device"):
             d.pop(k)
     return d
 
