@@ -303,6 +303,8 @@ def make_fixtures(fx: Path, big: bool) -> None:
         "image_size_huge.json": {"model": {"image_size": 100000}},
         "lambda_inf.json": '{"model": {"lambda_min_nm": Infinity}}',
         "nested_null.json": {"train": None},
+        "device_tpu.json": {"train": {"device": "tpu"}},
+        "device_int.json": {"train": {"device": 3}},
     }
     for name, content in cfgs.items():
         (fx / name).write_text(content if isinstance(content, str) else json.dumps(content))
@@ -342,6 +344,14 @@ def batch(*args: str) -> list[str]:
 
 def api(body: str) -> list[str]:
     return ["-c", API_PRELUDE.format(repo=str(REPO), body=textwrap.indent(textwrap.dedent(body), "    "))]
+
+
+def _has_cuda() -> bool:
+    try:
+        import torch
+    except ImportError:
+        return False
+    return torch.cuda.is_available()
 
 
 def cases(have_rgl: bool, big: bool) -> list[Case]:
@@ -424,6 +434,9 @@ def cases(have_rgl: bool, big: bool) -> list[Case]:
     for v in ("0", "-1", "nan", "inf", "abc"):
         add(C(f"train --max-minutes {v}", tr("--max-minutes", v, "--steps", "1"), mentions=("minutes",)))
     add(C("train --seed abc", tr("--seed", "abc"), mentions=("seed",)))
+    add(C("train --device tpu", tr("--device", "tpu"), mentions=("device",)))
+    if not _has_cuda():
+        add(C("train --device cuda without a GPU", tr("--device", "cuda", "--steps", "1"), mentions=("GPU",)))
     add(C("train --config missing", tr("--config", "{fx}/nope.json"), mentions=("not found", "no such")))
     add(C("train --config folder", tr("--config", "{fx}"), mentions=("folder",)))
     for f, m in (("steps_str.json", "steps"), ("lr_nan.json", "lr"), ("steps_zero.json", "steps"),
@@ -431,7 +444,8 @@ def cases(have_rgl: bool, big: bool) -> list[Case]:
                  ("unknown_key.json", "stepz"), ("unknown_section.json", "trian"), ("model_int.json", "model"),
                  ("list_top.json", ""), ("syntax.json", ""), ("empty.json", ""), ("lr_neg.json", "lr"),
                  ("threads_zero.json", "threads"), ("image_size_huge.json", "image_size"),
-                 ("lambda_inf.json", "lambda"), ("nested_null.json", "train"), ("steps_str.toml", "steps"),
+                 ("lambda_inf.json", "lambda"), ("nested_null.json", "train"), ("device_tpu.json", "device"),
+                 ("device_int.json", "device"), ("steps_str.toml", "steps"),
                  ("syntax.toml", ""), ("lr_array.toml", "lr"), ("config.yaml", "")):
         add(C(f"train --config {f}", tr("--config", "{fx}/" + f, "--steps", "1"), mentions=(m,) if m else ()))
     add(C("train --resume no checkpoint", tr("--resume", "--steps", "1"), mentions=("checkpoint",)))
@@ -519,6 +533,17 @@ def cases(have_rgl: bool, big: bool) -> list[Case]:
     add(C("render-input --manifest missing", ri("mat0001", "--manifest", "{fx}/nope.json")))
     add(C("render-input --manifest bad json", ri("mat0001", "--manifest", "{fx}/bad_manifest.json")))
     add(C("render-input --manifest wrong shape", ri("mat0001", "--manifest", "{fx}/manifest_wrong.json")))
+
+    # ---- ablate
+    ab = lambda *a: cli("ablate", "--out", "{out}/a.md", *a)  # noqa: E731
+    for v in ("0", "-3", "abc", "1e12"):
+        add(C(f"ablate --steps {v}", ab("--steps", v), mentions=("steps",)))
+    add(C("ablate --seeds 1 1", ab("--seeds", "1", "1"), mentions=("seeds",)))
+    add(C("ablate --seeds -1", ab("--seeds", "-1"), mentions=("seeds",)))
+    add(C("ablate --arms nope", ab("--arms", "nope"), mentions=("arm",)))
+    add(C("ablate --workers 0", ab("--workers", "0"), mentions=("workers",)))
+    add(C("ablate --out dir missing", cli("ablate", "--out", "{out}/no/such/a.md")))
+    add(C("ablate --json folder", cli("ablate", "--json", "{out}")))
 
     # ---- paper-tables
     pt = lambda *a: cli("paper-tables", "--out", "{out}/r.md", "--quiet", *a)  # noqa: E731

@@ -55,6 +55,8 @@ class DistContext:
 def train_device(requested: str = "cpu") -> torch.device:
     """The device this rank trains on: ``"cpu"``; ``"cuda"`` (GPU ``LOCAL_RANK``, refused without
     one); ``"auto"``: cuda when available, else the CPU."""
+    if requested not in ("cpu", "cuda", "auto"):
+        raise SpecGenError(f"training config: device must be 'cpu', 'cuda' or 'auto', got {requested!r}")
     if requested == "cpu" or (requested == "auto" and not torch.cuda.is_available()):
         return torch.device("cpu")
     if not torch.cuda.is_available():
