@@ -170,6 +170,7 @@ def test_paper_tables_smoke_run_writes_every_table_and_resumes(tmp_path, monkeyp
                     "## Real data", "## Targets"):
         assert heading in text
     assert "(d)" in text and "Hadamard" in text
+    assert "(input under the map, lighting given, refined)" in text.split("## (b)")[1].split("## (c)")[0]
     for family in ("classic", "tinted_coat", "car_paint", "thin_film", "sheen", "lobes", "mean (synthetic)"):
         assert f"| {family}" in text or f"| **{family}**" in text
     for png in ("psnr_per_wavelength.png", "gt_vs_specgen_wavelengths.png", "spectral_curves.png"):

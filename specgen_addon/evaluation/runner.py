@@ -167,6 +167,8 @@ def run_paper_tables(out: Path, img_dir: Path | None = None, smoke: bool = False
             for role in tables.ROLES_B:
                 env = h.scenes[role].env
                 h.run_model(tables.robustness_arm(specgen_arm, env), w, m, [role], input_env=env)
+                h.run_model(tables.robustness_arm(specgen_arm, env, lighting_given=True), w, m, [role],
+                            input_env=env, lighting_given=True)
         else:
             h.run_model(kind, w, m, tables.ROLES_ABLATION, direct=True)
         bar.update(1)

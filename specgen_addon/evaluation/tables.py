@@ -45,9 +45,11 @@ BASELINE_ROLES = ("distant", "env_seen", "env_unseen1", "env_unseen2", "shape_en
 MAIN_ROLES = ("distant", "env_unseen1", "shape_env", "shape_distant")
 
 
-def robustness_arm(specgen_arm: str, env: str) -> str:
-    """Arm name of SpecGen fed the sphere photographed under ``env`` (table (b))."""
-    return f"{specgen_arm}+input-{env}"
+def robustness_arm(specgen_arm: str, env: str, lighting_given: bool = False) -> str:
+    """Arm name of SpecGen fed the sphere photographed under ``env`` (table (b)); with
+    ``lighting_given`` the product's path when the user names that lighting: the photo brought to
+    the canonical white level for the network, then refined under that lighting."""
+    return f"{specgen_arm}+input-{env}" + ("+given+refined" if lighting_given else "")
 
 
 def photo_arm(method: str) -> str:
@@ -188,7 +190,7 @@ class Harness:
 
     def run_model(self, arm: str, weights: Path | None, material: Any, roles: Sequence[str],
                   keep_images: bool = False, input_env: str | None = None, direct: bool = False,
-                  refine: bool = False) -> None:
+                  refine: bool = False, lighting_given: bool = False) -> None:
         """Generate the spectral BRDF from the sphere input and score it in ``roles``.
 
         The input is the canonical sphere image, or with ``input_env`` the sphere photographed under
@@ -196,6 +198,8 @@ class Harness:
         queries the network at the render's directions instead of tabulating it
         (:class:`.network_brdf.NetworkBRDF`, used for the ablation arms). ``refine`` refines the
         canonical input's table against that input (:func:`specgen_addon.refine.refine_brdf`).
+        ``lighting_given`` (with ``input_env``): the input's lighting is known, as when a user names
+        it: :func:`specgen_addon.pipeline.generate` with that lighting, refinement on.
         """
         todo = [r for r in roles if self.cell(arm, material.name, r) is None]
         self_repro = not direct and input_env is None and self.cell(arm, material.name, SELF_ROLE) is None
@@ -215,6 +219,13 @@ class Harness:
 
                 table = refine_brdf(table, input_image.render_input(material),
                                     options=RefineOptions(clip_level=None)).table
+        elif lighting_given:
+            from ..input_lighting import InputLighting
+            from ..pipeline import generate
+
+            table = generate(protocol.input_under_environment(material, input_env),
+                             lighting=InputLighting(input_env, key_light=True), refine=True,
+                             weights=weights, wavelengths_nm=self.wl).table
         else:
             from .. import infer
 
