@@ -16,7 +16,7 @@ from __future__ import annotations
 
 import dataclasses
 import math
-from concurrent.futures import ProcessPoolExecutor
+import signal
 from multiprocessing import get_context
 from pathlib import Path
 from typing import Any, Callable, Sequence
@@ -69,6 +69,10 @@ def run_arm(settings: abl.AblationSettings, arm: str, seed: int, cache_dir: str,
             **score}
 
 
+def _ignore_sigint() -> None:
+    signal.signal(signal.SIGINT, signal.SIG_IGN)
+
+
 def run_study(steps: int, seeds: Sequence[int] = STUDY_SEEDS, arms: Sequence[str] = STUDY_ARMS,
               workers: int = 2, per_family: int = PER_FAMILY, resolution: int = RESOLUTION,
               cache_dir: Path | None = None, log: Callable[[str], None] = print) -> dict[str, Any]:
@@ -82,12 +86,22 @@ def run_study(steps: int, seeds: Sequence[int] = STUDY_SEEDS, arms: Sequence[str
             records.append(run_arm(settings, a, s, str(cache), per_family, resolution))
             log(f"ablate: {a} seed {s}: {records[-1]['psnr_distant']:.2f} dB")
     else:
-        with ProcessPoolExecutor(max_workers=workers, mp_context=get_context("spawn")) as pool:
-            futures = [pool.submit(run_arm, settings, a, s, str(cache), per_family, resolution) for a, s in jobs]
-            for f in futures:
-                records.append(f.result())
+        # Workers ignore Ctrl-C: the parent takes it (a clean stop) and ends them; a stopped arm
+        # keeps its last checkpoint in the cache, and the next run resumes it.
+        pool = get_context("spawn").Pool(workers, initializer=_ignore_sigint)
+        try:
+            pending = [pool.apply_async(run_arm, (settings, a, s, str(cache), per_family, resolution))
+                       for a, s in jobs]
+            for job in pending:
+                records.append(job.get())
                 r = records[-1]
                 log(f"ablate: {r['arm']} seed {r['seed']}: {r['psnr_distant']:.2f} dB")
+            pool.close()
+        except BaseException:
+            pool.terminate()
+            raise
+        finally:
+            pool.join()
     return {"steps": settings.steps, "seeds": list(settings.seeds), "arms": list(settings.arms),
             "per_family": per_family, "resolution": resolution, "records": records,
             **summarise(records)}
