@@ -65,6 +65,7 @@ def add_ablate_parser(subparsers: argparse._SubParsersAction) -> argparse.Argume
     p.add_argument("--workers", type=int, default=2, help="arms trained at once, one core each (default 2)")
     p.add_argument("--out", type=Path, default=None, help="markdown tables to write")
     p.add_argument("--json", type=Path, default=None, help="all records and the summary as JSON")
+    p.add_argument("--figure", type=Path, default=None, help="PNG dot plot of every arm's per-seed scores")
     p.set_defaults(func=run_ablate)
     return p
 
@@ -72,7 +73,7 @@ def add_ablate_parser(subparsers: argparse._SubParsersAction) -> argparse.Argume
 def run_ablate(args: argparse.Namespace) -> int:
     import json
 
-    from .evaluation.ablation_study import format_markdown, run_study
+    from .evaluation.ablation_study import format_markdown, plot_study, run_study
     from .io_utils import atomic_write
 
     study = run_study(args.steps, seeds=args.seeds, arms=args.arms, workers=args.workers)
@@ -82,6 +83,9 @@ def run_ablate(args: argparse.Namespace) -> int:
         if path is not None:
             with atomic_write(path, overwrite=True) as tmp:
                 tmp.write_text(content, encoding="utf-8")
+    if args.figure is not None:
+        with atomic_write(args.figure, overwrite=True) as tmp:
+            plot_study(study, tmp)
     return 0
 
 

@@ -182,9 +182,11 @@ def _paper_tables(a) -> None:
 def _ablate(a) -> None:
     from .evaluation.ablation import ARMS_BY_NAME
 
-    for f in (a.out, a.json):
+    for f in (a.out, a.json, a.figure):
         if f is not None:
             limits.check_output_file(f, overwrite=True)
+    if a.figure is not None and Path(a.figure).suffix.lower() != ".png":
+        raise SpecGenError(f"--figure {a.figure}: must end in .png")
     limits.check_numbers({"steps": a.steps})
     limits.check_number("workers", a.workers, bounds=(1, 64))
     for s in a.seeds:
@@ -216,7 +218,7 @@ def output_folders(args: argparse.Namespace) -> tuple[list[Path], list[Path]]:
     if cmd in ("corpus", "train"):
         return [Path(args.out)], []
     files = []
-    for name in ("out", "output", "json"):
+    for name in ("out", "output", "json", "figure"):
         p = getattr(args, name, None)
         if isinstance(p, (str, Path)):
             files.append(Path(p))

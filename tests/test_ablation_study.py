@@ -57,3 +57,12 @@ def test_ablate_refuses_bad_arguments_before_any_work(args, needle, tmp_path):
     assert r.returncode == 2
     assert needle in r.stderr and "Traceback" not in r.stderr
     assert list(tmp_path.iterdir()) == []
+
+
+def test_the_study_figure_is_a_png(tmp_path):
+    from specgen_addon.evaluation.ablation_study import plot_study
+
+    recs = [{"arm": a, "seed": s, "psnr_distant": 28.0 + s + (a == "joint-aff")} for a in ("joint-aff", "spectral-aff")
+            for s in (0, 1, 2)]
+    out = plot_study({"steps": 10, "seeds": [0, 1, 2], **summarise(recs)}, tmp_path / "f.png")
+    assert out.read_bytes()[:8] == b"\x89PNG\r\n\x1a\n"

@@ -154,3 +154,31 @@ def format_markdown(study: dict[str, Any]) -> str:
     for label, e in study["effects"].items():
         lines.append(f"| {label} | {e['mean']:+.2f} ± {e['std']:.2f} | {e['se']:.2f} | {e['sign']} |")
     return "\n".join(lines) + "\n"
+
+
+def plot_study(study: dict[str, Any], path: Path) -> Path:
+    """Dot plot: each arm's per-seed PSNR (dots) and mean ± std (bar), held-out split, distant lights."""
+    import matplotlib
+
+    matplotlib.use("Agg")
+    import matplotlib.pyplot as plt
+
+    arms = list(study["by_arm"])
+    fig, ax = plt.subplots(figsize=(1.8 + 1.4 * len(arms), 3.4), dpi=110)
+    for i, arm in enumerate(arms):
+        s = study["by_arm"][arm]
+        vals = [s["per_seed"][k] for k in sorted(s["per_seed"], key=int)]
+        ax.scatter(np.full(len(vals), i) + np.linspace(-0.12, 0.12, len(vals)), vals, s=22, color="C0", zorder=3)
+        ax.errorbar(i + 0.28, s["mean"], yerr=0 if not np.isfinite(s["std"]) else s["std"], fmt="s", color="k",
+                    capsize=4, zorder=3)
+    ax.set_xticks(range(len(arms)), arms)
+    ax.set_xlim(-0.5, len(arms) - 0.3)
+    ax.set_ylabel("spectral PSNR (dB), held-out split")
+    ax.set_title(f"{study['steps']} steps from scratch, seeds {', '.join(map(str, study['seeds']))}: "
+                 "dots per seed, ■ mean ± std", fontsize=9)
+    ax.grid(axis="y", alpha=0.3)
+    fig.tight_layout()
+    path.parent.mkdir(parents=True, exist_ok=True)
+    fig.savefig(path)
+    plt.close(fig)
+    return path
