@@ -200,7 +200,7 @@ def compose(h: tables.Harness, mats: Sequence[Any], specgen_arm: str, weights: P
     section("## (c) Joint RGB + spectral training vs spectral only, and (d) AFF vs Hadamard fusion")
     add("")
     if not arms:
-        add("Not run here (`--no-ablation`). The seeded study (three seeds per arm, mean ± standard "
+        add("Not run here (`--no-ablation`). The seeded study (several seeds per arm, mean ± standard "
             "deviation, paired effects with their uncertainty) is `python -m specgen_addon ablate`; "
             "its results are in [ablations.md](ablations.md).")
     else:
