@@ -10,6 +10,9 @@ the file and compares it with the shipped one. The tables are stored at their na
 * ``illuminant_*``: every CIE illuminant of ``colour.SDS_ILLUMINANTS`` (ragged, with offsets);
 * ``mallett2019_*``: the sRGB basis reflectances of Mallett & Yuksel (2019)
   (``colour.recovery.MSDS_BASIS_FUNCTIONS_sRGB_MALLETT2019``);
+* ``otsu2018_*``: Otsu, Yamamoto & Hachisuka's (2018) clustered reflectance basis
+  (``colour.recovery.BASIS_FUNCTIONS_OTSU2018``, ``CLUSTER_MEANS_OTSU2018``,
+  ``SELECTOR_ARRAY_OTSU2018`` on ``SPECTRAL_SHAPE_OTSU2018``), read by :mod:`.spectral_recovery`;
 * ``srgb_*``: the sRGB colourspace's XYZ ↔ RGB matrices and white point (XYZ);
 * ``bradford``: the Bradford chromatic adaptation matrix (``CAT_BRADFORD``).
 """
@@ -37,6 +40,7 @@ def build_tables() -> dict[str, np.ndarray]:
     offsets = np.cumsum([0] + [sd.wavelengths.size for sd in sds])
     basis = colour.recovery.MSDS_BASIS_FUNCTIONS_sRGB_MALLETT2019
     srgb = colour.RGB_COLOURSPACES["sRGB"]
+    otsu = colour.recovery
     return {
         "cmfs_wavelengths_nm": np.asarray(cmfs.wavelengths, np.float64),
         "cmfs_values": np.asarray(cmfs.values, np.float64),
@@ -46,6 +50,10 @@ def build_tables() -> dict[str, np.ndarray]:
         "illuminant_values": np.concatenate([sd.values for sd in sds]).astype(np.float64),
         "mallett2019_wavelengths_nm": np.asarray(basis.wavelengths, np.float64),
         "mallett2019_values": np.asarray(basis.values, np.float64),
+        "otsu2018_wavelengths_nm": np.asarray(otsu.SPECTRAL_SHAPE_OTSU2018.wavelengths, np.float64),
+        "otsu2018_basis": np.asarray(otsu.BASIS_FUNCTIONS_OTSU2018, np.float64),
+        "otsu2018_means": np.asarray(otsu.CLUSTER_MEANS_OTSU2018, np.float64),
+        "otsu2018_selector": np.asarray(otsu.SELECTOR_ARRAY_OTSU2018, np.float64),
         "srgb_xyz_to_rgb": np.asarray(srgb.matrix_XYZ_to_RGB, np.float64),
         "srgb_rgb_to_xyz": np.asarray(srgb.matrix_RGB_to_XYZ, np.float64),
         "srgb_white_xyz": np.asarray(colour.xy_to_XYZ(srgb.whitepoint), np.float64),

@@ -81,14 +81,15 @@ def test_photo_operator_reproduces_the_renderer_for_the_identity_correction(ramp
 
 
 def test_known_spectral_tint_is_recovered_from_its_own_render(ramp_table):
-    """A table × a tint inside the spectral basis is recovered to ≤ 1 % from its own photo."""
+    """A table × a tint inside the spectral basis is recovered to ≤ 1 % from its own photo (with the
+    network's body spectrum kept: the correction alone)."""
     basis = CorrectionBasis()
     knots_value = np.array([0.6, 1.05, 1.4])
     tint = basis.spectral_hats(WL) @ knots_value
     truth = _tinted(ramp_table, tint)
     light = InputLighting()
     photo = render_under(truth, light.scene(SIZE), light.image_exposure)
-    res = refine_brdf(ramp_table, photo, light, RefineOptions(clip_level=None))
+    res = refine_brdf(ramp_table, photo, light, RefineOptions(clip_level=None, body_prior="network"))
     err = np.linalg.norm(res.table.values - truth.values) / np.linalg.norm(truth.values)
     assert err <= 0.01, f"relative table error {err:.4f}"
     assert res.after.psnr_db > 45.0
@@ -263,3 +264,64 @@ def test_default_spectral_correction_is_mallett_2019_as_colour_science_has_it():
     assert np.count_nonzero(hats[:, 0]) < wl.size            # hats are local, Mallett's are not
     with pytest.raises(SpecGenError, match="spectral correction basis"):
         CorrectionBasis(spectral="otsu")
+
+
+def _with_body(table: BRDFTable, body: np.ndarray) -> BRDFTable:
+    """``table`` with its diffuse floor replaced by ``body`` (sr⁻¹ per band)."""
+    floor = diffuse_floor_of(table)
+    return BRDFTable((table.values - floor + body).astype(np.float32), table.wavelengths)
+
+
+@pytest.fixture(scope="module")
+def ramp_table_21() -> BRDFTable:
+    mat = RampMaterial(a=0.4, b=0.0, alpha=0.2, f0=0.05)      # a grey body under a white lobe
+    wl = np.linspace(380.0, 780.0, 21)
+
+    def fn(th, td, pd):
+        wi, wo = io_from_half_diff(th, td, pd)
+        return mat.eval(wi, wo, wl)
+
+    return BRDFTable.tabulate(fn, wl)
+
+
+def test_a_natural_body_spectrum_is_recovered_from_a_grey_prior(ramp_table_21):
+    """The network predicts a grey body; the photo shows an Otsu-basis reflectance. The default
+    body prior recovers that spectrum (its shape, not only its colour); the network body prior
+    keeps a tinted grey that has the colour but not the shape."""
+    from specgen_addon.spectral_recovery import otsu2018_reflectance
+
+    wl = ramp_table_21.wavelengths
+    rho = otsu2018_reflectance(np.array([0.25, 0.20, 0.08]), wl)        # an ochre
+    truth = _with_body(ramp_table_21, rho / np.pi)
+    light = InputLighting()
+    photo = render_under(truth, light.scene(SIZE), light.image_exposure)
+    errs = {}
+    for prior in ("otsu2018", "network"):
+        res = refine_brdf(ramp_table_21, photo, light, RefineOptions(clip_level=None, body_prior=prior))
+        got = diffuse_floor_of(res.table) * np.pi
+        errs[prior] = float(np.sqrt(np.mean((got - rho) ** 2)) / rho.mean())
+        assert res.after.psnr_db > 40.0, res.summary()
+        assert res.coefficients["body_prior"] == prior
+    assert errs["otsu2018"] < 0.03, errs
+    assert errs["network"] > 2 * errs["otsu2018"], errs
+
+
+def test_a_metal_keeps_the_network_body_spectrum():
+    """A table whose lobe has its floor's colour (a conductor) is not given a diffuse body."""
+    from specgen_addon.refine.body import has_separate_body
+
+    wl = np.linspace(380.0, 780.0, 21)
+    colour_ = np.linspace(0.4, 0.95, wl.size)                           # copper-like, rising to red
+    values = np.zeros((90, 90, 180, wl.size), np.float32)
+    values[:] = 0.05 * colour_
+    values[:20] += (5.0 * colour_).astype(np.float32)                    # the lobe, same colour
+    floor = 0.05 * colour_
+    assert not has_separate_body(values, floor, wl)
+    values[:20] = 0.05 * colour_ + 5.0                                   # white lobe: a dielectric
+    assert has_separate_body(values, floor, wl)
+    assert has_separate_body(values * 0 + floor.astype(np.float32), floor, wl)   # no lobe at all
+
+
+def test_unknown_body_prior_is_refused():
+    with pytest.raises(SpecGenError, match="unknown body prior"):
+        RefineOptions(body_prior="smits")

@@ -11,6 +11,11 @@ with ``θ0`` the identity (the network's own table), ``σ`` one percent of the p
 prior weighted by each coefficient's own data sensitivity ``D`` (so a coefficient the photo barely
 sees stays with the network). Clipped pixels (PNG/JPEG at full scale) are left out of the fit.
 
+The diffuse body's spectral shape then comes from a natural-reflectance basis (:mod:`.body`): the
+first solve finds the body's colour, the body is replaced by the Otsu 2018 reflectance of that
+colour, and the coefficients are solved again around it (the lobe's design is shared, so the second
+solve costs a few milliseconds). Metals keep the network's spectra.
+
 The result is checked by rendering it with the reference renderer under the same lighting:
 self-reproduction PSNR and ΔE2000 (:mod:`.report`). If the refined table reproduces the photo worse
 than the network's did, the network's table is returned unchanged. Everything is numpy: it runs
@@ -30,6 +35,7 @@ import numpy as np
 from ..errors import Cancelled, SpecGenError
 from ..table import BRDFTable
 from .basis import CorrectionBasis
+from .body import BODY_PRIORS, has_separate_body, natural_body
 from .operator import PhotoOperator, render_grid
 from .report import Reproduction, photo_scale, reproduction
 from .solve import difference_operator, nonneg_ridge
@@ -52,7 +58,9 @@ class RefineOptions:
 
     ``noise`` is σ as a fraction of the photo's level; ``prior`` the pull towards the network
     (relative to each coefficient's data weight); ``smooth`` the smoothness between neighbouring
-    knots; ``clip_level`` marks saturated pixels of an 8/16-bit photo (values in [0, 1]): they are
+    knots (3: chosen on the validation split, docs/refinement.md); ``body_prior`` the spectral
+    shape of the diffuse body: ``"otsu2018"`` (a natural reflectance of the photo's body colour,
+    :mod:`.body`) or ``"network"`` (the network's own body spectrum, tinted); ``clip_level`` marks saturated pixels of an 8/16-bit photo (values in [0, 1]): they are
     left out of the fit, and renders are clipped at 1 like the photo before they are scored
     (``None``: a linear EXR photo, nothing is clipped).
     """
@@ -60,9 +68,14 @@ class RefineOptions:
     basis: CorrectionBasis = field(default_factory=CorrectionBasis)
     noise: float = 0.01
     prior: float = 1e-5
-    smooth: float = 0.01
+    smooth: float = 3.0
+    body_prior: str = "otsu2018"
     clip_level: float | None = CLIP_LEVEL
     energy_check: bool = True
+
+    def __post_init__(self) -> None:
+        if self.body_prior not in BODY_PRIORS:
+            raise SpecGenError(f"unknown body prior {self.body_prior!r} (choose from {', '.join(BODY_PRIORS)})")
 
 
 @dataclass
@@ -164,30 +177,24 @@ def refine_brdf(table: BRDFTable, photo: np.ndarray, lighting=None, options: Ref
     s_hats = basis.spectral_hats(wl)
     a_lobe = op.lobe_design(table.values, floor, basis, progress=report(0.1, 0.6), cancel=cancel)
     check_cancel()
-    a_body = op.lambert_design(floor, s_hats)                          # y: tint of the body
     a_lamb = op.lambert_design(np.full(wl.size, 1.0 / np.pi), s_hats)  # z: added Lambertian
-    p = b.shape[0]
-    design = np.concatenate([a_lobe.reshape(p, 3, -1), a_body, a_lamb], axis=2)   # (P, 3, K)
     n_lobe, nl = basis.n_lobe, s_hats.shape[1]
-    theta0 = np.concatenate([np.ones(n_lobe), np.ones(nl), np.zeros(nl)])
-
+    a_lobe = a_lobe.reshape(b.shape[0], 3, -1)
     keep = ~clipped
-    a = design[keep].reshape(-1, theta0.size)
-    y = b[keep].reshape(-1)
-    sigma = options.noise * level
-    gram = a.T @ a / sigma ** 2
-    rhs = a.T @ y / sigma ** 2
-    # prior: each coefficient pulled to θ0 in proportion to its own data weight (plus a floor, so
-    # coefficients the photo cannot see stay exactly at the network's value)
-    diag = np.diag(gram).copy()
-    ridge = options.prior * (diag + 1e-6 * max(diag.max(), 1.0))
-    gram[np.diag_indices_from(gram)] += ridge
-    rhs += ridge * theta0
-    # smoothness between neighbouring knots of the lobe correction, and of the two body spectra
-    smooth = _smoothness(basis)
-    scale_s = options.smooth * max(float(np.median(diag[:n_lobe])), 1e-12)
-    gram[:n_lobe, :n_lobe] += scale_s * smooth.T @ smooth
-    theta = nonneg_ridge(gram, rhs)
+
+    def solve(body: np.ndarray) -> np.ndarray:
+        a_body = op.lambert_design(body, s_hats)                      # y: tint of the body
+        design = np.concatenate([a_lobe, a_body, a_lamb], axis=2)     # (P, 3, K)
+        return _solve_correction(design[keep], b[keep], n_lobe, nl, level, basis, options)
+
+    theta = solve(floor)
+    body = floor
+    if options.body_prior == "otsu2018" and has_separate_body(table.values, floor, wl):
+        coloured = floor * (s_hats @ theta[n_lobe:n_lobe + nl]) + (s_hats @ theta[n_lobe + nl:]) / np.pi
+        natural = natural_body(coloured, wl)
+        if natural is not None:
+            body = natural
+            theta = solve(body)
     check_cancel()
     if progress is not None:
         progress(0.65)
@@ -195,7 +202,7 @@ def refine_brdf(table: BRDFTable, photo: np.ndarray, lighting=None, options: Ref
     x = theta[:n_lobe]
     yb = theta[n_lobe:n_lobe + nl]
     zl = theta[n_lobe + nl:]
-    refined = apply_correction(table, floor, x, yb, zl, basis)
+    refined = apply_correction(table, floor, x, yb, zl, basis, body=body)
     if options.energy_check:
         warnings.extend(_energy_warnings(table, refined))
     check_cancel()
@@ -219,7 +226,8 @@ def refine_brdf(table: BRDFTable, photo: np.ndarray, lighting=None, options: Ref
         warnings.append(f"the chosen lighting does not explain this photo: self-reproduction reaches only "
                         f"{m_after.psnr_db:.1f} dB (check the input lighting, exposure and image)")
     coeffs = {"lobe": x.reshape(basis.shape).tolist(), "body_tint": yb.tolist(),
-              "lambert": zl.tolist(), "floor": floor.tolist()}
+              "lambert": zl.tolist(), "floor": floor.tolist(), "body": body.tolist(),
+              "body_prior": options.body_prior if body is not floor else "network"}
     meta = dict(refined.metadata)
     if improved:
         meta.update({"refined": True, "refine_lighting": lighting.label,
@@ -232,13 +240,40 @@ def refine_brdf(table: BRDFTable, photo: np.ndarray, lighting=None, options: Ref
                         warnings, after_img, improved)
 
 
+def _solve_correction(design: np.ndarray, photo: np.ndarray, n_lobe: int, nl: int, level: float,
+                      basis: CorrectionBasis, options: RefineOptions) -> np.ndarray:
+    """θ = (lobe x, body tint y, Lambertian z) from the observed pixels' design (P, 3, K) and
+    photo (P, 3): the regularised non-negative least squares of the module docstring."""
+    theta0 = np.concatenate([np.ones(n_lobe), np.ones(nl), np.zeros(nl)])
+    a = design.reshape(-1, theta0.size)
+    y = photo.reshape(-1)
+    sigma = options.noise * level
+    gram = a.T @ a / sigma ** 2
+    rhs = a.T @ y / sigma ** 2
+    # prior: each coefficient pulled to θ0 in proportion to its own data weight (plus a floor, so
+    # coefficients the photo cannot see stay exactly at the network's value)
+    diag = np.diag(gram).copy()
+    ridge = options.prior * (diag + 1e-6 * max(diag.max(), 1.0))
+    gram[np.diag_indices_from(gram)] += ridge
+    rhs += ridge * theta0
+    # smoothness between neighbouring θh and θd knots of the lobe correction
+    smooth = _smoothness(basis)
+    scale_s = options.smooth * max(float(np.median(diag[:n_lobe])), 1e-12)
+    gram[:n_lobe, :n_lobe] += scale_s * smooth.T @ smooth
+    return nonneg_ridge(gram, rhs)
+
+
 def apply_correction(table: BRDFTable, floor: np.ndarray, x: np.ndarray, body_tint: np.ndarray,
-                     lambert: np.ndarray, basis: CorrectionBasis) -> BRDFTable:
-    """``f' = c' + (f − c) Φ`` on the grid (see :mod:`.basis`), clipped at 0; a new table."""
+                     lambert: np.ndarray, basis: CorrectionBasis, body: np.ndarray | None = None) -> BRDFTable:
+    """``f' = c' + (f − c) Φ`` on the grid (see :mod:`.basis`), clipped at 0; a new table.
+
+    ``c' = body(λ) Σ y s + Σ z s / π`` with ``body`` the table's own floor ``c`` by default, or the
+    natural body spectrum (sr⁻¹) that replaced it (:mod:`.body`)."""
     wl = table.wavelengths
     s_hats = basis.spectral_hats(wl)
     phi = basis.lobe_factor(x, wl).astype(np.float32)                   # (90, 90, Λ)
-    c_new = floor * (s_hats @ body_tint) + (s_hats @ lambert) / np.pi    # (Λ,)
+    body = floor if body is None else np.asarray(body, np.float64)
+    c_new = body * (s_hats @ body_tint) + (s_hats @ lambert) / np.pi     # (Λ,)
     values = table.values - floor.astype(np.float32)
     values *= phi[:, :, None, :]
     values += c_new.astype(np.float32)
