@@ -325,3 +325,25 @@ def test_a_metal_keeps_the_network_body_spectrum():
 def test_unknown_body_prior_is_refused():
     with pytest.raises(SpecGenError, match="unknown body prior"):
         RefineOptions(body_prior="smits")
+
+
+def test_an_added_angular_term_gives_a_near_lambertian_prior_the_photos_grazing_sheen(ramp_table_21):
+    """The network predicts a near-Lambertian table; the photo is brighter towards grazing θd (a
+    sheen). A multiplicative lobe correction has almost no lobe to scale; the added term fits it."""
+    from specgen_addon.refine.basis import CorrectionBasis
+
+    basis = CorrectionBasis()
+    floor = diffuse_floor_of(ramp_table_21)
+    sheen = np.zeros(basis.shape)
+    sheen[:, -2:, :] = 0.08                                          # added at θd ≥ 77°, all θh
+    truth = apply_correction(ramp_table_21, floor, np.ones(basis.shape), np.ones(3), np.zeros(3), basis,
+                             added=sheen)
+    light = InputLighting()
+    photo = render_under(truth, light.scene(SIZE), light.image_exposure)
+    psnr = {}
+    for additive in (False, True):
+        res = refine_brdf(ramp_table_21, photo, light,
+                          RefineOptions(clip_level=None, additive=additive, body_prior="network"))
+        psnr[additive] = res.after.psnr_db
+    assert psnr[True] > 45.0, psnr
+    assert psnr[True] > psnr[False] + 3.0, psnr

@@ -29,9 +29,14 @@ SPECGEN = "specgen"
 SELF_ROLE = "self_reproduction"
 
 
+#: Bumped whenever the refinement's defaults change, so cached refined cells are not reused:
+#: 2 = Otsu 2018 body, smoothness 3 and the added angular term (fifth session).
+REFINE_VERSION = "v2"
+
+
 def refined_arm(specgen_arm: str) -> str:
     """The arm of SpecGen's table refined against its input photo (:mod:`specgen_addon.refine`)."""
-    return f"{specgen_arm}+refined"
+    return f"{specgen_arm}+refined-{REFINE_VERSION}"
 #: Prefix of the photo-only baselines' arms (:mod:`.photo_fit` + uplifting), e.g. ``photo-otsu2018``.
 PHOTO_PREFIX = "photo-"
 #: Scene roles of each table.
@@ -49,7 +54,7 @@ def robustness_arm(specgen_arm: str, env: str, lighting_given: bool = False) -> 
     """Arm name of SpecGen fed the sphere photographed under ``env`` (table (b)); with
     ``lighting_given`` the product's path when the user names that lighting: the photo brought to
     the canonical white level for the network, then refined under that lighting."""
-    return f"{specgen_arm}+input-{env}" + ("+given+refined" if lighting_given else "")
+    return f"{specgen_arm}+input-{env}" + (f"+given+refined-{REFINE_VERSION}" if lighting_given else "")
 
 
 def photo_arm(method: str) -> str:

@@ -56,7 +56,8 @@ CLIP_LEVEL = 0.995
 class RefineOptions:
     """Knobs of the refinement (defaults are the shipped behaviour).
 
-    ``noise`` is σ as a fraction of the photo's level; ``prior`` the pull towards the network
+    ``additive`` adds the angular term ``u`` (:func:`apply_correction`), which gives a shape to
+    near-Lambertian tables that the multiplicative lobe correction cannot scale. ``noise`` is σ as a fraction of the photo's level; ``prior`` the pull towards the network
     (relative to each coefficient's data weight); ``smooth`` the smoothness between neighbouring
     knots (3: chosen on the validation split, docs/refinement.md); ``body_prior`` the spectral
     shape of the diffuse body: ``"otsu2018"`` (a natural reflectance of the photo's body colour,
@@ -70,6 +71,7 @@ class RefineOptions:
     prior: float = 1e-5
     smooth: float = 3.0
     body_prior: str = "otsu2018"
+    additive: bool = True
     clip_level: float | None = CLIP_LEVEL
     energy_check: bool = True
 
@@ -180,6 +182,10 @@ def refine_brdf(table: BRDFTable, photo: np.ndarray, lighting=None, options: Ref
     a_lamb = op.lambert_design(np.full(wl.size, 1.0 / np.pi), s_hats)  # z: added Lambertian
     n_lobe, nl = basis.n_lobe, s_hats.shape[1]
     a_lobe = a_lobe.reshape(b.shape[0], 3, -1)
+    if options.additive:   # u: an added angular term h_a(θh) g_b(θd) s_l(λ), for near-Lambertian tables
+        unit = np.broadcast_to(np.ones(wl.size, np.float32), table.values.shape)
+        a_add = op.lobe_design(unit, np.zeros(wl.size), basis, progress=report(0.6, 0.65), cancel=cancel)
+        a_lobe = np.concatenate([a_lobe, a_add.reshape(b.shape[0], 3, -1)], axis=2)
     keep = ~clipped
 
     def solve(body: np.ndarray) -> np.ndarray:
@@ -187,10 +193,11 @@ def refine_brdf(table: BRDFTable, photo: np.ndarray, lighting=None, options: Ref
         design = np.concatenate([a_lobe, a_body, a_lamb], axis=2)     # (P, 3, K)
         return _solve_correction(design[keep], b[keep], n_lobe, nl, level, basis, options)
 
+    n_all = a_lobe.shape[2]                                           # lobe x, then added u
     theta = solve(floor)
     body = floor
     if options.body_prior == "otsu2018" and has_separate_body(table.values, floor, wl):
-        coloured = floor * (s_hats @ theta[n_lobe:n_lobe + nl]) + (s_hats @ theta[n_lobe + nl:]) / np.pi
+        coloured = floor * (s_hats @ theta[n_all:n_all + nl]) + (s_hats @ theta[n_all + nl:]) / np.pi
         natural = natural_body(coloured, wl)
         if natural is not None:
             body = natural
@@ -200,9 +207,10 @@ def refine_brdf(table: BRDFTable, photo: np.ndarray, lighting=None, options: Ref
         progress(0.65)
 
     x = theta[:n_lobe]
-    yb = theta[n_lobe:n_lobe + nl]
-    zl = theta[n_lobe + nl:]
-    refined = apply_correction(table, floor, x, yb, zl, basis, body=body)
+    u = theta[n_lobe:n_all] if options.additive else None
+    yb = theta[n_all:n_all + nl]
+    zl = theta[n_all + nl:]
+    refined = apply_correction(table, floor, x, yb, zl, basis, body=body, added=u)
     if options.energy_check:
         warnings.extend(_energy_warnings(table, refined))
     check_cancel()
@@ -226,6 +234,7 @@ def refine_brdf(table: BRDFTable, photo: np.ndarray, lighting=None, options: Ref
         warnings.append(f"the chosen lighting does not explain this photo: self-reproduction reaches only "
                         f"{m_after.psnr_db:.1f} dB (check the input lighting, exposure and image)")
     coeffs = {"lobe": x.reshape(basis.shape).tolist(), "body_tint": yb.tolist(),
+              "added": None if u is None else u.reshape(basis.shape).tolist(),
               "lambert": zl.tolist(), "floor": floor.tolist(), "body": body.tolist(),
               "body_prior": options.body_prior if body is not floor else "network"}
     meta = dict(refined.metadata)
@@ -244,7 +253,8 @@ def _solve_correction(design: np.ndarray, photo: np.ndarray, n_lobe: int, nl: in
                       basis: CorrectionBasis, options: RefineOptions) -> np.ndarray:
     """θ = (lobe x, body tint y, Lambertian z) from the observed pixels' design (P, 3, K) and
     photo (P, 3): the regularised non-negative least squares of the module docstring."""
-    theta0 = np.concatenate([np.ones(n_lobe), np.ones(nl), np.zeros(nl)])
+    n_add = design.shape[2] - n_lobe - 2 * nl                    # the added angular term (0 or n_lobe)
+    theta0 = np.concatenate([np.ones(n_lobe), np.zeros(n_add), np.ones(nl), np.zeros(nl)])
     a = design.reshape(-1, theta0.size)
     y = photo.reshape(-1)
     sigma = options.noise * level
@@ -260,13 +270,20 @@ def _solve_correction(design: np.ndarray, photo: np.ndarray, n_lobe: int, nl: in
     smooth = _smoothness(basis)
     scale_s = options.smooth * max(float(np.median(diag[:n_lobe])), 1e-12)
     gram[:n_lobe, :n_lobe] += scale_s * smooth.T @ smooth
+    if n_add:
+        add = slice(n_lobe, n_lobe + n_add)
+        scale_a = options.smooth * max(float(np.median(diag[add])), 1e-12)
+        gram[add, add] += scale_a * smooth.T @ smooth
     return nonneg_ridge(gram, rhs)
 
 
 def apply_correction(table: BRDFTable, floor: np.ndarray, x: np.ndarray, body_tint: np.ndarray,
-                     lambert: np.ndarray, basis: CorrectionBasis, body: np.ndarray | None = None) -> BRDFTable:
+                     lambert: np.ndarray, basis: CorrectionBasis, body: np.ndarray | None = None,
+                     added: np.ndarray | None = None) -> BRDFTable:
     """``f' = c' + (f − c) Φ`` on the grid (see :mod:`.basis`), clipped at 0; a new table.
 
+    Plus, with ``added`` (Na, Nb, L), the non-negative angular term ``Σ u_abl h_a(θh) g_b(θd) s_l(λ)``
+    (sr⁻¹), smooth across knots and pulled to zero like the rest.
     ``c' = body(λ) Σ y s + Σ z s / π`` with ``body`` the table's own floor ``c`` by default, or the
     natural body spectrum (sr⁻¹) that replaced it (:mod:`.body`)."""
     wl = table.wavelengths
@@ -277,6 +294,8 @@ def apply_correction(table: BRDFTable, floor: np.ndarray, x: np.ndarray, body_ti
     values = table.values - floor.astype(np.float32)
     values *= phi[:, :, None, :]
     values += c_new.astype(np.float32)
+    if added is not None:
+        values += basis.lobe_factor(added, wl).astype(np.float32)[:, :, None, :]
     np.maximum(values, 0.0, out=values)
     return BRDFTable(values, wl, table.channels, dict(table.metadata))
 
