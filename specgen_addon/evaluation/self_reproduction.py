@@ -80,13 +80,14 @@ def study_one(name: str, brdf, lighting, weights=None, novel_envs: Sequence[str]
 
 def run_study(items: Sequence[tuple[str, Any]], lightings: Sequence, weights=None,
               novel_envs: Sequence[str] = (), progress: Callable[[float], None] | None = None,
-              log: Callable[[str], None] = print) -> list[dict[str, Any]]:
-    """Rows for every (material, lighting); novel lighting is scored for the first lighting only."""
+              log: Callable[[str], None] = print, novel: bool = True) -> list[dict[str, Any]]:
+    """Rows for every (material, lighting); novel lighting (if ``novel``) is scored for the first
+    lighting only."""
     rows = []
     total = len(items) * len(lightings)
     for i, (name, brdf) in enumerate(items):
         for k, light in enumerate(lightings):
-            row = study_one(name, brdf, light, weights, novel_envs, novel=(k == 0))
+            row = study_one(name, brdf, light, weights, novel_envs, novel=novel and k == 0)
             rows.append(row)
             log(f"{name:<28} {light.label:<34} self {row['self_psnr_network']:6.2f} → "
                 f"{row['self_psnr_refined']:6.2f} dB  ΔE {_f(row['self_de_network'])} → "
