@@ -8,7 +8,7 @@ and the table refined under each setting; spectral PSNR (20 bands) against the t
 under the held-out map ``courtyard`` and the protocol's distant lights, as table (f) of
 docs/results_photo_only.md scores SpecGen. Settings: the body prior (``network``: the network's
 body spectrum, tinted; ``otsu2018``: a natural reflectance of the body's colour, the default) ×
-smoothness (0.01, the old default; 3, the new). See docs/refinement.md.
+smoothness (0.01, the old default; 3, the new) × the added angular term. See docs/refinement.md.
 """
 
 from __future__ import annotations
@@ -26,8 +26,10 @@ sys.path.insert(0, str(REPO))
 
 from bench.machine import describe_machine  # noqa: E402
 
-SETTINGS = {"network body, smooth 0.01": ("network", 0.01), "network body, smooth 3": ("network", 3.0),
-            "otsu2018 body, smooth 3 (default)": ("otsu2018", 3.0)}
+SETTINGS = {"network body, smooth 0.01, no added term (old)": ("network", 0.01, False),
+            "network body, smooth 3": ("network", 3.0, False),
+            "otsu2018 body, smooth 3": ("otsu2018", 3.0, False),
+            "otsu2018 body, smooth 3, added term (default)": ("otsu2018", 3.0, True)}
 ROLES = ("env_unseen1", "distant")
 
 
@@ -56,8 +58,8 @@ def main() -> int:
         table = tables.generate_from_sphere(m, None, h.wl)
         row = {"material": m.name, "kind": m.kind, "source": protocol.spectrum_source(m)}
         candidates = {"network alone": table}
-        for label, (prior, smooth) in SETTINGS.items():
-            opts = RefineOptions(clip_level=None, body_prior=prior, smooth=smooth)
+        for label, (prior, smooth, additive) in SETTINGS.items():
+            opts = RefineOptions(clip_level=None, body_prior=prior, smooth=smooth, additive=additive)
             candidates[label] = refine_brdf(table, photo, options=opts).table
         for label, t in candidates.items():
             scores = []
