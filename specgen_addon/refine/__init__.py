@@ -27,7 +27,7 @@ from __future__ import annotations
 
 import math
 import time
-from dataclasses import dataclass, field
+from dataclasses import dataclass, field, replace
 from typing import Callable
 
 import numpy as np
@@ -48,6 +48,10 @@ CancelFn = Callable[[], bool]
 
 #: Self-reproduction below this (dB) means the lighting does not explain the photo: warn.
 WARN_PSNR_DB = 30.0
+#: Self-reproduction (dB) below which the smoothness is relaxed to :data:`RELAXED_SMOOTH` and the
+#: better-reproducing of the two corrections is kept (issue 10's target is 40 dB).
+RELAX_BELOW_DB = 42.0
+RELAXED_SMOOTH = 0.01
 #: Photo values at or above this fraction of the maximum 8-bit level count as clipped.
 CLIP_LEVEL = 0.995
 
@@ -188,10 +192,10 @@ def refine_brdf(table: BRDFTable, photo: np.ndarray, lighting=None, options: Ref
         a_lobe = np.concatenate([a_lobe, a_add.reshape(b.shape[0], 3, -1)], axis=2)
     keep = ~clipped
 
-    def solve(body: np.ndarray) -> np.ndarray:
+    def solve(body: np.ndarray, opts: RefineOptions = options) -> np.ndarray:
         a_body = op.lambert_design(body, s_hats)                      # y: tint of the body
         design = np.concatenate([a_lobe, a_body, a_lamb], axis=2)     # (P, 3, K)
-        return _solve_correction(design[keep], b[keep], n_lobe, nl, level, basis, options)
+        return _solve_correction(design[keep], b[keep], n_lobe, nl, level, basis, opts)
 
     n_all = a_lobe.shape[2]                                           # lobe x, then added u
     theta = solve(floor)
@@ -220,11 +224,28 @@ def refine_brdf(table: BRDFTable, photo: np.ndarray, lighting=None, options: Ref
         progress(0.8)
     after_img = render_under(refined, scene, exposure)
     if progress is not None:
-        progress(0.98)
-    if options.clip_level is not None:  # an 8/16-bit photo: the camera clipped at full scale
-        before_img, after_img = np.minimum(before_img, 1.0), np.minimum(after_img, 1.0)
+        progress(0.9)
+
+    def clip(img: np.ndarray) -> np.ndarray:   # an 8/16-bit photo: the camera clipped at full scale
+        return img if options.clip_level is None else np.minimum(img, 1.0)
+
+    before_img, after_img = clip(before_img), clip(after_img)
     m_before = reproduction(b, op.observe(before_img))
     m_after = reproduction(b, op.observe(after_img))
+    if m_after.psnr_db < RELAX_BELOW_DB and options.smooth > RELAXED_SMOOTH:
+        # the smooth correction does not explain the photo: the photo wins, relax the smoothness
+        theta_r = solve(body, replace(options, smooth=RELAXED_SMOOTH))
+        relaxed = apply_correction(table, floor, theta_r[:n_lobe], theta_r[n_all:n_all + nl],
+                                   theta_r[n_all + nl:], basis, body=body,
+                                   added=theta_r[n_lobe:n_all] if options.additive else None)
+        relaxed_img = clip(render_under(relaxed, scene, exposure))
+        m_relaxed = reproduction(b, op.observe(relaxed_img))
+        if m_relaxed.psnr_db > m_after.psnr_db:
+            theta, refined, after_img, m_after = theta_r, relaxed, relaxed_img, m_relaxed
+            x, yb, zl = theta[:n_lobe], theta[n_all:n_all + nl], theta[n_all + nl:]
+            u = theta[n_lobe:n_all] if options.additive else None
+    if progress is not None:
+        progress(0.98)
     improved = m_after.psnr_db >= m_before.psnr_db
     if not improved:
         warnings.append(f"refinement did not improve on the network ({m_after.psnr_db:.1f} dB vs "
