@@ -37,6 +37,10 @@ def main() -> int:
     ap = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
     ap.add_argument("--split", choices=("val", "test"), default="val")
     ap.add_argument("--count", type=int, default=10)
+    ap.add_argument("--roles", nargs="+", default=list(ROLES),
+                    help="paper-tables scene roles (default: %(default)s; env_unseen2 is the 'interior' map)")
+    ap.add_argument("--default-only", action="store_true", help="score only the network and the default refinement")
+    ap.add_argument("--cache", type=Path, default=None, help="paper-tables cache to reuse ground-truth renders from")
     ap.add_argument("--json", type=Path, default=None)
     args = ap.parse_args()
     if args.count < 1:
@@ -50,7 +54,8 @@ def main() -> int:
 
     mats = [m for m in generate_corpus(protocol.CORPUS_SIZE, protocol.CORPUS_SEED)
             if m.split == args.split][:args.count]
-    h = tables.Harness(tables.Settings(), cache_root() / "refine-priors", log=lambda s: None)
+    h = tables.Harness(tables.Settings(), args.cache or cache_root() / "refine-priors", log=lambda s: None)
+    settings = {k: v for k, v in SETTINGS.items() if not args.default_only or "(default)" in k}
     rows = []
     t0 = time.perf_counter()
     for m in mats:
@@ -58,22 +63,22 @@ def main() -> int:
         table = tables.generate_from_sphere(m, None, h.wl)
         row = {"material": m.name, "kind": m.kind, "source": protocol.spectrum_source(m)}
         candidates = {"network alone": table}
-        for label, (prior, smooth, additive) in SETTINGS.items():
+        for label, (prior, smooth, additive) in settings.items():
             opts = RefineOptions(clip_level=None, body_prior=prior, smooth=smooth, additive=additive)
             candidates[label] = refine_brdf(table, photo, options=opts).table
         for label, t in candidates.items():
             scores = []
-            for role in ROLES:
+            for role in args.roles:
                 gt = h.ground_truth(m, role)
                 scores.append(tables.score(gt.spectral, h._render(t, role).spectral, gt.mask)["psnr_mean"])
             row[label] = scores
         rows.append(row)
-        print(f"{m.name} {m.kind:<16} " + "  ".join(f"{k}: {v[0]:.2f}/{v[1]:.2f}" for k, v in row.items()
+        print(f"{m.name} {m.kind:<16} " + "  ".join(f"{k}: " + "/".join(f"{x:.2f}" for x in v) for k, v in row.items()
                                                     if isinstance(v, list)), flush=True)
-    labels = ["network alone", *SETTINGS]
+    labels = ["network alone", *settings]
     summary = {k: float(np.mean([r[k] for r in rows])) for k in labels}
     print(f"\n{describe_machine()}; split {args.split}, {len(rows)} materials, "
-          f"{time.perf_counter() - t0:.0f} s; mean spectral PSNR (courtyard and distant lights):")
+          f"{time.perf_counter() - t0:.0f} s; mean spectral PSNR over {', '.join(args.roles)}:")
     for k, v in summary.items():
         print(f"  {k:<36} {v:.2f} dB")
     if args.json:
