@@ -60,14 +60,16 @@ CLIP_LEVEL = 0.995
 class RefineOptions:
     """Knobs of the refinement (defaults are the shipped behaviour).
 
-    ``additive`` adds the angular term ``u`` (:func:`apply_correction`), which gives a shape to
-    near-Lambertian tables that the multiplicative lobe correction cannot scale. ``noise`` is σ as a fraction of the photo's level; ``prior`` the pull towards the network
+    ``noise`` is σ as a fraction of the photo's level; ``prior`` the pull towards the network
     (relative to each coefficient's data weight); ``smooth`` the smoothness between neighbouring
     knots (3: chosen on the validation split, docs/refinement.md); ``body_prior`` the spectral
     shape of the diffuse body: ``"otsu2018"`` (a natural reflectance of the photo's body colour,
-    :mod:`.body`) or ``"network"`` (the network's own body spectrum, tinted); ``clip_level`` marks saturated pixels of an 8/16-bit photo (values in [0, 1]): they are
-    left out of the fit, and renders are clipped at 1 like the photo before they are scored
-    (``None``: a linear EXR photo, nothing is clipped).
+    :mod:`.body`) or ``"network"`` (the network's own body spectrum, tinted); ``additive`` adds
+    the angular term ``u`` (:func:`apply_correction`), which gives a shape to near-Lambertian
+    tables that the multiplicative lobe correction cannot scale; ``clip_level`` marks saturated
+    pixels of an 8/16-bit photo (values in [0, 1]): they are left out of the fit, and renders are
+    clipped at 1 like the photo before they are scored (``None``: a linear EXR photo, nothing is
+    clipped).
     """
 
     basis: CorrectionBasis = field(default_factory=CorrectionBasis)
@@ -198,11 +200,21 @@ def refine_brdf(table: BRDFTable, photo: np.ndarray, lighting=None, options: Ref
         return _solve_correction(design[keep], b[keep], n_lobe, nl, level, basis, opts)
 
     n_all = a_lobe.shape[2]                                           # lobe x, then added u
+
+    def split(theta: np.ndarray) -> tuple[np.ndarray, np.ndarray | None, np.ndarray, np.ndarray]:
+        """θ → (lobe x, added u or None, body tint y, Lambertian z)."""
+        return (theta[:n_lobe], theta[n_lobe:n_all] if options.additive else None,
+                theta[n_all:n_all + nl], theta[n_all + nl:])
+
+    def corrected(theta: np.ndarray, body: np.ndarray) -> BRDFTable:
+        x, u, yb, zl = split(theta)
+        return apply_correction(table, floor, x, yb, zl, basis, body=body, added=u)
+
     theta = solve(floor)
     body = floor
     if options.body_prior == "otsu2018" and has_separate_body(table.values, floor, wl):
-        coloured = floor * (s_hats @ theta[n_all:n_all + nl]) + (s_hats @ theta[n_all + nl:]) / np.pi
-        natural = natural_body(coloured, wl)
+        _, _, yb, zl = split(theta)
+        natural = natural_body(floor * (s_hats @ yb) + (s_hats @ zl) / np.pi, wl)
         if natural is not None:
             body = natural
             theta = solve(body)
@@ -210,11 +222,7 @@ def refine_brdf(table: BRDFTable, photo: np.ndarray, lighting=None, options: Ref
     if progress is not None:
         progress(0.65)
 
-    x = theta[:n_lobe]
-    u = theta[n_lobe:n_all] if options.additive else None
-    yb = theta[n_all:n_all + nl]
-    zl = theta[n_all + nl:]
-    refined = apply_correction(table, floor, x, yb, zl, basis, body=body, added=u)
+    refined = corrected(theta, body)
     if options.energy_check:
         warnings.extend(_energy_warnings(table, refined))
     check_cancel()
@@ -235,15 +243,12 @@ def refine_brdf(table: BRDFTable, photo: np.ndarray, lighting=None, options: Ref
     if m_after.psnr_db < RELAX_BELOW_DB and options.smooth > RELAXED_SMOOTH:
         # the smooth correction does not explain the photo: the photo wins, relax the smoothness
         theta_r = solve(body, replace(options, smooth=RELAXED_SMOOTH))
-        relaxed = apply_correction(table, floor, theta_r[:n_lobe], theta_r[n_all:n_all + nl],
-                                   theta_r[n_all + nl:], basis, body=body,
-                                   added=theta_r[n_lobe:n_all] if options.additive else None)
+        relaxed = corrected(theta_r, body)
         relaxed_img = clip(render_under(relaxed, scene, exposure))
         m_relaxed = reproduction(b, op.observe(relaxed_img))
         if m_relaxed.psnr_db > m_after.psnr_db:
             theta, refined, after_img, m_after = theta_r, relaxed, relaxed_img, m_relaxed
-            x, yb, zl = theta[:n_lobe], theta[n_all:n_all + nl], theta[n_all + nl:]
-            u = theta[n_lobe:n_all] if options.additive else None
+    x, u, yb, zl = split(theta)
     if progress is not None:
         progress(0.98)
     improved = m_after.psnr_db >= m_before.psnr_db
@@ -288,13 +293,12 @@ def _solve_correction(design: np.ndarray, photo: np.ndarray, n_lobe: int, nl: in
     gram[np.diag_indices_from(gram)] += ridge
     rhs += ridge * theta0
     # smoothness between neighbouring θh and θd knots of the lobe correction
+    # (and of the added term), each scaled by its own block's median data weight
     smooth = _smoothness(basis)
-    scale_s = options.smooth * max(float(np.median(diag[:n_lobe])), 1e-12)
-    gram[:n_lobe, :n_lobe] += scale_s * smooth.T @ smooth
-    if n_add:
-        add = slice(n_lobe, n_lobe + n_add)
-        scale_a = options.smooth * max(float(np.median(diag[add])), 1e-12)
-        gram[add, add] += scale_a * smooth.T @ smooth
+    blocks = [slice(0, n_lobe)] + ([slice(n_lobe, n_lobe + n_add)] if n_add else [])
+    for block in blocks:
+        scale = options.smooth * max(float(np.median(diag[block])), 1e-12)
+        gram[block, block] += scale * smooth.T @ smooth
     return nonneg_ridge(gram, rhs)
 
 
