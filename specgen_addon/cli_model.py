@@ -132,6 +132,11 @@ def run_train(args: argparse.Namespace) -> int:
     if args.brdf_dir:
         over["brdf_dirs"] = list(tcfg.brdf_dirs) + [str(d) for d in args.brdf_dir]
     tcfg = dataclasses.replace(tcfg, **over).validate()
+    if tcfg.init_weights is not None and not args.resume:  # before the input renders, not after
+        from .model.grow import can_grow
+
+        if not can_grow(load_weights(tcfg.init_weights).cfg, mcfg):
+            raise SpecGenError(f"{tcfg.init_weights}: weights were made with a different model config")
     out: Path = args.out
     if out.exists() and not out.is_dir():
         raise SpecGenError(f"{out}: exists and is not a directory")

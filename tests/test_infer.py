@@ -36,9 +36,12 @@ def small_weights(tmp_path, **kw):
     return save_weights(model, tmp_path / f"w_{kw.get('fusion', 'aff')}.pt"), model
 
 
-@pytest.mark.parametrize("fusion", ["aff", "hadamard"])
-def test_fast_grid_equals_naive_per_query_evaluation(tmp_path, fusion):
-    path, model = small_weights(tmp_path, fusion=fusion)
+@pytest.mark.parametrize("fusion,knots", [("aff", 1), ("aff", 4), ("hadamard", 4)])
+def test_fast_grid_equals_naive_per_query_evaluation(tmp_path, fusion, knots):
+    path, model = small_weights(tmp_path, fusion=fusion, spectral_code_knots=knots)
+    if knots > 1:  # knots that differ, so the spectral code really varies along the angle axes
+        torch.nn.init.normal_(model.generator.spectral.weight, std=0.3)
+        path = save_weights(model, path)
     be = infer.get_backend(path, "torch")
     x = np.random.default_rng(0).random((1, 3, 32, 32)).astype(np.float32)
     u_lam = lambda_coords(model, BANDS).numpy()

@@ -217,3 +217,29 @@ def test_component_stacks_resample_like_a_user_image():
     ours = resample_stack(stack, 64).astype(np.float32)
     ref = np.stack([resample_square(im, 64) for im in stack])
     np.testing.assert_allclose(ours, ref, rtol=1e-3, atol=1e-3)  # float16 storage
+
+
+def test_a_run_warm_starts_from_one_knot_weights_into_a_knotted_model(tmp_path):
+    spec, rgb, val = sets()
+    one = Config(**{**SMALL, "spectral_code_knots": 1})
+    first = train(one, TrainConfig(**{**FAST, "steps": 3}), spec, rgb, val, tmp_path / "a", show_progress=False)
+    knotted = Config(**{**SMALL, "spectral_code_knots": 4})
+    tcfg = TrainConfig(**{**FAST, "steps": 2, "init_weights": str(first.weights)})
+    grown = train(knotted, tcfg, spec, rgb, val, tmp_path / "b", show_progress=False)
+    assert load_weights(grown.weights).cfg.spectral_code_knots == 4
+    # the grown network starts where the old one ended: its first loss is the old one's loss there
+    again = train(one, dataclasses.replace(tcfg, steps=1), spec, rgb, val, tmp_path / "c", show_progress=False)
+    assert grown.history[0]["loss"] == pytest.approx(again.history[0]["loss"], rel=1e-5)
+
+
+def test_train_command_refuses_weights_of_another_model_before_any_work(tmp_path, repo_dir):
+    from specgen_addon.cli import main as cli_main
+
+    torch.manual_seed(0)
+    from specgen_addon.model import SpecGen, save_weights
+
+    other = save_weights(SpecGen(Config(**SMALL)), tmp_path / "other.pt")
+    path = tmp_path / "cfg.json"
+    path.write_text(json.dumps({"model": {}, "train": {"init_weights": str(other), "steps": 1}}))
+    assert cli_main(["train", "--config", str(path), "--out", str(tmp_path / "run"), "--quiet"]) == 2
+    assert not (tmp_path / "run").exists()

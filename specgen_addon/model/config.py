@@ -41,6 +41,11 @@ class Config:
     res_lambda: int = 16
     # per-material λ profile added to each spectral plane straight from the latent (see planes.py)
     spectral_code: bool = True
+    #: Knots of that profile along each spectral plane's angle axis (θh, θd or φd), interpolated
+    #: linearly between them: 1 is one profile per plane, constant over angle (weights made
+    #: before the sixth session); more let the latent colour the highlight apart from the body and
+    #: move a thin film's hue with θd.
+    spectral_code_knots: int = 6
     lambda_min_nm: float = 380.0
     lambda_max_nm: float = 780.0
     # features and fusion
@@ -64,6 +69,8 @@ class Config:
             raise SpecGenError("mlp_hidden needs two widths (a three-layer MLP)")
         if not self.lambda_min_nm < self.lambda_max_nm:
             raise SpecGenError("lambda_min_nm must be below lambda_max_nm")
+        if not (isinstance(self.spectral_code_knots, int) and self.spectral_code_knots >= 1):
+            raise SpecGenError(f"spectral_code_knots must be an integer ≥ 1, got {self.spectral_code_knots!r}")
         if self.image_size % (2 ** len(self.encoder_channels)) != 0:
             raise SpecGenError("image_size must be divisible by 2**len(encoder_channels)")
 

@@ -73,6 +73,9 @@ class PlaneGenerator(nn.Module):
     ``(C, 1, res_lambda)`` to each spectral plane: convolutions are translation-equivariant, so
     without it the material's spectrum has to be placed along the λ axis by the seed map alone
     (a first model trained that way predicted nearly the same spectral shape for every material).
+    With ``spectral_code_knots`` A > 1 the profile is given at A knots along the plane's angle axis
+    ``(C, A, res_lambda)`` and interpolated linearly to its rows, so the highlight (small θh) can
+    have another colour than the body, and a thin film's spectrum can change with θd.
     """
 
     def __init__(self, cfg: Config):
@@ -93,7 +96,8 @@ class PlaneGenerator(nn.Module):
             for name in PLANE_NAMES})
         self.spectral = None
         if cfg.spectral_code:
-            self.spectral = nn.Linear(cfg.latent_dim + 3, 3 * cfg.feature_dim * cfg.res_lambda)
+            self.spectral = nn.Linear(cfg.latent_dim + 3,
+                                      3 * cfg.feature_dim * cfg.spectral_code_knots * cfg.res_lambda)
             nn.init.normal_(self.spectral.weight, std=0.002)
             nn.init.zeros_(self.spectral.bias)
         base_mean = 1.0 if cfg.fusion == "hadamard" else 0.0
@@ -115,9 +119,12 @@ class PlaneGenerator(nn.Module):
             if colour is None:
                 colour = latent.new_zeros(latent.shape[0], 3)
             code = self.spectral(torch.cat([latent, colour], dim=1))
-            code = code.view(-1, 3, cfg.feature_dim, 1, cfg.res_lambda)
+            code = code.view(-1, 3, cfg.feature_dim, cfg.spectral_code_knots, cfg.res_lambda)
             for k, name in enumerate(("e1", "e2", "e3")):
-                planes[name] = planes[name] + code[:, k]
+                ck = code[:, k]
+                if cfg.spectral_code_knots > 1:  # knots -> the plane's rows, linearly
+                    ck = F.interpolate(ck, size=cfg.plane_shapes[name], mode="bilinear", align_corners=True)
+                planes[name] = planes[name] + ck
         return planes
 
 

@@ -101,8 +101,9 @@ def load_weights(path: str | Path | None = None, expect: Config | None = None) -
     if payload.get("version") != WEIGHTS_VERSION:
         raise WeightsError(f"{path}: unsupported weights version {payload.get('version')!r}")
     try:
-        # files written before the per-material spectral code existed did not have one
-        cfg = Config.from_dict({"spectral_code": False, **payload["config"]})
+        # files written before the per-material spectral code existed did not have one, and
+        # files written before its angle knots had one knot
+        cfg = Config.from_dict({"spectral_code": False, "spectral_code_knots": 1, **payload["config"]})
     except Exception as exc:
         raise WeightsError(f"{path}: bad model config in weights ({exc})") from None
     if expect is not None and cfg != expect:

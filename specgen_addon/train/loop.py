@@ -278,10 +278,12 @@ def train(mcfg: Config, tcfg: TrainConfig, spectral: MaterialSet, rgb: MaterialS
     if tcfg.init_weights is not None and not (resume and (out / "checkpoint.pt").is_file()):
         from ..model import load_weights
 
+        from ..model.grow import can_grow, grow_state_dict
+
         init = load_weights(tcfg.init_weights)
-        if init.cfg.to_dict() != mcfg.to_dict():
+        if not can_grow(init.cfg, mcfg):
             raise SpecGenError(f"{tcfg.init_weights}: weights were made with a different model config")
-        model.load_state_dict({k: v.float() for k, v in init.state_dict().items()})
+        model.load_state_dict(grow_state_dict(init.state_dict(), init.cfg, mcfg))
     model.to(device)  # before the optimiser, so its state lives there too
     opt = torch.optim.Adam(model.parameters(), lr=tcfg.lr, betas=(0.9, 0.999))
     history: list[dict[str, float]] = []

@@ -1,0 +1,45 @@
+"""Warm starts across a model change: carry trained weights into a larger configuration.
+
+A training run may start from weights made for a smaller :class:`~.config.Config` when the two
+differ only in ``spectral_code_knots`` (the per-material spectral code's knots along each spectral
+plane's angle axis). The code's linear map is resampled along its knot axis; from one knot this is
+exact (every knot starts as the old angle-constant profile, so the grown network computes the same
+function as the old one) and training then moves the knots apart.
+"""
+
+from __future__ import annotations
+
+import dataclasses
+
+import torch
+import torch.nn.functional as F
+
+from ..errors import SpecGenError
+from .config import Config
+
+#: Config fields a warm start may change.
+GROWABLE = ("spectral_code_knots",)
+
+
+def can_grow(old: Config, new: Config) -> bool:
+    """Whether weights of ``old`` can start a run of ``new`` (equal, or differing only in GROWABLE)."""
+    a, b = dataclasses.asdict(old), dataclasses.asdict(new)
+    return all(a[k] == b[k] for k in a if k not in GROWABLE) and old.spectral_code == new.spectral_code
+
+
+def grow_state_dict(state: dict[str, torch.Tensor], old: Config, new: Config) -> dict[str, torch.Tensor]:
+    """``state`` (a state dict of a ``old`` model) as a state dict for a ``new`` model."""
+    if not can_grow(old, new):
+        changed = sorted(k for k, v in dataclasses.asdict(old).items() if dataclasses.asdict(new)[k] != v)
+        raise SpecGenError(f"cannot warm-start across a change of {', '.join(changed)} "
+                           f"(only {', '.join(GROWABLE)} may differ)")
+    out = {k: v.float().clone() for k, v in state.items()}
+    if old.spectral_code and old.spectral_code_knots != new.spectral_code_knots:
+        c, lam = old.feature_dim, old.res_lambda
+        for name in ("generator.spectral.weight", "generator.spectral.bias"):
+            t = out[name]
+            tail = t.shape[1:]                                       # (in,) for the weight, () for the bias
+            t = t.reshape(3 * c, old.spectral_code_knots, lam, -1).permute(0, 3, 1, 2)  # (3C, in, A, L)
+            t = F.interpolate(t, size=(new.spectral_code_knots, lam), mode="bilinear", align_corners=True)
+            out[name] = t.permute(0, 2, 3, 1).reshape(-1, *tail)
+    return out

@@ -1,0 +1,98 @@
+"""The spectral code's angle knots, and warm starts that grow a one-knot model into a knotted one."""
+
+from __future__ import annotations
+
+import dataclasses
+import math
+
+import pytest
+import torch
+
+from specgen_addon.errors import SpecGenError
+from specgen_addon.model import Config, SpecGen, load_weights, save_weights
+from specgen_addon.model.grow import can_grow, grow_state_dict
+
+SMALL = dict(image_size=32, encoder_channels=(8, 16), latent_dim=32, decoder_seed_hw=(4, 4),
+             decoder_channels=(16, 8), head_channels=8, res_theta_h=8, res_theta_d=8, res_phi_d=12,
+             res_lambda=6, feature_dim=16, aff_map_hw=(4, 4), mlp_hidden=(16, 16))
+
+
+def queries(n: int = 300, seed: int = 0):
+    g = torch.Generator().manual_seed(seed)
+    return (torch.rand(2, n, generator=g) * math.pi / 2, torch.rand(2, n, generator=g) * math.pi / 2,
+            torch.rand(2, n, generator=g) * math.pi, 380 + 400 * torch.rand(2, n, generator=g))
+
+
+def lively(model: SpecGen) -> SpecGen:
+    """Spectral-code weights large enough that the code matters to the output."""
+    torch.nn.init.normal_(model.generator.spectral.weight, std=0.3)
+    torch.nn.init.normal_(model.generator.spectral.bias, std=0.3)
+    return model.eval()
+
+
+def code_added(knots: int) -> tuple[dict[str, torch.Tensor], torch.Tensor]:
+    """What the spectral code adds to each spectral plane of a lively model, and the raw code
+    ``(1, 3 planes, C, knots, res_lambda)``."""
+    torch.manual_seed(0)
+    model = lively(SpecGen(Config(**SMALL, spectral_code_knots=knots)))
+    image = torch.rand(1, 3, 32, 32)
+    with torch.no_grad():
+        with_code = model.planes(image)
+        latent, colour = model.encoder(image), model.encoder.colour(image)
+        code = model.generator.spectral(torch.cat([latent, colour], 1)).view(1, 3, 16, knots, 6)
+        model.generator.spectral = None
+        without = model.planes(image)
+    return {n: with_code[n] - without[n] for n in ("e1", "e2", "e3")}, code
+
+
+def test_one_knot_profile_is_constant_along_each_angle_axis():
+    added, _ = code_added(1)
+    for a in added.values():
+        assert torch.allclose(a, a[:, :, :1].expand_as(a), atol=1e-6)
+
+
+def test_knotted_profile_varies_along_the_angle_axis_through_its_knots():
+    planes, code = code_added(3)
+    added = planes["e2"]                                                     # rows: 8 θd texels
+    assert added.std(dim=2).mean() > 0.05                                    # not angle-constant
+    assert torch.allclose(added[:, :, 0], code[:, 1, :, 0], atol=1e-5)      # first knot at θd = 0
+    assert torch.allclose(added[:, :, -1], code[:, 1, :, -1], atol=1e-5)    # last knot at θd = π/2
+
+
+def test_growing_one_knot_weights_keeps_the_network_function_exactly():
+    torch.manual_seed(0)
+    old = lively(SpecGen(Config(**SMALL, spectral_code_knots=1)))
+    new_cfg = Config(**SMALL, spectral_code_knots=5)
+    new = SpecGen(new_cfg)
+    new.load_state_dict(grow_state_dict(old.state_dict(), old.cfg, new_cfg))
+    new.eval()
+    image = torch.rand(2, 3, 32, 32)
+    th, td, pd, lam = queries()
+    with torch.no_grad():
+        assert torch.allclose(old(image, th, td, pd, lam), new(image, th, td, pd, lam), atol=1e-5)
+        assert torch.allclose(old(image, th, td, pd, None), new(image, th, td, pd, None), atol=1e-5)
+
+
+def test_warm_start_refuses_any_other_change_by_name():
+    old = Config(**SMALL, spectral_code_knots=1)
+    new = dataclasses.replace(old, spectral_code_knots=4, mlp_hidden=(8, 8))
+    assert not can_grow(old, new)
+    assert can_grow(old, dataclasses.replace(old, spectral_code_knots=4))
+    with pytest.raises(SpecGenError, match="mlp_hidden"):
+        grow_state_dict(SpecGen(old).state_dict(), old, new)
+
+
+def test_weights_written_before_the_knots_load_as_one_knot(tmp_path):
+    torch.manual_seed(0)
+    model = SpecGen(Config(**SMALL, spectral_code_knots=1))
+    path = save_weights(model, tmp_path / "old.pt")
+    payload = torch.load(path, weights_only=True)
+    del payload["config"]["spectral_code_knots"]                               # as older files were
+    torch.save(payload, path)
+    assert load_weights(path).cfg.spectral_code_knots == 1
+
+
+def test_bad_knot_counts_are_refused():
+    for bad in (0, -2, 2.5, "3"):
+        with pytest.raises(SpecGenError, match="spectral_code_knots"):
+            Config(**SMALL, spectral_code_knots=bad)
