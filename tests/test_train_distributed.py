@@ -48,6 +48,20 @@ def test_shards_are_disjoint_and_their_weighted_losses_average_to_the_batch_loss
     assert np.isclose(np.mean(tv_w), 1.0)
 
 
+@pytest.mark.parametrize("world", [2, 3])
+def test_a_rank_evaluating_only_its_own_targets_gets_the_same_shard(world):
+    spec, _, _ = sets(5)
+    whole = _batch(5)
+    for rank in range(world):
+        ctx = ddp.DistContext(rank, world, True)
+        lean = make_batch(spec.materials, [im[0] for im in spec.images], np.random.default_rng(3), 64, 4,
+                          True, np.linspace(380, 780, 41), evaluate=ddp.shard_rows(5, ctx))
+        a, b = ddp.shard(whole, ctx), ddp.shard(lean, ctx)
+        for name in ("target", "valid", "theta_h", "theta_d", "phi_d", "wavelength_nm", "images"):
+            assert np.array_equal(getattr(a[0], name), getattr(b[0], name)), name
+        assert a[1:] == b[1:]
+
+
 def test_more_ranks_than_materials_per_step_is_refused():
     with pytest.raises(SpecGenError, match="rgb_materials_per_step = 1 cannot be shared by 2 ranks"):
         ddp.check_shardable({"spectral_materials_per_step": 4, "rgb_materials_per_step": 1},

@@ -80,14 +80,25 @@ def material_targets(mat: TrainingMaterial, theta_h: np.ndarray, theta_d: np.nda
 
 def make_batch(materials: Sequence[TrainingMaterial], images: Sequence[np.ndarray], rng: np.random.Generator,
                n_angles: int, n_wavelengths: int, spectral: bool,
-               wavelength_grid_nm: np.ndarray, mu: float = 255.0) -> Batch:
+               wavelength_grid_nm: np.ndarray, mu: float = 255.0,
+               evaluate: Sequence[int] | None = None) -> Batch:
     """Sample ``n_angles`` angles per material; spectral materials are evaluated on
-    ``wavelength_grid_nm`` and each angle keeps ``n_wavelengths`` of those bands at random."""
+    ``wavelength_grid_nm`` and each angle keeps ``n_wavelengths`` of those bands at random.
+
+    ``evaluate``: indices of the materials whose BRDF targets are computed (a data-parallel rank's
+    share); the others get zero targets. The random draws are the same either way.
+    """
     ths, tds, pds, lams, tgts, vals = [], [], [], [], [], []
     grid = np.asarray(wavelength_grid_nm, dtype=np.float64)
-    for mat in materials:
+    wanted = None if evaluate is None else set(int(i) for i in evaluate)
+    for i, mat in enumerate(materials):
         th, td, pd = sample_angles(rng, n_angles)
-        tgt, valid = material_targets(mat, th, td, pd, grid if spectral else None, mu)
+        if wanted is None or i in wanted:
+            tgt, valid = material_targets(mat, th, td, pd, grid if spectral else None, mu)
+        else:
+            wi, wo = io_from_half_diff(th, td, pd)
+            valid = (wi[:, 2] > 1e-6) & (wo[:, 2] > 1e-6)
+            tgt = np.zeros((n_angles, grid.size if spectral else 1))
         n_l = n_wavelengths if spectral else 1
         if spectral:
             cols = rng.integers(0, grid.size, size=(n_angles, n_l))

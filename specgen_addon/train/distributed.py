@@ -8,6 +8,10 @@ all-reduce averages — is exactly the single-process loss of the whole batch:
 * ``L_spec`` / ``L_RGB`` (masked means over points): ``W · n_valid(shard) / n_valid(batch)``;
 * ``L_TV`` (a mean over the batch's planes): ``W · B(shard) / B(batch)``;
 
+Only the BRDF targets of the rank's own shard are evaluated (the costly part of making a batch);
+the random stream is drawn for the whole batch all the same, so every shard is what a single
+process would make.
+
 with ``W`` the world size. So the gradients, the updates and the logged losses equal a
 single-process run of the same global batch up to float rounding; with ``W = 1`` (weights
 exactly 1) DDP training is plain :func:`~specgen_addon.train.loop.train`, bit for bit.
@@ -131,10 +135,15 @@ def check_shardable(counts: dict[str, int], ctx: DistContext) -> None:
                                f"use at least one material per rank (≥ {ctx.world_size})")
 
 
+def shard_rows(n_materials: int, ctx: DistContext) -> np.ndarray:
+    """Indices of this rank's contiguous share of a group of ``n_materials`` materials."""
+    return np.array_split(np.arange(n_materials), ctx.world_size)[ctx.rank]
+
+
 def shard(b: Batch, ctx: DistContext) -> tuple[Batch, float, float]:
     """This rank's contiguous slice of the batch's materials, with the weights of its masked MSE
     and of its TV term (module docstring)."""
-    rows = np.array_split(np.arange(b.images.shape[0]), ctx.world_size)[ctx.rank]
+    rows = shard_rows(b.images.shape[0], ctx)
     sl = slice(int(rows[0]), int(rows[-1]) + 1)
     part = Batch(**{f.name: (None if getattr(b, f.name) is None else getattr(b, f.name)[sl])
                     for f in dataclasses.fields(Batch)})

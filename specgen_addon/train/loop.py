@@ -231,8 +231,11 @@ def group_loss(model: SpecGen, b: Batch) -> tuple[torch.Tensor, torch.Tensor]:
 
 
 def make_step_batches(tcfg: TrainConfig, mcfg: Config, spectral: MaterialSet, rgb: MaterialSet,
-                      step: int) -> tuple[Batch | None, Batch | None]:
-    """The spectral and RGB batches of ``step``: a pure function of ``(seed, step)``."""
+                      step: int, dctx: ddp.DistContext | None = None) -> tuple[Batch | None, Batch | None]:
+    """The spectral and RGB batches of ``step``: a pure function of ``(seed, step)``.
+
+    With a data-parallel ``dctx`` only the rank's own materials get their targets evaluated.
+    """
     rng = np.random.default_rng([tcfg.seed, step])
     out: list[Batch | None] = []
     for mset, k, is_spec in ((spectral, tcfg.spectral_materials_per_step, True),
@@ -241,8 +244,9 @@ def make_step_batches(tcfg: TrainConfig, mcfg: Config, spectral: MaterialSet, rg
             out.append(None)
             continue
         mats, imgs = _draw(rng, mset, k, tcfg.canonical_fraction, tcfg.input_variants, tcfg.lighting)
+        mine = ddp.shard_rows(len(mats), dctx) if dctx is not None and dctx.parallel else None
         out.append(make_batch(mats, imgs, rng, tcfg.angles_per_material, tcfg.wavelengths_per_angle,
-                              is_spec, TARGET_WAVELENGTHS_NM, mcfg.mu))
+                              is_spec, TARGET_WAVELENGTHS_NM, mcfg.mu, evaluate=mine))
     return out[0], out[1]
 
 
@@ -328,7 +332,7 @@ def train(mcfg: Config, tcfg: TrainConfig, spectral: MaterialSet, rgb: MaterialS
             break
         for g in opt.param_groups:
             g["lr"] = lr_at(tcfg, step)
-        b_spec, b_rgb = make_step_batches(tcfg, mcfg, spectral, rgb, step)
+        b_spec, b_rgb = make_step_batches(tcfg, mcfg, spectral, rgb, step, dctx)
         model.train()
         opt.zero_grad(set_to_none=True)
         loss = torch.zeros((), device=device)
