@@ -106,24 +106,35 @@ class PlaneGenerator(nn.Module):
             for name, shape in cfg.plane_shapes.items()})
 
     def forward(self, latent: torch.Tensor, colour: torch.Tensor | None = None) -> dict[str, torch.Tensor]:
+        return self.planes_from(*self.trunk_and_code(latent, colour))
+
+    def trunk_and_code(self, latent: torch.Tensor, colour: torch.Tensor | None = None
+                       ) -> tuple[torch.Tensor, torch.Tensor | None]:
+        """The material-dependent inputs of the heads: the shared trunk map ``(B, c, h, w)`` and
+        the spectral code ``(B, 3, C, knots, res_lambda)`` (``None`` without ``spectral_code``)."""
         c0 = self.cfg.decoder_channels[0]
         h0, w0 = self.cfg.decoder_seed_hw
-        x = torch.relu(self.seed(latent)).view(-1, c0, h0, w0)
-        trunk = self.trunk(x)
+        trunk = self.trunk(torch.relu(self.seed(latent)).view(-1, c0, h0, w0))
+        if self.spectral is None:
+            return trunk, None
+        cfg = self.cfg
+        if colour is None:
+            colour = latent.new_zeros(latent.shape[0], 3)
+        code = self.spectral(torch.cat([latent, colour], dim=1))
+        return trunk, code.view(-1, 3, cfg.feature_dim, cfg.spectral_code_knots, cfg.res_lambda)
+
+    def planes_from(self, trunk: torch.Tensor, code: torch.Tensor | None) -> dict[str, torch.Tensor]:
+        """The six planes from the trunk map and the spectral code (see :meth:`trunk_and_code`)."""
         planes = {}
         for name, shape in self.cfg.plane_shapes.items():
             t = F.interpolate(trunk, size=shape, mode="bilinear", align_corners=True)
             planes[name] = self.static[name] + self.heads[name](t)
-        if self.spectral is not None:
-            cfg = self.cfg
-            if colour is None:
-                colour = latent.new_zeros(latent.shape[0], 3)
-            code = self.spectral(torch.cat([latent, colour], dim=1))
-            code = code.view(-1, 3, cfg.feature_dim, cfg.spectral_code_knots, cfg.res_lambda)
+        if code is not None:
             for k, name in enumerate(("e1", "e2", "e3")):
                 ck = code[:, k]
-                if cfg.spectral_code_knots > 1:  # knots -> the plane's rows, linearly
-                    ck = F.interpolate(ck, size=cfg.plane_shapes[name], mode="bilinear", align_corners=True)
+                if self.cfg.spectral_code_knots > 1:  # knots -> the plane's rows, linearly
+                    ck = F.interpolate(ck, size=self.cfg.plane_shapes[name], mode="bilinear",
+                                       align_corners=True)
                 planes[name] = planes[name] + ck
         return planes
 

@@ -2,7 +2,7 @@
 
 Target (issue 2, item 10): ≤ 5 s per file on the 2-core CPU-only machine.
 
-Usage: ``.venv/bin/python bench/tabulate.py [--repeat N] [--spectral] [FILE ...]``; without
+Usage: ``.venv/bin/python bench/tabulate_rgl.py [--repeat N] [--spectral] [FILE ...]``; without
 files it uses ../shared/data/rgl/*.bsdf beside the repository. ``--spectral`` also times a
 spectral file the script writes (the real felt's grid with 195 wavelengths, tabulated onto the
 default 21-band grid), since the real spectral files are not available here.
