@@ -96,3 +96,37 @@ def test_bad_knot_counts_are_refused():
     for bad in (0, -2, 2.5, "3"):
         with pytest.raises(SpecGenError, match="spectral_code_knots"):
             Config(**SMALL, spectral_code_knots=bad)
+
+
+def test_growing_residual_blocks_keeps_the_network_function_and_then_trains_them():
+    torch.manual_seed(0)
+    old = lively(SpecGen(Config(**SMALL, spectral_code_knots=1)))
+    new_cfg = Config(**SMALL, spectral_code_knots=3, latent_res_blocks=2, trunk_res_blocks=1)
+    new = SpecGen(new_cfg)
+    new.load_state_dict(grow_state_dict(old.state_dict(), old.cfg, new_cfg, fresh=new.state_dict()))
+    image = torch.rand(2, 3, 32, 32)
+    th, td, pd, lam = queries()
+    with torch.no_grad():
+        assert torch.allclose(old(image, th, td, pd, lam), new.eval()(image, th, td, pd, lam), atol=1e-5)
+    # the added blocks are not dead: their output layers get gradients
+    new.train()
+    new(image, th, td, pd, lam).pow(2).mean().backward()
+    assert new.encoder.res[1].body[2].weight.grad.abs().sum() > 0
+    assert new.generator.trunk[-1].body[2].weight.grad.abs().sum() > 0
+
+
+def test_residual_blocks_may_be_added_but_not_removed_and_need_the_fresh_weights():
+    small = Config(**SMALL, latent_res_blocks=1)
+    assert can_grow(small, dataclasses.replace(small, latent_res_blocks=3, trunk_res_blocks=2))
+    assert not can_grow(small, dataclasses.replace(small, latent_res_blocks=0))
+    with pytest.raises(SpecGenError, match="latent_res_blocks"):
+        grow_state_dict(SpecGen(small).state_dict(), small, dataclasses.replace(small, latent_res_blocks=0))
+    with pytest.raises(SpecGenError, match="fresh"):
+        grow_state_dict(SpecGen(small).state_dict(), small, dataclasses.replace(small, trunk_res_blocks=1))
+
+
+def test_bad_residual_block_counts_are_refused():
+    for name in ("latent_res_blocks", "trunk_res_blocks"):
+        for bad in (-1, 1.5, "2", True):
+            with pytest.raises(SpecGenError, match=name):
+                Config(**SMALL, **{name: bad})

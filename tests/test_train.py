@@ -171,6 +171,21 @@ def test_lighting_mix_draws_a_new_lighting_every_time():
     assert np.all(q == 1.0)  # clipped like an 8-bit image
 
 
+def test_lighting_mix_honours_the_configured_canonical_fraction():
+    from specgen_addon.train.lighting_mix import COMPONENTS, MODE_P, mix_lighting
+
+    stack = np.random.default_rng(0).uniform(0.0, 0.5, size=(len(COMPONENTS), 3, 8, 8)).astype(np.float16)
+
+    def canonical_share(**kw) -> float:
+        images = [mix_lighting(stack, np.random.default_rng([1, s]), **kw) for s in range(300)]
+        return sum(any(np.array_equal(im, stack[j].astype(np.float32)) for j in (0, 1)) for im in images) / 300
+
+    assert canonical_share(canonical_p=1.0) == 1.0
+    assert canonical_share(canonical_p=0.0) == 0.0
+    assert abs(canonical_share(canonical_p=0.8) - 0.8) < 0.08
+    assert abs(canonical_share() - MODE_P[0]) < 0.08
+
+
 @pytest.mark.parametrize("bad, message", [
     ({"steps": 0}, "steps must be an integer ≥ 1"),
     ({"seed": -1}, "seed must be an integer ≥ 0"),

@@ -46,6 +46,11 @@ class Config:
     #: before the sixth session); more let the latent colour the highlight apart from the body and
     #: move a thin film's hue with θd.
     spectral_code_knots: int = 6
+    #: Residual Linear–ReLU–Linear blocks on the latent (image -> latent capacity) and residual
+    #: 3×3 conv blocks at the end of the decoder's trunk; each starts as the identity, so weights
+    #: without them warm-start a model with them exactly (:mod:`.grow`). Default: none.
+    latent_res_blocks: int = 0
+    trunk_res_blocks: int = 0
     lambda_min_nm: float = 380.0
     lambda_max_nm: float = 780.0
     # features and fusion
@@ -71,6 +76,10 @@ class Config:
             raise SpecGenError("lambda_min_nm must be below lambda_max_nm")
         if not (isinstance(self.spectral_code_knots, int) and self.spectral_code_knots >= 1):
             raise SpecGenError(f"spectral_code_knots must be an integer ≥ 1, got {self.spectral_code_knots!r}")
+        for name in ("latent_res_blocks", "trunk_res_blocks"):
+            n = getattr(self, name)
+            if not (isinstance(n, int) and not isinstance(n, bool) and n >= 0):
+                raise SpecGenError(f"{name} must be an integer ≥ 0, got {n!r}")
         if self.image_size % (2 ** len(self.encoder_channels)) != 0:
             raise SpecGenError("image_size must be divisible by 2**len(encoder_channels)")
 

@@ -8,6 +8,7 @@ import torch
 from torch import nn
 
 from .config import Config
+from .residual import mlp_blocks
 
 
 class ImageEncoder(nn.Module):
@@ -16,7 +17,8 @@ class ImageEncoder(nn.Module):
     Input ``(B, 3, S, S)`` linear RGB in roughly [0, 1] (S = ``image_size``); the image is
     log-compressed first (``log1p(16·x)/log(17)``) so specular highlights do not dominate.
     Two extra coordinate channels (x, y in [-1, 1]) tell the convolutions where on the sphere
-    each pixel lies, i.e. which directions it saw.
+    each pixel lies, i.e. which directions it saw. ``latent_res_blocks`` residual MLP blocks
+    follow the linear layer.
     """
 
     def __init__(self, cfg: Config):
@@ -29,6 +31,7 @@ class ImageEncoder(nn.Module):
         self.convs = nn.Sequential(*layers)
         side = cfg.image_size // 2 ** len(cfg.encoder_channels)
         self.fc = nn.Linear(c_in * side * side, cfg.latent_dim)
+        self.res = mlp_blocks(cfg.latent_res_blocks, cfg.latent_dim)
         ys, xs = torch.meshgrid(torch.linspace(-1, 1, cfg.image_size),
                                 torch.linspace(-1, 1, cfg.image_size), indexing="ij")
         self.register_buffer("coords", torch.stack([xs, ys])[None], persistent=False)
@@ -45,4 +48,4 @@ class ImageEncoder(nn.Module):
     def forward(self, image: torch.Tensor) -> torch.Tensor:
         x = self.compress(image)
         x = torch.cat([x, self.coords.expand(x.shape[0], -1, -1, -1)], dim=1)
-        return torch.relu(self.fc(self.convs(x).flatten(1)))
+        return self.res(torch.relu(self.fc(self.convs(x).flatten(1))))

@@ -1,10 +1,16 @@
 """Warm starts across a model change: carry trained weights into a larger configuration.
 
 A training run may start from weights made for a smaller :class:`~.config.Config` when the two
-differ only in ``spectral_code_knots`` (the per-material spectral code's knots along each spectral
-plane's angle axis). The code's linear map is resampled along its knot axis; from one knot this is
-exact (every knot starts as the old angle-constant profile, so the grown network computes the same
-function as the old one) and training then moves the knots apart.
+differ only in the fields of :data:`GROWABLE`:
+
+* ``spectral_code_knots`` (the per-material spectral code's knots along each spectral plane's
+  angle axis): the code's linear map is resampled along its knot axis; from one knot this is
+  exact (every knot starts as the old angle-constant profile) and training then moves the knots
+  apart;
+* ``latent_res_blocks`` and ``trunk_res_blocks`` (more, never fewer): the added residual blocks
+  keep the new model's initial weights, which make them the identity (:mod:`.residual`).
+
+In both cases the grown network computes the same function as the old one.
 """
 
 from __future__ import annotations
@@ -18,21 +24,29 @@ from ..errors import SpecGenError
 from .config import Config
 
 #: Config fields a warm start may change.
-GROWABLE = ("spectral_code_knots",)
+GROWABLE = ("spectral_code_knots", "latent_res_blocks", "trunk_res_blocks")
+#: Of those, the counts of identity-initialised blocks, which may only grow.
+ADDED_BLOCKS = ("latent_res_blocks", "trunk_res_blocks")
 
 
 def can_grow(old: Config, new: Config) -> bool:
     """Whether weights of ``old`` can start a run of ``new`` (equal, or differing only in GROWABLE)."""
     a, b = dataclasses.asdict(old), dataclasses.asdict(new)
-    return all(a[k] == b[k] for k in a if k not in GROWABLE) and old.spectral_code == new.spectral_code
+    return (all(a[k] == b[k] for k in a if k not in GROWABLE) and old.spectral_code == new.spectral_code
+            and all(b[k] >= a[k] for k in ADDED_BLOCKS))
 
 
-def grow_state_dict(state: dict[str, torch.Tensor], old: Config, new: Config) -> dict[str, torch.Tensor]:
-    """``state`` (a state dict of a ``old`` model) as a state dict for a ``new`` model."""
+def grow_state_dict(state: dict[str, torch.Tensor], old: Config, new: Config,
+                    fresh: dict[str, torch.Tensor] | None = None) -> dict[str, torch.Tensor]:
+    """``state`` (a state dict of a ``old`` model) as a state dict for a ``new`` model.
+
+    ``fresh`` is a newly built ``new`` model's state dict; the added residual blocks take their
+    (identity) weights from it, so it is needed whenever ``new`` has more blocks than ``old``.
+    """
     if not can_grow(old, new):
         changed = sorted(k for k, v in dataclasses.asdict(old).items() if dataclasses.asdict(new)[k] != v)
         raise SpecGenError(f"cannot warm-start across a change of {', '.join(changed)} "
-                           f"(only {', '.join(GROWABLE)} may differ)")
+                           f"(only {', '.join(GROWABLE)} may differ, and blocks may only be added)")
     out = {k: v.float().clone() for k, v in state.items()}
     if old.spectral_code and old.spectral_code_knots != new.spectral_code_knots:
         c, lam = old.feature_dim, old.res_lambda
@@ -42,4 +56,8 @@ def grow_state_dict(state: dict[str, torch.Tensor], old: Config, new: Config) ->
             t = t.reshape(3 * c, old.spectral_code_knots, lam, -1).permute(0, 3, 1, 2)  # (3C, in, A, L)
             t = F.interpolate(t, size=(new.spectral_code_knots, lam), mode="bilinear", align_corners=True)
             out[name] = t.permute(0, 2, 3, 1).reshape(-1, *tail)
+    if any(getattr(new, k) > getattr(old, k) for k in ADDED_BLOCKS):
+        if fresh is None:
+            raise SpecGenError("growing residual blocks needs the new model's initial weights (fresh)")
+        out.update({k: v.float().clone() for k, v in fresh.items() if k not in out})
     return out

@@ -17,6 +17,7 @@ import torch.nn.functional as F
 from torch import nn
 
 from .config import Config
+from .residual import conv_blocks
 
 PLANE_NAMES = ("d1", "d2", "d3", "e1", "e2", "e3")
 # Which coordinate indexes the rows and the columns of each plane.
@@ -88,8 +89,8 @@ class PlaneGenerator(nn.Module):
         for c_prev, c in zip(cfg.decoder_channels[:-1], cfg.decoder_channels[1:]):
             ups += [nn.Upsample(scale_factor=2, mode="nearest"), nn.Conv2d(c_prev, c, 3, padding=1),
                     nn.ReLU(inplace=True)]
-        self.trunk = nn.Sequential(*ups)
         c_last = cfg.decoder_channels[-1]
+        self.trunk = nn.Sequential(*ups, *conv_blocks(cfg.trunk_res_blocks, c_last))
         self.heads = nn.ModuleDict({
             name: nn.Sequential(nn.Conv2d(c_last, cfg.head_channels, 3, padding=1), nn.ReLU(inplace=True),
                                 nn.Conv2d(cfg.head_channels, cfg.feature_dim, 1))

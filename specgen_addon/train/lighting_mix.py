@@ -12,7 +12,8 @@ and every training step mixes them with fresh random weights:
 * ``sky``: :data:`SKY_DIRECTIONS`, twelve weak distant lights over the upper hemisphere (a
   stand-in for a sky dome; its blue tint is applied in RGB at mixing time).
 
-A step draws one of three modes (:data:`MODE_P`): canonical (linear or PNG), environment
+A step draws one of three modes (:data:`MODE_P` by default; training passes its config's
+``canonical_fraction`` and splits the rest evenly): canonical (linear or PNG), environment
 (random exposure), or synthetic (one or two suns of random strength and warmth plus a sky of
 random strength, random exposure). Synthetic and environment images are then clipped and
 8-bit quantised with probability :data:`P_QUANTISE` (at the network's resolution: an
@@ -103,13 +104,18 @@ def quantise(image: np.ndarray) -> np.ndarray:
     return spectra.srgb_decode(q).astype(np.float32)
 
 
-def mix_lighting(stack: np.ndarray, rng: np.random.Generator, canonical_only: bool = False) -> np.ndarray:
-    """One input image (3, S, S) from a material's component stack (len(COMPONENTS), 3, S, S)."""
+def mix_lighting(stack: np.ndarray, rng: np.random.Generator, canonical_only: bool = False,
+                 canonical_p: float = MODE_P[0]) -> np.ndarray:
+    """One input image (3, S, S) from a material's component stack (len(COMPONENTS), 3, S, S).
+
+    ``canonical_p`` is the probability of the canonical mode; the environment and synthetic
+    modes share the rest evenly (the default reproduces :data:`MODE_P`).
+    """
     stack = stack.astype(np.float32, copy=False)
     u = rng.random()
-    if canonical_only or u < MODE_P[0]:
+    if canonical_only or u < canonical_p:
         return stack[1] if rng.random() < 0.5 else stack[0]
-    if u < MODE_P[0] + MODE_P[1]:
+    if u < canonical_p + 0.5 * (1.0 - canonical_p):
         img = stack[2] * np.float32(2.0 ** rng.uniform(-1.0, 1.0))
     else:
         n_sun = 1 + int(rng.random() < 0.4)

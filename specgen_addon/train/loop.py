@@ -180,7 +180,8 @@ def lr_at(tcfg: TrainConfig, step: int) -> float:
 def _draw(rng: np.random.Generator, mset: MaterialSet, k: int, canonical_fraction: float,
           n_variants: int, lighting: str = "variants") -> tuple[list[TrainingMaterial], list[np.ndarray]]:
     """``k`` materials and one input image each: the canonical lighting with probability
-    ``canonical_fraction`` (its linear or PNG version), else any of the material's images.
+    ``canonical_fraction`` (its linear or PNG version), else any of the material's images
+    (``lighting="mix"``: a random environment or synthetic lighting, :func:`.lighting_mix.mix_lighting`).
 
     Coloured environment maps shift the sphere's colour, which a single image cannot tell apart
     from the material's own; mostly canonical inputs keep the colour → spectrum mapping sharp.
@@ -193,7 +194,7 @@ def _draw(rng: np.random.Generator, mset: MaterialSet, k: int, canonical_fractio
             from .lighting_mix import mix_lighting
 
             mats.append(mset.materials[i])
-            imgs.append(mix_lighting(stack, rng))
+            imgs.append(mix_lighting(stack, rng, canonical_p=canonical_fraction))
             continue
         canonical = np.arange(0, stack.shape[0], max(1, n_variants))   # variant 0 (and its PNG)
         if rng.random() < canonical_fraction:
@@ -287,7 +288,7 @@ def train(mcfg: Config, tcfg: TrainConfig, spectral: MaterialSet, rgb: MaterialS
         init = load_weights(tcfg.init_weights)
         if not can_grow(init.cfg, mcfg):
             raise SpecGenError(f"{tcfg.init_weights}: weights were made with a different model config")
-        model.load_state_dict(grow_state_dict(init.state_dict(), init.cfg, mcfg))
+        model.load_state_dict(grow_state_dict(init.state_dict(), init.cfg, mcfg, fresh=model.state_dict()))
     model.to(device)  # before the optimiser, so its state lives there too
     opt = torch.optim.Adam(model.parameters(), lr=tcfg.lr, betas=(0.9, 0.999))
     history: list[dict[str, float]] = []
