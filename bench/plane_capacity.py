@@ -67,9 +67,9 @@ FREE = ("latent", "trunk", "planes")
 
 
 def fit_planes(model, x, mat, free: str, steps: int, seed: int, tv_weight: float = 0.0,
-               pool: int = 16384, per_step: int = 4096, lr: float = 3e-3) -> dict:
-    """Planes refined to ``mat``'s true BRDF (μ-law MSE + ``tv_weight``·L_TV, as in training),
-    starting from the network's prediction for the image ``x``; only the ``free`` stage
+               pool: int = 16384, per_step: int = 4096, lr: float = 3e-3) -> tuple[dict, dict]:
+    """The network's planes for the image ``x``, and planes refined from them to ``mat``'s true
+    BRDF (μ-law MSE + ``tv_weight``·L_TV, as in training); only the ``free`` stage
     (:data:`FREE`) is optimised, every weight of the model stays frozen."""
     import torch
 
@@ -93,6 +93,8 @@ def fit_planes(model, x, mat, free: str, steps: int, seed: int, tv_weight: float
         start = {"latent": (latent, colour), "trunk": gen.trunk_and_code(latent, colour),
                  "planes": (model.planes(x),)}[free]
     to_planes = {"latent": gen, "trunk": gen.planes_from, "planes": lambda p: p}[free]
+    with torch.no_grad():
+        predicted = to_planes(*start)
     params = [({k: torch.nn.Parameter(v.clone()) for k, v in t.items()} if isinstance(t, dict)
                else torch.nn.Parameter(t.clone())) for t in start]
     leaves = [v for t in params for v in (t.values() if isinstance(t, dict) else [t])]
@@ -111,7 +113,7 @@ def fit_planes(model, x, mat, free: str, steps: int, seed: int, tv_weight: float
         loss.backward()
         opt.step()
     with torch.no_grad():
-        return {k: v.detach() for k, v in to_planes(*params).items()}
+        return predicted, {k: v.detach() for k, v in to_planes(*params).items()}
 
 
 def main() -> int:
@@ -150,9 +152,7 @@ def main() -> int:
     for k, mat in enumerate(mixed_test_materials(args.per_family)):
         x = torch.from_numpy(network_input(input_image.render_input(mat), model.cfg.image_size)
                              .astype(np.float32))
-        with torch.no_grad():
-            planes0 = model.planes(x)
-        fitted = fit_planes(model, x, mat, args.free, args.steps, seed=k, tv_weight=args.tv_weight)
+        planes0, fitted = fit_planes(model, x, mat, args.free, args.steps, seed=k, tv_weight=args.tv_weight)
         gt = render_spectral(mat, geo, lights=DISTANT_LIGHTS, wavelengths_nm=WAVELENGTHS_NM).spectral
         scores = []
         for planes in (planes0, fitted):

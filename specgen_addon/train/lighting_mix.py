@@ -104,8 +104,7 @@ def quantise(image: np.ndarray) -> np.ndarray:
     return spectra.srgb_decode(q).astype(np.float32)
 
 
-def mix_lighting(stack: np.ndarray, rng: np.random.Generator, canonical_only: bool = False,
-                 canonical_p: float = MODE_P[0]) -> np.ndarray:
+def mix_lighting(stack: np.ndarray, rng: np.random.Generator, canonical_p: float = MODE_P[0]) -> np.ndarray:
     """One input image (3, S, S) from a material's component stack (len(COMPONENTS), 3, S, S).
 
     ``canonical_p`` is the probability of the canonical mode; the environment and synthetic
@@ -113,7 +112,7 @@ def mix_lighting(stack: np.ndarray, rng: np.random.Generator, canonical_only: bo
     """
     stack = stack.astype(np.float32, copy=False)
     u = rng.random()
-    if canonical_only or u < canonical_p:
+    if u < canonical_p:
         return stack[1] if rng.random() < 0.5 else stack[0]
     if u < canonical_p + 0.5 * (1.0 - canonical_p):
         img = stack[2] * np.float32(2.0 ** rng.uniform(-1.0, 1.0))
