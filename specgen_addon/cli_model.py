@@ -66,6 +66,10 @@ def add_parser(sub: argparse._SubParsersAction) -> argparse.ArgumentParser:
                         "configs/default.json) under the distant lights and the held-out maps, and "
                         "the real RGL files in ../shared/data/rgl (default 0: off)")
     p.add_argument("--no-envs", action="store_true", help="with --families: distant lights only")
+    p.add_argument("--input-env", default=None, metavar="MAP",
+                   help="with --families: photograph each input sphere under this environment map "
+                        "(e.g. a held-out one: courtyard, interior) instead of the canonical lighting, "
+                        "without telling the network; measures its robustness to the input's lighting")
     p.add_argument("--family-resolution", type=int, default=64,
                    help="sphere size (px) of the per-family renders (default 64)")
     p.add_argument("--quiet", action="store_true", help="no progress bar")
@@ -208,6 +212,12 @@ def run_evaluate(args: argparse.Namespace) -> int:
         raise SpecGenError(f"--families must be ≥ 0, got {args.families}")
     if args.weights is not None and not args.weights.is_file():
         raise SpecGenError(f"{args.weights}: weights file not found")
+    if args.input_env is not None:
+        from .lighting import env_path
+
+        if not args.families:
+            raise SpecGenError("--input-env needs --families N (it applies to the per-family evaluation)")
+        env_path(args.input_env)  # refuses an unknown map, naming the available ones
     with progress_bar("evaluate", enabled=not args.quiet) as update:
         res = evaluate_test_split(weights=args.weights, limit=args.limit, backend=args.backend,
                                   progress=update, refine=args.refine)
@@ -219,7 +229,8 @@ def run_evaluate(args: argparse.Namespace) -> int:
             res["by_family"] = evaluate_families(weights=args.weights, per_family=args.families,
                                                  envs=not args.no_envs, rgl_dir=SHARED_RGL_DIR,
                                                  resolution=args.family_resolution,
-                                                 backend=args.backend, progress=update)
+                                                 backend=args.backend, progress=update,
+                                                 input_env=args.input_env)
         print(format_family_results(res["by_family"]))
     if args.json:
         from .io_utils import atomic_write

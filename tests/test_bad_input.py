@@ -297,6 +297,8 @@ CLI_CASES = {
     "infer-weights-missing": (lambda w: ["infer", str(EXAMPLE), "-o", str(w.out / "b.npz"), "--weights", str(w.root / "w.pt"), Q], "not found"),
     "infer-weights-folder": (lambda w: ["infer", str(EXAMPLE), "-o", str(w.out / "b.npz"), "--weights", str(w.out), Q], "is a folder"),
     "evaluate-limit-0": (lambda w: ["evaluate", "--limit", "0", Q], "--limit"),
+    "evaluate-input-env-without-families": (lambda w: ["evaluate", "--input-env", "courtyard", Q], "--families"),
+    "evaluate-input-env-unknown": (lambda w: ["evaluate", "--families", "1", "--input-env", "moon", Q], "no environment map named 'moon'"),
     "evaluate-limit-negative": (lambda w: ["evaluate", "--limit", "-1", Q], "--limit"),
     "evaluate-json-folder": (lambda w: ["evaluate", "--json", str(w.out), Q], "is a folder"),
     "evaluate-json-existing": (lambda w: ["evaluate", "--json", str(_touch(w.out / "r.json")), Q], "already exists"),

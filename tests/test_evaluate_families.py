@@ -27,3 +27,15 @@ def test_family_rows_average_to_the_family_means(shared_dir):
     if rgl is not None and any(rgl.glob("*.bsdf")):
         assert res["families"]["rgl (real, RGB)"]["n"] == len(list(rgl.glob("*.bsdf")))
     assert "sheen" in format_family_results(res)
+
+
+@pytest.mark.slow
+def test_input_env_photographs_the_input_under_that_map():
+    kw = dict(per_family=1, envs=False, resolution=24, families=["classic"])
+    canonical = evaluate_families(**kw)
+    under_map = evaluate_families(input_env="courtyard", **kw)
+    assert canonical["input"] == "canonical" and under_map["input"] == "courtyard"
+    # another input image gives another table, so another score against the same truth
+    assert under_map["materials"][0]["psnr_distant"] != pytest.approx(canonical["materials"][0]["psnr_distant"], abs=1e-3)
+    assert "'courtyard'" in format_family_results(under_map)
+    assert "courtyard" not in format_family_results(canonical)

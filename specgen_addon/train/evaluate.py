@@ -125,11 +125,15 @@ def mixed_test_materials(per_family: int, families: list[str] | None = None) -> 
 def evaluate_families(weights: str | Path | None = None, per_family: int = 4, envs: bool = True,
                       rgl_dir: str | Path | None = None, backend: str = "torch",
                       resolution: int = RESOLUTION, families: list[str] | None = None,
-                      progress: Callable[[float], None] | None = None) -> dict[str, Any]:
+                      progress: Callable[[float], None] | None = None,
+                      input_env: str | None = None) -> dict[str, Any]:
     """PSNR/SSIM per family of the mixed test split, network alone (no refinement).
 
     Scenes: the protocol's distant lights and, with ``envs``, the two held-out environment maps
-    (:data:`specgen_addon.lighting.HELDOUT_ENVS`). The input is always the canonical sphere.
+    (:data:`specgen_addon.lighting.HELDOUT_ENVS`). The input is the canonical sphere, or with
+    ``input_env`` the sphere photographed under that map
+    (:func:`specgen_addon.evaluation.protocol.input_under_environment`) and the network not told:
+    the canonical-input score says how well it fits, this one how robust it is to a user's lighting.
     ``rgl_dir``: real RGL RGB files (``*.bsdf``) scored in linear sRGB under the distant lights
     (the project renderer's slice assignment: the light direction selects the measured slice).
     """
@@ -146,10 +150,16 @@ def evaluate_families(weights: str | Path | None = None, per_family: int = 4, en
     mats = mixed_test_materials(per_family, families)
     rgl_files = sorted(Path(rgl_dir).glob("*.bsdf")) if rgl_dir is not None and Path(rgl_dir).is_dir() else []
     total = len(mats) + len(rgl_files)
+    def input_of(brdf) -> np.ndarray:
+        if input_env is None:
+            return input_image.render_input(brdf)
+        from ..evaluation.protocol import input_under_environment
+
+        return input_under_environment(brdf, input_env)
+
     rows = []
     for i, mat in enumerate(mats):
-        table = generate_brdf(input_image.render_input(mat), weights=weights, wavelengths_nm=WAVELENGTHS_NM,
-                              backend=backend)
+        table = generate_brdf(input_of(mat), weights=weights, wavelengths_nm=WAVELENGTHS_NM, backend=backend)
         row: dict[str, Any] = {"material": mat.name, "family": material_family(mat), "kind": mat.kind}
         for label, kw in scenes:
             gt = render_spectral(mat, geo, wavelengths_nm=WAVELENGTHS_NM, **kw).spectral
@@ -163,8 +173,7 @@ def evaluate_families(weights: str | Path | None = None, per_family: int = 4, en
         from ..formats import load_brdf
 
         brdf = load_brdf(path)
-        table = generate_brdf(input_image.render_input(brdf), weights=weights, wavelengths_nm=WAVELENGTHS_NM,
-                              backend=backend)
+        table = generate_brdf(input_of(brdf), weights=weights, wavelengths_nm=WAVELENGTHS_NM, backend=backend)
         gt = render_rgb(brdf, geo, lights=DISTANT_LIGHTS).rgb
         pred = render_spectral(table, geo, lights=DISTANT_LIGHTS, wavelengths_nm=WAVELENGTHS_NM).rgb
         res = metrics.spectral_metrics(gt, pred, geo.mask)
@@ -183,7 +192,7 @@ def evaluate_families(weights: str | Path | None = None, per_family: int = 4, en
     means = {f"{k}_{lab}": float(np.mean([r[f"{k}_{lab}"] for r in synth]))
              for lab in labels for k in ("psnr", "ssim")} if synth else {}
     return {"materials": rows, "families": by_family, "means": means, "scenes": labels,
-            "per_family": per_family, "resolution": resolution,
+            "per_family": per_family, "resolution": resolution, "input": input_env or "canonical",
             "weights": str(weights) if weights else "default", "backend": backend,
             "corpus": {"size": MIXED_CORPUS_SIZE, "seed": MIXED_CORPUS_SEED},
             "metrics": getattr(metrics, "NORMALISATION_TEXT", "")}
@@ -210,6 +219,8 @@ def family_rows(res: dict[str, Any], mean_label: str = "mean (synthetic)") -> tu
 def format_family_results(res: dict[str, Any]) -> str:
     """:func:`family_rows` as a plain fixed-width table for the terminal."""
     header, rows = family_rows(res)
+    lead = [] if res.get("input", "canonical") == "canonical" else \
+        [f"input: the sphere under {res['input']!r}, the network not told"]
     widths = [max(len(r[c]) for r in [header, *rows]) for c in range(len(header))]
-    return "\n".join("  ".join(cell.ljust(w) if c == 0 else cell.rjust(w) for c, (cell, w) in
-                               enumerate(zip(r, widths))) for r in [header, *rows])
+    return "\n".join(lead + ["  ".join(cell.ljust(w) if c == 0 else cell.rjust(w) for c, (cell, w) in
+                                        enumerate(zip(r, widths))) for r in [header, *rows]])
