@@ -130,3 +130,47 @@ def test_bad_residual_block_counts_are_refused():
         for bad in (-1, 1.5, "2", True):
             with pytest.raises(SpecGenError, match=name):
                 Config(**SMALL, **{name: bad})
+
+
+def test_adding_a_detail_branch_at_twice_the_image_size_keeps_the_network_function():
+    import numpy as np
+
+    from specgen_addon.infer import resample_square
+
+    torch.manual_seed(0)
+    old = lively(SpecGen(Config(**SMALL)))
+    new_cfg = Config(**{**SMALL, "image_size": 64}, detail_factor=2)
+    new = SpecGen(new_cfg)
+    new.load_state_dict(grow_state_dict(old.state_dict(), old.cfg, new_cfg, fresh=new.state_dict()))
+    big = np.random.default_rng(1).random((2, 64, 64, 3), dtype=np.float32) * 1.5
+    small = torch.from_numpy(np.stack([resample_square(b, 32) for b in big]))   # the input pipeline's 64 → 32
+    th, td, pd, lam = queries()
+    with torch.no_grad():
+        assert torch.allclose(old(small, th, td, pd, lam),
+                              new.eval()(torch.from_numpy(big.transpose(0, 3, 1, 2).copy()), th, td, pd, lam),
+                              atol=1e-5)
+    # the branch is not dead: its zero-initialised last layer gets a gradient
+    new.train()
+    new(torch.from_numpy(big.transpose(0, 3, 1, 2).copy()), th, td, pd, lam).pow(2).mean().backward()
+    assert new.encoder.detail[-1].weight.grad.abs().sum() > 0
+
+
+def test_detail_branch_growth_needs_the_same_conv_stack_size_and_never_removes_a_branch():
+    old = Config(**SMALL)
+    assert can_grow(old, dataclasses.replace(old, image_size=64, detail_factor=2))
+    assert can_grow(old, dataclasses.replace(old, image_size=128, detail_factor=4))
+    assert not can_grow(old, dataclasses.replace(old, image_size=64))                  # stack would see 64²
+    assert not can_grow(dataclasses.replace(old, image_size=64, detail_factor=2), old)  # branch removed
+    with pytest.raises(SpecGenError, match="image_size"):
+        grow_state_dict(SpecGen(old).state_dict(), old, dataclasses.replace(old, image_size=64))
+    with pytest.raises(SpecGenError, match="fresh"):
+        new = dataclasses.replace(old, image_size=64, detail_factor=2)
+        grow_state_dict(SpecGen(old).state_dict(), old, new)
+
+
+def test_bad_detail_factors_are_refused():
+    for bad in (0, 3, 1.5, "2", True):
+        with pytest.raises(SpecGenError, match="detail_factor"):
+            Config(**SMALL, detail_factor=bad)
+    with pytest.raises(SpecGenError, match="divisible"):
+        Config(**SMALL, detail_factor=16)

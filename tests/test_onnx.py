@@ -68,3 +68,16 @@ def test_onnx_backend_without_exported_graphs_says_how_to_make_them(tmp_path):
     weights = save_weights(SpecGen(Config(**SMALL)), tmp_path / "lonely.pt")
     with pytest.raises(WeightsError, match="export-onnx"):
         infer.get_backend(weights, "onnx")
+
+
+def test_a_model_with_a_detail_branch_exports_and_agrees(tmp_path):
+    torch.manual_seed(0)
+    model = SpecGen(Config(**{**SMALL, "image_size": 64}, detail_factor=2))
+    torch.nn.init.normal_(model.encoder.detail[-1].weight, std=0.3)     # a trained, non-zero branch
+    weights = save_weights(model, tmp_path / "d.pt")
+    export_onnx(weights)
+    x = np.random.default_rng(0).random((1, 3, 64, 64)).astype(np.float32)
+    u = np.linspace(-1, 1, 5).astype(np.float32)
+    for ta, tb in zip(infer.get_backend(weights, "onnx").make_tables(x, u),
+                      infer.get_backend(weights, "torch").make_tables(x, u)):
+        assert np.abs(ta - tb.numpy()).max() < 1e-4

@@ -29,6 +29,9 @@ class Config:
     image_size: int = 64
     # encoder: stride-2 3×3 convs, then a linear layer to the latent vector
     encoder_channels: tuple[int, ...] = (32, 64, 96, 128)
+    #: The convs see the image at image_size / detail_factor; with a factor k > 1 (a power of
+    #: two) a detail branch sees it at full size (:class:`.encoder.ImageEncoder`). Default 1: none.
+    detail_factor: int = 1
     latent_dim: int = 256
     # plane generator: latent -> seed map -> upsampling convs -> per-plane heads
     decoder_seed_hw: tuple[int, int] = (4, 8)
@@ -80,8 +83,11 @@ class Config:
             n = getattr(self, name)
             if not (isinstance(n, int) and not isinstance(n, bool) and n >= 0):
                 raise SpecGenError(f"{name} must be an integer ≥ 0, got {n!r}")
-        if self.image_size % (2 ** len(self.encoder_channels)) != 0:
-            raise SpecGenError("image_size must be divisible by 2**len(encoder_channels)")
+        k = self.detail_factor
+        if not (isinstance(k, int) and not isinstance(k, bool) and k >= 1 and k & (k - 1) == 0):
+            raise SpecGenError(f"detail_factor must be a power of two ≥ 1, got {k!r}")
+        if self.image_size % (k * 2 ** len(self.encoder_channels)) != 0:
+            raise SpecGenError("image_size must be divisible by detail_factor × 2**len(encoder_channels)")
 
     @property
     def plane_shapes(self) -> dict[str, tuple[int, int]]:

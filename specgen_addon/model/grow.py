@@ -8,9 +8,14 @@ differ only in the fields of :data:`GROWABLE`:
   exact (every knot starts as the old angle-constant profile) and training then moves the knots
   apart;
 * ``latent_res_blocks`` and ``trunk_res_blocks`` (more, never fewer): the added residual blocks
-  keep the new model's initial weights, which make them the identity (:mod:`.residual`).
+  keep the new model's initial weights, which make them the identity (:mod:`.residual`);
+* ``image_size`` with ``detail_factor`` (from no detail branch to a factor k, the image k times
+  larger): the conv stack keeps its size, sees the larger image resampled by the same
+  antialiased weights the input pipeline used, and the new detail branch starts at zero
+  (:class:`.encoder.ImageEncoder`).
 
-In both cases the grown network computes the same function as the old one.
+In each case the grown network computes the same function as the old one (to float rounding of
+the resampling).
 """
 
 from __future__ import annotations
@@ -24,7 +29,7 @@ from ..errors import SpecGenError
 from .config import Config
 
 #: Config fields a warm start may change.
-GROWABLE = ("spectral_code_knots", "latent_res_blocks", "trunk_res_blocks")
+GROWABLE = ("spectral_code_knots", "latent_res_blocks", "trunk_res_blocks", "image_size", "detail_factor")
 #: Of those, the counts of identity-initialised blocks, which may only grow.
 ADDED_BLOCKS = ("latent_res_blocks", "trunk_res_blocks")
 
@@ -32,8 +37,10 @@ ADDED_BLOCKS = ("latent_res_blocks", "trunk_res_blocks")
 def can_grow(old: Config, new: Config) -> bool:
     """Whether weights of ``old`` can start a run of ``new`` (equal, or differing only in GROWABLE)."""
     a, b = dataclasses.asdict(old), dataclasses.asdict(new)
+    same_stack = old.image_size // old.detail_factor == new.image_size // new.detail_factor
+    branch_ok = old.detail_factor in (1, new.detail_factor)
     return (all(a[k] == b[k] for k in a if k not in GROWABLE) and old.spectral_code == new.spectral_code
-            and all(b[k] >= a[k] for k in ADDED_BLOCKS))
+            and all(b[k] >= a[k] for k in ADDED_BLOCKS) and same_stack and branch_ok)
 
 
 def grow_state_dict(state: dict[str, torch.Tensor], old: Config, new: Config,
@@ -46,7 +53,8 @@ def grow_state_dict(state: dict[str, torch.Tensor], old: Config, new: Config,
     if not can_grow(old, new):
         changed = sorted(k for k, v in dataclasses.asdict(old).items() if dataclasses.asdict(new)[k] != v)
         raise SpecGenError(f"cannot warm-start across a change of {', '.join(changed)} "
-                           f"(only {', '.join(GROWABLE)} may differ, and blocks may only be added)")
+                           f"(only {', '.join(GROWABLE)} may differ, blocks may only be added, and "
+                           f"image_size / detail_factor must stay the same)")
     out = {k: v.float().clone() for k, v in state.items()}
     if old.spectral_code and old.spectral_code_knots != new.spectral_code_knots:
         c, lam = old.feature_dim, old.res_lambda
@@ -56,8 +64,8 @@ def grow_state_dict(state: dict[str, torch.Tensor], old: Config, new: Config,
             t = t.reshape(3 * c, old.spectral_code_knots, lam, -1).permute(0, 3, 1, 2)  # (3C, in, A, L)
             t = F.interpolate(t, size=(new.spectral_code_knots, lam), mode="bilinear", align_corners=True)
             out[name] = t.permute(0, 2, 3, 1).reshape(-1, *tail)
-    if any(getattr(new, k) > getattr(old, k) for k in ADDED_BLOCKS):
+    if any(getattr(new, k) > getattr(old, k) for k in ADDED_BLOCKS) or new.detail_factor > old.detail_factor:
         if fresh is None:
-            raise SpecGenError("growing residual blocks needs the new model's initial weights (fresh)")
+            raise SpecGenError("growing blocks or a detail branch needs the new model's initial weights (fresh)")
         out.update({k: v.float().clone() for k, v in fresh.items() if k not in out})
     return out
