@@ -30,8 +30,9 @@ def test_family_rows_average_to_the_family_means(shared_dir):
 
 
 @pytest.mark.slow
-def test_input_env_photographs_the_input_under_that_map():
-    kw = dict(per_family=1, envs=False, resolution=24, families=["classic"])
+def test_input_env_photographs_the_input_under_that_map(shared_dir):
+    rgl = shared_dir / "data" / "rgl" if shared_dir is not None else None   # RGB-only files take eval_rgb
+    kw = dict(per_family=1, envs=False, resolution=24, families=["classic"], rgl_dir=rgl)
     canonical = evaluate_families(**kw)
     under_map = evaluate_families(input_env="courtyard", **kw)
     assert canonical["input"] == "canonical" and under_map["input"] == "courtyard"

@@ -102,8 +102,7 @@ def input_under_environment(brdf, env: str) -> np.ndarray:
                        spectra.DEFAULT_ILLUMINANT)
     scene = RenderScene(sphere_geometry(input_image.CANONICAL_SIZE), [key], lighting.load_environment(env),
                         sampling=input_image.input_sampling())
-    rgb = scene.render_spectral(brdf, spectra.DEFAULT_WAVELENGTHS_NM).rgb
-    return (np.clip(rgb, 0.0, None) * input_image.EXPOSURE).astype(np.float32)
+    return input_image.photo_in_scene(brdf, scene, input_image.EXPOSURE)  # RGB-only files through eval_rgb
 
 
 def scene_list(envs: EnvChoice) -> dict[str, Scene]:
