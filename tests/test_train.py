@@ -109,6 +109,36 @@ def test_training_is_bit_for_bit_deterministic_and_resumable(tmp_path):
     assert (tmp_path / "a" / "history.csv").read_text().count("\n") == 7
 
 
+def test_weight_average_is_what_the_run_ships_and_it_resumes_bit_for_bit(tmp_path):
+    spec, rgb, val = sets()
+    tcfg = TrainConfig(**{**FAST, "steps": 6, "ema_decay": 0.5})
+    a = train(Config(**SMALL), tcfg, spec, rgb, val, tmp_path / "a", show_progress=False)
+    train(Config(**SMALL), dataclasses.replace(tcfg, steps=3), spec, rgb, val, tmp_path / "c",
+          show_progress=False)
+    c = train(Config(**SMALL), tcfg, spec, rgb, val, tmp_path / "c", resume=True, show_progress=False)
+    shipped, resumed = load_weights(a.weights).state_dict(), load_weights(c.weights).state_dict()
+    ck = torch.load(tmp_path / "a" / "checkpoint.pt", weights_only=True)
+    raw, avg = ck["model"], {k[len("module."):]: v for k, v in ck["ema"].items() if k.startswith("module.")}
+    w = "encoder.fc.weight"
+    assert torch.equal(shipped[w], avg[w]) and not torch.equal(shipped[w], raw[w])
+    for k in shipped:
+        assert torch.equal(shipped[k], resumed[k]), k
+    with pytest.raises(SpecGenError, match="ema_decay"):
+        TrainConfig(ema_decay=1.0).validate()
+
+
+def test_checkpoints_from_before_the_weight_average_still_resume(tmp_path):
+    spec, rgb, val = sets()
+    tcfg = TrainConfig(**{**FAST, "steps": 3})
+    train(Config(**SMALL), tcfg, spec, rgb, val, tmp_path, show_progress=False)
+    ck = torch.load(tmp_path / "checkpoint.pt", weights_only=True)
+    del ck["train_config"]["ema_decay"]                                     # as older runs wrote them
+    torch.save(ck, tmp_path / "checkpoint.pt")
+    res = train(Config(**SMALL), dataclasses.replace(tcfg, steps=5), spec, rgb, val, tmp_path, resume=True,
+                show_progress=False)
+    assert res.steps == 5
+
+
 def test_resume_refuses_a_different_configuration(tmp_path):
     spec, rgb, val = sets()
     tcfg = TrainConfig(**{**FAST, "steps": 3})
@@ -193,6 +223,7 @@ def test_lighting_mix_honours_the_configured_canonical_fraction():
     ({"families": {"velvet": 1.0}}, "unknown material family 'velvet'"),
     ({"lighting": "sunny"}, "lighting must be"),
     ({"lr": -1.0}, "lr must be"),
+    ({"ema_decay": 1.5}, "ema_decay"),
     ({"init_weights": "/nonexistent/w.pt"}, "not found"),
 ])
 def test_bad_training_configs_are_refused_with_one_clear_error(tmp_path, bad, message):

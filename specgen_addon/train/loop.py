@@ -76,6 +76,10 @@ class TrainConfig:
     #: Where the network trains: "cpu", "cuda" (one GPU per rank; DDP then uses nccl) or "auto"
     #: (cuda when available). Targets and inputs are made on the CPU either way.
     device: str = "cpu"
+    #: Decay of an exponential moving average of the weights (0: off). When on, validation scores
+    #: and ``specgen.pt`` holds the average (torch.optim.swa_utils.AveragedModel), which smooths
+    #: the step-to-step noise of a small batch; the checkpoint keeps both.
+    ema_decay: float = 0.0
 
     @classmethod
     def from_dict(cls, d: dict[str, Any]) -> "TrainConfig":
@@ -107,6 +111,9 @@ class TrainConfig:
             v = getattr(self, key)
             if not isinstance(v, (int, float)) or isinstance(v, bool) or not np.isfinite(v) or v < 0:
                 raise SpecGenError(f"training config: {key} must be a finite number ≥ 0, got {v!r}")
+        if not (isinstance(self.ema_decay, (int, float)) and not isinstance(self.ema_decay, bool)
+                and 0.0 <= self.ema_decay < 1.0):
+            raise SpecGenError(f"training config: ema_decay must be a number in [0, 1), got {self.ema_decay!r}")
         if self.lr <= 0 or self.canonical_fraction > 1:
             raise SpecGenError("training config: lr must be > 0 and canonical_fraction ≤ 1")
         if self.max_minutes is not None and not (isinstance(self.max_minutes, (int, float))
@@ -291,6 +298,11 @@ def train(mcfg: Config, tcfg: TrainConfig, spectral: MaterialSet, rgb: MaterialS
         model.load_state_dict(grow_state_dict(init.state_dict(), init.cfg, mcfg, fresh=model.state_dict()))
     model.to(device)  # before the optimiser, so its state lives there too
     opt = torch.optim.Adam(model.parameters(), lr=tcfg.lr, betas=(0.9, 0.999))
+    ema = None
+    if tcfg.ema_decay > 0:
+        from torch.optim.swa_utils import AveragedModel, get_ema_multi_avg_fn
+
+        ema = AveragedModel(model, multi_avg_fn=get_ema_multi_avg_fn(tcfg.ema_decay), use_buffers=True)
     history: list[dict[str, float]] = []
     start_step, elapsed0 = 0, 0.0
     ckpt_path = out / "checkpoint.pt"
@@ -299,10 +311,13 @@ def train(mcfg: Config, tcfg: TrainConfig, spectral: MaterialSet, rgb: MaterialS
     ck = ddp.broadcast(torch.load(ckpt_path, map_location="cpu", weights_only=True)
                        if resume and dctx.is_main and ckpt_path.is_file() else None, dctx)
     if ck is not None:
-        if ck["model_config"] != mcfg.to_dict() or ck["train_config"] != _tdict(tcfg, ignore_budget=True):
+        saved = {"ema_decay": 0.0, **ck["train_config"]}  # checkpoints from before the EMA had none
+        if ck["model_config"] != mcfg.to_dict() or saved != _tdict(tcfg, ignore_budget=True):
             raise SpecGenError(f"{ckpt_path}: checkpoint was made with a different configuration")
         model.load_state_dict(ck["model"])
         opt.load_state_dict(ck["optimizer"])
+        if ema is not None:
+            ema.load_state_dict(ck["ema"])
         start_step, elapsed0, history = ck["step"], ck["elapsed"], ck["history"]
     val_batch = _validation_batch(tcfg, mcfg, val)
     step_losses = ddp.step_losses(model, group_loss, dctx)  # this rank's share, DDP-averaged
@@ -313,6 +328,8 @@ def train(mcfg: Config, tcfg: TrainConfig, spectral: MaterialSet, rgb: MaterialS
         payload = {"model": model.state_dict(), "optimizer": opt.state_dict(), "step": step,
                    "elapsed": elapsed, "history": history, "model_config": mcfg.to_dict(),
                    "train_config": _tdict(tcfg, ignore_budget=True)}
+        if ema is not None:
+            payload["ema"] = ema.state_dict()
         with atomic_write(ckpt_path, overwrite=True) as tmp:
             torch.save(payload, tmp)
         _write_history(out / "history.csv", history)
@@ -323,6 +340,7 @@ def train(mcfg: Config, tcfg: TrainConfig, spectral: MaterialSet, rgb: MaterialS
 
         bar = tqdm(total=tcfg.steps, initial=start_step, desc="train", unit="step", dynamic_ncols=True,
                    mininterval=2.0)
+    scored = model if ema is None else ema.module  # what validation scores and specgen.pt holds
     t0 = time.perf_counter()
     step = start_step
     stopped = False
@@ -354,12 +372,14 @@ def train(mcfg: Config, tcfg: TrainConfig, spectral: MaterialSet, rgb: MaterialS
         loss = loss + tcfg.tv_weight * l_tv
         loss.backward()
         opt.step()
+        if ema is not None:
+            ema.update_parameters(model)
         step += 1
         rec["tv"] = float(l_tv.detach())
         rec["loss"] = float(loss.detach())
         rec = ddp.mean_record(rec, dctx)
         if val_batch is not None and (step % tcfg.val_every == 0 or step == tcfg.steps):
-            rec["val"] = evaluate_batch(model, val_batch)
+            rec["val"] = evaluate_batch(scored, val_batch)
         rec["elapsed"] = elapsed0 + time.perf_counter() - t0
         history.append(rec)
         if on_step is not None:
@@ -376,12 +396,12 @@ def train(mcfg: Config, tcfg: TrainConfig, spectral: MaterialSet, rgb: MaterialS
         bar.close()
     wall = elapsed0 + time.perf_counter() - t0
     if val_batch is not None and history and "val" not in history[-1]:
-        history[-1]["val"] = evaluate_batch(model, val_batch)
+        history[-1]["val"] = evaluate_batch(scored, val_batch)
     checkpoint(step, wall)
     info = {"steps": step, "planned_steps": tcfg.steps, "wall_seconds": round(wall, 1),
             "seed": tcfg.seed, "parameters": count_parameters(model), "train_config": _tdict(tcfg),
             "final_val_mse": history[-1].get("val") if history else None, **(meta or {})}
-    weights = save_weights(model, out / "specgen.pt", meta=info) if dctx.is_main else out / "specgen.pt"
+    weights = save_weights(scored, out / "specgen.pt", meta=info) if dctx.is_main else out / "specgen.pt"
     return TrainResult(weights, step, wall, history, stopped)
 
 
