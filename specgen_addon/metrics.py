@@ -111,3 +111,29 @@ def spectral_metrics(gt: np.ndarray, pred: np.ndarray, mask: np.ndarray | None =
     ps = np.array([psnr(g[..., c], p[..., c], mask) for c in range(g.shape[-1])])
     ss = np.array([ssim(g[..., c], p[..., c], mask) for c in range(g.shape[-1])])
     return SpectralMetrics(ps, ss, float(np.mean(ps)), float(np.mean(ss)), scale)
+
+
+def brightness_fitted_psnr(gt: np.ndarray, pred: np.ndarray, mask: np.ndarray | None = None) -> tuple[float, float]:
+    """(mean PSNR dB, scale k) of ``k · pred`` against ``gt``, k the least-squares brightness.
+
+    An *oracle* diagnostic (it sees the truth): the part of an error a single exposure factor
+    explains, e.g. a photo whose brightness the network cannot know. Same normalisation as
+    :func:`spectral_metrics`.
+    """
+    gt, pred = _as_stack(gt, "ground truth"), _as_stack(pred, "prediction")
+    if gt.shape != pred.shape:
+        raise SpecGenError(f"ground truth {gt.shape} and prediction {pred.shape} differ in shape")
+    m = np.ones(gt.shape[:2], bool) if mask is None else np.asarray(mask, bool)
+    g, p = gt[m], pred[m]
+    denom = float(np.sum(p * p))
+    k = float(np.sum(g * p) / denom) if denom > 0 else 1.0
+    return mean_psnr(gt, k * pred, m), k
+
+
+def mean_psnr(gt: np.ndarray, pred: np.ndarray, mask: np.ndarray | None = None) -> float:
+    """Mean over bands of PSNR (dB) with :func:`spectral_metrics`' normalisation, without SSIM."""
+    gt, pred = _as_stack(gt, "ground truth"), _as_stack(pred, "prediction")
+    m = None if mask is None else np.asarray(mask, bool)
+    scale = normalisation_scale(gt, m)
+    return float(np.mean([psnr(gt[..., c] / scale, pred[..., c] / scale, m) for c in range(gt.shape[-1])]))
+

@@ -73,3 +73,17 @@ def test_bad_inputs_raise():
         metrics.spectral_metrics(gt, np.full((8, 8, 2), np.nan))
     with pytest.raises(SpecGenError, match="black"):
         metrics.spectral_metrics(np.zeros((8, 8, 2)), gt)
+
+
+def test_brightness_fit_removes_an_exposure_error_and_nothing_else():
+    from specgen_addon.metrics import brightness_fitted_psnr, mean_psnr
+
+    rng = np.random.default_rng(3)
+    gt = rng.random((16, 16, 4)) + 0.1
+    psnr_fit, k = brightness_fitted_psnr(gt, 2.0 * gt)
+    assert k == pytest.approx(0.5) and psnr_fit > 100                      # a pure exposure error
+    noisy = gt + rng.normal(0, 0.05, gt.shape)                               # no exposure error
+    psnr_fit, k = brightness_fitted_psnr(gt, noisy)
+    assert k == pytest.approx(1.0, abs=0.02)
+    assert psnr_fit == pytest.approx(mean_psnr(gt, noisy), abs=0.2)
+    assert mean_psnr(gt, noisy) == pytest.approx(metrics.spectral_metrics(gt, noisy).psnr_mean)

@@ -166,6 +166,9 @@ def evaluate_families(weights: str | Path | None = None, per_family: int = 4, en
             pred = render_spectral(table, geo, wavelengths_nm=WAVELENGTHS_NM, **kw).spectral
             res = metrics.spectral_metrics(gt, pred, geo.mask)
             row[f"psnr_{label}"], row[f"ssim_{label}"] = float(res.psnr_mean), float(res.ssim_mean)
+            # oracle diagnostic: how much of the error one brightness factor explains
+            row[f"psnr_brightness_fitted_{label}"], row[f"brightness_{label}"] = \
+                metrics.brightness_fitted_psnr(gt, pred, geo.mask)
         rows.append(row)
         if progress is not None:
             progress((i + 1) / total)
@@ -190,7 +193,7 @@ def evaluate_families(weights: str | Path | None = None, per_family: int = 4, en
                                           if all(f"{k}_{lab}" in r for r in sel)}}
     synth = [r for r in rows if r["kind"] != "measured"]
     means = {f"{k}_{lab}": float(np.mean([r[f"{k}_{lab}"] for r in synth]))
-             for lab in labels for k in ("psnr", "ssim")} if synth else {}
+             for lab in labels for k in ("psnr", "ssim", "psnr_brightness_fitted")} if synth else {}
     return {"materials": rows, "families": by_family, "means": means, "scenes": labels,
             "per_family": per_family, "resolution": resolution, "input": input_env or "canonical",
             "weights": str(weights) if weights else "default", "backend": backend,
@@ -221,6 +224,11 @@ def format_family_results(res: dict[str, Any]) -> str:
     header, rows = family_rows(res)
     lead = [] if res.get("input", "canonical") == "canonical" else \
         [f"input: the sphere under {res['input']!r}, the network not told"]
+    means = res.get("means", {})
+    fitted = [f"{lab} {means[f'psnr_brightness_fitted_{lab}']:.2f} dB" for lab in res["scenes"]
+              if f"psnr_brightness_fitted_{lab}" in means]
+    tail = [f"with each prediction's brightness fitted to the truth (oracle diagnostic): {', '.join(fitted)}"] \
+        if fitted else []
     widths = [max(len(r[c]) for r in [header, *rows]) for c in range(len(header))]
     return "\n".join(lead + ["  ".join(cell.ljust(w) if c == 0 else cell.rjust(w) for c, (cell, w) in
-                                        enumerate(zip(r, widths))) for r in [header, *rows]])
+                                        enumerate(zip(r, widths))) for r in [header, *rows]] + tail)
