@@ -1,4 +1,4 @@
-"""CLI commands of the network: ``train``, ``infer``, ``evaluate``, ``export-onnx``."""
+"""CLI commands of the network: ``train``, ``infer``, ``evaluate``, ``export-onnx``, ``average-weights``."""
 
 from __future__ import annotations
 
@@ -80,6 +80,16 @@ def add_parser(sub: argparse._SubParsersAction) -> argparse.ArgumentParser:
     p.add_argument("--weights", type=Path, default=None, help="weights (.pt); default: shipped")
     p.add_argument("--overwrite", action="store_true", help="replace existing .onnx graphs")
     p.set_defaults(func=run_export)
+
+    p = sub.add_parser("average-weights", help="average weights files or checkpoints of one run (SWA)",
+                       description="Writes the element-wise mean of the given weights files "
+                                   "(specgen.pt) or training checkpoints (checkpoint.pt), all of one "
+                                   "model configuration: stochastic weight averaging after the fact.")
+    p.add_argument("sources", type=Path, nargs="+", help="two or more .pt files")
+    p.add_argument("-o", "--output", type=Path, required=True, help="averaged weights file (.pt)")
+    p.add_argument("--half", action="store_true", help="store float16 tensors (as the shipped weights)")
+    p.add_argument("--overwrite", action="store_true", help="replace an existing output")
+    p.set_defaults(func=run_average)
     return p
 
 
@@ -237,6 +247,17 @@ def run_evaluate(args: argparse.Namespace) -> int:
 
         with atomic_write(args.json, overwrite=True) as tmp:
             tmp.write_text(json.dumps(res, indent=1))
+    return 0
+
+
+def run_average(args: argparse.Namespace) -> int:
+    from .model import save_weights
+    from .model.average import average_models
+
+    model = average_models(args.sources)
+    meta = {"averaged_from": [str(p) for p in args.sources]}
+    path = save_weights(model, args.output, meta=meta, overwrite=args.overwrite, half=args.half)
+    print(f"{path}: mean of {len(args.sources)} files, {path.stat().st_size / 1e6:.1f} MB")
     return 0
 
 

@@ -198,10 +198,18 @@ def _ablate(a) -> None:
         raise SpecGenError(f"unknown arm {unknown[0]!r}; available: {', '.join(ARMS_BY_NAME)}")
 
 
+def _average_weights(a) -> None:
+    if len(a.sources) < 2:
+        raise SpecGenError("average-weights needs at least two weights files or checkpoints")
+    for src in a.sources:
+        limits.check_input_file(src, "weights file")
+    limits.check_output_file(a.output, a.overwrite, suffixes=(".pt",))
+
+
 CHECKS: dict[str, Callable[[argparse.Namespace], None]] = {
     "info": _info, "tabulate": _tabulate, "corpus": _corpus, "train": _train, "infer": _infer,
     "evaluate": _evaluate, "export-onnx": _export, "render-input": _render_input,
-    "paper-tables": _paper_tables, "ablate": _ablate,
+    "paper-tables": _paper_tables, "ablate": _ablate, "average-weights": _average_weights,
 }
 
 
