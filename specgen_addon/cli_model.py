@@ -255,8 +255,7 @@ def run_average(args: argparse.Namespace) -> int:
     from .model.average import average_models
 
     model = average_models(args.sources)
-    meta = {"averaged_from": [str(p) for p in args.sources]}
-    path = save_weights(model, args.output, meta=meta, overwrite=args.overwrite, half=args.half)
+    path = save_weights(model, args.output, meta=model.meta, overwrite=args.overwrite, half=args.half)
     print(f"{path}: mean of {len(args.sources)} files, {path.stat().st_size / 1e6:.1f} MB")
     return 0
 

@@ -31,6 +31,9 @@ def test_average_is_the_element_wise_mean_of_weights_and_checkpoints(tmp_path):
     sa, sb = a.state_dict(), b.state_dict()
     for k in sa:
         assert torch.allclose(mean[k], (sa[k] + sb[k]) / 2, atol=1e-7), k
+    # provenance: the latest source's record (the checkpoint at step 7), and what was averaged
+    meta = average_models([pa, pb]).meta
+    assert meta["steps"] == 7 and meta["averaged_steps"] == [0, 7] and len(meta["averaged_from"]) == 2
 
 
 def test_average_weights_command_writes_the_mean_and_refuses_bad_input(tmp_path, capsys):

@@ -31,12 +31,17 @@ def load_any(path: str | Path) -> SpecGen:
             model.load_state_dict(payload["model"])
         except RuntimeError:
             raise WeightsError(f"{path}: checkpoint tensors do not fit its model config") from None
+        model.meta = {"steps": int(payload["step"]), "train_config": payload.get("train_config", {})}
         return model.eval()
     return load_weights(path)
 
 
 def average_models(paths: Sequence[str | Path]) -> SpecGen:
-    """The element-wise mean of the weights in ``paths`` (all of one model configuration)."""
+    """The element-wise mean of the weights in ``paths`` (all of one model configuration).
+
+    Its ``meta`` is the latest source's (the one with the most training steps), plus
+    ``averaged_from`` (the files) and ``averaged_steps`` (each source's step count).
+    """
     if len(paths) < 2:
         raise WeightsError("averaging needs at least two weights files or checkpoints")
     models = [load_any(p) for p in paths]
@@ -49,4 +54,7 @@ def average_models(paths: Sequence[str | Path]) -> SpecGen:
             for k, v in states[0].items()}
     out = SpecGen(cfg)
     out.load_state_dict(mean)
+    steps = [int(getattr(m, "meta", {}).get("steps", 0)) for m in models]
+    latest = models[max(range(len(models)), key=steps.__getitem__)]
+    out.meta = {**getattr(latest, "meta", {}), "averaged_from": [str(p) for p in paths], "averaged_steps": steps}
     return out.eval()
