@@ -222,12 +222,6 @@ def run_evaluate(args: argparse.Namespace) -> int:
         raise SpecGenError(f"--families must be ≥ 0, got {args.families}")
     if args.weights is not None and not args.weights.is_file():
         raise SpecGenError(f"{args.weights}: weights file not found")
-    if args.input_env is not None:
-        from .lighting import env_path
-
-        if not args.families:
-            raise SpecGenError("--input-env needs --families N (it applies to the per-family evaluation)")
-        env_path(args.input_env)  # refuses an unknown map, naming the available ones
     with progress_bar("evaluate", enabled=not args.quiet) as update:
         res = evaluate_test_split(weights=args.weights, limit=args.limit, backend=args.backend,
                                   progress=update, refine=args.refine)

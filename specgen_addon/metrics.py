@@ -94,8 +94,8 @@ def ssim(gt: np.ndarray, pred: np.ndarray, mask: np.ndarray | None = None,
     return float(smap[mask].mean() if mask is not None else smap.mean())
 
 
-def spectral_metrics(gt: np.ndarray, pred: np.ndarray, mask: np.ndarray | None = None) -> SpectralMetrics:
-    """PSNR and SSIM of ``pred`` against ``gt`` (H, W, C) per band and averaged (module docstring)."""
+def _checked(gt: np.ndarray, pred: np.ndarray, mask: np.ndarray | None):
+    """(gt, pred, mask) as float stacks of one shape and a boolean mask that covers a pixel."""
     gt = _as_stack(gt, "ground truth")
     pred = _as_stack(pred, "prediction")
     if gt.shape != pred.shape:
@@ -106,9 +106,20 @@ def spectral_metrics(gt: np.ndarray, pred: np.ndarray, mask: np.ndarray | None =
             raise SpecGenError(f"mask {mask.shape} does not match images {gt.shape[:2]}")
         if not mask.any():
             raise SpecGenError("mask covers no pixel")
+    return gt, pred, mask
+
+
+def _band_psnrs(g: np.ndarray, p: np.ndarray, mask: np.ndarray | None) -> np.ndarray:
+    """PSNR (dB) of each band of already-normalised stacks."""
+    return np.array([psnr(g[..., c], p[..., c], mask) for c in range(g.shape[-1])])
+
+
+def spectral_metrics(gt: np.ndarray, pred: np.ndarray, mask: np.ndarray | None = None) -> SpectralMetrics:
+    """PSNR and SSIM of ``pred`` against ``gt`` (H, W, C) per band and averaged (module docstring)."""
+    gt, pred, mask = _checked(gt, pred, mask)
     scale = normalisation_scale(gt, mask)
     g, p = gt / scale, pred / scale
-    ps = np.array([psnr(g[..., c], p[..., c], mask) for c in range(g.shape[-1])])
+    ps = _band_psnrs(g, p, mask)
     ss = np.array([ssim(g[..., c], p[..., c], mask) for c in range(g.shape[-1])])
     return SpectralMetrics(ps, ss, float(np.mean(ps)), float(np.mean(ss)), scale)
 
@@ -120,20 +131,16 @@ def brightness_fitted_psnr(gt: np.ndarray, pred: np.ndarray, mask: np.ndarray | 
     explains, e.g. a photo whose brightness the network cannot know. Same normalisation as
     :func:`spectral_metrics`.
     """
-    gt, pred = _as_stack(gt, "ground truth"), _as_stack(pred, "prediction")
-    if gt.shape != pred.shape:
-        raise SpecGenError(f"ground truth {gt.shape} and prediction {pred.shape} differ in shape")
-    m = np.ones(gt.shape[:2], bool) if mask is None else np.asarray(mask, bool)
-    g, p = gt[m], pred[m]
+    gt, pred, mask = _checked(gt, pred, mask)
+    g, p = (gt, pred) if mask is None else (gt[mask], pred[mask])
     denom = float(np.sum(p * p))
     k = float(np.sum(g * p) / denom) if denom > 0 else 1.0
-    return mean_psnr(gt, k * pred, m), k
+    return mean_psnr(gt, k * pred, mask), k
 
 
 def mean_psnr(gt: np.ndarray, pred: np.ndarray, mask: np.ndarray | None = None) -> float:
     """Mean over bands of PSNR (dB) with :func:`spectral_metrics`' normalisation, without SSIM."""
-    gt, pred = _as_stack(gt, "ground truth"), _as_stack(pred, "prediction")
-    m = None if mask is None else np.asarray(mask, bool)
-    scale = normalisation_scale(gt, m)
-    return float(np.mean([psnr(gt[..., c] / scale, pred[..., c] / scale, m) for c in range(gt.shape[-1])]))
+    gt, pred, mask = _checked(gt, pred, mask)
+    scale = normalisation_scale(gt, mask)
+    return float(np.mean(_band_psnrs(gt / scale, pred / scale, mask)))
 

@@ -126,6 +126,10 @@ def _evaluate(a) -> None:
     limits.check_number("limit", a.limit)
     if a.json is not None:
         limits.check_output_file(a.json, getattr(a, "overwrite", False))
+    if a.input_env is not None:
+        if not a.families:
+            raise SpecGenError("--input-env needs --families N (it applies to the per-family evaluation)")
+        check_env_name(a.input_env)
 
 
 def _export(a) -> None:

@@ -54,7 +54,7 @@ def average_models(paths: Sequence[str | Path]) -> SpecGen:
             for k, v in states[0].items()}
     out = SpecGen(cfg)
     out.load_state_dict(mean)
-    steps = [int(getattr(m, "meta", {}).get("steps", 0)) for m in models]
+    steps = [int(m.meta.get("steps", 0)) for m in models]  # load_any gives every model its meta
     latest = models[max(range(len(models)), key=steps.__getitem__)]
-    out.meta = {**getattr(latest, "meta", {}), "averaged_from": [str(p) for p in paths], "averaged_steps": steps}
+    out.meta = {**latest.meta, "averaged_from": [str(p) for p in paths], "averaged_steps": steps}
     return out.eval()

@@ -54,7 +54,7 @@ def grow_state_dict(state: dict[str, torch.Tensor], old: Config, new: Config,
         changed = sorted(k for k, v in dataclasses.asdict(old).items() if dataclasses.asdict(new)[k] != v)
         raise SpecGenError(f"cannot warm-start across a change of {', '.join(changed)} "
                            f"(only {', '.join(GROWABLE)} may differ, blocks may only be added, and "
-                           f"image_size / detail_factor must stay the same)")
+                           f"the conv stack's size image_size / detail_factor must stay the same)")
     out = {k: v.float().clone() for k, v in state.items()}
     if old.spectral_code and old.spectral_code_knots != new.spectral_code_knots:
         c, lam = old.feature_dim, old.res_lambda
