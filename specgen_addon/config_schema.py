@@ -28,6 +28,7 @@ TRAIN_BOUNDS: dict[str, tuple[float | None, float | None]] = {
     "corpus_seed": (0, 2**32 - 1), "input_variants": (1, 1000), "canonical_fraction": (0.0, 1.0),
     "checkpoint_every": (1, None), "val_every": (1, None), "val_materials": (0, 10_000),
     "threads": (1, 256), "ema_decay": (0.0, 0.999999),
+    "snapshot_every": (0, None), "snapshot_from": (0, None),
 }
 #: Numeric model sizes are at least 1 (and finite); these have other bounds.
 MODEL_BOUNDS: dict[str, tuple[float | None, float | None]] = {

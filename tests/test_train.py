@@ -289,3 +289,26 @@ def test_train_command_refuses_weights_of_another_model_before_any_work(tmp_path
     path.write_text(json.dumps({"model": {}, "train": {"init_weights": str(other), "steps": 1}}))
     assert cli_main(["train", "--config", str(path), "--out", str(tmp_path / "run"), "--quiet"]) == 2
     assert not (tmp_path / "run").exists()
+
+
+def test_snapshots_hold_what_the_run_would_ship_at_their_step_and_average(tmp_path):
+    from specgen_addon.model.average import average_models
+
+    spec, rgb, val = sets()
+    tcfg = TrainConfig(**{**FAST, "steps": 6, "ema_decay": 0.5, "snapshot_every": 2, "snapshot_from": 3})
+    a = train(Config(**SMALL), tcfg, spec, rgb, val, tmp_path / "a", show_progress=False)
+    snaps = sorted((tmp_path / "a" / "snapshots").glob("*.pt"))
+    assert [p.name for p in snaps] == ["step000004.pt", "step000006.pt"]
+    last, shipped = load_weights(snaps[-1]), load_weights(a.weights)
+    assert last.meta["steps"] == 6
+    for k, v in shipped.state_dict().items():
+        assert torch.equal(v, last.state_dict()[k]), k
+    mean = average_models(snaps)
+    assert mean.meta["averaged_steps"] == [4, 6]
+    # snapshots do not change the run: the same config without them ships the same weights
+    b = train(Config(**SMALL), dataclasses.replace(tcfg, snapshot_every=0), spec, rgb, val, tmp_path / "b",
+              show_progress=False)
+    for k, v in load_weights(b.weights).state_dict().items():
+        assert torch.equal(v, shipped.state_dict()[k]), k
+    with pytest.raises(SpecGenError, match="snapshot_every"):
+        TrainConfig(snapshot_every=-1).validate()

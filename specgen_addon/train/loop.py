@@ -80,6 +80,11 @@ class TrainConfig:
     #: and ``specgen.pt`` holds the average (torch.optim.swa_utils.AveragedModel), which smooths
     #: the step-to-step noise of a small batch; the checkpoint keeps both.
     ema_decay: float = 0.0
+    #: Every this many steps from ``snapshot_from`` on, the weights ``specgen.pt`` would hold then
+    #: are saved as ``snapshots/stepNNNNNN.pt`` (0: off), for averaging afterwards
+    #: (``average-weights``, :mod:`specgen_addon.model.average`).
+    snapshot_every: int = 0
+    snapshot_from: int = 0
 
     @classmethod
     def from_dict(cls, d: dict[str, Any]) -> "TrainConfig":
@@ -103,7 +108,8 @@ class TrainConfig:
                         ("spectral_materials_per_step", 0), ("rgb_materials_per_step", 0),
                         ("angles_per_material", 1), ("wavelengths_per_angle", 1), ("input_variants", 1),
                         ("lr_decay_every", 1), ("checkpoint_every", 1), ("val_every", 1),
-                        ("val_materials", 0), ("threads", 1), ("render_workers", 1)):
+                        ("val_materials", 0), ("threads", 1), ("render_workers", 1),
+                        ("snapshot_every", 0), ("snapshot_from", 0)):
             v = getattr(self, key)
             if not is_int(v) or v < lo:
                 raise SpecGenError(f"training config: {key} must be an integer ≥ {lo}, got {v!r}")
@@ -392,6 +398,11 @@ def train(mcfg: Config, tcfg: TrainConfig, spectral: MaterialSet, rgb: MaterialS
             bar.set_postfix(post, refresh=False)
         if step % tcfg.checkpoint_every == 0:
             checkpoint(step, rec["elapsed"])
+        if tcfg.snapshot_every and step >= tcfg.snapshot_from and step % tcfg.snapshot_every == 0 \
+                and dctx.is_main:
+            (out / "snapshots").mkdir(exist_ok=True)
+            save_weights(scored, out / "snapshots" / f"step{step:06d}.pt",
+                         meta={"steps": step, "train_config": _tdict(tcfg)})
     if bar is not None:
         bar.close()
     wall = elapsed0 + time.perf_counter() - t0
@@ -420,8 +431,8 @@ def _tdict(tcfg: TrainConfig, ignore_budget: bool = False) -> dict[str, Any]:
     d = dataclasses.asdict(tcfg)
     if ignore_budget:  # a resumed run may extend its budget or change what it logs
         for k in ("steps", "max_minutes", "threads", "checkpoint_every", "val_every", "init_weights",
-                  "render_workers", "device"):
-            d.pop(k)
+                  "render_workers", "device", "snapshot_every", "snapshot_from"):
+            d.pop(k, None)
     return d
 
 
