@@ -347,6 +347,8 @@ def train(mcfg: Config, tcfg: TrainConfig, spectral: MaterialSet, rgb: MaterialS
         bar = tqdm(total=tcfg.steps, initial=start_step, desc="train", unit="step", dynamic_ncols=True,
                    mininterval=2.0)
     scored = model if ema is None else ema.module  # what validation scores and specgen.pt holds
+    if tcfg.snapshot_every and dctx.is_main:
+        (out / "snapshots").mkdir(exist_ok=True)
     t0 = time.perf_counter()
     step = start_step
     stopped = False
@@ -400,7 +402,6 @@ def train(mcfg: Config, tcfg: TrainConfig, spectral: MaterialSet, rgb: MaterialS
             checkpoint(step, rec["elapsed"])
         if tcfg.snapshot_every and step >= tcfg.snapshot_from and step % tcfg.snapshot_every == 0 \
                 and dctx.is_main:
-            (out / "snapshots").mkdir(exist_ok=True)
             save_weights(scored, out / "snapshots" / f"step{step:06d}.pt",
                          meta={"steps": step, "train_config": _tdict(tcfg)})
     if bar is not None:
@@ -432,7 +433,7 @@ def _tdict(tcfg: TrainConfig, ignore_budget: bool = False) -> dict[str, Any]:
     if ignore_budget:  # a resumed run may extend its budget or change what it logs
         for k in ("steps", "max_minutes", "threads", "checkpoint_every", "val_every", "init_weights",
                   "render_workers", "device", "snapshot_every", "snapshot_from"):
-            d.pop(k, None)
+            d.pop(k)
     return d
 
 
