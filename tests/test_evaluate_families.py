@@ -6,7 +6,9 @@ import numpy as np
 import pytest
 
 from specgen_addon.corpus.generate import material_family
-from specgen_addon.train.evaluate import evaluate_families, format_family_results, mixed_test_materials
+from specgen_addon.errors import SpecGenError
+from specgen_addon.train.evaluate import (evaluate_families, format_family_results, mixed_split_materials,
+                                         mixed_test_materials)
 
 
 @pytest.mark.slow
@@ -15,6 +17,18 @@ def test_mixed_test_materials_are_held_out_and_grouped_by_family():
     assert [material_family(m) for m in mats].count("sheen") == 2
     assert [material_family(m) for m in mats].count("thin_film") == 2
     assert all(m.split == "test" for m in mats)
+
+
+@pytest.mark.slow
+def test_val_materials_share_no_material_with_the_test_materials():
+    val = mixed_split_materials(2, ["thin_film"], "val")
+    assert len(val) == 2 and all(m.split == "val" and material_family(m) == "thin_film" for m in val)
+    assert not {m.name for m in val} & {m.name for m in mixed_test_materials(2, ["thin_film"])}
+
+
+def test_unknown_split_is_refused_before_the_corpus_is_drawn():
+    with pytest.raises(SpecGenError, match="unknown split 'holdout'"):
+        mixed_split_materials(1, None, "holdout")
 
 
 @pytest.mark.slow

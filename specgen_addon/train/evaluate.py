@@ -109,14 +109,24 @@ MIXED_CORPUS_SEED = 0
 
 def mixed_test_materials(per_family: int, families: list[str] | None = None) -> list:
     """The first ``per_family`` test materials of each family of the mixed corpus (corpus order)."""
+    return mixed_split_materials(per_family, families, "test")
+
+
+def mixed_split_materials(per_family: int, families: list[str] | None = None, split: str = "test") -> list:
+    """The first ``per_family`` materials of ``split`` (train, val or test) of each family of the
+    mixed corpus, in corpus order (settings are chosen on ``val``, figures reported on ``test``)."""
     from ..corpus.generate import generate_mixed_corpus, material_family
     from ..corpus.families import FAMILY_NAMES
+    from ..corpus.spectra_sources import SPLITS
+    from ..errors import SpecGenError
 
+    if split not in SPLITS:
+        raise SpecGenError(f"unknown split {split!r} (choose from {', '.join(SPLITS)})")
     wanted = list(FAMILY_NAMES if families is None else families)
     out, count = [], {f: 0 for f in wanted}
     for m in generate_mixed_corpus(MIXED_CORPUS_SIZE, MIXED_CORPUS_SEED):
         f = material_family(m)
-        if m.split == "test" and f in count and count[f] < per_family:
+        if m.split == split and f in count and count[f] < per_family:
             out.append(m)
             count[f] += 1
     return out
