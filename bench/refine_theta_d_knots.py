@@ -66,6 +66,8 @@ def main() -> int:
     ap.add_argument("--per-family", type=int, default=3)
     ap.add_argument("--families", nargs="+", default=None)
     ap.add_argument("--weights", type=Path, default=None)
+    ap.add_argument("--knot-sets", nargs="+", type=int, default=None, metavar="I",
+                    help="score only these entries of KNOT_SETS (0-based; default: all)")
     ap.add_argument("--json", type=Path, default=None)
     args = ap.parse_args()
     if args.per_family < 1:
@@ -78,6 +80,10 @@ def main() -> int:
     from specgen_addon.refine import CorrectionBasis, RefineOptions, refine_brdf
     from specgen_addon.train.evaluate import mixed_split_materials
 
+    names = list(KNOT_SETS)
+    if args.knot_sets is not None and not all(0 <= i < len(names) for i in args.knot_sets):
+        ap.error(f"--knot-sets: indices 0..{len(names) - 1}")
+    knot_sets = {names[i]: KNOT_SETS[names[i]] for i in (args.knot_sets or range(len(names)))}
     mats = mixed_split_materials(args.per_family, args.families, "val")
     h = tables.Harness(tables.Settings(), cache_root() / "refine-knots", log=lambda s: None)
     rows = []
@@ -87,7 +93,7 @@ def main() -> int:
         table = tables.generate_from_sphere(m, args.weights, h.wl)
         row = {"material": m.name, "family": material_family(m), "kind": m.kind}
         candidates = {"network alone": (table, None)}
-        for label, knots in KNOT_SETS.items():
+        for label, knots in knot_sets.items():
             opts = RefineOptions(clip_level=None, basis=CorrectionBasis(theta_d_knots=knots))
             res = refine_brdf(table, photo, options=opts)
             candidates[label] = (res.table, res.after.psnr_db)
@@ -100,7 +106,7 @@ def main() -> int:
         print(f"{m.name} {row['family']:<12} " + " | ".join(
             f"{k[:10]}: {v['psnr'][0]:.2f}/{v['psnr'][1]:.2f} dB, hue {v['hue_error_deg']:.0f}°, ΔE {v['dE2000']:.1f}"
             for k, v in row.items() if isinstance(v, dict)), flush=True)
-    labels = ["network alone", *KNOT_SETS]
+    labels = ["network alone", *knot_sets]
     print(f"\n{describe_machine()}; val split, {len(rows)} materials, {time.perf_counter() - t0:.0f} s")
     summary: dict = {}
     for fam in sorted({r["family"] for r in rows}) + ["all"]:
