@@ -30,23 +30,23 @@ WL = np.linspace(380.0, 780.0, 41)
 THETA_D = np.radians(np.linspace(0.0, 80.0, 33))
 
 
-def _lab(spectra_rows: np.ndarray, normalise_y: float | None = None) -> np.ndarray:
+def _lab(spectra_rows: np.ndarray, normalise_y: float | None = None, wavelengths: np.ndarray = WL) -> np.ndarray:
     import colour
 
     from specgen_addon.spectra import reflectance_to_linear_srgb
 
-    rgb = reflectance_to_linear_srgb(spectra_rows, WL)
+    rgb = reflectance_to_linear_srgb(spectra_rows, wavelengths)
     xyz = colour.RGB_to_XYZ(rgb, colour.RGB_COLOURSPACES["sRGB"], apply_cctf_decoding=False)
     if normalise_y is not None:
         xyz = xyz * (normalise_y / np.maximum(xyz[..., 1:2], 1e-12))
     return colour.XYZ_to_Lab(xyz, colour.CCS_ILLUMINANTS["CIE 1931 2 Degree Standard Observer"]["D65"])
 
 
-def _specular(brdf, theta_d: np.ndarray) -> np.ndarray:
+def _specular(brdf, theta_d: np.ndarray, wavelengths: np.ndarray = WL) -> np.ndarray:
     from specgen_addon.rusinkiewicz import io_from_half_diff
 
     wi, wo = io_from_half_diff(np.zeros_like(theta_d), theta_d, np.zeros_like(theta_d))
-    return np.asarray(brdf.eval(wi, wo, WL))
+    return np.asarray(brdf.eval(wi, wo, wavelengths))
 
 
 def main() -> None:

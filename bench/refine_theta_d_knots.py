@@ -29,7 +29,7 @@ import numpy as np
 REPO = Path(__file__).resolve().parents[1]
 sys.path.insert(0, str(REPO))
 
-from bench.family_checks import THETA_D  # noqa: E402
+from bench.family_checks import THETA_D, _lab, _specular  # noqa: E402
 from bench.machine import describe_machine  # noqa: E402
 
 #: Candidate θd knots (MERL grid indices, 1° apart).
@@ -43,19 +43,8 @@ def hue_scores(truth, table) -> tuple[float, float]:
     """(mean |hue error| in degrees, mean Y-normalised ΔE2000) of the specular colour over θd."""
     import colour
 
-    from specgen_addon.rusinkiewicz import io_from_half_diff
-    from specgen_addon.spectra import reflectance_to_linear_srgb
-
-    wl = np.asarray(table.wavelengths, dtype=np.float64)
-    wi, wo = io_from_half_diff(np.zeros_like(THETA_D), THETA_D, np.zeros_like(THETA_D))
-
-    def lab(brdf) -> np.ndarray:  # θh = 0 colour over θd, luminance normalised to Y = 0.5
-        rgb = reflectance_to_linear_srgb(np.asarray(brdf.eval(wi, wo, wl)), wl)
-        xyz = colour.RGB_to_XYZ(rgb, colour.RGB_COLOURSPACES["sRGB"], apply_cctf_decoding=False)
-        xyz = xyz * (0.5 / np.maximum(xyz[..., 1:2], 1e-12))
-        return colour.XYZ_to_Lab(xyz, colour.CCS_ILLUMINANTS["CIE 1931 2 Degree Standard Observer"]["D65"])
-
-    lab_t, lab_p = lab(truth), lab(table)
+    wl = np.asarray(table.wavelengths, dtype=np.float64)  # the truth on the table's bands
+    lab_t, lab_p = (_lab(_specular(b, THETA_D, wl), 0.5, wl) for b in (truth, table))
     h = lambda lab: np.degrees(np.arctan2(lab[:, 2], lab[:, 1]))  # noqa: E731
     err = np.abs((h(lab_p) - h(lab_t) + 180.0) % 360.0 - 180.0)
     return float(err.mean()), float(colour.delta_E(lab_t, lab_p, method="CIE 2000").mean())
