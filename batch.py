@@ -149,7 +149,10 @@ def run(args) -> Path:
         info = bake.generate_lookup(str(source), out / "lookup", wavelengths, weights=args.weights,
                                     backend=args.backend, name=source.stem, progress=progress,
                                     lighting=photo_lighting, refine=args.refine,
-                                    save_table=True)
+                                    save_table=True, model=args.model)
+        if info.film_fit is not None:
+            cli_model = import_module(f"{pkg.__name__}.specgen_addon.cli_model")
+            print(cli_model.film_fit_summary(info.film_fit, photo_lighting.label), flush=True)
         if info.refinement is not None:
             print(f"refinement under {photo_lighting.label}: {info.refinement.summary()}", flush=True)
             for w in info.refinement.warnings:

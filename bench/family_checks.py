@@ -1,5 +1,7 @@
-"""Issue 11's two family checks, truth against the prediction: the network alone, and the network
-refined to its input photo (:func:`specgen_addon.refine.refine_brdf`, the product's default):
+"""Issue 11's two family checks, truth against the prediction: the network alone, the network
+refined to its input photo (:func:`specgen_addon.refine.refine_brdf`, the product's default) and,
+for the thin films, the thin-film family's fit to the photo (``infer --model thin-film``,
+:func:`specgen_addon.fit.thin_film.fit_thin_film`):
 
 * thin film: hue (CIELAB h°, D65) of the specular direction (θh = 0) over θd for two held-out
   thin-film test materials, drawn as a figure;
@@ -66,10 +68,19 @@ def main() -> None:
     out: dict = {"weights": str(args.weights or "shipped")}
     from specgen_addon.refine import RefineOptions, refine_brdf
 
-    def predict(m):
+    from specgen_addon.fit.thin_film import fit_thin_film
+
+    def predict(m, fit: bool = False):
         image = input_image.render_input(m)
         table = generate_brdf(image, weights=args.weights, wavelengths_nm=WL)
-        return table, refine_brdf(table, image, options=RefineOptions(clip_level=None)).table
+        out = (table, refine_brdf(table, image, options=RefineOptions(clip_level=None)).table)
+        if fit:
+            film = fit_thin_film(image, clip_level=None)
+            print(f"  thin-film fit of {m.name}: {film.material.kind}, η_f {film.material.film_eta:g}, "
+                  f"d {film.material.thickness_nm:g} nm, α {film.material.alpha:.4g}; "
+                  f"self-reproduction {film.reproduction.text()}")
+            out = out + (film,)
+        return out
 
     films = mixed_test_materials(2, ["thin_film"])
     coats = mixed_test_materials(3, ["tinted_coat"])
@@ -77,11 +88,11 @@ def main() -> None:
     # hue angle, unwrapped along θd (a film sweeping through red shows as a continuous curve)
     hue = lambda lab: np.degrees(np.unwrap(np.arctan2(lab[:, 2], lab[:, 1])))  # noqa: E731
     for m in films:
-        tables = predict(m)
+        tables = predict(m, fit=True)
         h_true = _lab(_specular(m, THETA_D), 0.5)
         row = {"material": m.name, "hue_true": hue(h_true).tolist()}
         hues = []
-        for tag, table in zip(("network", "refined"), tables):
+        for tag, table in zip(("network", "refined", "fit"), tables):
             h_pred = _lab(_specular(table, THETA_D), 0.5)
             de = colour.delta_E(h_true, h_pred, method="CIE 2000")
             # hue is circular: the predicted curve (unwrapped on its own) is drawn on the turn
@@ -116,11 +127,12 @@ def main() -> None:
         import matplotlib.pyplot as plt
 
         fig, axes = plt.subplots(1, len(curves), figsize=(5 * len(curves), 3.6), dpi=100)
-        for ax, (m, ht, hp, hr) in zip(np.atleast_1d(axes), curves):
+        for ax, (m, ht, hp, hr, hf) in zip(np.atleast_1d(axes), curves):
             deg = np.degrees(THETA_D)
-            ax.plot(deg, ht, "k-", label="truth")
+            ax.plot(deg, ht, "k-", lw=2.5, alpha=0.5, label="truth")
             ax.plot(deg, hp, "C3--", label="SpecGen (network alone)")
             ax.plot(deg, hr, "C0-.", label="SpecGen refined to the photo")
+            ax.plot(deg, hf, "C2:", lw=2, label="thin-film fit to the photo")
             ax.set_xlabel("θd (degrees), θh = 0")
             ax.set_ylabel("CIELAB hue h° (D65, unwrapped)")
             ax.set_title(f"{m.name}: {m.kind}, d = {m.thickness_nm:.0f} nm", fontsize=9)

@@ -117,7 +117,7 @@ class SPECGEN_OT_generate_brdf(_Modal, bpy.types.Operator):
         return dict(image=image, out_dir=out, wavelengths_nm=_wavelengths(s), weights=weights,
                     n_phi_d=int(s.lookup_resolution), tolerance=s.basis_tolerance, name=self._stem,
                     save_table=s.export_table, preview=True,
-                    lighting=input_lighting(s), refine=s.refine, overwrite=s.overwrite)
+                    lighting=input_lighting(s), refine=s.refine, overwrite=s.overwrite, model=s.model)
 
     def _done(self, context, info: bake.AtlasInfo) -> None:
         from .render import make_material
@@ -138,8 +138,10 @@ class SPECGEN_OT_generate_brdf(_Modal, bpy.types.Operator):
                 img.reload()
             mat["specgen_preview"] = img.name
         s.material = mat
-        ref = info.refinement
+        ref, fit = info.refinement, info.film_fit
         s.refine_summary = "" if ref is None else f"Photo match: {ref.after.text()} (network {ref.before.text()})"
+        if fit is not None:
+            s.refine_summary = f"Thin-film fit, photo match: {fit.reproduction.text()}"
         s.refine_residual = -1.0 if ref is None else ref.after.psnr_db
         for warning in ([] if ref is None else ref.warnings):
             self.report({"WARNING"}, f"SpecGen: {warning}")

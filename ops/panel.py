@@ -36,7 +36,9 @@ class SPECGEN_PT_main(bpy.types.Panel):
             col.prop(s, "input_rotation")
             col.prop(s, "input_exposure")
             col.prop(s, "input_key_light")
-        col.prop(s, "refine")
+        col.prop(s, "model")
+        if s.model == "network":
+            col.prop(s, "refine")
 
         col = layout.column(heading="Spectrum", align=True)
         col.prop(s, "wl_min", text="Wavelengths (nm)")

@@ -90,6 +90,11 @@ class SpecGenSettings(bpy.types.PropertyGroup):
                                description="Folder for baked lookups and spectral EXR renders")
     overwrite: BoolProperty(name="Overwrite", default=False,
                             description="Replace existing output files")
+    model: EnumProperty(name="Model", default="network",
+                        items=[("network", "SpecGen Network", "The network's BRDF (then refined to the photo)"),
+                               ("thin-film", "Thin-Film Fit", "Fit an interference film (soap, oil, "
+                                "anodised metal) to the photo: its colour changes with angle")],
+                        description="What makes the BRDF from the photo")
     refine: BoolProperty(name="Refine to Photo", default=True,
                          description="Refine the network's BRDF so that, rendered under the input "
                                      "lighting, it reproduces the photo")

@@ -93,6 +93,7 @@ class AtlasInfo:
     rel_error: float = 0.0
     closures: "ClosureFit | None" = None  # native closure fit for the full-scene render
     refinement: object | None = None   # specgen_addon.refine.RefineResult of a generated table
+    film_fit: object | None = None     # specgen_addon.fit.thin_film.ThinFilmFit (model "thin-film")
 
     @property
     def n_coeffs(self) -> int:
@@ -499,9 +500,11 @@ def generate_lookup(image, out_dir: str | os.PathLike, wavelengths_nm: np.ndarra
                     progress: Callable[[float], None] | None = None,
                     cancel: Callable[[], bool] | None = None, overwrite: bool = True,
                     lighting=None, refine: bool = True, save_table: bool = False,
-                    preview: bool = False) -> AtlasInfo:
+                    preview: bool = False, model: str = "network") -> AtlasInfo:
     """Image of a sphere → spectral BRDF table, refined against the photo under ``lighting``
-    unless ``refine`` is False → coefficient atlas + JSON (``<name>_lookup.*``).
+    unless ``refine`` is False → coefficient atlas + JSON (``<name>_lookup.*``). ``model``
+    ``"thin-film"`` fits the thin-film family to the photo instead of running the network
+    (:mod:`specgen_addon.pipeline`); its report is ``info.film_fit``.
 
     Runs without bpy (the Generate operator calls it on a worker thread). Progress: 0–0.8 network
     and refinement (:func:`specgen_addon.pipeline.generate`), 0.8–1 bake. The refinement's report
@@ -524,18 +527,18 @@ def generate_lookup(image, out_dir: str | os.PathLike, wavelengths_nm: np.ndarra
     with OutputGuard([out]):  # failed, cancelled or interrupted: nothing new stays in out_dir
         out.mkdir(parents=True, exist_ok=True)
         return _generate_lookup(image, out, wavelengths_nm, weights, n_phi_d, tolerance, backend,
-                                name, progress, cancel, lighting, refine, save_table, preview)
+                                name, progress, cancel, lighting, refine, save_table, preview, model)
 
 
 def _generate_lookup(image, out: Path, wavelengths_nm, weights, n_phi_d, tolerance, backend, name,
-                     progress, cancel, lighting, refine, save_table, preview) -> AtlasInfo:
+                     progress, cancel, lighting, refine, save_table, preview, model="network") -> AtlasInfo:
     from .errors import WeightsError
     from .pipeline import generate
 
     sub = (lambda lo, hi: (lambda f: progress(lo + (hi - lo) * f))) if progress else (lambda lo, hi: None)
     chosen = backend or choose_backend()
     kwargs = dict(lighting=lighting, refine=refine, weights=weights, wavelengths_nm=wavelengths_nm,
-                  progress=sub(0.0, 0.8), cancel=cancel)
+                  progress=sub(0.0, 0.8), cancel=cancel, model=model)
     try:
         generated = generate(image, backend=chosen, **kwargs)
     except WeightsError:
@@ -555,4 +558,5 @@ def _generate_lookup(image, out: Path, wavelengths_nm, weights, n_phi_d, toleran
                       progress=sub(0.8, 1.0), cancel=cancel)
     save_atlas_info(info, out / f"{name}_lookup.json")
     info.refinement = generated.refinement
+    info.film_fit = generated.film_fit
     return info

@@ -94,10 +94,14 @@ def add_parser(sub: argparse._SubParsersAction) -> argparse.ArgumentParser:
 
 
 def add_refine_arguments(p: argparse.ArgumentParser) -> None:
-    """``--refine/--no-refine`` and the input lighting options (shared with batch.py)."""
+    """``--model``, ``--refine/--no-refine`` and the input lighting options (shared with batch.py)."""
     g = p.add_argument_group("photo consistency",
                              "the lighting the photo was taken under, and the refinement that makes "
                              "the BRDF reproduce the photo under it")
+    g.add_argument("--model", choices=("network", "thin-film"), default="network",
+                   help="what makes the BRDF: 'network' (SpecGen, then refinement; default) or "
+                        "'thin-film': fit the thin-film interference family (soap, oil, anodised "
+                        "metal) to the photo, for a colour that changes with angle")
     g.add_argument("--refine", action=argparse.BooleanOptionalAction, default=True,
                    help="refine the network's BRDF so it reproduces the photo (default: on)")
     g.add_argument("--input-env", default="canonical", metavar="NAME|FILE",
@@ -116,6 +120,13 @@ def input_lighting_from_args(args: argparse.Namespace):
     from .input_lighting import parse_lighting
 
     return parse_lighting(args.input_env, args.input_rotation, args.input_exposure, args.input_key_light)
+
+
+def film_fit_summary(fit, lighting_label: str) -> str:
+    """One line on a thin-film fit: the film found and its self-reproduction."""
+    m = fit.material
+    return (f"thin-film fit: {m.kind}, η_f {m.film_eta:g}, d {m.thickness_nm:g} nm, α {m.alpha:.4g}; "
+            f"self-reproduction under {lighting_label}: {fit.reproduction.text()}")
 
 
 def print_refinement(generated) -> None:
@@ -199,12 +210,14 @@ def run_infer(args: argparse.Namespace) -> int:
     t0 = time.perf_counter()
     with progress_bar("infer", enabled=not args.quiet) as update:
         generated = generate(args.image, lighting, refine=args.refine, weights=args.weights,
-                             wavelengths_nm=wl, backend=args.backend, progress=update)
+                             wavelengths_nm=wl, backend=args.backend, progress=update, model=args.model)
     table = generated.table
     dt = time.perf_counter() - t0
     table.save(out, overwrite=args.overwrite)
     print(f"{out}: spectral BRDF {table.values.shape} ({wl[0]:g}–{wl[-1]:g} nm) in {dt:.1f} s")
     print_refinement(generated)
+    if generated.film_fit is not None:
+        print(film_fit_summary(generated.film_fit, lighting.label))
     if args.rgb:
         table.to_rgb().save(rgb_out, overwrite=args.overwrite)
         print(f"{rgb_out}: RGB projection (D65, linear sRGB)")

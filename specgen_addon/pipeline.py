@@ -8,6 +8,10 @@
 3. unless switched off, the table is refined against the photo under that lighting
    (:func:`specgen_addon.refine.refine_brdf`). Without refinement the network's table is returned
    untouched.
+
+With ``model="thin-film"`` steps 2–3 are replaced by the thin-film family's fit to the photo
+(:func:`specgen_addon.fit.thin_film.fit_thin_film`): for interference films (soap, oil, anodised
+metal) whose angle-dependent colour the network's prior does not place.
 """
 
 from __future__ import annotations
@@ -25,6 +29,8 @@ CancelFn = Callable[[], bool]
 
 #: Share of the progress bar taken by the network when refinement follows.
 NETWORK_SHARE = 0.45
+#: What generates the table: the network (then refinement), or the thin-film family's fit.
+MODELS = ("network", "thin-film")
 
 
 @dataclass
@@ -33,6 +39,7 @@ class Generated:
 
     table: BRDFTable
     refinement: object | None = None   # specgen_addon.refine.RefineResult
+    film_fit: object | None = None     # specgen_addon.fit.thin_film.ThinFilmFit (model="thin-film")
 
     @property
     def warnings(self) -> list[str]:
@@ -51,18 +58,36 @@ def load_photo(image) -> tuple[np.ndarray, bool]:
 
 def generate(image, lighting=None, refine: bool = True, weights=None, wavelengths_nm=None,
              backend: str = "torch", progress: ProgressFn | None = None,
-             cancel: CancelFn | None = None) -> Generated:
+             cancel: CancelFn | None = None, model: str = "network") -> Generated:
     """Generate (and by default refine) the spectral BRDF of the sphere in ``image``.
 
     ``lighting`` is an :class:`~specgen_addon.input_lighting.InputLighting` (default: canonical).
+    ``model`` is one of :data:`MODELS` (``"thin-film"`` ignores ``refine``, ``weights``, ``backend``).
     ``progress(fraction)`` and ``cancel()`` are passed down; cancelling raises
     :class:`~specgen_addon.errors.Cancelled` and returns nothing.
     """
     from .infer import generate_brdf
     from .input_lighting import InputLighting
 
+    from .errors import SpecGenError
+
+    if model not in MODELS:
+        raise SpecGenError(f"unknown model {model!r}; choose one of {', '.join(MODELS)}")
     lighting = lighting or InputLighting()
     photo, linear = load_photo(image)
+    src = str(image) if isinstance(image, (str, Path)) else "image"
+    if model == "thin-film":
+        from .fit.thin_film import fit_thin_film
+        from .refine import CLIP_LEVEL
+        from .spectra import DEFAULT_WAVELENGTHS_NM
+
+        wl = DEFAULT_WAVELENGTHS_NM if wavelengths_nm is None else np.asarray(wavelengths_nm, np.float64)
+        fit = fit_thin_film(photo, lighting, clip_level=None if linear else CLIP_LEVEL,
+                            progress=None if progress is None else (lambda f: progress(0.8 * f)), cancel=cancel)
+        table = fit.table(wl, progress=None if progress is None else (lambda f: progress(0.8 + 0.2 * f)),
+                          cancel=cancel)
+        table.metadata = {**table.metadata, "input_image": src, "input_lighting": lighting.label}
+        return Generated(table, film_fit=fit)
     share = NETWORK_SHARE if refine else 1.0
 
     def sub(lo: float, hi: float) -> ProgressFn | None:
@@ -70,7 +95,6 @@ def generate(image, lighting=None, refine: bool = True, weights=None, wavelength
 
     table = generate_brdf(photo * lighting.network_gain(), weights=weights, wavelengths_nm=wavelengths_nm,
                           backend=backend, progress=sub(0.0, share), cancel=cancel)
-    src = str(image) if isinstance(image, (str, Path)) else "image"
     table.metadata = {**table.metadata, "input_image": src, "input_lighting": lighting.label}
     if not refine:
         return Generated(table)

@@ -2,10 +2,6 @@
 
 from __future__ import annotations
 
-import subprocess
-import sys
-import textwrap
-
 import numpy as np
 import pytest
 
@@ -18,6 +14,7 @@ from specgen_addon.refine.operator import PhotoOperator
 from specgen_addon.refine.solve import nonneg_ridge
 from specgen_addon.rusinkiewicz import io_from_half_diff
 from specgen_addon.table import BRDFTable
+from tests.numpy_only import run_numpy_only
 from tests.specgen_standins import RampMaterial
 
 SIZE = 48
@@ -182,8 +179,8 @@ def test_input_lighting_validates_names_files_and_values(tmp_path):
 def test_user_hdr_file_lights_like_the_same_map_as_exr(tmp_path):
     """A Radiance .hdr written by OpenImageIO (a reader no one here wrote) gives the same lighting."""
     oiio = pytest.importorskip("OpenImageIO")
-    from specgen_addon.render.environment import read_exr_rgb
     from specgen_addon.lighting import env_path
+    from specgen_addon.render.environment import read_exr_rgb
 
     rgb = read_exr_rgb(env_path("forest"))[::4, ::4].copy()
     path = tmp_path / "forest_small.hdr"
@@ -208,14 +205,7 @@ def test_refinement_runs_with_only_numpy_importable(tmp_path, ramp_table, repo_d
     """The panel's path: numpy only (torch, scipy, scikit-image, Pillow, colour-science and OpenEXR blocked)."""
     path = tmp_path / "t.npz"
     ramp_table.save(path)
-    code = textwrap.dedent(f"""
-        import sys
-        class Block:
-            def find_spec(self, name, path=None, target=None):
-                if name.split('.')[0] in ('torch', 'scipy', 'skimage', 'PIL', 'colour', 'OpenEXR'):
-                    raise ImportError('blocked: ' + name)
-        sys.meta_path.insert(0, Block())
-        sys.path.insert(0, {str(repo_dir)!r})
+    out = run_numpy_only(repo_dir, f"""
         import numpy as np
         from specgen_addon.table import BRDFTable
         from specgen_addon.input_lighting import InputLighting
@@ -228,7 +218,6 @@ def test_refinement_runs_with_only_numpy_importable(tmp_path, ramp_table, repo_d
         assert 'torch' not in sys.modules and 'scipy' not in sys.modules
         print('ok', res.summary())
     """)
-    out = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True, timeout=300)
     assert out.returncode == 0, out.stderr[-2000:]
     assert out.stdout.startswith("ok")
 

@@ -55,14 +55,15 @@ def airy_reflectance(cos_theta: np.ndarray, wavelengths_nm: np.ndarray, film_eta
     """Unpolarised reflectance of a film on a substrate, from air (Airy summation, exact).
 
     ``cos_theta`` (..., 1) or broadcastable against ``wavelengths_nm`` (Λ,); ``substrate_n`` real
-    or complex per wavelength; ``thickness_nm`` ≥ 0. Returns the broadcast shape.
+    or complex per wavelength; ``thickness_nm`` ≥ 0 (a float, or an array broadcastable against the
+    others, e.g. (N, 1, 1) for a stack of films). Returns the broadcast shape.
     """
     c = np.clip(np.asarray(cos_theta, dtype=np.float64), 0.0, 1.0)
     lam = np.asarray(wavelengths_nm, dtype=np.float64)
     n1 = np.asarray(film_eta, dtype=np.float64) + 0j
     n2 = np.asarray(substrate_n) + 0j
     cos1, s, p = _amplitudes(c, n1, n2)
-    phase = np.exp(1j * 4.0 * np.pi * n1 * float(thickness_nm) * cos1 / lam)
+    phase = np.exp(1j * 4.0 * np.pi * n1 * np.asarray(thickness_nm, dtype=np.float64) * cos1 / lam)
     out = 0.0
     for r01, r12 in (s, p):
         r = (r01 + r12 * phase) / (1.0 + r01 * r12 * phase)

@@ -1,0 +1,322 @@
+"""Fit of the thin-film family to the photo: an interference film's angle-dependent colour from one
+sphere photo, where the network's prior cannot place it (issue 11).
+
+The model is the corpus family :class:`~specgen_addon.corpus.families.thin_film.ThinFilm`: a GGX
+lobe (roughness ``α``) whose Fresnel factor is the exact Airy reflectance ``R(θd, λ)`` of a film
+(index ``η_f``, thickness ``d`` in nm) on a metal or dielectric substrate, plus, over a
+dielectric, a Lambertian body ``ρ(λ)/π`` (added, not energy-coupled; ``ρ`` in the three-spectrum
+basis of Mallett & Yuksel 2019, as the refinement's tints). Rendering is linear in the
+BRDF, so under the photo's lighting (:class:`~specgen_addon.refine.PhotoOperator`, the renderer's
+own samples) the photo is
+
+    photo[p, c] = Σ_j Σ_λ R(θd_j, λ) K_α[p, c, j, λ]  +  Σ_l ρ_l B[p, c, l],
+
+with ``K_α`` the response of the lobe ``G_α(θh, θd, φd) = D G₂ / (4 cos θi cos θo)`` per unit
+reflectance at table node ``θd_j`` and render wavelength ``λ``, and ``B`` that of a Lambertian body
+per basis spectrum. The fit runs in three stages:
+
+1. ``α``: for each roughness on a log grid, ``R`` free (smooth hats in θd × λ) and ``ρ ≥ 0`` are
+   solved by least squares; the roughness with the smallest residual is kept;
+2. ``(substrate, η_f, d)``: an exhaustive search of the Airy model on a grid (every measured metal
+   and three dielectrics, η_f 1.2–2.6 in steps of 0.1, optical thickness η_f·d in 4 nm steps for
+   d 0–1500 nm), ``ρ`` solved in closed form, in the design's reduced singular basis;
+3. a finer local grid around the best candidate, and a non-negative body.
+
+Everything is numpy (it runs inside a stock Blender); a 128² photo takes 30–60 s of one core.
+Angles are radians, wavelengths nm, BRDF values sr⁻¹.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+from typing import Callable
+
+import numpy as np
+
+from ..corpus.families.thin_film import THICKNESS_RANGE_NM, ThinFilm, airy_reflectance
+from ..corpus.fresnel import cauchy_ior
+from ..corpus.material import ALPHA_RANGE, Conductor, Dielectric, Material
+from ..corpus.metals import METALS, metal_ior
+from ..corpus.microfacet import specular_geometry
+from ..errors import Cancelled, SpecGenError
+from ..refine.basis import CorrectionBasis, hat_matrix
+from ..refine.operator import PhotoOperator
+from ..refine.report import Reproduction, reproduction
+from ..refine.solve import nonneg_ridge
+from ..table import N_PHI_D, N_THETA_D, N_THETA_H, BRDFTable, grid_angles
+
+ProgressFn = Callable[[float], None]
+CancelFn = Callable[[], bool]
+
+#: Roughness grid of stage 1 (log-spaced over the corpus's range up to 0.5).
+ALPHA_GRID = np.geomspace(ALPHA_RANGE[0], 0.5, 14)
+#: Film index grid of stage 2 (oils and soaps ≈ 1.33–1.5, oxides up to ≈ 2.4).
+FILM_ETA_GRID = np.round(np.arange(1.2, 2.601, 0.1), 3)
+#: Step of stage 2's grid in optical thickness η_f·d (nm): the phase 4π η_f d cos θ₁ / λ moves by
+#: ≤ 0.13 rad per step across the visible range, whatever η_f.
+OPTICAL_STEP_NM = 4.0
+#: Singular vectors of the design kept by stage 2's reduction.
+REDUCED_RANK = 320
+#: Dielectric substrates tried (Cauchy A; B = 0.004 µm²): water-like, glass, dense glass/resin.
+DIELECTRIC_CAUCHY_A = (1.32, 1.5, 1.7)
+DIELECTRIC_CAUCHY_B_UM2 = 0.004
+#: Pixels used by the fit (an even subset of the observed sphere, for speed).
+MAX_FIT_PIXELS = 1500
+#: Knots of stage 1's free reflectance: θd (radians) and λ (nm).
+FREE_THETA_D_KNOTS = np.radians(np.arange(0.0, 90.1, 10.0))
+SPECTRAL_KNOTS_NM = np.linspace(380.0, 780.0, 9)
+
+
+@dataclass
+class ThinFilmFit:
+    """The fitted film: ``material`` (no body), the Lambertian body ``body_reflectance`` at
+    ``body_wavelengths_nm`` (zeros over a metal), and the fit's photo reproduction."""
+
+    material: ThinFilm
+    body_wavelengths_nm: np.ndarray
+    body_reflectance: np.ndarray
+    reproduction: Reproduction
+    alpha_residuals: dict[float, float]
+
+    def eval(self, wi: np.ndarray, wo: np.ndarray, wavelengths_nm: np.ndarray) -> np.ndarray:
+        """``f_r(ωi, ωo, λ)`` in sr⁻¹, (N, Λ): the film's lobe plus the body ``ρ(λ)/π``."""
+        w = np.asarray(wavelengths_nm, dtype=np.float64)
+        f = self.material.eval(wi, wo, w)
+        above = (np.asarray(wi)[:, 2] > 0) & (np.asarray(wo)[:, 2] > 0)
+        return f + above[:, None] * np.interp(w, self.body_wavelengths_nm, self.body_reflectance)[None] / np.pi
+
+    def table(self, wavelengths_nm: np.ndarray, progress: ProgressFn | None = None,
+              cancel: CancelFn | None = None) -> BRDFTable:
+        """The fitted BRDF on the MERL grid as a spectral table (sr⁻¹)."""
+        w = np.asarray(wavelengths_nm, dtype=np.float64)
+        lobe = self.material.tabulate(w, progress=progress, cancel=cancel)
+        body = np.interp(w, self.body_wavelengths_nm, self.body_reflectance) / np.pi
+        cos_i, cos_o, _, _ = Material._hd_cosines(*np.meshgrid(*grid_angles(), indexing="ij"))
+        above = ((cos_i > 0) & (cos_o > 0)).reshape(N_THETA_H, N_THETA_D, N_PHI_D, 1)
+        values = (lobe.values + above * body.astype(lobe.values.dtype)).astype(lobe.values.dtype)
+        meta = dict(lobe.metadata)
+        meta.update({"source": "specgen thin-film fit", "description": self.material.kind,
+                     "fit_psnr_db": round(self.reproduction.psnr_db, 3)})
+        return BRDFTable(values, w, metadata=meta)
+
+
+def lobe_geometry(alpha: float) -> np.ndarray:
+    """``G_α = D G₂ / (4 cos θi cos θo)`` (sr⁻¹) on the MERL grid nodes, (90, 90, 180)."""
+    th, td, pd = np.meshgrid(*grid_angles(), indexing="ij")
+    cos_i, cos_o, cos_h, _ = Material._hd_cosines(th, td, pd)
+    return specular_geometry(cos_i, cos_o, cos_h, alpha).reshape(N_THETA_H, N_THETA_D, N_PHI_D)
+
+
+def fit_pixels(op: PhotoOperator, max_pixels: int = MAX_FIT_PIXELS) -> np.ndarray:
+    """Indices (into the operator's observed pixels) of an even subset of at most ``max_pixels``."""
+    n = op.n_pixels
+    return np.arange(n) if n <= max_pixels else np.unique(np.linspace(0, n - 1, max_pixels).round().astype(int))
+
+
+def theta_d_response(op: PhotoOperator, geometry: np.ndarray, pixels: np.ndarray) -> np.ndarray:
+    """``K[p, c, j, λ]``: linear-sRGB photo of the BRDF ``geometry · R`` per unit ``R(θd_j, λ)``.
+
+    ``geometry`` (90, 90, 180) on the grid nodes; looked up trilinearly as the renderer looks up a
+    table, so ``K`` reproduces the renderer's image of the tabulated film. ``pixels`` selects the
+    operator's observed pixels; λ runs over ``op.render_wavelengths_nm``.
+    """
+    n_sel = pixels.size
+    compact = np.full(op.n_pixels, -1, dtype=np.int64)
+    compact[pixels] = np.arange(n_sel)
+    nw = op.render_wavelengths_nm.size
+    acc = np.zeros((n_sel * N_THETA_D, nw))
+    g = geometry.reshape(-1)
+    for grp in op.groups:
+        pix = compact[grp.pixel]
+        keep = pix >= 0
+        if not np.any(keep):
+            continue
+        pix = pix[keep]
+        ih, jd, kp = (grp.ih[keep].astype(np.int64), grp.jd[keep].astype(np.int64),
+                      grp.kp[keep].astype(np.int64))
+        th, td, tp = grp.th[keep], grp.td[keep], grp.tp[keep]
+        radiance = grp.weights[keep].astype(np.float64) @ grp.radiance_basis          # (S, Λr)
+        kp1 = (kp + 1) % N_PHI_D
+        for dj, wj in ((0, 1 - td), (1, td)):
+            j = jd + dj
+            w_sum = np.zeros(pix.size)
+            for di, wi in ((0, 1 - th), (1, th)):
+                base = ((ih + di) * N_THETA_D + j) * N_PHI_D
+                w_sum += wi * ((1 - tp) * g[base + kp] + tp * g[base + kp1])
+            w_sum *= wj
+            idx = pix * N_THETA_D + j
+            for c in range(nw):
+                acc[:, c] += np.bincount(idx, weights=w_sum * radiance[:, c], minlength=acc.shape[0])
+    acc = acc.reshape(n_sel, N_THETA_D, nw)
+    return op.exposure * np.einsum("cw,pjw->pcjw", op.to_rgb, acc, optimize=True)
+
+
+def body_basis(wavelengths_nm: np.ndarray) -> np.ndarray:
+    """(Λ, 3) reflectance basis of the body: Mallett & Yuksel 2019's blue, green and red spectra
+    (smooth, summing to 1), so three coefficients in [0, 1] give a natural reflectance ≤ 1 — an
+    RGB photo cannot constrain a finer body spectrum."""
+    return CorrectionBasis().spectral_hats(wavelengths_nm)
+
+
+def body_response(op: PhotoOperator, pixels: np.ndarray) -> np.ndarray:
+    """``B[p, c, l]``: photo of the Lambertian body ``m_l(λ)/π`` per basis spectrum ``l``."""
+    hats = body_basis(op.render_wavelengths_nm)                                         # (Λr, 3)
+    per_band = op.lambert[pixels][:, :, None] * hats[None] / np.pi
+    return op.exposure * np.einsum("cw,pwl->pcl", op.to_rgb, per_band, optimize=True)
+
+
+def substrates(wavelengths_nm: np.ndarray) -> list[tuple[Dielectric | Conductor, np.ndarray]]:
+    """Every candidate substrate with its (complex) index at ``wavelengths_nm``."""
+    out: list[tuple[Dielectric | Conductor, np.ndarray]] = []
+    for metal in METALS:
+        eta, k = metal_ior(metal, wavelengths_nm)
+        out.append((Conductor(metal), eta + 1j * k))
+    for a in DIELECTRIC_CAUCHY_A:
+        out.append((Dielectric(a, DIELECTRIC_CAUCHY_B_UM2), cauchy_ior(wavelengths_nm, a, DIELECTRIC_CAUCHY_B_UM2) + 0j))
+    return out
+
+
+def _airy_stack(cos_nodes: np.ndarray, wl: np.ndarray, eta_f: float, thicknesses_nm: np.ndarray,
+                n2: np.ndarray) -> np.ndarray:
+    """``R(θd_j, λ)`` (N, J, Λ) of films of one index over ``thicknesses_nm`` (N,)."""
+    return airy_reflectance(cos_nodes, wl, eta_f, np.asarray(thicknesses_nm)[:, None, None], n2)
+
+
+class _ReducedDesign:
+    """Residuals ``min_ρ ‖K R + B ρ − b‖²`` of many reflectance tables ``R``, in the reduced basis.
+
+    ``[K B] = U S Vᵀ``; keeping the leading ``REDUCED_RANK`` vectors, ``‖b − K R − B ρ‖²`` is
+    ``‖b⊥‖² + ‖Uᵀb − (SVᵀ)_K R − (SVᵀ)_B ρ‖²`` up to the truncation, and ``ρ`` (free, least
+    squares) is projected out with the QR of ``(SVᵀ)_B``.
+    """
+
+    def __init__(self, k: np.ndarray, body: np.ndarray, b: np.ndarray):
+        u, sv, vt = np.linalg.svd(np.concatenate([k, body], axis=1), full_matrices=False)
+        r = min(REDUCED_RANK, sv.size)
+        coeff = sv[:r, None] * vt[:r]                                   # (r, JΛ + L)
+        self.k = coeff[:, :k.shape[1]].T.copy()                         # (JΛ, r)
+        self.q, _ = np.linalg.qr(coeff[:, k.shape[1]:])                 # (r, L)
+        self.b = u[:, :r].T @ b
+
+    def residuals(self, reflectance: np.ndarray, with_body: bool) -> np.ndarray:
+        """(N,) residuals of reflectance tables (N, J, Λ)."""
+        r = self.b[None, :] - reflectance.reshape(reflectance.shape[0], -1) @ self.k
+        if with_body:
+            r = r - (r @ self.q) @ self.q.T
+        return np.einsum("nm,nm->n", r, r)
+
+
+def fit_thin_film(photo: np.ndarray, lighting=None, clip_level: float | None = 0.995,
+                  progress: ProgressFn | None = None, cancel: CancelFn | None = None) -> ThinFilmFit:
+    """Fit the thin-film family (module docstring) to a sphere ``photo`` taken under ``lighting``.
+
+    ``photo``: linear sRGB (S, S, 3) on the canonical sphere crop, as the refinement takes it;
+    ``lighting``: :class:`~specgen_addon.input_lighting.InputLighting` (default canonical); pixels
+    at or above ``clip_level`` (an 8-bit photo's full scale) are left out. Raises
+    :class:`SpecGenError` on a malformed photo and :class:`Cancelled` when ``cancel()`` is true.
+    """
+    from ..input_lighting import InputLighting
+    from ..refine import render_under
+
+    photo = np.asarray(photo, dtype=np.float64)
+    if photo.ndim != 3 or photo.shape[2] != 3 or photo.shape[0] != photo.shape[1]:
+        raise SpecGenError(f"photo must be a square S×S×3 sphere crop, got {photo.shape}")
+    if not np.all(np.isfinite(photo)):
+        raise SpecGenError("photo holds NaN or Inf values")
+    lighting = lighting or InputLighting()
+
+    def step(fraction: float) -> None:
+        if cancel is not None and cancel():
+            raise Cancelled("thin-film fit cancelled")
+        if progress is not None:
+            progress(fraction)
+
+    scene = lighting.scene(photo.shape[0])
+    fit_wl = np.linspace(380.0, 780.0, 21)
+    op = PhotoOperator(scene, fit_wl, lighting.image_exposure, cancel=cancel)
+    wl = op.render_wavelengths_nm
+    pixels = fit_pixels(op)
+    b_rows = op.observe(photo)[pixels]                                    # (P, 3)
+    keep = np.ones(b_rows.shape[0], bool) if clip_level is None else ~np.any(b_rows >= clip_level, axis=1)
+    if not np.any(keep):
+        raise SpecGenError("every pixel of the photo is clipped: there is nothing to fit")
+    b = b_rows[keep].reshape(-1)
+    body = body_response(op, pixels)[keep].reshape(-1, 3)                        # (M, 3)
+    step(0.05)
+
+    # Stage 1: roughness, with a free smooth reflectance R(θd, λ) and a free body; the best grid
+    # roughness is then moved to the vertex of a parabola through its neighbours (in log α).
+    td_nodes = grid_angles()[1]
+    free_basis = np.einsum("ja,wl->jwal", hat_matrix(td_nodes, FREE_THETA_D_KNOTS),
+                           hat_matrix(wl, SPECTRAL_KNOTS_NM)).reshape(N_THETA_D * wl.size, -1)
+    scale = max(float(np.mean(b * b)), 1e-20)
+
+    def free_fit(alpha: float) -> tuple[float, np.ndarray]:
+        k = theta_d_response(op, lobe_geometry(alpha), pixels)[keep].reshape(-1, N_THETA_D * wl.size)
+        design = np.concatenate([k @ free_basis, body], axis=1)
+        gram = design.T @ design + 1e-6 * scale * design.shape[0] * np.eye(design.shape[1])
+        theta = nonneg_ridge(gram, design.T @ b)
+        return float(np.sum((design @ theta - b) ** 2)), k
+
+    alpha_res: dict[float, float] = {}
+    k_best, res_best, best_alpha = None, np.inf, float(ALPHA_GRID[0])
+    for n, alpha in enumerate(ALPHA_GRID):
+        res, k = free_fit(float(alpha))
+        alpha_res[float(alpha)] = res
+        if res < res_best:
+            k_best, res_best, best_alpha = k, res, float(alpha)
+        step(0.05 + 0.4 * (n + 1) / ALPHA_GRID.size)
+    i = int(np.flatnonzero(ALPHA_GRID == best_alpha)[0])
+    if 0 < i < ALPHA_GRID.size - 1:
+        x = np.log(ALPHA_GRID[i - 1:i + 2])
+        y = np.array([alpha_res[float(a)] for a in ALPHA_GRID[i - 1:i + 2]])
+        c2, c1, _ = np.polyfit(x, y, 2)
+        if c2 > 0:
+            vertex = float(np.exp(np.clip(-c1 / (2 * c2), x[0], x[2])))
+            res, k = free_fit(vertex)
+            alpha_res[vertex] = res
+            if res < res_best:
+                k_best, res_best, best_alpha = k, res, vertex
+    step(0.5)
+
+    # Stage 2: the Airy model on a grid of (substrate, η_f, optical thickness η_f·d); the photo
+    # and the design are reduced to the design's leading singular vectors (exact up to the
+    # truncation: predictions lie in the design's column space), the body projected out there.
+    reduced = _ReducedDesign(k_best, body, b)
+    cos_nodes = np.cos(td_nodes)[:, None]
+    subs = substrates(wl)
+    best = (np.inf, None, 0.0, 0.0)
+    for n, (sub, n2) in enumerate(subs):
+        with_body = isinstance(sub, Dielectric)
+        for eta_f in FILM_ETA_GRID:
+            ds = np.arange(0.0, eta_f * THICKNESS_RANGE_NM[1] + 1e-9, OPTICAL_STEP_NM) / eta_f
+            res = reduced.residuals(_airy_stack(cos_nodes, wl, eta_f, ds, n2), with_body)
+            i = int(np.argmin(res))
+            if res[i] < best[0]:
+                best = (float(res[i]), sub, float(eta_f), float(ds[i]))
+        step(0.5 + 0.4 * (n + 1) / len(subs))
+
+    # Stage 3: a finer local grid around the best candidate (η_f ± 0.1, optical thickness ± one step).
+    _, sub, eta0, d0 = best
+    n2 = {id(s): v for s, v in subs}[id(sub)]
+    with_body = isinstance(sub, Dielectric)
+    cand = [(e, (eta0 * d0 + dd) / e) for e in np.clip(eta0 + np.arange(-0.1, 0.1001, 0.01), 1.01, 3.99)
+            for dd in np.arange(-OPTICAL_STEP_NM, OPTICAL_STEP_NM + 1e-9, OPTICAL_STEP_NM / 8)]
+    cand = [(e, d) for e, d in cand if 0.0 <= d <= THICKNESS_RANGE_NM[1]]
+    r = np.stack([airy_reflectance(cos_nodes, wl, e, d, n2) for e, d in cand])
+    res = reduced.residuals(r, with_body)
+    eta_f, d = cand[int(np.argmin(res))]
+    body_or_none = body if with_body else None
+    film = ThinFilm(name="thin-film fit", split="test", alpha=float(best_alpha), film_eta=float(round(eta_f, 4)),
+                    thickness_nm=float(round(d, 2)), substrate=sub)
+    rho = np.zeros(3)
+    if body_or_none is not None:
+        pred = k_best @ airy_reflectance(cos_nodes, wl, film.film_eta, film.thickness_nm, n2).reshape(-1)
+        rho = nonneg_ridge(body.T @ body + 1e-9 * np.eye(3), body.T @ (b - pred))
+    step(0.92)
+    fit = ThinFilmFit(film, wl.copy(), np.clip(body_basis(wl) @ np.clip(rho, 0.0, 1.0), 0.0, 1.0),
+                      Reproduction(float("nan"), None), alpha_res)
+    rendered = render_under(fit.table(fit_wl), scene, lighting.image_exposure)
+    fit.reproduction = reproduction(op.observe(photo), op.observe(rendered))
+    step(1.0)
+    return fit
