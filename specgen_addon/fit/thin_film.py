@@ -4,8 +4,9 @@ sphere photo, where the network's prior cannot place it (issue 11).
 The model is the corpus family :class:`~specgen_addon.corpus.families.thin_film.ThinFilm`: a GGX
 lobe (roughness ``α``) whose Fresnel factor is the exact Airy reflectance ``R(θd, λ)`` of a film
 (index ``η_f``, thickness ``d`` in nm) on a metal or dielectric substrate, plus, over a
-dielectric, a Lambertian body ``ρ(λ)/π`` (added, not energy-coupled; ``ρ`` in the three-spectrum
-basis of Mallett & Yuksel 2019, as the refinement's tints). Rendering is linear in the
+dielectric, a Lambertian body ``ρ(λ)/π`` (added, not energy-coupled; fitted in the three-spectrum
+basis of Mallett & Yuksel 2019, then given the spectral shape of a natural reflectance of the same
+colour, Otsu et al. 2018, as the refinement's body: :mod:`specgen_addon.refine.body`). Rendering is linear in the
 BRDF, so under the photo's lighting (:class:`~specgen_addon.refine.PhotoOperator`, the renderer's
 own samples) the photo is
 
@@ -40,6 +41,7 @@ from ..corpus.metals import METALS, metal_ior
 from ..corpus.microfacet import specular_geometry
 from ..errors import Cancelled, SpecGenError
 from ..refine.basis import CorrectionBasis, hat_matrix
+from ..refine.body import natural_body
 from ..refine.operator import PhotoOperator
 from ..refine.report import Reproduction, reproduction
 from ..refine.solve import nonneg_ridge
@@ -313,8 +315,12 @@ def fit_thin_film(photo: np.ndarray, lighting=None, clip_level: float | None = 0
     if body_or_none is not None:
         pred = k_best @ airy_reflectance(cos_nodes, wl, film.film_eta, film.thickness_nm, n2).reshape(-1)
         rho = nonneg_ridge(body.T @ body + 1e-9 * np.eye(3), body.T @ (b - pred))
+    reflectance = np.clip(body_basis(wl) @ np.clip(rho, 0.0, 1.0), 0.0, 1.0)
+    natural = natural_body(reflectance / np.pi, wl) if np.any(rho > 0) else None
+    if natural is not None:   # the body's spectral shape: a natural reflectance of its colour
+        reflectance = np.clip(natural * np.pi, 0.0, 1.0)
     step(0.92)
-    fit = ThinFilmFit(film, wl.copy(), np.clip(body_basis(wl) @ np.clip(rho, 0.0, 1.0), 0.0, 1.0),
+    fit = ThinFilmFit(film, wl.copy(), reflectance,
                       Reproduction(float("nan"), None), alpha_res)
     rendered = render_under(fit.table(fit_wl), scene, lighting.image_exposure)
     fit.reproduction = reproduction(op.observe(photo), op.observe(rendered))
