@@ -72,7 +72,7 @@ def main() -> None:
         gt = render_spectral(m, geo, lights=DISTANT_LIGHTS, wavelengths_nm=wl).spectral
         row = {"material": m.name, "kind": m.kind, "truth": {"alpha": m.alpha, "film_eta": m.film_eta,
                                                              "thickness_nm": m.thickness_nm},
-               "fit": {"kind": fit.material.kind, "alpha": fit.material.alpha, "film_eta": fit.material.film_eta,
+               "fitted": {"kind": fit.material.kind, "alpha": fit.material.alpha, "film_eta": fit.material.film_eta,
                        "thickness_nm": fit.material.thickness_nm, "seconds": round(seconds, 1),
                        "self_psnr_db": fit.reproduction.psnr_db, "self_delta_e2000": fit.reproduction.delta_e2000}}
         for tag, brdf, table in (("network", network, network), ("refined", refined, refined),
