@@ -153,6 +153,8 @@ def run(args) -> Path:
         if info.film_fit is not None:
             cli_model = import_module(f"{pkg.__name__}.specgen_addon.cli_model")
             print(cli_model.film_fit_summary(info.film_fit, photo_lighting.label), flush=True)
+            for w in info.film_fit.warnings:
+                print(f"warning: {w}", file=sys.stderr)
         if info.refinement is not None:
             print(f"refinement under {photo_lighting.label}: {info.refinement.summary()}", flush=True)
             for w in info.refinement.warnings:

@@ -143,7 +143,7 @@ class SPECGEN_OT_generate_brdf(_Modal, bpy.types.Operator):
         if fit is not None:
             s.refine_summary = f"Thin-film fit, photo match: {fit.reproduction.text()}"
         s.refine_residual = -1.0 if ref is None else ref.after.psnr_db
-        for warning in ([] if ref is None else ref.warnings):
+        for warning in ([] if ref is None else ref.warnings) + ([] if fit is None else fit.warnings):
             self.report({"WARNING"}, f"SpecGen: {warning}")
         self.report({"INFO"}, f"SpecGen: material {mat.name!r} generated, {info.n_coeffs} spectral "
                               f"basis coefficients (max error {info.rel_error:.1e})")

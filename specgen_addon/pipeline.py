@@ -43,7 +43,8 @@ class Generated:
 
     @property
     def warnings(self) -> list[str]:
-        return [] if self.refinement is None else list(self.refinement.warnings)
+        fit = [] if self.film_fit is None else list(self.film_fit.warnings)
+        return fit + ([] if self.refinement is None else list(self.refinement.warnings))
 
 
 def load_photo(image) -> tuple[np.ndarray, bool]:

@@ -119,3 +119,16 @@ def test_infer_with_the_thin_film_model_writes_a_table_that_reproduces_the_photo
     table = BRDFTable.load(out)
     assert table.values.shape[-1] == 9 and table.metadata["source"] == "specgen thin-film fit"
     assert table.metadata["fit_psnr_db"] > 38.0
+
+
+@pytest.mark.slow
+def test_a_photo_no_film_explains_is_warned_about_by_name():
+    """Noise on the sphere: the closest film reproduces it badly, and the fit says so."""
+    from specgen_addon import input_image
+
+    truth = ThinFilm("t", "test", alpha=0.1, film_eta=1.8, thickness_nm=300.0, substrate=Conductor("Al"))
+    photo = input_image.render_input(truth, SIZE)
+    photo = photo * np.random.default_rng(0).uniform(0.0, 2.0, size=photo.shape)
+    fit = fit_thin_film(photo, clip_level=None)
+    assert fit.reproduction.psnr_db < 30.0
+    assert len(fit.warnings) == 1 and "does not explain this photo" in fit.warnings[0]

@@ -29,7 +29,7 @@ Angles are radians, wavelengths nm, BRDF values sr⁻¹.
 
 from __future__ import annotations
 
-from dataclasses import dataclass
+from dataclasses import dataclass, field
 from typing import Callable
 
 import numpy as np
@@ -42,6 +42,7 @@ from ..corpus.microfacet import specular_geometry
 from ..errors import Cancelled, SpecGenError
 from ..refine.basis import CorrectionBasis, hat_matrix
 from ..refine.body import natural_body
+from ..refine import WARN_PSNR_DB
 from ..refine.operator import PhotoOperator
 from ..refine.report import Reproduction, reproduction
 from ..refine.solve import nonneg_ridge
@@ -72,13 +73,15 @@ SPECTRAL_KNOTS_NM = np.linspace(380.0, 780.0, 9)
 @dataclass
 class ThinFilmFit:
     """The fitted film: ``material`` (no body), the Lambertian body ``body_reflectance`` at
-    ``body_wavelengths_nm`` (zeros over a metal), and the fit's photo reproduction."""
+    ``body_wavelengths_nm`` (zeros over a metal), the fit's photo reproduction, and warnings (one
+    sentence each: a photo the model does not explain)."""
 
     material: ThinFilm
     body_wavelengths_nm: np.ndarray
     body_reflectance: np.ndarray
     reproduction: Reproduction
     alpha_residuals: dict[float, float]
+    warnings: list[str] = field(default_factory=list)
 
     def eval(self, wi: np.ndarray, wo: np.ndarray, wavelengths_nm: np.ndarray) -> np.ndarray:
         """``f_r(ωi, ωo, λ)`` in sr⁻¹, (N, Λ): the film's lobe plus the body ``ρ(λ)/π``."""
@@ -324,5 +327,9 @@ def fit_thin_film(photo: np.ndarray, lighting=None, clip_level: float | None = 0
                       Reproduction(float("nan"), None), alpha_res)
     rendered = render_under(fit.table(fit_wl), scene, lighting.image_exposure)
     fit.reproduction = reproduction(op.observe(photo), op.observe(rendered))
+    if fit.reproduction.psnr_db < WARN_PSNR_DB:
+        fit.warnings.append(f"the thin-film model does not explain this photo: self-reproduction reaches only "
+                            f"{fit.reproduction.psnr_db:.1f} dB (is the material a film? the network model "
+                            f"may fit it better)")
     step(1.0)
     return fit
