@@ -151,7 +151,6 @@ def run(args) -> Path:
                                     lighting=photo_lighting, refine=args.refine,
                                     save_table=True, model=args.model)
         if info.film_fit is not None:
-            cli_model = import_module(f"{pkg.__name__}.specgen_addon.cli_model")
             print(cli_model.film_fit_summary(info.film_fit, photo_lighting.label), flush=True)
             for w in info.film_fit.warnings:
                 print(f"warning: {w}", file=sys.stderr)

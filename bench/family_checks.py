@@ -51,6 +51,11 @@ def _specular(brdf, theta_d: np.ndarray, wavelengths: np.ndarray = WL) -> np.nda
     return np.asarray(brdf.eval(wi, wo, wavelengths))
 
 
+def _hue_error(hue_true_deg: np.ndarray, hue_pred_deg: np.ndarray) -> np.ndarray:
+    """|hue error| in degrees, the shorter way round the circle (hue is circular)."""
+    return np.abs((hue_pred_deg - hue_true_deg + 180.0) % 360.0 - 180.0)
+
+
 def main() -> None:
     import colour
 
@@ -99,7 +104,7 @@ def main() -> None:
             # nearest the truth's, and the error is the shorter way round the circle
             own = hue(h_pred)
             aligned = own + 360.0 * np.round((hue(h_true).mean() - own.mean()) / 360.0)
-            error = np.abs((own - hue(h_true) + 180.0) % 360.0 - 180.0)
+            error = _hue_error(hue(h_true), own)
             hues.append(aligned)
             print(f"thin film {m.name} ({m.kind}, d = {m.thickness_nm:.0f} nm, η_f = {m.film_eta}), {tag}: "
                   f"true hue span {np.ptp(hue(h_true)):.0f}°, predicted span {np.ptp(own):.0f}°, "

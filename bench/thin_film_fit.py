@@ -23,7 +23,7 @@ import time
 from pathlib import Path
 
 import numpy as np
-from family_checks import THETA_D, _lab, _specular  # bench/family_checks.py
+from family_checks import THETA_D, _hue_error, _lab, _specular  # bench/family_checks.py
 from machine import describe_machine  # bench/machine.py
 
 REPO = Path(__file__).resolve().parents[1]
@@ -37,8 +37,7 @@ def hue_errors(truth, brdf, wavelengths: np.ndarray) -> tuple[float, float]:
     lab_t = _lab(_specular(truth, THETA_D, wavelengths), 0.5, wavelengths)
     lab_p = _lab(_specular(brdf, THETA_D, wavelengths), 0.5, wavelengths)
     h_t, h_p = (np.degrees(np.arctan2(x[:, 2], x[:, 1])) for x in (lab_t, lab_p))
-    err = np.abs((h_p - h_t + 180.0) % 360.0 - 180.0)
-    return float(err.mean()), float(np.mean(colour.delta_E(lab_t, lab_p, method="CIE 2000")))
+    return float(_hue_error(h_t, h_p).mean()), float(np.mean(colour.delta_E(lab_t, lab_p, method="CIE 2000")))
 
 
 def main() -> None:

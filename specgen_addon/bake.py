@@ -531,7 +531,7 @@ def generate_lookup(image, out_dir: str | os.PathLike, wavelengths_nm: np.ndarra
 
 
 def _generate_lookup(image, out: Path, wavelengths_nm, weights, n_phi_d, tolerance, backend, name,
-                     progress, cancel, lighting, refine, save_table, preview, model="network") -> AtlasInfo:
+                     progress, cancel, lighting, refine, save_table, preview, model) -> AtlasInfo:
     from .errors import WeightsError
     from .pipeline import generate
 

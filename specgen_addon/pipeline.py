@@ -67,16 +67,19 @@ def generate(image, lighting=None, refine: bool = True, weights=None, wavelength
     ``progress(fraction)`` and ``cancel()`` are passed down; cancelling raises
     :class:`~specgen_addon.errors.Cancelled` and returns nothing.
     """
+    from .errors import SpecGenError
     from .infer import generate_brdf
     from .input_lighting import InputLighting
-
-    from .errors import SpecGenError
 
     if model not in MODELS:
         raise SpecGenError(f"unknown model {model!r}; choose one of {', '.join(MODELS)}")
     lighting = lighting or InputLighting()
     photo, linear = load_photo(image)
     src = str(image) if isinstance(image, (str, Path)) else "image"
+
+    def sub(lo: float, hi: float) -> ProgressFn | None:
+        return None if progress is None else (lambda f: progress(lo + (hi - lo) * f))
+
     if model == "thin-film":
         from .fit.thin_film import fit_thin_film
         from .refine import CLIP_LEVEL
@@ -84,16 +87,11 @@ def generate(image, lighting=None, refine: bool = True, weights=None, wavelength
 
         wl = DEFAULT_WAVELENGTHS_NM if wavelengths_nm is None else np.asarray(wavelengths_nm, np.float64)
         fit = fit_thin_film(photo, lighting, clip_level=None if linear else CLIP_LEVEL,
-                            progress=None if progress is None else (lambda f: progress(0.8 * f)), cancel=cancel)
-        table = fit.table(wl, progress=None if progress is None else (lambda f: progress(0.8 + 0.2 * f)),
-                          cancel=cancel)
+                            progress=sub(0.0, 0.8), cancel=cancel)
+        table = fit.table(wl, progress=sub(0.8, 1.0), cancel=cancel)
         table.metadata = {**table.metadata, "input_image": src, "input_lighting": lighting.label}
         return Generated(table, film_fit=fit)
     share = NETWORK_SHARE if refine else 1.0
-
-    def sub(lo: float, hi: float) -> ProgressFn | None:
-        return None if progress is None else (lambda f: progress(lo + (hi - lo) * f))
-
     table = generate_brdf(photo * lighting.network_gain(), weights=weights, wavelengths_nm=wavelengths_nm,
                           backend=backend, progress=sub(0.0, share), cancel=cancel)
     table.metadata = {**table.metadata, "input_image": src, "input_lighting": lighting.label}

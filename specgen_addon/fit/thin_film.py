@@ -40,9 +40,9 @@ from ..corpus.material import ALPHA_RANGE, Conductor, Dielectric, Material
 from ..corpus.metals import METALS, metal_ior
 from ..corpus.microfacet import specular_geometry
 from ..errors import Cancelled, SpecGenError
+from ..refine import WARN_PSNR_DB
 from ..refine.basis import CorrectionBasis, hat_matrix
 from ..refine.body import natural_body
-from ..refine import WARN_PSNR_DB
 from ..refine.operator import PhotoOperator
 from ..refine.report import Reproduction, reproduction
 from ..refine.solve import nonneg_ridge
@@ -83,26 +83,31 @@ class ThinFilmFit:
     alpha_residuals: dict[float, float]
     warnings: list[str] = field(default_factory=list)
 
+    def _with_body(self, lobe: np.ndarray, cos_i: np.ndarray, cos_o: np.ndarray, w: np.ndarray) -> np.ndarray:
+        """The lobe's values (N, Λ) plus the body ``ρ(λ)/π`` where both directions are above the horizon."""
+        above = (np.ravel(cos_i) > 0) & (np.ravel(cos_o) > 0)
+        return lobe + above[:, None] * np.interp(w, self.body_wavelengths_nm, self.body_reflectance)[None] / np.pi
+
     def eval(self, wi: np.ndarray, wo: np.ndarray, wavelengths_nm: np.ndarray) -> np.ndarray:
         """``f_r(ωi, ωo, λ)`` in sr⁻¹, (N, Λ): the film's lobe plus the body ``ρ(λ)/π``."""
         w = np.asarray(wavelengths_nm, dtype=np.float64)
-        f = self.material.eval(wi, wo, w)
-        above = (np.asarray(wi)[:, 2] > 0) & (np.asarray(wo)[:, 2] > 0)
-        return f + above[:, None] * np.interp(w, self.body_wavelengths_nm, self.body_reflectance)[None] / np.pi
+        return self._with_body(self.material.eval(wi, wo, w), np.asarray(wi)[:, 2], np.asarray(wo)[:, 2], w)
+
+    def eval_hd(self, theta_h: np.ndarray, theta_d: np.ndarray, phi_d: np.ndarray,
+                wavelengths_nm: np.ndarray) -> np.ndarray:
+        """``f_r`` at Rusinkiewicz angles (radians) → (N, Λ), as :meth:`eval`."""
+        w = np.asarray(wavelengths_nm, dtype=np.float64)
+        cos_i, cos_o, _, _ = Material._hd_cosines(theta_h, theta_d, phi_d)
+        return self._with_body(self.material.eval_hd(theta_h, theta_d, phi_d, w), cos_i, cos_o, w)
 
     def table(self, wavelengths_nm: np.ndarray, progress: ProgressFn | None = None,
               cancel: CancelFn | None = None) -> BRDFTable:
         """The fitted BRDF on the MERL grid as a spectral table (sr⁻¹)."""
         w = np.asarray(wavelengths_nm, dtype=np.float64)
-        lobe = self.material.tabulate(w, progress=progress, cancel=cancel)
-        body = np.interp(w, self.body_wavelengths_nm, self.body_reflectance) / np.pi
-        cos_i, cos_o, _, _ = Material._hd_cosines(*np.meshgrid(*grid_angles(), indexing="ij"))
-        above = ((cos_i > 0) & (cos_o > 0)).reshape(N_THETA_H, N_THETA_D, N_PHI_D, 1)
-        values = (lobe.values + above * body.astype(lobe.values.dtype)).astype(lobe.values.dtype)
-        meta = dict(lobe.metadata)
-        meta.update({"source": "specgen thin-film fit", "description": self.material.kind,
-                     "fit_psnr_db": round(self.reproduction.psnr_db, 3)})
-        return BRDFTable(values, w, metadata=meta)
+        meta = {"source": "specgen thin-film fit", "material": self.material.to_dict(),
+                "description": self.material.kind, "fit_psnr_db": round(self.reproduction.psnr_db, 3)}
+        return BRDFTable.tabulate(lambda th, td, pd: self.eval_hd(th, td, pd, w), w, metadata=meta,
+                                  progress=progress, cancel=cancel)
 
 
 def lobe_geometry(alpha: float) -> np.ndarray:
@@ -179,12 +184,6 @@ def substrates(wavelengths_nm: np.ndarray) -> list[tuple[Dielectric | Conductor,
     for a in DIELECTRIC_CAUCHY_A:
         out.append((Dielectric(a, DIELECTRIC_CAUCHY_B_UM2), cauchy_ior(wavelengths_nm, a, DIELECTRIC_CAUCHY_B_UM2) + 0j))
     return out
-
-
-def _airy_stack(cos_nodes: np.ndarray, wl: np.ndarray, eta_f: float, thicknesses_nm: np.ndarray,
-                n2: np.ndarray) -> np.ndarray:
-    """``R(θd_j, λ)`` (N, J, Λ) of films of one index over ``thicknesses_nm`` (N,)."""
-    return airy_reflectance(cos_nodes, wl, eta_f, np.asarray(thicknesses_nm)[:, None, None], n2)
 
 
 class _ReducedDesign:
@@ -290,27 +289,28 @@ def fit_thin_film(photo: np.ndarray, lighting=None, clip_level: float | None = 0
     reduced = _ReducedDesign(k_best, body, b)
     cos_nodes = np.cos(td_nodes)[:, None]
     subs = substrates(wl)
-    best = (np.inf, None, 0.0, 0.0)
+    best = (np.inf, None, None, 0.0, 0.0)
     for n, (sub, n2) in enumerate(subs):
         with_body = isinstance(sub, Dielectric)
         for eta_f in FILM_ETA_GRID:
             ds = np.arange(0.0, eta_f * THICKNESS_RANGE_NM[1] + 1e-9, OPTICAL_STEP_NM) / eta_f
-            res = reduced.residuals(_airy_stack(cos_nodes, wl, eta_f, ds, n2), with_body)
+            res = reduced.residuals(airy_reflectance(cos_nodes, wl, eta_f, ds[:, None, None], n2), with_body)
             i = int(np.argmin(res))
             if res[i] < best[0]:
-                best = (float(res[i]), sub, float(eta_f), float(ds[i]))
+                best = (float(res[i]), sub, n2, float(eta_f), float(ds[i]))
         step(0.5 + 0.4 * (n + 1) / len(subs))
 
     # Stage 3: a finer local grid around the best candidate (η_f ± 0.1, optical thickness ± one step).
-    _, sub, eta0, d0 = best
-    n2 = {id(s): v for s, v in subs}[id(sub)]
+    _, sub, n2, eta0, d0 = best
     with_body = isinstance(sub, Dielectric)
-    cand = [(e, (eta0 * d0 + dd) / e) for e in np.clip(eta0 + np.arange(-0.1, 0.1001, 0.01), 1.01, 3.99)
-            for dd in np.arange(-OPTICAL_STEP_NM, OPTICAL_STEP_NM + 1e-9, OPTICAL_STEP_NM / 8)]
-    cand = [(e, d) for e, d in cand if 0.0 <= d <= THICKNESS_RANGE_NM[1]]
-    r = np.stack([airy_reflectance(cos_nodes, wl, e, d, n2) for e, d in cand])
-    res = reduced.residuals(r, with_body)
-    eta_f, d = cand[int(np.argmin(res))]
+    etas, steps = np.meshgrid(np.clip(eta0 + np.arange(-0.1, 0.1001, 0.01), 1.01, 3.99),
+                              np.arange(-OPTICAL_STEP_NM, OPTICAL_STEP_NM + 1e-9, OPTICAL_STEP_NM / 8),
+                              indexing="ij")
+    etas, ds = etas.ravel(), (eta0 * d0 + steps.ravel()) / etas.ravel()
+    inside = (ds >= 0.0) & (ds <= THICKNESS_RANGE_NM[1])
+    etas, ds = etas[inside], ds[inside]
+    res = reduced.residuals(airy_reflectance(cos_nodes, wl, etas[:, None, None], ds[:, None, None], n2), with_body)
+    eta_f, d = etas[int(np.argmin(res))], ds[int(np.argmin(res))]
     body_or_none = body if with_body else None
     film = ThinFilm(name="thin-film fit", split="test", alpha=float(best_alpha), film_eta=float(round(eta_f, 4)),
                     thickness_nm=float(round(d, 2)), substrate=sub)
