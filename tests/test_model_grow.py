@@ -174,3 +174,21 @@ def test_bad_detail_factors_are_refused():
             Config(**SMALL, detail_factor=bad)
     with pytest.raises(SpecGenError, match="divisible"):
         Config(**SMALL, detail_factor=16)
+
+
+def test_growing_trunk_upsample_stages_keeps_the_network_function_and_then_trains_them():
+    torch.manual_seed(0)
+    old = lively(SpecGen(Config(**SMALL, spectral_code_knots=2)))
+    new_cfg = Config(**SMALL, spectral_code_knots=2, trunk_upsample_stages=2)
+    new = SpecGen(new_cfg)
+    new.load_state_dict(grow_state_dict(old.state_dict(), old.cfg, new_cfg, fresh=new.state_dict()))
+    image = torch.rand(2, 3, 32, 32)
+    th, td, pd, lam = queries()
+    with torch.no_grad():
+        trunk, _ = new.generator.trunk_and_code(new.encoder(image))
+        assert trunk.shape[-2:] == (29, 29)                                  # 8×8 → 15×15 → 29×29
+        assert torch.allclose(old(image, th, td, pd, lam), new.eval()(image, th, td, pd, lam), atol=1e-5)
+    new.train()
+    new(image, th, td, pd, lam).pow(2).mean().backward()
+    assert new.generator.refine[-1].block.body[2].weight.grad.abs().sum() > 0
+    assert not can_grow(new_cfg, old.cfg)                                    # stages are never removed

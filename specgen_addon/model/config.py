@@ -54,6 +54,10 @@ class Config:
     #: without them warm-start a model with them exactly (:mod:`.grow`). Default: none.
     latent_res_blocks: int = 0
     trunk_res_blocks: int = 0
+    #: Stages that refine the decoder's trunk map to (2h − 1) × (2w − 1) before the plane heads
+    #: resample it (bilinear midpoint insertion plus a residual conv block, identity at start, so
+    #: :mod:`.grow` can add them to trained weights exactly). Default: none.
+    trunk_upsample_stages: int = 0
     lambda_min_nm: float = 380.0
     lambda_max_nm: float = 780.0
     # features and fusion
@@ -79,7 +83,7 @@ class Config:
             raise SpecGenError("lambda_min_nm must be below lambda_max_nm")
         if not (isinstance(self.spectral_code_knots, int) and self.spectral_code_knots >= 1):
             raise SpecGenError(f"spectral_code_knots must be an integer ≥ 1, got {self.spectral_code_knots!r}")
-        for name in ("latent_res_blocks", "trunk_res_blocks"):
+        for name in ("latent_res_blocks", "trunk_res_blocks", "trunk_upsample_stages"):
             n = getattr(self, name)
             if not (isinstance(n, int) and not isinstance(n, bool) and n >= 0):
                 raise SpecGenError(f"{name} must be an integer ≥ 0, got {n!r}")

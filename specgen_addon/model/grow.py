@@ -9,6 +9,9 @@ differ only in the fields of :data:`GROWABLE`:
   apart;
 * ``latent_res_blocks`` and ``trunk_res_blocks`` (more, never fewer): the added residual blocks
   keep the new model's initial weights, which make them the identity (:mod:`.residual`);
+* ``trunk_upsample_stages`` (more, never fewer): each added stage inserts midpoints into the
+  trunk map bilinearly, which leaves every later bilinear resampling unchanged, and its residual
+  block starts at zero (:class:`.residual.RefiningUpsample`);
 * ``image_size`` with ``detail_factor`` (from no detail branch to a factor k, the image k times
   larger): the conv stack keeps its size, sees the larger image resampled by the same
   antialiased weights the input pipeline used, and the new detail branch starts at zero
@@ -29,9 +32,10 @@ from ..errors import SpecGenError
 from .config import Config
 
 #: Config fields a warm start may change.
-GROWABLE = ("spectral_code_knots", "latent_res_blocks", "trunk_res_blocks", "image_size", "detail_factor")
+GROWABLE = ("spectral_code_knots", "latent_res_blocks", "trunk_res_blocks", "trunk_upsample_stages",
+            "image_size", "detail_factor")
 #: Of those, the counts of identity-initialised blocks, which may only grow.
-ADDED_BLOCKS = ("latent_res_blocks", "trunk_res_blocks")
+ADDED_BLOCKS = ("latent_res_blocks", "trunk_res_blocks", "trunk_upsample_stages")
 
 
 def can_grow(old: Config, new: Config) -> bool:

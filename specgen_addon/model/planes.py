@@ -17,7 +17,7 @@ import torch.nn.functional as F
 from torch import nn
 
 from .config import Config
-from .residual import conv_blocks
+from .residual import conv_blocks, upsample_stages
 
 PLANE_NAMES = ("d1", "d2", "d3", "e1", "e2", "e3")
 # Which coordinate indexes the rows and the columns of each plane.
@@ -91,6 +91,9 @@ class PlaneGenerator(nn.Module):
                     nn.ReLU(inplace=True)]
         c_last = cfg.decoder_channels[-1]
         self.trunk = nn.Sequential(*ups, *conv_blocks(cfg.trunk_res_blocks, c_last))
+        #: Finer trunk stages (``trunk_upsample_stages``): a sharp lobe or sheen rim a few plane
+        #: texels wide needs more than the 16-row trunk the heads resample (docs/model.md).
+        self.refine = upsample_stages(cfg.trunk_upsample_stages, c_last)
         self.heads = nn.ModuleDict({
             name: nn.Sequential(nn.Conv2d(c_last, cfg.head_channels, 3, padding=1), nn.ReLU(inplace=True),
                                 nn.Conv2d(cfg.head_channels, cfg.feature_dim, 1))
@@ -115,7 +118,7 @@ class PlaneGenerator(nn.Module):
         the spectral code ``(B, 3, C, knots, res_lambda)`` (``None`` without ``spectral_code``)."""
         c0 = self.cfg.decoder_channels[0]
         h0, w0 = self.cfg.decoder_seed_hw
-        trunk = self.trunk(torch.relu(self.seed(latent)).view(-1, c0, h0, w0))
+        trunk = self.refine(self.trunk(torch.relu(self.seed(latent)).view(-1, c0, h0, w0)))
         if self.spectral is None:
             return trunk, None
         cfg = self.cfg

@@ -8,6 +8,7 @@ blocks computes exactly what it computed before, and training then uses the new 
 from __future__ import annotations
 
 import torch
+import torch.nn.functional as F
 from torch import nn
 
 
@@ -36,3 +37,28 @@ def conv_blocks(n: int, channels: int) -> nn.Sequential:
     return nn.Sequential(*(ZeroResidual(nn.Sequential(nn.Conv2d(channels, channels, 3, padding=1), nn.ReLU(),
                                                       nn.Conv2d(channels, channels, 3, padding=1)))
                            for _ in range(n)))
+
+
+class RefiningUpsample(nn.Module):
+    """A map ``(B, c, h, w)`` → ``(B, c, 2h − 1, 2w − 1)``: bilinear midpoint insertion
+    (``align_corners=True``), then a residual 3×3 conv–ReLU–1×1 conv block (identity at start).
+
+    Inserting midpoints keeps the bilinear interpolant unchanged: any later bilinear resampling
+    (``align_corners=True``) of the finer map equals that of the coarser one, so a trained model
+    that gains this stage computes exactly what it computed before, and the block then learns
+    detail at twice the resolution.
+    """
+
+    def __init__(self, channels: int):
+        super().__init__()
+        self.block = ZeroResidual(nn.Sequential(nn.Conv2d(channels, channels, 3, padding=1), nn.ReLU(),
+                                                nn.Conv2d(channels, channels, 1)))
+
+    def forward(self, x: torch.Tensor) -> torch.Tensor:
+        h, w = x.shape[-2:]
+        return self.block(F.interpolate(x, size=(2 * h - 1, 2 * w - 1), mode="bilinear", align_corners=True))
+
+
+def upsample_stages(n: int, channels: int) -> nn.Sequential:
+    """``n`` :class:`RefiningUpsample` stages (each keeps the function at initialisation)."""
+    return nn.Sequential(*(RefiningUpsample(channels) for _ in range(n)))
