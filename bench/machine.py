@@ -4,6 +4,7 @@ from __future__ import annotations
 
 import os
 import platform
+import sys
 
 import numpy as np
 
@@ -15,6 +16,10 @@ def describe_machine() -> str:
         mem = f", {os.sysconf('SC_PHYS_PAGES') * os.sysconf('SC_PAGE_SIZE') / 2**30:.0f} GB"
     except (ValueError, OSError, AttributeError):
         pass
-    return (f"{platform.machine()}, {os.cpu_count()} cores{mem}, CPU only; Python "
+    accel = "CPU only"
+    torch = sys.modules.get("torch")  # named only when the bench already uses torch
+    if torch is not None and torch.cuda.is_available():
+        accel = f"GPU {torch.cuda.get_device_name(0)} (torch {torch.__version__})"
+    return (f"{platform.machine()}, {os.cpu_count()} cores{mem}, {accel}; Python "
             f"{platform.python_version()}, numpy {np.__version__}; "
             f"load average {os.getloadavg()[0]:.2f}")

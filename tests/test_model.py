@@ -49,6 +49,19 @@ def test_planes_and_predictions_have_configured_shapes():
     assert model.query(planes, th, td, pd, None).shape == (3, 50)
 
 
+@pytest.mark.parametrize("fusion", ["aff", "hadamard"])
+def test_a_training_step_runs_wholly_on_the_models_device(fusion):
+    """Every tensor the network makes lives on its parameters' device, so it trains on a GPU:
+    torch's shape-only "meta" device refuses a host tensor as a GPU does (the GPU check of
+    bench/gpu_check.sh found AFF's constant maps made on the host)."""
+    model = small_model(fusion=fusion, spectral_code_knots=3, trunk_upsample_stages=1).to("meta")
+    planes = model.planes(torch.rand(2, 3, 32, 32, device="meta"))
+    q = [t.to("meta") for t in random_queries(2, 40)]
+    loss = model.query(planes, *q).pow(2).mean() + model.query(planes, *q[:3], None).pow(2).mean()
+    (loss + model.tv_loss(planes)).backward()
+    assert all(p.grad is not None and p.grad.device.type == "meta" for p in model.parameters())
+
+
 def test_gradients_reach_all_six_planes():
     model = small_model()
     planes = model.planes(torch.rand(2, 3, 32, 32))

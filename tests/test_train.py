@@ -185,6 +185,36 @@ def test_training_with_lighting_drawn_per_step_is_bit_identical_for_a_seed(tmp_p
     assert not all(torch.equal(sa[k], sc[k]) for k in sa)
 
 
+def test_batches_made_ahead_by_data_workers_train_the_same_weights_bit_for_bit(tmp_path):
+    spec, rgb, val = _component_sets()
+    tcfg = TrainConfig(**{**FAST, "steps": 7, "lighting": "mix", "max_minutes": 30.0})
+    a = train(Config(**SMALL), tcfg, spec, rgb, val, tmp_path / "a", show_progress=False)
+    b = train(Config(**SMALL), dataclasses.replace(tcfg, data_workers=2), spec, rgb, val, tmp_path / "b",
+              show_progress=False)
+    sa, sb = (load_weights(r.weights).state_dict() for r in (a, b))
+    assert all(torch.equal(sa[k], sb[k]) for k in sa)
+    assert [r["loss"] for r in a.history] == [r["loss"] for r in b.history]
+
+
+def test_data_workers_stay_a_bounded_number_of_steps_ahead_and_stop_with_the_consumer():
+    import multiprocessing as mp
+
+    from specgen_addon.train.prefetch import step_batches
+
+    made = mp.get_context("fork").Value("i", 0)
+
+    def make(step):
+        with made.get_lock():
+            made.value += 1
+        return step * step
+
+    gen = step_batches(make, 3, 1000, workers=2, ahead=4)
+    assert [next(gen) for _ in range(3)] == [9, 16, 25]
+    gen.close()                                   # the consumer stops early: the pool is torn down
+    assert made.value <= 3 + 4
+    assert list(step_batches(make, 0, 5, workers=0)) == [0, 1, 4, 9, 16]
+
+
 def test_lighting_mix_draws_a_new_lighting_every_time():
     from specgen_addon.train.lighting_mix import COMPONENTS, MODE_P, mix_lighting, quantise
 
@@ -224,6 +254,7 @@ def test_lighting_mix_honours_the_configured_canonical_fraction():
     ({"lighting": "sunny"}, "lighting must be"),
     ({"lr": -1.0}, "lr must be"),
     ({"ema_decay": 1.5}, "ema_decay"),
+    ({"data_workers": -1}, "data_workers must be an integer ≥ 0"),
     ({"init_weights": "/nonexistent/w.pt"}, "not found"),
 ])
 def test_bad_training_configs_are_refused_with_one_clear_error(tmp_path, bad, message):

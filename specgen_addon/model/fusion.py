@@ -39,7 +39,8 @@ class AFF(nn.Module):
         matrix is the conv applied to the C basis vectors.
         """
         c = self.map_hw[0] * self.map_hw[1]
-        eye = torch.eye(c, dtype=self.branch_convs.weight.dtype).reshape(c, 1, *self.map_hw)
+        w = self.branch_convs.weight
+        eye = torch.eye(c, dtype=w.dtype, device=w.device).reshape(c, 1, *self.map_hw)
         cols = nn.functional.conv2d(eye.expand(c, 6, *self.map_hw), self.branch_convs.weight,
                                     bias=None, padding=1, groups=6)      # (C_in, 6, H, W)
         return cols.reshape(c, 6, c).permute(1, 2, 0)                      # (6, C_out, C_in)
@@ -56,7 +57,8 @@ class AFF(nn.Module):
         ``m_k[q] = 1/(HW) Σ_t β_k[t] [q − t inside the map]``: the transposed conv of a constant map.
         """
         h, w = self.map_hw
-        ones = torch.full((1, 6, h, w), 1.0 / (h * w), dtype=self.branch_convs.weight.dtype)
+        ones = torch.full((1, 6, h, w), 1.0 / (h * w), dtype=self.branch_convs.weight.dtype,
+                          device=self.branch_convs.weight.device)
         m = nn.functional.conv_transpose2d(ones, self.branch_convs.weight, padding=1, groups=6)
         return m.reshape(6, h * w), self.branch_convs.bias.sum()
 

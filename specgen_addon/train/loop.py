@@ -10,11 +10,12 @@ with ``L_spec`` the MSE of μ-law reflectance at (θh, θd, φd, λ) points, ``L
 the μ-law of the RGB channel mean using λ-averaged spectral features, and ``L_TV`` the planes'
 total variation (paper: α = 2). Adam (β = 0.9, 0.999) with a step-decayed learning rate, as the
 paper halves it every four epochs. Bit-for-bit deterministic on CPU for a fixed seed and thread
-count.
+count (on a GPU: to float rounding).
 """
 
 from __future__ import annotations
 
+import contextlib
 import csv
 import dataclasses
 import json
@@ -32,6 +33,7 @@ from ..model import Config, SpecGen, count_parameters, save_weights
 from ..spectra import wavelength_grid
 from . import distributed as ddp
 from .data import Batch, TrainingMaterial, make_batch
+from .prefetch import step_batches
 
 #: Band grid (nm) the spectral targets are evaluated on: 10 nm steps over the visible range.
 TARGET_WAVELENGTHS_NM = wavelength_grid(380.0, 780.0, 41)
@@ -73,6 +75,9 @@ class TrainConfig:
     init_weights: str | None = None
     #: Processes rendering missing input images before training.
     render_workers: int = 2
+    #: Processes making step batches ahead of the network (:mod:`.prefetch`; the same run, bit for
+    #: bit): worth it on a GPU, where numpy is the bound; 0 (default) makes each when needed.
+    data_workers: int = 0
     #: Where the network trains: "cpu", "cuda" (one GPU per rank; DDP then uses nccl) or "auto"
     #: (cuda when available). Targets and inputs are made on the CPU either way.
     device: str = "cpu"
@@ -108,7 +113,7 @@ class TrainConfig:
                         ("spectral_materials_per_step", 0), ("rgb_materials_per_step", 0),
                         ("angles_per_material", 1), ("wavelengths_per_angle", 1), ("input_variants", 1),
                         ("lr_decay_every", 1), ("checkpoint_every", 1), ("val_every", 1),
-                        ("val_materials", 0), ("threads", 1), ("render_workers", 1),
+                        ("val_materials", 0), ("threads", 1), ("render_workers", 1), ("data_workers", 0),
                         ("snapshot_every", 0), ("snapshot_from", 0)):
             v = getattr(self, key)
             if not is_int(v) or v < lo:
@@ -288,10 +293,13 @@ def train(mcfg: Config, tcfg: TrainConfig, spectral: MaterialSet, rgb: MaterialS
     out = Path(out_dir)
     out.mkdir(parents=True, exist_ok=True)
     torch.set_num_threads(tcfg.threads)
-    torch.use_deterministic_algorithms(True)
-    torch.manual_seed(tcfg.seed)
     dctx = ddp.context()  # rank/world size under torchrun; 0 of 1 otherwise
     device = ddp.train_device(tcfg.device)
+    # Bit-identical runs on the CPU. On a GPU the backward passes of grid_sample and bilinear
+    # interpolation accumulate with atomics and have no deterministic kernel, so a run there is
+    # reproducible only to float rounding.
+    torch.use_deterministic_algorithms(device.type == "cpu")
+    torch.manual_seed(tcfg.seed)
     model = SpecGen(mcfg)
     if tcfg.init_weights is not None and not (resume and (out / "checkpoint.pt").is_file()):
         from ..model import load_weights
@@ -352,58 +360,60 @@ def train(mcfg: Config, tcfg: TrainConfig, spectral: MaterialSet, rgb: MaterialS
     t0 = time.perf_counter()
     step = start_step
     stopped = False
-    while step < tcfg.steps:
-        elapsed = elapsed0 + time.perf_counter() - t0
-        if tcfg.max_minutes is not None and elapsed > 60.0 * tcfg.max_minutes:
-            stopped = True
-            break
-        for g in opt.param_groups:
-            g["lr"] = lr_at(tcfg, step)
-        b_spec, b_rgb = make_step_batches(tcfg, mcfg, spectral, rgb, step, dctx)
-        model.train()
-        opt.zero_grad(set_to_none=True)
-        loss = torch.zeros((), device=device)
-        rec: dict[str, float] = {"step": step + 1, "lr": lr_at(tcfg, step)}
-        tv_terms = []
-        g_spec, g_rgb = step_losses(b_spec, b_rgb)
-        if g_spec is not None:
-            l_spec, tv = g_spec
-            loss = loss + l_spec
-            tv_terms.append(tv)
-            rec["spec"] = float(l_spec.detach())
-        if g_rgb is not None:
-            l_rgb, tv = g_rgb
-            loss = loss + tcfg.rgb_weight * l_rgb
-            tv_terms.append(tv)
-            rec["rgb"] = float(l_rgb.detach())
-        l_tv = torch.stack(tv_terms).mean()
-        loss = loss + tcfg.tv_weight * l_tv
-        loss.backward()
-        opt.step()
-        if ema is not None:
-            ema.update_parameters(model)
-        step += 1
-        rec["tv"] = float(l_tv.detach())
-        rec["loss"] = float(loss.detach())
-        rec = ddp.mean_record(rec, dctx)
-        if val_batch is not None and (step % tcfg.val_every == 0 or step == tcfg.steps):
-            rec["val"] = evaluate_batch(scored, val_batch)
-        rec["elapsed"] = elapsed0 + time.perf_counter() - t0
-        history.append(rec)
-        if on_step is not None:
-            on_step(step, rec)
-        if bar is not None:
-            bar.update(1)
-            post = {k: f"{rec[k]:.4g}" for k in ("loss", "spec", "rgb", "tv") if k in rec}
-            if "val" in rec:
-                post["val"] = f"{rec['val']:.4g}"
-            bar.set_postfix(post, refresh=False)
-        if step % tcfg.checkpoint_every == 0:
-            checkpoint(step, rec["elapsed"])
-        if tcfg.snapshot_every and step >= tcfg.snapshot_from and step % tcfg.snapshot_every == 0 \
-                and dctx.is_main:
-            save_weights(scored, out / "snapshots" / f"step{step:06d}.pt",
-                         meta={"steps": step, "train_config": _tdict(tcfg)})
+    with contextlib.closing(step_batches(lambda s: make_step_batches(tcfg, mcfg, spectral, rgb, s, dctx),
+                                         start_step, tcfg.steps, tcfg.data_workers)) as batches:
+        # (closing: the data workers, if any, stop however the loop ends)
+        for b_spec, b_rgb in batches:
+            elapsed = elapsed0 + time.perf_counter() - t0
+            if tcfg.max_minutes is not None and elapsed > 60.0 * tcfg.max_minutes:
+                stopped = True
+                break
+            for g in opt.param_groups:
+                g["lr"] = lr_at(tcfg, step)
+            model.train()
+            opt.zero_grad(set_to_none=True)
+            loss = torch.zeros((), device=device)
+            rec: dict[str, float] = {"step": step + 1, "lr": lr_at(tcfg, step)}
+            tv_terms = []
+            g_spec, g_rgb = step_losses(b_spec, b_rgb)
+            if g_spec is not None:
+                l_spec, tv = g_spec
+                loss = loss + l_spec
+                tv_terms.append(tv)
+                rec["spec"] = float(l_spec.detach())
+            if g_rgb is not None:
+                l_rgb, tv = g_rgb
+                loss = loss + tcfg.rgb_weight * l_rgb
+                tv_terms.append(tv)
+                rec["rgb"] = float(l_rgb.detach())
+            l_tv = torch.stack(tv_terms).mean()
+            loss = loss + tcfg.tv_weight * l_tv
+            loss.backward()
+            opt.step()
+            if ema is not None:
+                ema.update_parameters(model)
+            step += 1
+            rec["tv"] = float(l_tv.detach())
+            rec["loss"] = float(loss.detach())
+            rec = ddp.mean_record(rec, dctx)
+            if val_batch is not None and (step % tcfg.val_every == 0 or step == tcfg.steps):
+                rec["val"] = evaluate_batch(scored, val_batch)
+            rec["elapsed"] = elapsed0 + time.perf_counter() - t0
+            history.append(rec)
+            if on_step is not None:
+                on_step(step, rec)
+            if bar is not None:
+                bar.update(1)
+                post = {k: f"{rec[k]:.4g}" for k in ("loss", "spec", "rgb", "tv") if k in rec}
+                if "val" in rec:
+                    post["val"] = f"{rec['val']:.4g}"
+                bar.set_postfix(post, refresh=False)
+            if step % tcfg.checkpoint_every == 0:
+                checkpoint(step, rec["elapsed"])
+            if tcfg.snapshot_every and step >= tcfg.snapshot_from and step % tcfg.snapshot_every == 0 \
+                    and dctx.is_main:
+                save_weights(scored, out / "snapshots" / f"step{step:06d}.pt",
+                             meta={"steps": step, "train_config": _tdict(tcfg)})
     if bar is not None:
         bar.close()
     wall = elapsed0 + time.perf_counter() - t0
@@ -432,7 +442,7 @@ def _tdict(tcfg: TrainConfig, ignore_budget: bool = False) -> dict[str, Any]:
     d = dataclasses.asdict(tcfg)
     if ignore_budget:  # a resumed run may extend its budget or change what it logs
         for k in ("steps", "max_minutes", "threads", "checkpoint_every", "val_every", "init_weights",
-                  "render_workers", "device", "snapshot_every", "snapshot_from"):
+                  "render_workers", "data_workers", "device", "snapshot_every", "snapshot_from"):
             d.pop(k)
     return d
 
