@@ -18,13 +18,12 @@ trap 'rm -rf "$WORK"' EXIT
 command -v nvidia-smi >/dev/null && nvidia-smi --query-gpu=name,memory.total,driver_version --format=csv 2>&1 | tee "$OUT/machine.txt"
 $PY -c "import sys, torch, numpy; print('python', sys.version.split()[0], 'torch', torch.__version__, 'numpy', numpy.__version__, 'cuda', torch.cuda.is_available())" 2>&1 | tee -a "$OUT/machine.txt"
 $PY - "$WORK/tiny.json" <<'PYEOF'
-import json, sys
+import json, os, sys
 c = json.load(open("configs/continue_s11_trunk.json"))
 c["train"].update(corpus_size=64, steps=60, checkpoint_every=30, val_every=30, val_materials=8,
-                  render_workers=8, threads=4, init_weights="../weights/specgen_default.pt")
-c["train"]["init_weights"] = __import__("os").path.abspath("weights/specgen_default.pt")
+                  render_workers=8, threads=4, init_weights=os.path.abspath("weights/specgen_default.pt"))
 json.dump(c, open(sys.argv[1], "w"))
-c["train"].update(steps=int(__import__("os").environ.get("TIMED_STEPS", "400")), data_workers=12)
+c["train"].update(steps=int(os.environ.get("TIMED_STEPS", "400")), data_workers=12)
 json.dump(c, open(sys.argv[1].replace("tiny", "timed"), "w"))
 PYEOF
 export SPECGEN_CACHE_DIR=${CACHE:-$WORK/cache}
