@@ -28,12 +28,14 @@ TRAIN_BOUNDS: dict[str, tuple[float | None, float | None]] = {
     "corpus_seed": (0, 2**32 - 1), "input_variants": (1, 1000), "canonical_fraction": (0.0, 1.0),
     "checkpoint_every": (1, None), "val_every": (1, None), "val_materials": (0, 10_000),
     "threads": (1, 256), "ema_decay": (0.0, 0.999999),
-    "snapshot_every": (0, None), "snapshot_from": (0, None),
+    "snapshot_every": (0, None), "snapshot_from": (0, None), "render_workers": (1, 256),
+    "data_workers": (0, 256),
 }
 #: Numeric model sizes are at least 1 (and finite); these have other bounds.
 MODEL_BOUNDS: dict[str, tuple[float | None, float | None]] = {
     "image_size": (8, 1024), "lambda_min_nm": (300.0, 1100.0), "lambda_max_nm": (300.0, 1100.0),
-    "mu": (1e-3, 1e6),
+    "mu": (1e-3, 1e6), "latent_res_blocks": (0, 64), "trunk_res_blocks": (0, 64),
+    "trunk_upsample_stages": (0, 4),
 }
 
 
