@@ -126,7 +126,7 @@ def test_residual_blocks_may_be_added_but_not_removed_and_need_the_fresh_weights
 
 
 def test_bad_residual_block_counts_are_refused():
-    for name in ("latent_res_blocks", "trunk_res_blocks"):
+    for name in ("latent_res_blocks", "trunk_res_blocks", "trunk_upsample_stages"):
         for bad in (-1, 1.5, "2", True):
             with pytest.raises(SpecGenError, match=name):
                 Config(**SMALL, **{name: bad})
@@ -192,3 +192,14 @@ def test_growing_trunk_upsample_stages_keeps_the_network_function_and_then_train
     new(image, th, td, pd, lam).pow(2).mean().backward()
     assert new.generator.refine[-1].block.body[2].weight.grad.abs().sum() > 0
     assert not can_grow(new_cfg, old.cfg)                                    # stages are never removed
+
+
+def test_config_files_accept_no_added_blocks_and_refuse_too_many(tmp_path):
+    from specgen_addon.config_schema import validate_train_config
+
+    path = tmp_path / "c.json"
+    path.write_text('{"model": {"latent_res_blocks": 0, "trunk_res_blocks": 0, "trunk_upsample_stages": 0}}')
+    validate_train_config(path)
+    path.write_text('{"model": {"trunk_upsample_stages": 9}}')
+    with pytest.raises(SpecGenError, match="trunk_upsample_stages must be between 0 and 4"):
+        validate_train_config(path)
