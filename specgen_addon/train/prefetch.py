@@ -3,7 +3,7 @@
 A step's batch is a pure function of ``(seed, step)`` (:func:`.loop.make_step_batches`), so
 workers can make future steps while the network trains on the current one, and the run is the
 same, bit for bit, as one that makes each batch when it needs it. On a GPU the data is the bound
-(docs/scale.md: 40–90 ms of numpy against 25–35 ms of network per step on an H200), on two CPU
+(docs/scale.md: 10–160 ms of numpy against 22–46 ms of network per step on an H200), on two CPU
 cores the network is, and the default is no workers.
 """
 
@@ -11,10 +11,16 @@ from __future__ import annotations
 
 import collections
 import multiprocessing as mp
+import signal
 from typing import Any, Callable, Iterator
 
 #: The batch maker the forked workers call (set before the pool starts; fork copies it).
 _MAKE: Callable[[int], Any] | None = None
+
+
+def _ignore_interrupts() -> None:
+    """Workers leave Ctrl-C to the training process, which stops them (no traceback per worker)."""
+    signal.signal(signal.SIGINT, signal.SIG_IGN)
 
 
 def _make(step: int) -> Any:
@@ -36,7 +42,7 @@ def step_batches(make: Callable[[int], Any], start: int, stop: int, workers: int
         return
     global _MAKE
     _MAKE = make
-    pool = mp.get_context("fork").Pool(workers)
+    pool = mp.get_context("fork").Pool(workers, initializer=_ignore_interrupts)
     try:
         steps = iter(range(start, stop))
         pending: collections.deque = collections.deque()
