@@ -160,6 +160,16 @@ def test_config_files_load_and_reject_unknown_keys(tmp_path, repo_dir):
         load_config(tmp_path / "bad.json")
 
 
+def test_every_shipped_config_file_passes_the_schema_and_builds_its_model(repo_dir):
+    from specgen_addon.config_schema import validate_train_config
+    from specgen_addon.model import SpecGen, count_parameters
+
+    for path in sorted((repo_dir / "configs").glob("*.json")):
+        validate_train_config(path)
+        mcfg, _ = load_config(path)
+        assert count_parameters(SpecGen(mcfg)) <= 10_000_000, path.name   # the model budget
+
+
 def _component_sets(n: int = 3):
     from specgen_addon.train.lighting_mix import COMPONENTS
 
