@@ -1,4 +1,4 @@
-"""Joint RGB + spectral training of SpecGen (paper §3.3, §4.2) on CPU.
+"""Joint RGB + spectral training of SpecGen (paper §3.3, §4.2) on the CPU (or a GPU: ``device``).
 
 Each step draws a few spectral materials and a few RGB materials (seeded by ``(seed, step)``, so a
 resumed run continues exactly as an uninterrupted one), renders nothing (input images are
