@@ -31,7 +31,7 @@ def time_config(mcfg, tcfg, sets, device: str, steps: int, warmup: int) -> dict:
 
     from specgen_addon.model import SpecGen, count_parameters
     from specgen_addon.train import distributed as ddp
-    from specgen_addon.train.loop import group_loss, make_step_batches
+    from specgen_addon.train.loop import group_loss, make_step_batches, total_loss
 
     spectral, rgb, _ = sets
     dev = ddp.train_device(device)
@@ -43,13 +43,7 @@ def time_config(mcfg, tcfg, sets, device: str, steps: int, warmup: int) -> dict:
         b_spec, b_rgb = make_step_batches(tcfg, mcfg, spectral, rgb, step)
         t1 = time.perf_counter()
         opt.zero_grad(set_to_none=True)
-        loss, tvs = 0.0, []
-        for b, w in ((b_spec, 1.0), (b_rgb, tcfg.rgb_weight)):
-            if b is not None:
-                mse, tv = group_loss(model, b)
-                loss = loss + w * mse
-                tvs.append(tv)
-        loss = loss + tcfg.tv_weight * torch.stack(tvs).mean()
+        loss, _ = total_loss(tcfg, *(None if b is None else group_loss(model, b) for b in (b_spec, b_rgb)))
         loss.backward()
         opt.step()
         if dev.type == "cuda":

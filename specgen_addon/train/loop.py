@@ -249,6 +249,23 @@ def group_loss(model: SpecGen, b: Batch) -> tuple[torch.Tensor, torch.Tensor]:
     return _masked_mse(pred, t["target"], t["valid"]), model.tv_loss(planes)
 
 
+def total_loss(tcfg: TrainConfig, g_spec: tuple[torch.Tensor, torch.Tensor] | None,
+               g_rgb: tuple[torch.Tensor, torch.Tensor] | None) -> tuple[torch.Tensor, dict[str, float]]:
+    """``L = L_spec + w_rgb · L_RGB + α · L_TV`` from the groups' ``(MSE, TV)`` (either may be
+    ``None``), and the logged parts ``spec``, ``rgb``, ``tv``."""
+    parts: dict[str, float] = {}
+    terms, tv_terms = [], []
+    for key, group, weight in (("spec", g_spec, 1.0), ("rgb", g_rgb, tcfg.rgb_weight)):
+        if group is not None:
+            mse, tv = group
+            terms.append(weight * mse)
+            tv_terms.append(tv)
+            parts[key] = float(mse.detach())
+    l_tv = torch.stack(tv_terms).mean()
+    parts["tv"] = float(l_tv.detach())
+    return sum(terms) + tcfg.tv_weight * l_tv, parts
+
+
 def make_step_batches(tcfg: TrainConfig, mcfg: Config, spectral: MaterialSet, rgb: MaterialSet,
                       step: int, dctx: ddp.DistContext | None = None) -> tuple[Batch | None, Batch | None]:
     """The spectral and RGB batches of ``step``: a pure function of ``(seed, step)``.
@@ -372,28 +389,13 @@ def train(mcfg: Config, tcfg: TrainConfig, spectral: MaterialSet, rgb: MaterialS
                 g["lr"] = lr_at(tcfg, step)
             model.train()
             opt.zero_grad(set_to_none=True)
-            loss = torch.zeros((), device=device)
-            rec: dict[str, float] = {"step": step + 1, "lr": lr_at(tcfg, step)}
-            tv_terms = []
-            g_spec, g_rgb = step_losses(b_spec, b_rgb)
-            if g_spec is not None:
-                l_spec, tv = g_spec
-                loss = loss + l_spec
-                tv_terms.append(tv)
-                rec["spec"] = float(l_spec.detach())
-            if g_rgb is not None:
-                l_rgb, tv = g_rgb
-                loss = loss + tcfg.rgb_weight * l_rgb
-                tv_terms.append(tv)
-                rec["rgb"] = float(l_rgb.detach())
-            l_tv = torch.stack(tv_terms).mean()
-            loss = loss + tcfg.tv_weight * l_tv
+            loss, parts = total_loss(tcfg, *step_losses(b_spec, b_rgb))
+            rec: dict[str, float] = {"step": step + 1, "lr": lr_at(tcfg, step), **parts}
             loss.backward()
             opt.step()
             if ema is not None:
                 ema.update_parameters(model)
             step += 1
-            rec["tv"] = float(l_tv.detach())
             rec["loss"] = float(loss.detach())
             rec = ddp.mean_record(rec, dctx)
             if val_batch is not None and (step % tcfg.val_every == 0 or step == tcfg.steps):
