@@ -264,6 +264,7 @@ def test_lighting_mix_honours_the_configured_canonical_fraction():
     ({"lighting": "sunny"}, "lighting must be"),
     ({"lr": -1.0}, "lr must be"),
     ({"ema_decay": 1.5}, "ema_decay"),
+    ({"linear_loss_weight": -1.0}, "linear_loss_weight must be"),
     ({"data_workers": -1}, "data_workers must be an integer ≥ 0"),
     ({"init_weights": "/nonexistent/w.pt"}, "not found"),
 ])

@@ -18,7 +18,9 @@ from __future__ import annotations
 import contextlib
 import csv
 import dataclasses
+import functools
 import json
+import math
 import time
 from dataclasses import dataclass, field
 from pathlib import Path
@@ -55,6 +57,9 @@ class TrainConfig:
     wavelengths_per_angle: int = 8
     tv_weight: float = 2.0
     rgb_weight: float = 1.0
+    #: Weight of the rendered-scale term (:func:`rendered_scale_loss`) added to each group's
+    #: μ-law MSE (0: off, the paper's loss).
+    linear_loss_weight: float = 0.0
     corpus_size: int = 200
     corpus_seed: int = 0
     input_variants: int = 4
@@ -118,7 +123,7 @@ class TrainConfig:
             v = getattr(self, key)
             if not is_int(v) or v < lo:
                 raise SpecGenError(f"training config: {key} must be an integer ≥ {lo}, got {v!r}")
-        for key in ("lr", "lr_decay", "tv_weight", "rgb_weight", "canonical_fraction"):
+        for key in ("lr", "lr_decay", "tv_weight", "rgb_weight", "linear_loss_weight", "canonical_fraction"):
             v = getattr(self, key)
             if not isinstance(v, (int, float)) or isinstance(v, bool) or not np.isfinite(v) or v < 0:
                 raise SpecGenError(f"training config: {key} must be a finite number ≥ 0, got {v!r}")
@@ -241,12 +246,51 @@ def _masked_mse(pred: torch.Tensor, target: torch.Tensor, valid: torch.Tensor) -
     return ((pred - target) ** 2 * valid).sum() / valid.sum().clamp_min(1.0)
 
 
-def group_loss(model: SpecGen, b: Batch) -> tuple[torch.Tensor, torch.Tensor]:
-    """(MSE in μ-law space, TV of the generated planes) for one batch group."""
+def inverse_mu_law(r: torch.Tensor, mu: float) -> torch.Tensor:
+    """f_r (sr⁻¹) from r′ = ln(1 + μ·f_r) / ln(1 + μ), the inverse of the paper's μ-law."""
+    return torch.expm1(r * math.log1p(mu)) / mu
+
+
+def foreshortening(theta_h: torch.Tensor, theta_d: torch.Tensor, phi_d: torch.Tensor) -> torch.Tensor:
+    """min(cos θi, cos θo) of Rusinkiewicz angles (radians), clamped at 0.
+
+    cos θi,o = cos θh·cos θd ∓ sin θh·sin θd·cos φd; the smaller of the two is symmetric in
+    i ↔ o, so the weight needs no convention for which direction is the light.
+    """
+    c = torch.cos(theta_h) * torch.cos(theta_d) - torch.sin(theta_h) * torch.sin(theta_d) * torch.cos(phi_d).abs()
+    return c.clamp_min(0.0)
+
+
+def rendered_scale_loss(pred: torch.Tensor, target: torch.Tensor, valid: torch.Tensor,
+                        cos_weight: torch.Tensor, mu: float) -> torch.Tensor:
+    """Linear-space error of the radiance a BRDF sends toward a distant light's viewer, relative to
+    each material's brightest sampled point: mean of ((f̂ − f)·cos / max(f·cos))² per row.
+
+    The μ-law MSE weighs a relative error alike at every level; a rendered image's PSNR (normalised
+    by its bright end) weighs the absolute error of the highlight and the body's overall scale.
+    This term puts that weight into training. Arrays are ``(B, N)``; ``pred``/``target`` are r′.
+    """
+    f_true = inverse_mu_law(target, mu) * cos_weight
+    f_pred = inverse_mu_law(pred.clamp(max=3.0), mu) * cos_weight   # r′ ≤ 3: f ≤ 6.6·10⁴ sr⁻¹
+    scale = (f_true * valid).amax(dim=1, keepdim=True).clamp_min(1e-4).detach()
+    return _masked_mse(f_pred / scale, f_true / scale, valid)
+
+
+def group_loss(model: SpecGen, b: Batch, linear_weight: float = 0.0) -> tuple[torch.Tensor, torch.Tensor]:
+    """(data term, TV of the generated planes) for one batch group.
+
+    The data term is the MSE in μ-law space (paper §3.3), plus ``linear_weight`` times
+    :func:`rendered_scale_loss` when that is positive.
+    """
     t = _tensors(b, _device_of(model))
     planes = model.planes(t["images"])
     pred = model.query(planes, t["theta_h"], t["theta_d"], t["phi_d"], t["wavelength_nm"])
-    return _masked_mse(pred, t["target"], t["valid"]), model.tv_loss(planes)
+    data = _masked_mse(pred, t["target"], t["valid"])
+    if linear_weight > 0:
+        cos_w = foreshortening(t["theta_h"], t["theta_d"], t["phi_d"])
+        data = data + linear_weight * rendered_scale_loss(pred, t["target"], t["valid"], cos_w,
+                                                          model.cfg.mu)
+    return data, model.tv_loss(planes)
 
 
 def total_loss(tcfg: TrainConfig, g_spec: tuple[torch.Tensor, torch.Tensor] | None,
@@ -342,7 +386,8 @@ def train(mcfg: Config, tcfg: TrainConfig, spectral: MaterialSet, rgb: MaterialS
     ck = ddp.broadcast(torch.load(ckpt_path, map_location="cpu", weights_only=True)
                        if resume and dctx.is_main and ckpt_path.is_file() else None, dctx)
     if ck is not None:
-        saved = {"ema_decay": 0.0, **ck["train_config"]}  # checkpoints from before the EMA had none
+        saved = {"ema_decay": 0.0, "linear_loss_weight": 0.0,  # keys older checkpoints lack
+                 **ck["train_config"]}
         if ck["model_config"] != mcfg.to_dict() or saved != _tdict(tcfg, ignore_budget=True):
             raise SpecGenError(f"{ckpt_path}: checkpoint was made with a different configuration")
         model.load_state_dict(ck["model"])
@@ -351,7 +396,9 @@ def train(mcfg: Config, tcfg: TrainConfig, spectral: MaterialSet, rgb: MaterialS
             ema.load_state_dict(ck["ema"])
         start_step, elapsed0, history = ck["step"], ck["elapsed"], ck["history"]
     val_batch = _validation_batch(tcfg, mcfg, val)
-    step_losses = ddp.step_losses(model, group_loss, dctx)  # this rank's share, DDP-averaged
+    loss_fn = (functools.partial(group_loss, linear_weight=tcfg.linear_loss_weight)
+               if tcfg.linear_loss_weight > 0 else group_loss)
+    step_losses = ddp.step_losses(model, loss_fn, dctx)  # this rank's share, DDP-averaged
 
     def checkpoint(step: int, elapsed: float) -> None:
         if not dctx.is_main:
