@@ -70,6 +70,11 @@ def add_parser(sub: argparse._SubParsersAction) -> argparse.ArgumentParser:
                    help="with --families: photograph each input sphere under this environment map "
                         "(e.g. a held-out one: courtyard, interior) instead of the canonical lighting, "
                         "without telling the network; measures its robustness to the input's lighting")
+    p.add_argument("--input-shift", type=float, default=0.0, metavar="PX",
+                   help="with --families: move each input sphere by PX pixels right and down inside "
+                        "a black border before the sphere is found and cropped (the canonical image is "
+                        "128 px); measures how the network takes a sphere a user's crop leaves off "
+                        "centre (default 0)")
     p.add_argument("--family-resolution", type=int, default=64,
                    help="sphere size (px) of the per-family renders (default 64)")
     p.add_argument("--quiet", action="store_true", help="no progress bar")
@@ -247,7 +252,8 @@ def run_evaluate(args: argparse.Namespace) -> int:
                                                  envs=not args.no_envs, rgl_dir=SHARED_RGL_DIR,
                                                  resolution=args.family_resolution,
                                                  backend=args.backend, progress=update,
-                                                 input_env=args.input_env)
+                                                 input_env=args.input_env,
+                                                 input_shift_px=args.input_shift)
         print(format_family_results(res["by_family"]))
     if args.json:
         from .io_utils import atomic_write

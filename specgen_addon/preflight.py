@@ -8,6 +8,7 @@ of inference, baking or rendering it would otherwise follow. Bounds come from :m
 from __future__ import annotations
 
 import argparse
+import math
 import re
 from pathlib import Path
 from typing import Callable
@@ -130,6 +131,11 @@ def _evaluate(a) -> None:
         if not a.families:
             raise SpecGenError("--input-env needs --families N (it applies to the per-family evaluation)")
         check_env_name(a.input_env)
+    shift = getattr(a, "input_shift", 0.0)
+    if not (math.isfinite(shift) and abs(shift) <= 8.0):
+        raise SpecGenError(f"--input-shift must be a number of pixels in [-8, 8], got {shift}")
+    if shift and not a.families:
+        raise SpecGenError("--input-shift needs --families N (it applies to the per-family evaluation)")
 
 
 def _export(a) -> None:

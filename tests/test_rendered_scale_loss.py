@@ -51,8 +51,8 @@ def test_points_below_the_horizon_do_not_count():
     pred[0, 3] = 50.0                          # wrong, but masked
     valid = np.array([[1.0, 1.0, 1.0, 0.0]])
     enc = lambda a: torch.from_numpy(mu_law_encode(a, 255.0))  # noqa: E731
-    got = rendered_scale_loss(enc(pred), enc(f), torch.from_numpy(valid), torch.ones(1, 4, dtype=torch.float64),
-                              255.0)
+    ones = torch.ones(1, 4, dtype=torch.float64)
+    got = rendered_scale_loss(enc(pred), enc(f), torch.from_numpy(valid), ones, 255.0)
     assert float(got) == 0.0
 
 

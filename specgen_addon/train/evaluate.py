@@ -132,11 +132,21 @@ def mixed_split_materials(per_family: int, families: list[str] | None = None, sp
     return out
 
 
+def displaced_input(image: np.ndarray, shift_px: float, border_px: int = 16) -> np.ndarray:
+    """``image`` (H×W×3) inside a black border of ``border_px``, moved by ``shift_px`` pixels right
+    and down (bilinear): a sphere that sits off the pixel grid, as in a photograph."""
+    from scipy.ndimage import shift as nd_shift
+
+    b = border_px
+    padded = np.pad(np.asarray(image, dtype=np.float64), ((b, b), (b, b), (0, 0)))
+    return nd_shift(padded, (shift_px, shift_px, 0.0), order=1, mode="constant", cval=0.0).astype(np.float32)
+
+
 def evaluate_families(weights: str | Path | None = None, per_family: int = 4, envs: bool = True,
                       rgl_dir: str | Path | None = None, backend: str = "torch",
                       resolution: int = RESOLUTION, families: list[str] | None = None,
                       progress: Callable[[float], None] | None = None,
-                      input_env: str | None = None) -> dict[str, Any]:
+                      input_env: str | None = None, input_shift_px: float = 0.0) -> dict[str, Any]:
     """PSNR/SSIM per family of the mixed test split, network alone (no refinement).
 
     Scenes: the protocol's distant lights and, with ``envs``, the two held-out environment maps
@@ -144,6 +154,8 @@ def evaluate_families(weights: str | Path | None = None, per_family: int = 4, en
     ``input_env`` the sphere photographed under that map
     (:func:`specgen_addon.evaluation.protocol.input_under_environment`) and the network not told:
     the canonical-input score says how well it fits, this one how robust it is to a user's lighting.
+    ``input_shift_px``: the input sphere moved by that many pixels right and down inside a black
+    border (:func:`displaced_input`) before the pipeline finds and crops it, as in a user's photo.
     ``rgl_dir``: real RGL RGB files (``*.bsdf``) scored in linear sRGB under the distant lights
     (the project renderer's slice assignment: the light direction selects the measured slice).
     """
@@ -162,10 +174,12 @@ def evaluate_families(weights: str | Path | None = None, per_family: int = 4, en
     total = len(mats) + len(rgl_files)
     def input_of(brdf) -> np.ndarray:
         if input_env is None:
-            return input_image.render_input(brdf)
-        from ..evaluation.protocol import input_under_environment
+            image = input_image.render_input(brdf)
+        else:
+            from ..evaluation.protocol import input_under_environment
 
-        return input_under_environment(brdf, input_env)
+            image = input_under_environment(brdf, input_env)
+        return displaced_input(image, input_shift_px) if input_shift_px else image
 
     rows = []
     for i, mat in enumerate(mats):

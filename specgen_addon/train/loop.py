@@ -60,6 +60,9 @@ class TrainConfig:
     #: Weight of the rendered-scale term (:func:`rendered_scale_loss`) added to each group's
     #: μ-law MSE (0: off, the paper's loss).
     linear_loss_weight: float = 0.0
+    #: Largest random shift (network pixels, each axis) of every training input (0: off), as a
+    #: real photo's crop leaves the sphere a fraction of a pixel off centre (:mod:`.augment`).
+    input_jitter_px: float = 0.0
     corpus_size: int = 200
     corpus_seed: int = 0
     input_variants: int = 4
@@ -123,7 +126,8 @@ class TrainConfig:
             v = getattr(self, key)
             if not is_int(v) or v < lo:
                 raise SpecGenError(f"training config: {key} must be an integer ≥ {lo}, got {v!r}")
-        for key in ("lr", "lr_decay", "tv_weight", "rgb_weight", "linear_loss_weight", "canonical_fraction"):
+        for key in ("lr", "lr_decay", "tv_weight", "rgb_weight", "linear_loss_weight", "input_jitter_px",
+                    "canonical_fraction"):
             v = getattr(self, key)
             if not isinstance(v, (int, float)) or isinstance(v, bool) or not np.isfinite(v) or v < 0:
                 raise SpecGenError(f"training config: {key} must be a finite number ≥ 0, got {v!r}")
@@ -257,7 +261,8 @@ def foreshortening(theta_h: torch.Tensor, theta_d: torch.Tensor, phi_d: torch.Te
     cos θi,o = cos θh·cos θd ∓ sin θh·sin θd·cos φd; the smaller of the two is symmetric in
     i ↔ o, so the weight needs no convention for which direction is the light.
     """
-    c = torch.cos(theta_h) * torch.cos(theta_d) - torch.sin(theta_h) * torch.sin(theta_d) * torch.cos(phi_d).abs()
+    c = (torch.cos(theta_h) * torch.cos(theta_d)
+         - torch.sin(theta_h) * torch.sin(theta_d) * torch.cos(phi_d).abs())
     return c.clamp_min(0.0)
 
 
@@ -324,6 +329,10 @@ def make_step_batches(tcfg: TrainConfig, mcfg: Config, spectral: MaterialSet, rg
             out.append(None)
             continue
         mats, imgs = _draw(rng, mset, k, tcfg.canonical_fraction, tcfg.input_variants, tcfg.lighting)
+        if tcfg.input_jitter_px > 0:   # (no draws when off: earlier runs keep their data bit for bit)
+            from .augment import jitter_position
+
+            imgs = [jitter_position(im, rng, tcfg.input_jitter_px) for im in imgs]
         mine = ddp.shard_rows(len(mats), dctx) if dctx is not None and dctx.parallel else None
         out.append(make_batch(mats, imgs, rng, tcfg.angles_per_material, tcfg.wavelengths_per_angle,
                               is_spec, TARGET_WAVELENGTHS_NM, mcfg.mu, evaluate=mine))
@@ -386,8 +395,8 @@ def train(mcfg: Config, tcfg: TrainConfig, spectral: MaterialSet, rgb: MaterialS
     ck = ddp.broadcast(torch.load(ckpt_path, map_location="cpu", weights_only=True)
                        if resume and dctx.is_main and ckpt_path.is_file() else None, dctx)
     if ck is not None:
-        saved = {"ema_decay": 0.0, "linear_loss_weight": 0.0,  # keys older checkpoints lack
-                 **ck["train_config"]}
+        # keys that older checkpoints lack take their defaults
+        saved = {"ema_decay": 0.0, "linear_loss_weight": 0.0, "input_jitter_px": 0.0, **ck["train_config"]}
         if ck["model_config"] != mcfg.to_dict() or saved != _tdict(tcfg, ignore_budget=True):
             raise SpecGenError(f"{ckpt_path}: checkpoint was made with a different configuration")
         model.load_state_dict(ck["model"])

@@ -1,0 +1,79 @@
+"""Where the sphere sits: the training jitter and the evaluation's displaced inputs."""
+
+from __future__ import annotations
+
+import dataclasses
+
+import numpy as np
+import pytest
+import torch
+
+from specgen_addon.errors import SpecGenError
+from specgen_addon.input_image import prepare_sphere_array
+from specgen_addon.model import Config, load_weights
+from specgen_addon.train.augment import jitter_position, shift_image
+from specgen_addon.train.evaluate import displaced_input
+from specgen_addon.train.loop import TrainConfig, train
+from test_train import FAST, SMALL, sets
+
+
+def test_a_whole_pixel_shift_moves_the_image_exactly():
+    img = np.random.default_rng(0).random((3, 16, 16)).astype(np.float32)
+    out = shift_image(img, 2.0, -1.0)
+    np.testing.assert_array_equal(out[:, 2:, :-1], img[:, :-2, 1:])
+    np.testing.assert_array_equal(shift_image(img, 0.0, 0.0), img)
+
+
+def test_a_half_pixel_shift_averages_neighbours():
+    img = np.zeros((1, 8, 8), np.float32)
+    img[0, 4, 4] = 1.0
+    out = shift_image(img, 0.0, 0.5)
+    assert out[0, 4, 4] == pytest.approx(0.5) and out[0, 4, 5] == pytest.approx(0.5)
+    assert out.sum() == pytest.approx(1.0)
+
+
+def test_jitter_is_drawn_from_the_generator_within_its_bound():
+    img = np.random.default_rng(1).random((3, 16, 16)).astype(np.float32)
+    a = jitter_position(img, np.random.default_rng(5), 0.5)
+    rng = np.random.default_rng(5)
+    dy, dx = rng.uniform(-0.5, 0.5, size=2)
+    np.testing.assert_array_equal(a, shift_image(img, dy, dx))
+    assert abs(dy) <= 0.5 and abs(dx) <= 0.5
+
+
+def test_jittered_training_is_bit_identical_for_a_seed_and_differs_from_unjittered(tmp_path):
+    spec, rgb, val = sets()
+    tcfg = TrainConfig(**{**FAST, "steps": 3, "input_jitter_px": 0.5})
+    a = train(Config(**SMALL), tcfg, spec, rgb, val, tmp_path / "a", show_progress=False)
+    b = train(Config(**SMALL), tcfg, spec, rgb, val, tmp_path / "b", show_progress=False)
+    c = train(Config(**SMALL), dataclasses.replace(tcfg, input_jitter_px=0.0), spec, rgb, val,
+              tmp_path / "c", show_progress=False)
+    sa, sb, sc = (load_weights(r.weights).state_dict() for r in (a, b, c))
+    assert all(torch.equal(sa[k], sb[k]) for k in sa)
+    assert any(not torch.equal(sa[k], sc[k]) for k in sa)
+
+
+def test_a_negative_jitter_is_refused():
+    with pytest.raises(SpecGenError, match="input_jitter_px must be"):
+        TrainConfig.from_dict({"input_jitter_px": -0.5})
+
+
+def _disc_image(size: int = 64) -> np.ndarray:
+    yy, xx = (np.mgrid[0:size, 0:size] + 0.5 - size / 2) / (size / 2)
+    inside = xx * xx + yy * yy < 1.0
+    img = np.zeros((size, size, 3), np.float32)
+    img[inside] = np.stack([0.2 + 0.25 * (xx[inside] + 1), 0.3 * np.ones(inside.sum()),
+                            0.6 - 0.2 * yy[inside]], -1)
+    return img
+
+
+def test_a_whole_pixel_displacement_gives_the_pipeline_the_same_crop():
+    """The measurement's zero point: moved by whole pixels inside a border, the sphere is found
+    and cropped exactly as the framed original."""
+    img = _disc_image()
+    ref = prepare_sphere_array(img, size=64)
+    moved = displaced_input(img, 3.0)
+    assert moved.shape == (96, 96, 3)
+    np.testing.assert_allclose(prepare_sphere_array(moved, size=64), ref, atol=1e-6)
+    off = prepare_sphere_array(displaced_input(img, 0.5), size=64)
+    assert np.abs(off - ref).max() > 1e-3    # off the pixel grid, the crop differs
