@@ -2,19 +2,16 @@
 
 from __future__ import annotations
 
-import dataclasses
-
 import numpy as np
 import pytest
 import torch
 
 from specgen_addon.errors import SpecGenError
 from specgen_addon.input_image import prepare_sphere_array
-from specgen_addon.model import Config, load_weights
 from specgen_addon.train.augment import jitter_position, shift_image
 from specgen_addon.train.evaluate import displaced_input
-from specgen_addon.train.loop import TrainConfig, train
-from test_train import FAST, SMALL, sets
+from specgen_addon.train.loop import TrainConfig
+from test_train import twice_and_without
 
 
 def test_a_whole_pixel_shift_moves_the_image_exactly():
@@ -42,13 +39,7 @@ def test_jitter_is_drawn_from_the_generator_within_its_bound():
 
 
 def test_jittered_training_is_bit_identical_for_a_seed_and_differs_from_unjittered(tmp_path):
-    spec, rgb, val = sets()
-    tcfg = TrainConfig(**{**FAST, "steps": 3, "input_jitter_px": 0.5})
-    a = train(Config(**SMALL), tcfg, spec, rgb, val, tmp_path / "a", show_progress=False)
-    b = train(Config(**SMALL), tcfg, spec, rgb, val, tmp_path / "b", show_progress=False)
-    c = train(Config(**SMALL), dataclasses.replace(tcfg, input_jitter_px=0.0), spec, rgb, val,
-              tmp_path / "c", show_progress=False)
-    sa, sb, sc = (load_weights(r.weights).state_dict() for r in (a, b, c))
+    (sa, sb, sc), _ = twice_and_without(tmp_path, input_jitter_px=0.5)
     assert all(torch.equal(sa[k], sb[k]) for k in sa)
     assert any(not torch.equal(sa[k], sc[k]) for k in sa)
 

@@ -2,17 +2,13 @@
 
 from __future__ import annotations
 
-import dataclasses
-
 import numpy as np
 import torch
 
-from specgen_addon.model import Config, load_weights
 from specgen_addon.rusinkiewicz import io_from_half_diff
 from specgen_addon.table import mu_law_encode
-from specgen_addon.train.loop import (TrainConfig, foreshortening, inverse_mu_law, rendered_scale_loss,
-                                      train)
-from test_train import FAST, SMALL, sets
+from specgen_addon.train.loop import foreshortening, inverse_mu_law, rendered_scale_loss
+from test_train import twice_and_without
 
 
 def test_foreshortening_is_the_smaller_cosine_of_the_two_directions():
@@ -57,13 +53,7 @@ def test_points_below_the_horizon_do_not_count():
 
 
 def test_a_run_with_the_term_is_bit_identical_for_a_seed_and_differs_from_one_without(tmp_path):
-    spec, rgb, val = sets()
-    with_term = TrainConfig(**{**FAST, "steps": 4, "linear_loss_weight": 2.0})
-    a = train(Config(**SMALL), with_term, spec, rgb, val, tmp_path / "a", show_progress=False)
-    b = train(Config(**SMALL), with_term, spec, rgb, val, tmp_path / "b", show_progress=False)
-    c = train(Config(**SMALL), dataclasses.replace(with_term, linear_loss_weight=0.0), spec, rgb, val,
-              tmp_path / "c", show_progress=False)
-    sa, sb, sc = (load_weights(r.weights).state_dict() for r in (a, b, c))
+    (sa, sb, sc), (a, _, c) = twice_and_without(tmp_path, steps=4, linear_loss_weight=2.0)
     assert all(torch.equal(sa[k], sb[k]) for k in sa)
     assert any(not torch.equal(sa[k], sc[k]) for k in sa)
     assert a.history[0]["spec"] > c.history[0]["spec"]   # the same first batch, plus the term

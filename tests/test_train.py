@@ -92,6 +92,16 @@ def test_tiny_overfit_reduces_the_loss_tenfold(tmp_path):
     assert last < first / 10, (first, last)
 
 
+def twice_and_without(tmp_path, steps: int = 3, **option):
+    """Three tiny runs: two with ``option`` set, one with it at its default; (states, results)."""
+    spec, rgb, val = sets()
+    with_option = TrainConfig(**{**FAST, "steps": steps, **option})
+    without = dataclasses.replace(with_option, **{k: getattr(TrainConfig(), k) for k in option})
+    runs = [train(Config(**SMALL), t, spec, rgb, val, tmp_path / name, show_progress=False)
+            for name, t in (("a", with_option), ("b", with_option), ("c", without))]
+    return [load_weights(r.weights).state_dict() for r in runs], runs
+
+
 def test_training_is_bit_for_bit_deterministic_and_resumable(tmp_path):
     spec, rgb, val = sets()
     tcfg = TrainConfig(**{**FAST, "steps": 6})
