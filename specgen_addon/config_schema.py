@@ -24,7 +24,7 @@ TRAIN_BOUNDS: dict[str, tuple[float | None, float | None]] = {
     "lr": (1e-8, 1.0), "lr_decay_every": (1, None), "lr_decay": (1e-6, 1.0),
     "spectral_materials_per_step": (1, 4096), "rgb_materials_per_step": (0, 4096),
     "angles_per_material": (1, 1 << 20), "wavelengths_per_angle": (1, 512),
-    "tv_weight": (0.0, 1e6), "rgb_weight": (0.0, 1e6), "linear_loss_weight": (0.0, 1e6), "input_jitter_px": (0.0, 8.0), "corpus_size": (1, 100_000),
+    "tv_weight": (0.0, 1e6), "rgb_weight": (0.0, 1e6), "linear_loss_weight": (0.0, 1e6), "input_jitter_px": (0.0, 8.0), "input_scale_jitter": (0.0, 0.5), "corpus_size": (1, 100_000),
     "corpus_seed": (0, 2**32 - 1), "input_variants": (1, 1000), "canonical_fraction": (0.0, 1.0),
     "checkpoint_every": (1, None), "val_every": (1, None), "val_materials": (0, 10_000),
     "threads": (1, 256), "ema_decay": (0.0, 0.999999),

@@ -8,7 +8,7 @@ import torch
 
 from specgen_addon.errors import SpecGenError
 from specgen_addon.input_image import prepare_sphere_array
-from specgen_addon.train.augment import jitter_position, shift_image
+from specgen_addon.train.augment import jitter_framing, reframe
 from specgen_addon.train.evaluate import displaced_input
 from specgen_addon.train.loop import TrainConfig
 from test_train import twice_and_without
@@ -16,30 +16,39 @@ from test_train import twice_and_without
 
 def test_a_whole_pixel_shift_moves_the_image_exactly():
     img = np.random.default_rng(0).random((3, 16, 16)).astype(np.float32)
-    out = shift_image(img, 2.0, -1.0)
+    out = reframe(img, 2.0, -1.0)
     np.testing.assert_array_equal(out[:, 2:, :-1], img[:, :-2, 1:])
-    np.testing.assert_array_equal(shift_image(img, 0.0, 0.0), img)
+    np.testing.assert_array_equal(reframe(img, 0.0, 0.0), img)
 
 
 def test_a_half_pixel_shift_averages_neighbours():
     img = np.zeros((1, 8, 8), np.float32)
     img[0, 4, 4] = 1.0
-    out = shift_image(img, 0.0, 0.5)
+    out = reframe(img, 0.0, 0.5)
     assert out[0, 4, 4] == pytest.approx(0.5) and out[0, 4, 5] == pytest.approx(0.5)
     assert out.sum() == pytest.approx(1.0)
 
 
-def test_jitter_is_drawn_from_the_generator_within_its_bound():
+def test_scaling_is_about_the_image_centre():
+    img = np.zeros((1, 9, 9), np.float32)
+    img[0, 4, 6] = 1.0                       # two pixels right of the centre
+    out = reframe(img, 0.0, 0.0, 2.0)
+    assert tuple(np.argwhere(out[0] == out[0].max())[0]) == (4, 8)
+    assert out[0, 4, 4] == 0.0
+
+
+def test_jitter_is_drawn_from_the_generator_within_its_bounds():
     img = np.random.default_rng(1).random((3, 16, 16)).astype(np.float32)
-    a = jitter_position(img, np.random.default_rng(5), 0.5)
+    a = jitter_framing(img, np.random.default_rng(5), 0.5, 0.02)
     rng = np.random.default_rng(5)
     dy, dx = rng.uniform(-0.5, 0.5, size=2)
-    np.testing.assert_array_equal(a, shift_image(img, dy, dx))
-    assert abs(dy) <= 0.5 and abs(dx) <= 0.5
+    scale = 1.0 + rng.uniform(-0.02, 0.02)
+    np.testing.assert_array_equal(a, reframe(img, dy, dx, scale))
+    assert abs(dy) <= 0.5 and abs(dx) <= 0.5 and abs(scale - 1.0) <= 0.02
 
 
 def test_jittered_training_is_bit_identical_for_a_seed_and_differs_from_unjittered(tmp_path):
-    (sa, sb, sc), _ = twice_and_without(tmp_path, input_jitter_px=0.5)
+    (sa, sb, sc), _ = twice_and_without(tmp_path, input_jitter_px=0.5, input_scale_jitter=0.02)
     assert all(torch.equal(sa[k], sb[k]) for k in sa)
     assert any(not torch.equal(sa[k], sc[k]) for k in sa)
 
@@ -47,6 +56,8 @@ def test_jittered_training_is_bit_identical_for_a_seed_and_differs_from_unjitter
 def test_a_negative_jitter_is_refused():
     with pytest.raises(SpecGenError, match="input_jitter_px must be"):
         TrainConfig.from_dict({"input_jitter_px": -0.5})
+    with pytest.raises(SpecGenError, match="input_scale_jitter must be"):
+        TrainConfig.from_dict({"input_scale_jitter": -0.1})
 
 
 def _disc_image(size: int = 64) -> np.ndarray:

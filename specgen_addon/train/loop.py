@@ -60,9 +60,11 @@ class TrainConfig:
     #: Weight of the rendered-scale term (:func:`rendered_scale_loss`) added to each group's
     #: μ-law MSE (0: off, the paper's loss).
     linear_loss_weight: float = 0.0
-    #: Largest random shift (network pixels, each axis) of every training input (0: off), as a
-    #: real photo's crop leaves the sphere a fraction of a pixel off centre (:mod:`.augment`).
+    #: Largest random shift (network pixels, each axis) and relative scale change of every training
+    #: input (0: off), as a real photo's crop leaves the sphere a fraction of a pixel off centre and
+    #: a fraction of a pixel too wide (:mod:`.augment`).
     input_jitter_px: float = 0.0
+    input_scale_jitter: float = 0.0
     corpus_size: int = 200
     corpus_seed: int = 0
     input_variants: int = 4
@@ -126,7 +128,7 @@ class TrainConfig:
             v = getattr(self, key)
             if not is_int(v) or v < lo:
                 raise SpecGenError(f"training config: {key} must be an integer ≥ {lo}, got {v!r}")
-        for key in ("lr", "lr_decay", "tv_weight", "rgb_weight", "linear_loss_weight", "input_jitter_px",
+        for key in ("lr", "lr_decay", "tv_weight", "rgb_weight", "linear_loss_weight", "input_jitter_px", "input_scale_jitter",
                     "canonical_fraction"):
             v = getattr(self, key)
             if not isinstance(v, (int, float)) or isinstance(v, bool) or not np.isfinite(v) or v < 0:
@@ -329,10 +331,11 @@ def make_step_batches(tcfg: TrainConfig, mcfg: Config, spectral: MaterialSet, rg
             out.append(None)
             continue
         mats, imgs = _draw(rng, mset, k, tcfg.canonical_fraction, tcfg.input_variants, tcfg.lighting)
-        if tcfg.input_jitter_px > 0:   # (no draws when off: earlier runs keep their data bit for bit)
-            from .augment import jitter_position
+        if tcfg.input_jitter_px > 0 or tcfg.input_scale_jitter > 0:
+            # (no draws when off: earlier runs keep their data bit for bit)
+            from .augment import jitter_framing
 
-            imgs = [jitter_position(im, rng, tcfg.input_jitter_px) for im in imgs]
+            imgs = [jitter_framing(im, rng, tcfg.input_jitter_px, tcfg.input_scale_jitter) for im in imgs]
         mine = ddp.shard_rows(len(mats), dctx) if dctx is not None and dctx.parallel else None
         out.append(make_batch(mats, imgs, rng, tcfg.angles_per_material, tcfg.wavelengths_per_angle,
                               is_spec, TARGET_WAVELENGTHS_NM, mcfg.mu, evaluate=mine))
@@ -396,7 +399,8 @@ def train(mcfg: Config, tcfg: TrainConfig, spectral: MaterialSet, rgb: MaterialS
                        if resume and dctx.is_main and ckpt_path.is_file() else None, dctx)
     if ck is not None:
         # keys that older checkpoints lack take their defaults
-        saved = {"ema_decay": 0.0, "linear_loss_weight": 0.0, "input_jitter_px": 0.0, **ck["train_config"]}
+        saved = {"ema_decay": 0.0, "linear_loss_weight": 0.0, "input_jitter_px": 0.0,
+                 "input_scale_jitter": 0.0, **ck["train_config"]}
         if ck["model_config"] != mcfg.to_dict() or saved != _tdict(tcfg, ignore_budget=True):
             raise SpecGenError(f"{ckpt_path}: checkpoint was made with a different configuration")
         model.load_state_dict(ck["model"])
