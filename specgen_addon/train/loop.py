@@ -128,8 +128,8 @@ class TrainConfig:
             v = getattr(self, key)
             if not is_int(v) or v < lo:
                 raise SpecGenError(f"training config: {key} must be an integer ≥ {lo}, got {v!r}")
-        for key in ("lr", "lr_decay", "tv_weight", "rgb_weight", "linear_loss_weight", "input_jitter_px", "input_scale_jitter",
-                    "canonical_fraction"):
+        for key in ("lr", "lr_decay", "tv_weight", "rgb_weight", "linear_loss_weight", "input_jitter_px",
+                    "input_scale_jitter", "canonical_fraction"):
             v = getattr(self, key)
             if not isinstance(v, (int, float)) or isinstance(v, bool) or not np.isfinite(v) or v < 0:
                 raise SpecGenError(f"training config: {key} must be a finite number ≥ 0, got {v!r}")
