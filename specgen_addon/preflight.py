@@ -131,7 +131,7 @@ def _evaluate(a) -> None:
         if not a.families:
             raise SpecGenError("--input-env needs --families N (it applies to the per-family evaluation)")
         check_env_name(a.input_env)
-    shift = getattr(a, "input_shift", 0.0)
+    shift = a.input_shift
     if not (math.isfinite(shift) and abs(shift) <= 8.0):
         raise SpecGenError(f"--input-shift must be a number of pixels in [-8, 8], got {shift}")
     if shift and not a.families:

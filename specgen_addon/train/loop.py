@@ -409,8 +409,7 @@ def train(mcfg: Config, tcfg: TrainConfig, spectral: MaterialSet, rgb: MaterialS
             ema.load_state_dict(ck["ema"])
         start_step, elapsed0, history = ck["step"], ck["elapsed"], ck["history"]
     val_batch = _validation_batch(tcfg, mcfg, val)
-    loss_fn = (functools.partial(group_loss, linear_weight=tcfg.linear_loss_weight)
-               if tcfg.linear_loss_weight > 0 else group_loss)
+    loss_fn = functools.partial(group_loss, linear_weight=tcfg.linear_loss_weight)
     step_losses = ddp.step_losses(model, loss_fn, dctx)  # this rank's share, DDP-averaged
 
     def checkpoint(step: int, elapsed: float) -> None:
