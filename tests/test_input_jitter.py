@@ -8,7 +8,7 @@ import torch
 
 from specgen_addon.errors import SpecGenError
 from specgen_addon.input_image import prepare_sphere_array
-from specgen_addon.train.augment import jitter_framing, reframe
+from specgen_addon.train.augment import jitter_framing, offgrid_photo_crop, reframe
 from specgen_addon.train.evaluate import displaced_input
 from specgen_addon.train.loop import TrainConfig
 from test_train import twice_and_without
@@ -79,3 +79,36 @@ def test_a_whole_pixel_displacement_gives_the_pipeline_the_same_crop():
     np.testing.assert_allclose(prepare_sphere_array(moved, size=64), ref, atol=1e-6)
     off = prepare_sphere_array(displaced_input(img, 0.5), size=64)
     assert np.abs(off - ref).max() > 1e-3    # off the pixel grid, the crop differs
+
+
+def test_an_offgrid_crop_is_what_the_pipeline_makes_of_a_photo_moved_off_the_grid():
+    """Without finder error, the augmentation equals the loader's crop of the same photo (the
+    sphere finder's error on this disc is far below the 0.07 px the training draws)."""
+    from scipy.ndimage import shift
+
+    img = _disc_image()
+    rng = np.random.default_rng(7)
+    out = offgrid_photo_crop(img.transpose(2, 0, 1), rng, 0.0).transpose(1, 2, 0)
+    dy, dx = np.random.default_rng(7).uniform(0.0, 1.0, size=2)
+    photo = shift(np.pad(img, ((4, 4), (4, 4), (0, 0))), (dy, dx, 0.0), order=1)
+    assert 0 < dy < 1 and 0 < dx < 1
+    diff = np.abs(out - prepare_sphere_array(photo, size=64)).max(-1)
+    yy, xx = (np.mgrid[0:64, 0:64] + 0.5 - 32) / 32
+    rr = np.hypot(xx, yy)
+    assert diff[rr < 0.9].max() < 2e-3        # inside: the finder's few hundredths of a pixel
+    assert diff.max() < 0.15                   # the outline pixels, steep, move most
+    assert np.abs(out - img).max() > 1e-3
+    assert np.all(out[rr >= 1.0] == 0.0)
+
+
+def test_offgrid_training_is_bit_identical_for_a_seed_and_differs_from_the_plain_run(tmp_path):
+    (sa, sb, sc), _ = twice_and_without(tmp_path, input_offgrid_fraction=1.0)
+    assert all(torch.equal(sa[k], sb[k]) for k in sa)
+    assert any(not torch.equal(sa[k], sc[k]) for k in sa)
+
+
+@pytest.mark.parametrize("key,value", [("input_offgrid_fraction", 1.5), ("input_offgrid_fraction", -0.1),
+                                       ("input_finder_error_px", -0.1)])
+def test_bad_offgrid_settings_are_refused(key, value):
+    with pytest.raises(SpecGenError, match=key):
+        TrainConfig.from_dict({key: value})

@@ -1,11 +1,15 @@
 """Input augmentations of the training images that the lighting mix does not cover.
 
-A user's sphere is found and cropped by :mod:`specgen_addon.input_image`, which snaps the crop to
-whole pixels; the corpus renders are framed exactly. Off the pixel grid the crop comes out up to
-half a pixel off centre and half a pixel (of a 64-pixel radius) too wide, and the thirteenth
-session measured what that costs a network trained on exact framing: 6–8 dB (docs/model.md,
-``evaluate --input-shift``). :func:`jitter_framing` shows the network the sphere moved and scaled
-by such amounts, as a real crop leaves it.
+The corpus renders are framed exactly: the sphere's outline on the pixel grid, its outline pixels
+point-sampled. A user's sphere lies off the grid, and :mod:`specgen_addon.input_image` finds it to
+a fraction of a pixel and resamples it; the resampling blurs the image a little and the outline
+pixels mix with the background. The thirteenth and fourteenth sessions measured what that costs a
+network trained on exact framing (docs/model.md, ``evaluate --input-shift``).
+
+* :func:`jitter_framing` moves and scales the sphere by up to the old whole-pixel crop's error.
+* :func:`offgrid_photo_crop` hands the network what the pipeline makes of a photo whose sphere
+  lies off the grid: the canonical image moved by a random fraction of a pixel (bilinear, black
+  around it), then cropped by the pipeline's own resampler with the sphere finder's measured error.
 """
 
 from __future__ import annotations
@@ -34,3 +38,24 @@ def jitter_framing(img: np.ndarray, rng: np.random.Generator, max_shift_px: floa
     dy, dx = rng.uniform(-max_shift_px, max_shift_px, size=2)
     scale = 1.0 + rng.uniform(-max_scale, max_scale) if max_scale > 0 else 1.0
     return reframe(img, float(dy), float(dx), float(scale))
+
+
+def offgrid_photo_crop(img: np.ndarray, rng: np.random.Generator, finder_error_px: float) -> np.ndarray:
+    """``(C, S, S)`` canonical input as the pipeline passes on a photo of it moved by a fraction of
+    a pixel (uniform in [0, 1)² pixels, bilinear): found with a Gaussian error of ``finder_error_px``
+    (standard deviation, each of centre x, y and radius) and resampled by
+    :func:`specgen_addon.input_image._resample_circle`."""
+    from scipy.ndimage import shift
+
+    from ..input_image import _resample_circle
+
+    img = np.asarray(img, dtype=np.float32)
+    s = img.shape[-1]
+    border = 4
+    dy, dx = rng.uniform(0.0, 1.0, size=2)
+    ex, ey, er = rng.normal(0.0, finder_error_px, size=3) if finder_error_px > 0 else (0.0, 0.0, 0.0)
+    photo = np.pad(img.transpose(1, 2, 0), ((border, border), (border, border), (0, 0)))
+    photo = shift(photo, (dy, dx, 0.0), order=1, mode="constant", cval=0.0)
+    centre = s / 2.0 + border
+    out = _resample_circle(photo, centre + dx + ex, centre + dy + ey, s / 2.0 + er, s)
+    return np.ascontiguousarray(out.transpose(2, 0, 1), dtype=np.float32)

@@ -65,6 +65,11 @@ class TrainConfig:
     #: a fraction of a pixel too wide (:mod:`.augment`).
     input_jitter_px: float = 0.0
     input_scale_jitter: float = 0.0
+    #: Fraction of training inputs handed over as the pipeline crops a photo whose sphere lies off
+    #: the pixel grid, with the sphere finder's error in pixels (:func:`.augment.offgrid_photo_crop`;
+    #: 0: off).
+    input_offgrid_fraction: float = 0.0
+    input_finder_error_px: float = 0.07
     corpus_size: int = 200
     corpus_seed: int = 0
     input_variants: int = 4
@@ -129,7 +134,7 @@ class TrainConfig:
             if not is_int(v) or v < lo:
                 raise SpecGenError(f"training config: {key} must be an integer ≥ {lo}, got {v!r}")
         for key in ("lr", "lr_decay", "tv_weight", "rgb_weight", "linear_loss_weight", "input_jitter_px",
-                    "input_scale_jitter", "canonical_fraction"):
+                    "input_scale_jitter", "input_finder_error_px", "canonical_fraction"):
             v = getattr(self, key)
             if not isinstance(v, (int, float)) or isinstance(v, bool) or not np.isfinite(v) or v < 0:
                 raise SpecGenError(f"training config: {key} must be a finite number ≥ 0, got {v!r}")
@@ -138,6 +143,9 @@ class TrainConfig:
             raise SpecGenError(f"training config: ema_decay must be a number in [0, 1), got {self.ema_decay!r}")
         if self.lr <= 0 or self.canonical_fraction > 1:
             raise SpecGenError("training config: lr must be > 0 and canonical_fraction ≤ 1")
+        f = self.input_offgrid_fraction
+        if not isinstance(f, (int, float)) or isinstance(f, bool) or not 0.0 <= f <= 1.0:
+            raise SpecGenError(f"training config: input_offgrid_fraction must be a number in [0, 1], got {f!r}")
         if self.max_minutes is not None and not (isinstance(self.max_minutes, (int, float))
                                                  and self.max_minutes > 0):
             raise SpecGenError(f"training config: max_minutes must be > 0, got {self.max_minutes!r}")
@@ -336,6 +344,11 @@ def make_step_batches(tcfg: TrainConfig, mcfg: Config, spectral: MaterialSet, rg
             from .augment import jitter_framing
 
             imgs = [jitter_framing(im, rng, tcfg.input_jitter_px, tcfg.input_scale_jitter) for im in imgs]
+        if tcfg.input_offgrid_fraction > 0:
+            from .augment import offgrid_photo_crop
+
+            imgs = [offgrid_photo_crop(im, rng, tcfg.input_finder_error_px)
+                    if rng.random() < tcfg.input_offgrid_fraction else im for im in imgs]
         mine = ddp.shard_rows(len(mats), dctx) if dctx is not None and dctx.parallel else None
         out.append(make_batch(mats, imgs, rng, tcfg.angles_per_material, tcfg.wavelengths_per_angle,
                               is_spec, TARGET_WAVELENGTHS_NM, mcfg.mu, evaluate=mine))
@@ -400,7 +413,8 @@ def train(mcfg: Config, tcfg: TrainConfig, spectral: MaterialSet, rgb: MaterialS
     if ck is not None:
         # keys that older checkpoints lack take their defaults
         saved = {"ema_decay": 0.0, "linear_loss_weight": 0.0, "input_jitter_px": 0.0,
-                 "input_scale_jitter": 0.0, **ck["train_config"]}
+                 "input_scale_jitter": 0.0, "input_offgrid_fraction": 0.0, "input_finder_error_px": 0.07,
+                 **ck["train_config"]}
         if ck["model_config"] != mcfg.to_dict() or saved != _tdict(tcfg, ignore_budget=True):
             raise SpecGenError(f"{ckpt_path}: checkpoint was made with a different configuration")
         model.load_state_dict(ck["model"])
