@@ -96,9 +96,10 @@ def _gaussian_kernel(sigma: float, truncate: float = 4.0) -> np.ndarray:
 
 
 def gaussian_filter(a: np.ndarray, sigma, mode: str = "nearest", truncate: float = 4.0) -> np.ndarray:
-    """Separable Gaussian blur with edge replication (``mode="nearest"`` only)."""
-    if mode != "nearest":
-        raise ValueError("only mode='nearest' is implemented")
+    """Separable Gaussian blur with edge replication (``mode="nearest"``) or zeros beyond the edge
+    (``mode="constant"``, cval 0)."""
+    if mode not in ("nearest", "constant"):
+        raise ValueError("only mode='nearest' and mode='constant' are implemented")
     out = np.asarray(a, dtype=np.float64)
     sigmas = np.broadcast_to(np.asarray(sigma, dtype=np.float64), (out.ndim,))
     for axis, s in enumerate(sigmas):
@@ -108,7 +109,7 @@ def gaussian_filter(a: np.ndarray, sigma, mode: str = "nearest", truncate: float
         r = k.size // 2
         pad = [(0, 0)] * out.ndim
         pad[axis] = (r, r)
-        padded = np.pad(out, pad, mode="edge")
+        padded = np.pad(out, pad, mode="edge" if mode == "nearest" else "constant")
         acc = np.zeros_like(out)
         for i, weight in enumerate(k):
             acc += weight * np.take(padded, np.arange(i, i + out.shape[axis]), axis=axis)

@@ -35,6 +35,7 @@ import numpy as np
 from ..errors import Cancelled, SpecGenError
 from ..table import BRDFTable
 from .basis import CorrectionBasis
+from .blur import BLUR_CANDIDATES_PX, blur_image, blur_rows, rows_inside
 from .body import BODY_PRIORS, has_separate_body, natural_body
 from .operator import PhotoOperator, render_grid
 from .report import Reproduction, photo_scale, reproduction
@@ -80,8 +81,11 @@ class RefineOptions:
     additive: bool = True
     clip_level: float | None = CLIP_LEVEL
     energy_check: bool = True
+    blur_px: float | None = None
 
     def __post_init__(self) -> None:
+        if self.blur_px is not None and not (np.isfinite(self.blur_px) and 0.0 <= self.blur_px <= 4.0):
+            raise SpecGenError(f"blur_px must be None or a number of pixels in [0, 4], got {self.blur_px!r}")
         if self.body_prior not in BODY_PRIORS:
             raise SpecGenError(f"unknown body prior {self.body_prior!r} (choose from {', '.join(BODY_PRIORS)})")
 
@@ -99,9 +103,11 @@ class RefineResult:
     warnings: list[str] = field(default_factory=list)
     rendered: np.ndarray | None = None       # (H, W, 3) refined render under the input lighting
     improved: bool = True
+    blur_px: float = 0.0                     # the photo's blur the fit modelled (Gaussian σ, px)
 
     def summary(self) -> str:
-        return (f"self-reproduction {self.before.text()} → {self.after.text()} "
+        blur = f" (photo blur σ {self.blur_px:g} px modelled)" if self.blur_px > 0 else ""
+        return (f"self-reproduction {self.before.text()} → {self.after.text()}{blur} "
                 f"in {self.seconds:.1f} s")
 
 
@@ -192,11 +198,15 @@ def refine_brdf(table: BRDFTable, photo: np.ndarray, lighting=None, options: Ref
         unit = np.broadcast_to(np.ones(wl.size, np.float32), table.values.shape)
         a_add = op.lobe_design(unit, np.zeros(wl.size), basis, progress=report(0.6, 0.65), cancel=cancel)
         a_lobe = np.concatenate([a_lobe, a_add.reshape(b.shape[0], 3, -1)], axis=2)
-    keep = ~clipped
+    sigma = _photo_blur(op, a_lobe, a_lamb, op.lambert_design(floor, s_hats), b, clipped, n_lobe, nl,
+                        level, basis, options, check_cancel)
+    blur = blur_rows(op.shape, op.pixel_ids, sigma)
+    keep = rows_inside(op.shape, op.pixel_ids, sigma, clipped)
+    a_lobe_fit, a_lamb_fit = blur(a_lobe), blur(a_lamb)
 
     def solve(body: np.ndarray, opts: RefineOptions = options) -> np.ndarray:
-        a_body = op.lambert_design(body, s_hats)                      # y: tint of the body
-        design = np.concatenate([a_lobe, a_body, a_lamb], axis=2)     # (P, 3, K)
+        a_body = blur(op.lambert_design(body, s_hats))                # y: tint of the body
+        design = np.concatenate([a_lobe_fit, a_body, a_lamb_fit], axis=2)     # (P, 3, K)
         return _solve_correction(design[keep], b[keep], n_lobe, nl, level, basis, opts)
 
     n_all = a_lobe.shape[2]                                           # lobe x, then added u
@@ -237,14 +247,17 @@ def refine_brdf(table: BRDFTable, photo: np.ndarray, lighting=None, options: Ref
     def clip(img: np.ndarray) -> np.ndarray:   # an 8/16-bit photo: the camera clipped at full scale
         return img if options.clip_level is None else np.minimum(img, 1.0)
 
-    before_img, after_img = clip(before_img), clip(after_img)
+    def as_photographed(img: np.ndarray) -> np.ndarray:   # blurred by the lens and the crop, then clipped
+        return clip(blur_image(img, sigma))
+
+    before_img, after_img = as_photographed(before_img), as_photographed(after_img)
     m_before = reproduction(b, op.observe(before_img))
     m_after = reproduction(b, op.observe(after_img))
     if m_after.psnr_db < RELAX_BELOW_DB and options.smooth > RELAXED_SMOOTH:
         # the smooth correction does not explain the photo: the photo wins, relax the smoothness
         theta_r = solve(body, replace(options, smooth=RELAXED_SMOOTH))
         relaxed = corrected(theta_r, body)
-        relaxed_img = clip(render_under(relaxed, scene, exposure))
+        relaxed_img = as_photographed(render_under(relaxed, scene, exposure))
         m_relaxed = reproduction(b, op.observe(relaxed_img))
         if m_relaxed.psnr_db > m_after.psnr_db:
             theta, refined, after_img, m_after = theta_r, relaxed, relaxed_img, m_relaxed
@@ -272,7 +285,25 @@ def refine_brdf(table: BRDFTable, photo: np.ndarray, lighting=None, options: Ref
     if progress is not None:
         progress(1.0)
     return RefineResult(refined, m_before, m_after, coeffs, time.perf_counter() - t0, clipped_fraction,
-                        warnings, after_img, improved)
+                        warnings, after_img, improved, sigma)
+
+
+def _photo_blur(op: PhotoOperator, a_lobe: np.ndarray, a_lamb: np.ndarray, a_body: np.ndarray,
+                b: np.ndarray, clipped: np.ndarray, n_lobe: int, nl: int, level: float,
+                basis: CorrectionBasis, options: RefineOptions, check_cancel: Callable[[], None]) -> float:
+    """The photo's blur σ (px): ``options.blur_px``, or the candidate of :data:`.blur.BLUR_CANDIDATES_PX`
+    whose first solve leaves the smallest mean squared residual on the rows every candidate keeps."""
+    if options.blur_px is not None:
+        return float(options.blur_px)
+    common = rows_inside(op.shape, op.pixel_ids, max(BLUR_CANDIDATES_PX), clipped)
+    residual = {}
+    for sigma in BLUR_CANDIDATES_PX:
+        blur = blur_rows(op.shape, op.pixel_ids, sigma)
+        design = np.concatenate([blur(a_lobe), blur(a_body), blur(a_lamb)], axis=2)[common]
+        theta = _solve_correction(design, b[common], n_lobe, nl, level, basis, options)
+        residual[sigma] = float(np.mean((design @ theta - b[common]) ** 2))
+        check_cancel()
+    return min(residual, key=residual.get)
 
 
 def _solve_correction(design: np.ndarray, photo: np.ndarray, n_lobe: int, nl: int, level: float,
