@@ -75,6 +75,10 @@ def add_parser(sub: argparse._SubParsersAction) -> argparse.ArgumentParser:
                         "a black border before the sphere is found and cropped (the canonical image is "
                         "128 px); measures how the network takes a sphere a user's crop leaves off "
                         "centre (default 0)")
+    p.add_argument("--input-antialias", action="store_true",
+                   help="with --families: take each input sphere as a camera or an antialiased render "
+                        "does, each pixel the mean over its area (rendered at 4× and box-filtered; "
+                        "--input-shift then moves it by quarter pixels)")
     p.add_argument("--family-resolution", type=int, default=64,
                    help="sphere size (px) of the per-family renders (default 64)")
     p.add_argument("--quiet", action="store_true", help="no progress bar")
@@ -253,7 +257,8 @@ def run_evaluate(args: argparse.Namespace) -> int:
                                                  resolution=args.family_resolution,
                                                  backend=args.backend, progress=update,
                                                  input_env=args.input_env,
-                                                 input_shift_px=args.input_shift)
+                                                 input_shift_px=args.input_shift,
+                                                 input_antialias=args.input_antialias)
         print(format_family_results(res["by_family"]))
     if args.json:
         from .io_utils import atomic_write

@@ -136,6 +136,13 @@ def _evaluate(a) -> None:
         raise SpecGenError(f"--input-shift must be a number of pixels in [-8, 8], got {shift}")
     if shift and not a.families:
         raise SpecGenError("--input-shift needs --families N (it applies to the per-family evaluation)")
+    if getattr(a, "input_antialias", False):
+        if not a.families:
+            raise SpecGenError("--input-antialias needs --families N "
+                               "(it applies to the per-family evaluation)")
+        if a.input_env is not None:
+            raise SpecGenError("--input-antialias takes the canonical input; "
+                               "it cannot be combined with --input-env")
 
 
 def _export(a) -> None:

@@ -142,11 +142,28 @@ def displaced_input(image: np.ndarray, shift_px: float, border_px: int = 16) -> 
     return nd_shift(padded, (shift_px, shift_px, 0.0), order=1, mode="constant", cval=0.0).astype(np.float32)
 
 
+def antialiased_input(brdf, shift_px: float = 0.0, supersample: int = 4, border_px: int = 16,
+                      size: int | None = None) -> np.ndarray:
+    """The canonical input of ``brdf`` as a camera or an antialiased render takes it: rendered at
+    ``supersample``× the size and box-filtered (each pixel the mean over its area), inside a black
+    border of ``border_px``, moved by ``shift_px`` pixels right and down (rounded to
+    1/``supersample`` of a pixel)."""
+    from .. import input_image
+
+    size = int(size or input_image.CANONICAL_SIZE)
+    hi = input_image.render_input(brdf, size=size * supersample)
+    k, b = int(round(shift_px * supersample)), border_px * supersample
+    padded = np.pad(hi, ((b + k, b - k), (b + k, b - k), (0, 0)))
+    n = padded.shape[0] // supersample
+    return padded.reshape(n, supersample, n, supersample, 3).mean(axis=(1, 3)).astype(np.float32)
+
+
 def evaluate_families(weights: str | Path | None = None, per_family: int = 4, envs: bool = True,
                       rgl_dir: str | Path | None = None, backend: str = "torch",
                       resolution: int = RESOLUTION, families: list[str] | None = None,
                       progress: Callable[[float], None] | None = None,
-                      input_env: str | None = None, input_shift_px: float = 0.0) -> dict[str, Any]:
+                      input_env: str | None = None, input_shift_px: float = 0.0,
+                      input_antialias: bool = False) -> dict[str, Any]:
     """PSNR/SSIM per family of the mixed test split, network alone (no refinement).
 
     Scenes: the protocol's distant lights and, with ``envs``, the two held-out environment maps
@@ -156,6 +173,8 @@ def evaluate_families(weights: str | Path | None = None, per_family: int = 4, en
     the canonical-input score says how well it fits, this one how robust it is to a user's lighting.
     ``input_shift_px``: the input sphere moved by that many pixels right and down inside a black
     border (:func:`displaced_input`) before the pipeline finds and crops it, as in a user's photo.
+    ``input_antialias``: the canonical input area-sampled instead (:func:`antialiased_input`, moved
+    by ``input_shift_px``), as a camera or an antialiased render takes it.
     ``rgl_dir``: real RGL RGB files (``*.bsdf``) scored in linear sRGB under the distant lights
     (the project renderer's slice assignment: the light direction selects the measured slice).
     """
@@ -173,6 +192,8 @@ def evaluate_families(weights: str | Path | None = None, per_family: int = 4, en
     rgl_files = sorted(Path(rgl_dir).glob("*.bsdf")) if rgl_dir is not None and Path(rgl_dir).is_dir() else []
     total = len(mats) + len(rgl_files)
     def input_of(brdf) -> np.ndarray:
+        if input_antialias:
+            return antialiased_input(brdf, input_shift_px)
         if input_env is None:
             image = input_image.render_input(brdf)
         else:
@@ -220,6 +241,7 @@ def evaluate_families(weights: str | Path | None = None, per_family: int = 4, en
              for lab in labels for k in ("psnr", "ssim", "psnr_brightness_fitted")} if synth else {}
     return {"materials": rows, "families": by_family, "means": means, "scenes": labels,
             "per_family": per_family, "resolution": resolution, "input": input_env or "canonical",
+            "input_shift_px": input_shift_px, "input_antialias": input_antialias,
             "weights": str(weights) if weights else "default", "backend": backend,
             "corpus": {"size": MIXED_CORPUS_SIZE, "seed": MIXED_CORPUS_SEED},
             "metrics": getattr(metrics, "NORMALISATION_TEXT", "")}
