@@ -64,6 +64,8 @@ def sector_edges(contrast: np.ndarray, cx: float, cy: float, r: float,
     yy, xx = np.mgrid[y0:y1, x0:x1]
     px, py = xx + 0.5 - cx, yy + 0.5 - cy
     rho = np.hypot(px, py)
+    inside = contrast[y0:y1, x0:x1][rho < inner - 1.0]
+    typical = float(np.median(inside)) if inside.size else 0.0   # the sphere's own contrast
     band = (rho >= inner) & (rho < outer)
     px, py, rho = px[band], py[band], rho[band]
     value = contrast[y0:y1, x0:x1][band]
@@ -74,7 +76,6 @@ def sector_edges(contrast: np.ndarray, cx: float, cy: float, r: float,
     if extrapolate:  # the shading's slope towards the limb, from two points inside
         ref_b = _bilinear(contrast, cx + ux * (inner - 2.0), cy + uy * (inner - 2.0))
         ref = np.clip(ref_a + (ref_a - ref_b) * (rho - (inner - 1.0)), 0.5 * ref_a, 2.0 * ref_a)
-    typical = float(np.median(contrast[contrast > 0])) if np.any(contrast > 0) else 0.0
     ok = ref > MIN_REFERENCE_FRACTION * typical
     coverage = np.clip(value / np.where(ok, ref, 1.0), 0.0, 1.0)
     sector = np.minimum(((np.arctan2(py, px) + np.pi) / (2 * np.pi) * sectors).astype(int), sectors - 1)
