@@ -803,7 +803,7 @@ def test_output_guard_removes_new_files_and_keeps_only_what_it_is_told(tmp_path)
 
 
 @NEEDS_WEIGHTS
-@pytest.mark.parametrize("after_calls,stage", [(1, "generation"), (47, "refinement"), (93, "bake")])
+@pytest.mark.parametrize("after_calls,stage", [(1, "generation"), (47, "refinement"), (99, "bake")])
 def test_cancelled_generate_leaves_nothing_in_the_lookup_folder(after_calls, stage, tmp_path):
     """The panel's Esc: Generate's worker polls ``cancel`` between network blocks, in the
     refinement and between bake groups; wherever it stops, nothing is left."""
