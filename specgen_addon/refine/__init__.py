@@ -10,6 +10,8 @@ linearly and is found by regularised non-negative least squares (:mod:`.solve`):
 with ``θ0`` the identity (the network's own table), ``σ`` one percent of the photo's level and the
 prior weighted by each coefficient's own data sensitivity ``D`` (so a coefficient the photo barely
 sees stays with the network). Clipped pixels (PNG/JPEG at full scale) are left out of the fit.
+The photo's blur (lens, pixel area, the crop's resampling) is modelled on the rendered side,
+``photo ≈ G_σ ∗ Aθ``, with σ chosen by the fit (:mod:`.blur`).
 
 The diffuse body's spectral shape then comes from a natural-reflectance basis (:mod:`.body`): the
 first solve finds the body's colour, the body is replaced by the Otsu 2018 reflectance of that
