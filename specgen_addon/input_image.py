@@ -276,22 +276,22 @@ def prepare_sphere_array(arr: np.ndarray, size: int = CANONICAL_SIZE) -> np.ndar
         mask = coverage > 0.5
         if mask.sum() < np.pi * MIN_SPHERE_RADIUS_PX ** 2 * 0.5:
             raise ImageInputError("the alpha channel covers no sphere")
-        circle = _circle_of_mask(mask, fit_outline=False, contrast=coverage)
+        contrast = coverage
+        rough = _circle_of_mask(mask, fit_outline=False)
     else:
         try:
             mask, contrast = _foreground(rgb)
-            circle = _circle_of_mask(mask, fit_outline=True, contrast=contrast)
+            rough = _circle_of_mask(mask, fit_outline=True)
         except ImageInputError as exc:
             try:  # JPEG noise around a black background: ignore the darkest 1 % of the range
                 mask, contrast = _foreground(rgb, noise_floor=0.01)
-                circle = _circle_of_mask(mask, fit_outline=True, contrast=contrast)
+                rough = _circle_of_mask(mask, fit_outline=True)
             except ImageInputError:
                 raise exc from None
-    rough, refined = circle
     framed = _whole_pixel_framing(rough, mask)
     if framed is not None:  # a sphere already framed exactly stays untouched
         return _resample_circle(rgb, *framed, size)
-    return _resample_circle(rgb, *refined, size)
+    return _resample_circle(rgb, *_refined_circle(contrast, rough), size)
 
 
 def _ndimage():
@@ -353,16 +353,9 @@ def _foreground(rgb: np.ndarray, noise_floor: float = 0.0) -> tuple[np.ndarray, 
     return ndimage.binary_fill_holes(largest), contrast
 
 
-def _circle_of_mask(mask: np.ndarray, fit_outline: bool, contrast: np.ndarray
-                    ) -> tuple[tuple[float, float, float], tuple[float, float, float]]:
-    """The sphere in ``mask`` as two circles (cx, cy, r) in pixel units (pixel centres at integer
-    + 0.5): the mask's own (to about half a pixel), and that circle refined to a fraction of a pixel
-    from the outline's partly covered pixels (:func:`specgen_addon.sphere_edge.refine_circle`;
-    ``contrast``, H×W, is proportional to each pixel's coverage by the sphere). Where the outline
-    cannot be measured, the second is the first.
-    """
-    from .sphere_edge import refine_circle
-
+def _circle_of_mask(mask: np.ndarray, fit_outline: bool) -> tuple[float, float, float]:
+    """(cx, cy, r) in pixel units (pixel centres at integer + 0.5) of the sphere in ``mask``, to
+    about half a pixel (:func:`_refined_circle` takes it further)."""
     ndimage = _ndimage()
 
     area = float(mask.sum())
@@ -385,20 +378,39 @@ def _circle_of_mask(mask: np.ndarray, fit_outline: bool, contrast: np.ndarray
         fx, fy, fr = (float(v) for v in model.params)
         # the outline passes through edge-pixel centres, half a pixel inside the silhouette
         cx, cy, r = fx, fy, fr + 0.5
-    h, w = mask.shape
     # the disc must be mostly filled and mostly inside the frame
-    yy, xx = np.mgrid[0:h, 0:w]
-    disc = (xx + 0.5 - cx) ** 2 + (yy + 0.5 - cy) ** 2 < r * r
+    box, disc = _disc_in_frame(mask.shape, cx, cy, r)
     inside = disc.sum() / max(np.pi * r * r, 1.0)
-    filled = (disc & mask).sum() / max(disc.sum(), 1)
+    filled = (disc & mask[box]).sum() / max(disc.sum(), 1)
     if r < MIN_SPHERE_RADIUS_PX or inside < 0.8 or filled < 0.7:
         raise ImageInputError(f"no sphere found (best circle: centre ({cx:.0f}, {cy:.0f}), radius "
                               f"{r:.0f} px, {filled:.0%} filled, {inside:.0%} inside the frame)")
-    rough = (float(cx), float(cy), float(r))
+    return float(cx), float(cy), float(r)
+
+
+def _refined_circle(contrast: np.ndarray, rough: tuple[float, float, float]) -> tuple[float, float, float]:
+    """``rough`` refined to a fraction of a pixel from the outline's partly covered pixels
+    (:func:`specgen_addon.sphere_edge.refine_circle`; ``contrast``, H×W, is proportional to each
+    pixel's coverage by the sphere); ``rough`` itself where the outline cannot be measured."""
+    from .sphere_edge import refine_circle
+
+    cx, cy, r = rough
     refined = refine_circle(np.asarray(contrast, np.float64), cx, cy, r)
     if refined is None or abs(refined[2] - r) > 1.5 or np.hypot(refined[0] - cx, refined[1] - cy) > 1.5:
-        refined = rough
-    return rough, refined
+        return rough
+    return refined
+
+
+def _disc_in_frame(shape: tuple[int, int], cx: float, cy: float, r: float
+                   ) -> tuple[tuple[slice, slice], np.ndarray]:
+    """The frame's part of the disc's bounding box, and the pixels there whose centre lies inside
+    the disc (all others of the frame lie outside it)."""
+    h, w = shape
+    y0, y1 = max(int(np.floor(cy - r)), 0), min(int(np.ceil(cy + r)) + 1, h)
+    x0, x1 = max(int(np.floor(cx - r)), 0), min(int(np.ceil(cx + r)) + 1, w)
+    yy, xx = np.mgrid[y0:max(y1, y0), x0:max(x1, x0)]
+    return (slice(y0, max(y1, y0)), slice(x0, max(x1, x0))), \
+        (xx + 0.5 - cx) ** 2 + (yy + 0.5 - cy) ** 2 < r * r
 
 
 def _whole_pixel_framing(circle: tuple[float, float, float],
@@ -411,10 +423,9 @@ def _whole_pixel_framing(circle: tuple[float, float, float],
     x0, x1, y0, y1 = (round(cx - r), round(cx + r), round(cy - r), round(cy + r))
     side = max(x1 - x0, y1 - y0)
     fx, fy, fr = (x0 + x1) / 2.0, (y0 + y1) / 2.0, side / 2.0
-    h, w = mask.shape
-    yy, xx = np.mgrid[0:h, 0:w]
-    disc = (xx + 0.5 - fx) ** 2 + (yy + 0.5 - fy) ** 2 < fr * fr
-    if np.any(mask & ~disc) or np.sum(disc & ~mask) > 0.1 * 2 * np.pi * fr:
+    box, disc = _disc_in_frame(mask.shape, fx, fy, fr)
+    covered = int((mask[box] & disc).sum())
+    if int(mask.sum()) != covered or int(disc.sum()) - covered > 0.1 * 2 * np.pi * fr:
         return None
     return fx, fy, fr
 

@@ -132,5 +132,5 @@ def test_an_antialiased_input_is_area_sampled_and_found_where_it_was_put():
     lum = img.sum(-1)
     assert np.any((lum > 0) & (lum < 0.5 * lum.max()))           # partly covered outline pixels
     mask, contrast = input_image._foreground(img)
-    _, (cx, cy, r) = input_image._circle_of_mask(mask, fit_outline=True, contrast=contrast)
+    cx, cy, r = input_image._refined_circle(contrast, input_image._circle_of_mask(mask, fit_outline=True))
     assert abs(cx - 36.25) < 0.1 and abs(cy - 36.25) < 0.1 and abs(r - 32.0) < 0.1, (cx, cy, r)

@@ -42,9 +42,8 @@ def _disc(shape: tuple[int, int], cx: float, cy: float, r: float, limb: float = 
 
 def _rough_circle(img: np.ndarray) -> tuple[float, float, float]:
     """The mask's circle (to about half a pixel), as input_image finds it first."""
-    mask, contrast = input_image._foreground(img)
-    rough, _ = input_image._circle_of_mask(mask, fit_outline=True, contrast=np.zeros_like(contrast))
-    return rough
+    mask, _ = input_image._foreground(img)
+    return input_image._circle_of_mask(mask, fit_outline=True)
 
 
 @pytest.mark.parametrize("limb", [-0.8, 0.0, 0.8])
