@@ -200,11 +200,10 @@ def refine_brdf(table: BRDFTable, photo: np.ndarray, lighting=None, options: Ref
         unit = np.broadcast_to(np.ones(wl.size, np.float32), table.values.shape)
         a_add = op.lobe_design(unit, np.zeros(wl.size), basis, progress=report(0.6, 0.65), cancel=cancel)
         a_lobe = np.concatenate([a_lobe, a_add.reshape(b.shape[0], 3, -1)], axis=2)
-    sigma = _photo_blur(op, a_lobe, a_lamb, op.lambert_design(floor, s_hats), b, clipped, n_lobe, nl,
-                        level, basis, options, check_cancel)
+    sigma, a_lobe_fit, a_lamb_fit = _photo_blur(op, a_lobe, a_lamb, op.lambert_design(floor, s_hats), b,
+                                                clipped, n_lobe, nl, level, basis, options, check_cancel)
     blur = blur_rows(op.shape, op.pixel_ids, sigma)
     keep = rows_inside(op.shape, op.pixel_ids, sigma, clipped)
-    a_lobe_fit, a_lamb_fit = blur(a_lobe), blur(a_lamb)
 
     def solve(body: np.ndarray, opts: RefineOptions = options) -> np.ndarray:
         a_body = blur(op.lambert_design(body, s_hats))                # y: tint of the body
@@ -292,20 +291,26 @@ def refine_brdf(table: BRDFTable, photo: np.ndarray, lighting=None, options: Ref
 
 def _photo_blur(op: PhotoOperator, a_lobe: np.ndarray, a_lamb: np.ndarray, a_body: np.ndarray,
                 b: np.ndarray, clipped: np.ndarray, n_lobe: int, nl: int, level: float,
-                basis: CorrectionBasis, options: RefineOptions, check_cancel: Callable[[], None]) -> float:
-    """The photo's blur σ (px): ``options.blur_px``, or the candidate of :data:`.blur.BLUR_CANDIDATES_PX`
-    whose first solve leaves the smallest mean squared residual on the rows every candidate keeps."""
+                basis: CorrectionBasis, options: RefineOptions, check_cancel: Callable[[], None]
+                ) -> tuple[float, np.ndarray, np.ndarray]:
+    """The photo's blur σ (px) and the lobe and Lambertian designs blurred by it: σ is
+    ``options.blur_px``, or the candidate of :data:`.blur.BLUR_CANDIDATES_PX` whose first solve
+    leaves the smallest mean squared residual on the rows every candidate keeps."""
     if options.blur_px is not None:
-        return float(options.blur_px)
+        blur = blur_rows(op.shape, op.pixel_ids, float(options.blur_px))
+        return float(options.blur_px), blur(a_lobe), blur(a_lamb)
     common = rows_inside(op.shape, op.pixel_ids, max(BLUR_CANDIDATES_PX), clipped)
-    residual = {}
+    best: tuple[float, float, np.ndarray, np.ndarray] | None = None
     for sigma in BLUR_CANDIDATES_PX:
         blur = blur_rows(op.shape, op.pixel_ids, sigma)
-        design = np.concatenate([blur(a_lobe), blur(a_body), blur(a_lamb)], axis=2)[common]
+        lobe, lamb = blur(a_lobe), blur(a_lamb)
+        design = np.concatenate([lobe, blur(a_body), lamb], axis=2)[common]
         theta = _solve_correction(design, b[common], n_lobe, nl, level, basis, options)
-        residual[sigma] = float(np.mean((design @ theta - b[common]) ** 2))
+        residual = float(np.mean((design @ theta - b[common]) ** 2))
+        if best is None or residual < best[0]:
+            best = (residual, sigma, lobe, lamb)
         check_cancel()
-    return min(residual, key=residual.get)
+    return best[1], best[2], best[3]
 
 
 def _solve_correction(design: np.ndarray, photo: np.ndarray, n_lobe: int, nl: int, level: float,
