@@ -45,17 +45,15 @@ def offgrid_photo_crop(img: np.ndarray, rng: np.random.Generator, finder_error_p
     a pixel (uniform in [0, 1)² pixels, bilinear): found with a Gaussian error of ``finder_error_px``
     (standard deviation, each of centre x, y and radius) and resampled by
     :func:`specgen_addon.input_image._resample_circle`."""
-    from scipy.ndimage import shift
-
     from ..input_image import _resample_circle
+    from .evaluate import displaced_input
 
     img = np.asarray(img, dtype=np.float32)
     s = img.shape[-1]
     border = 4
     dy, dx = rng.uniform(0.0, 1.0, size=2)
     ex, ey, er = rng.normal(0.0, finder_error_px, size=3) if finder_error_px > 0 else (0.0, 0.0, 0.0)
-    photo = np.pad(img.transpose(1, 2, 0), ((border, border), (border, border), (0, 0)))
-    photo = shift(photo, (dy, dx, 0.0), order=1, mode="constant", cval=0.0)
+    photo = displaced_input(img.transpose(1, 2, 0), (dy, dx), border_px=border)
     centre = s / 2.0 + border
     out = _resample_circle(photo, centre + dx + ex, centre + dy + ey, s / 2.0 + er, s)
     return np.ascontiguousarray(out.transpose(2, 0, 1), dtype=np.float32)
