@@ -37,17 +37,16 @@ def main(argv: list[str] | None = None) -> int:
             or (a.operator_scale is not None and not 0.25 <= a.operator_scale <= 8):
         ap.error("--per-family ≥ 1, seeds ≥ 0 and scales in [0.25, 8]")
 
-    from specgen_addon import input_image, lighting, metrics
+    from off_grid_refine import independent_photo
+    from specgen_addon import input_image, metrics
     from specgen_addon.evaluation.protocol import DISTANT_LIGHTS, WAVELENGTHS_NM
     from specgen_addon.infer import generate_brdf
     from specgen_addon.refine import RefineOptions, refine_brdf
-    from specgen_addon.render import EnvSampling, Scene, render_spectral, sphere_geometry
+    from specgen_addon.render import EnvSampling, render_spectral, sphere_geometry
     from specgen_addon.train.evaluate import mixed_test_materials
 
     geo = sphere_geometry(64)
-    env = lighting.load_environment(input_image.CANONICAL_ENV)
-    photo_scene = Scene(sphere_geometry(input_image.CANONICAL_SIZE), [input_image._key_light()], env,
-                        sampling=replace(EnvSampling().scaled(a.photo_scale), seed=a.photo_seed))
+    photo_sampling = replace(EnvSampling().scaled(a.photo_scale), seed=a.photo_seed)
     arms = [("refined", None)]
     if a.operator_scale is not None:
         arms.append(("denser op", replace(EnvSampling().scaled(a.operator_scale), seed=a.operator_seed)))
@@ -60,7 +59,7 @@ def main(argv: list[str] | None = None) -> int:
             pred = render_spectral(table, geo, wavelengths_nm=WAVELENGTHS_NM, lights=DISTANT_LIGHTS).spectral
             return float(metrics.spectral_metrics(gt, pred, geo.mask).psnr_mean)
 
-        photo = input_image.photo_in_scene(mat, photo_scene, input_image.EXPOSURE).astype(np.float64)
+        photo = independent_photo(mat, photo_sampling).astype(np.float64)
         table = generate_brdf(photo, wavelengths_nm=WAVELENGTHS_NM)
         row = {"network": score(table)}
         for label, sampling in arms:

@@ -20,6 +20,7 @@ from __future__ import annotations
 import argparse
 import json
 import sys
+from dataclasses import replace
 from pathlib import Path
 
 import numpy as np
@@ -74,16 +75,16 @@ def main(argv: list[str] | None = None) -> int:
     return 0
 
 
-def independent_photo(material) -> np.ndarray:
-    """The canonical photo of ``material`` rendered with other environment samples (seed 1, twice
-    the directions) than the refinement's operator (:func:`specgen_addon.input_image.input_sampling`)."""
-    from dataclasses import replace
-
+def independent_photo(material, sampling=None) -> np.ndarray:
+    """The canonical photo of ``material`` rendered with other environment samples than the
+    refinement's operator (:func:`specgen_addon.input_image.input_sampling`): ``sampling``, by default
+    seed 1 and twice the input renders' directions."""
     from specgen_addon import input_image, lighting
     from specgen_addon.render import Scene, sphere_geometry
 
+    if sampling is None:
+        sampling = replace(input_image.input_sampling().scaled(2.0), seed=1)
     env = lighting.load_environment(input_image.CANONICAL_ENV)
-    sampling = replace(input_image.input_sampling().scaled(2.0), seed=1)
     scene = Scene(sphere_geometry(input_image.CANONICAL_SIZE), [input_image._key_light()], env,
                   sampling=sampling)
     return input_image.photo_in_scene(material, scene, input_image.EXPOSURE)
