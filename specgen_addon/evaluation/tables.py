@@ -30,8 +30,10 @@ SELF_ROLE = "self_reproduction"
 
 
 #: Bumped whenever the refinement's defaults change, so cached refined cells are not reused:
-#: 2 = Otsu 2018 body, smoothness 3 and the added angular term (fifth session).
-REFINE_VERSION = "v2"
+#: 2 = Otsu 2018 body, smoothness 3 and the added angular term (fifth session); 3 = the photo's
+#: blur modelled (fourteenth session: exactly framed canonical photos still choose σ = 0, but some
+#: photos under a map choose 0.35 px, e.g. mat0003 under ``city`` and ``interior``).
+REFINE_VERSION = "v3"
 
 
 def refined_arm(specgen_arm: str) -> str:
