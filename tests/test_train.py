@@ -5,6 +5,7 @@ from __future__ import annotations
 import dataclasses
 import json
 import math
+from pathlib import Path
 
 import numpy as np
 import pytest
@@ -170,12 +171,20 @@ def test_config_files_load_and_reject_unknown_keys(tmp_path, repo_dir):
         load_config(tmp_path / "bad.json")
 
 
-def test_every_shipped_config_file_passes_the_schema_and_builds_its_model(repo_dir):
+def test_every_shipped_config_file_passes_the_schema_and_builds_its_model(repo_dir, tmp_path):
     from specgen_addon.config_schema import validate_train_config
     from specgen_addon.model import SpecGen, count_parameters
 
     for path in sorted((repo_dir / "configs").glob("*.json")):
         validate_train_config(path)
+        data = json.loads(path.read_text())
+        init = data["train"].get("init_weights")
+        if init and Path(init).parts[:2] == ("..", "out"):
+            # a chained run (docs/model.md): it starts from an earlier run's output, absent from a
+            # clean clone, so the shipped weights stand in for the rest of the checks
+            data["train"]["init_weights"] = str(repo_dir / "weights" / "specgen_default.pt")
+            path = tmp_path / path.name
+            path.write_text(json.dumps(data))
         mcfg, _ = load_config(path)
         assert count_parameters(SpecGen(mcfg)) <= 10_000_000, path.name   # the model budget
 
