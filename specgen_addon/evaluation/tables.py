@@ -31,8 +31,8 @@ SELF_ROLE = "self_reproduction"
 
 #: Bumped whenever the refinement's defaults change, so cached refined cells are not reused:
 #: 2 = Otsu 2018 body, smoothness 3 and the added angular term (fifth session); 3 = the photo's
-#: blur modelled (fourteenth session: exactly framed canonical photos still choose σ = 0, but some
-#: photos under a map choose 0.35 px, e.g. mat0003 under ``city`` and ``interior``).
+#: blur modelled (fourteenth session: most exactly framed photos choose σ = 0, some do not, e.g.
+#: mat0003 under ``city`` and ``interior`` choose 0.35 px, so cached refined cells changed).
 REFINE_VERSION = "v3"
 
 
