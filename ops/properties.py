@@ -65,7 +65,7 @@ class SpecGenSettings(bpy.types.PropertyGroup):
     image_path: StringProperty(name="Image File", subtype="FILE_PATH", options=_PATH,
                                description="Photo of a sphere of the material (used if no datablock is set)")
     weights_path: StringProperty(name="Weights", subtype="FILE_PATH", options=_PATH,
-                                 description="Network weights (.pt with its .onnx graphs); empty = the shipped default")
+                                 description="Network weights (.pt with its .onnx graphs); empty = the shipped networks (one for canonical renders, one for photos)")
     wl_min: FloatProperty(name="From", default=DEFAULT_RANGE_NM[0], min=360.0, max=1000.0,
                           precision=0, description="Shortest wavelength (nm)", update=_update_range)
     wl_max: FloatProperty(name="To", default=DEFAULT_RANGE_NM[1], min=360.0, max=1000.0,

@@ -37,7 +37,9 @@ def add_parser(sub: argparse._SubParsersAction) -> argparse.ArgumentParser:
                        description="Writes the full tabulated spectral BRDF (90×90×180×Λ, .npz).")
     p.add_argument("image", type=Path, help="image of a material sphere (EXR, PNG, JPEG)")
     p.add_argument("-o", "--output", type=Path, required=True, help="output table (.npz)")
-    p.add_argument("--weights", type=Path, default=None, help="weights (.pt); default: shipped")
+    p.add_argument("--weights", type=Path, default=None,
+                   help="weights (.pt); default: the shipped network for how the sphere was cut "
+                        "(copied from a canonical frame, or resampled from a photo)")
     p.add_argument("--backend", choices=("torch", "onnx"), default="torch")
     p.add_argument("--bands", type=int, default=21, help="wavelength bands (default 21)")
     p.add_argument("--range", type=float, nargs=2, default=(380.0, 780.0), metavar=("START", "END"),
@@ -52,7 +54,9 @@ def add_parser(sub: argparse._SubParsersAction) -> argparse.ArgumentParser:
                        description="Renders each test material's sphere under a distant light at 20 "
                                    "wavelengths from the predicted and the true BRDF; prints per-"
                                    "material and mean PSNR/SSIM.")
-    p.add_argument("--weights", type=Path, default=None, help="weights (.pt); default: shipped")
+    p.add_argument("--weights", type=Path, default=None,
+                   help="weights (.pt); default: the shipped network for how the sphere was cut "
+                        "(copied from a canonical frame, or resampled from a photo)")
     p.add_argument("--limit", type=int, default=None, help="only the first N test materials")
     p.add_argument("--json", type=Path, default=None, help="also write the results as JSON")
     p.add_argument("--overwrite", action="store_true", help="replace an existing --json file")
@@ -86,7 +90,8 @@ def add_parser(sub: argparse._SubParsersAction) -> argparse.ArgumentParser:
 
     p = sub.add_parser("export-onnx", help="export weights to ONNX graphs for onnxruntime",
                        description="Writes <stem>.tables.onnx and <stem>.head.onnx beside the weights.")
-    p.add_argument("--weights", type=Path, default=None, help="weights (.pt); default: shipped")
+    p.add_argument("--weights", type=Path, default=None,
+                   help="weights (.pt); default: both shipped networks (copied and resampled inputs)")
     p.add_argument("--overwrite", action="store_true", help="replace existing .onnx graphs")
     p.set_defaults(func=run_export)
 
@@ -194,12 +199,15 @@ def run_train(args: argparse.Namespace) -> int:
                       "world_size": dctx.world_size})
     if not dctx.is_main:
         return 0
-    plot_history(res.history, out / "loss_curve.png",
-                 title=f"SpecGen training: seed {tcfg.seed}, {res.steps} steps, {res.wall_seconds / 60:.1f} min")
+    if res.history:  # (a run stopped before its first step has no curve to draw)
+        plot_history(res.history, out / "loss_curve.png",
+                     title=f"SpecGen training: seed {tcfg.seed}, {res.steps} steps, "
+                           f"{res.wall_seconds / 60:.1f} min")
     n = count_parameters(load_weights(res.weights))
     note = " (stopped by --max-minutes)" if res.stopped_early else ""
-    print(f"{res.weights}: {n:,} parameters, {res.steps} steps in {res.wall_seconds:.0f} s{note}; "
-          f"final validation μ-law MSE {res.history[-1].get('val', float('nan')):.4g}")
+    val = res.history[-1].get("val") if res.history else None
+    tail = f"final validation μ-law MSE {val:.4g}" if val is not None else "no step was trained in this call"
+    print(f"{res.weights}: {n:,} parameters, {res.steps} steps in {res.wall_seconds:.0f} s{note}; {tail}")
     return 0
 
 
@@ -279,8 +287,14 @@ def run_average(args: argparse.Namespace) -> int:
 
 
 def run_export(args: argparse.Namespace) -> int:
+    from .model import DEFAULT_WEIGHTS, RESAMPLED_WEIGHTS
     from .model.export_onnx import export_onnx
 
-    for p in export_onnx(args.weights, overwrite=args.overwrite):
-        print(f"{p}: {p.stat().st_size / 1e6:.1f} MB")
+    sources = [args.weights] if args.weights is not None else [DEFAULT_WEIGHTS, RESAMPLED_WEIGHTS]
+    for w in sources:
+        if not Path(w).is_file():
+            raise SpecGenError(f"{w}: weights file not found")
+    for w in sources:
+        for p in export_onnx(w, overwrite=args.overwrite):
+            print(f"{p}: {p.stat().st_size / 1e6:.1f} MB")
     return 0

@@ -12,13 +12,16 @@ import math
 import threading
 from concurrent.futures import ThreadPoolExecutor
 from pathlib import Path
-from typing import Callable
+from typing import TYPE_CHECKING, Callable
 
 import numpy as np
 
 from .errors import Cancelled, ImageInputError, SpecGenError, WeightsError
 from .spectra import DEFAULT_WAVELENGTHS_NM
 from .table import GRID_SHAPE, N_THETA_D, N_THETA_H, BRDFTable
+
+if TYPE_CHECKING:
+    from .input_image import SphereCrop
 
 BACKENDS = ("torch", "onnx")
 #: θd rows per block: 10 × 180 × Λ points (~38 k at 21 bands) keep torch's temporaries
@@ -37,13 +40,17 @@ def network_input(image, image_size: int) -> np.ndarray:
     Paths go through :func:`specgen_addon.input_image.load_sphere_image` (finds and crops the
     sphere, rejects images without one); arrays are checked the same way.
     """
+    return resample_square(sphere_crop(image).image, image_size)[None]
+
+
+def sphere_crop(image) -> SphereCrop:
+    """The canonical crop of an image (path, or array H×W×3/4 linear RGB), and how it was cut
+    (:class:`specgen_addon.input_image.SphereCrop`)."""
     from . import input_image
 
     if isinstance(image, (str, Path)):
-        arr = input_image.load_sphere_image(image)
-    else:
-        arr = input_image.prepare_sphere_array(np.asarray(image))
-    return resample_square(arr, image_size)[None]
+        return input_image.load_sphere_crop(image)
+    return input_image.crop_sphere(np.asarray(image))
 
 
 def _aa_bilinear_weights(n_in: int, n_out: int) -> np.ndarray:
@@ -238,8 +245,10 @@ def generate_brdf(image, weights=None, wavelengths_nm=None, backend: str = "torc
     image
         Path to an image of a material sphere (EXR/PNG/JPEG) or an H×W×3/4 linear RGB array.
     weights
-        ``.pt`` weights file; ``None`` loads the shipped default. The onnx backend uses the two
-        graphs exported beside it (``<stem>.tables.onnx``, ``<stem>.head.onnx``).
+        ``.pt`` weights file; ``None`` picks the shipped network for how the sphere was cut
+        (:func:`specgen_addon.model.shipped_weights`: the default network for a sphere copied from a
+        canonical frame, the resampled-input network for one resampled from a photo). The onnx
+        backend uses the two graphs exported beside it (``<stem>.tables.onnx``, ``<stem>.head.onnx``).
     wavelengths_nm
         Band centres in nm inside the model's range (default: 380–780 nm, 21 bands).
     backend
@@ -253,6 +262,11 @@ def generate_brdf(image, weights=None, wavelengths_nm=None, backend: str = "torc
     BRDFTable
         ``f_r`` in sr⁻¹, shape (90, 90, 180, Λ), float32.
     """
+    crop = sphere_crop(image)
+    if weights is None:
+        from .model import shipped_weights
+
+        weights = shipped_weights(crop.copied)
     be = get_backend(weights, backend)
     cfg = be.cfg
     wl = np.asarray(DEFAULT_WAVELENGTHS_NM if wavelengths_nm is None else wavelengths_nm, dtype=np.float64)
@@ -261,7 +275,7 @@ def generate_brdf(image, weights=None, wavelengths_nm=None, backend: str = "torc
     if wl[0] < cfg.lambda_min_nm - 1e-6 or wl[-1] > cfg.lambda_max_nm + 1e-6:
         raise SpecGenError(f"wavelengths {wl[0]:g}–{wl[-1]:g} nm fall outside the model's "
                            f"{cfg.lambda_min_nm:g}–{cfg.lambda_max_nm:g} nm")
-    x = network_input(image, cfg.image_size).astype(np.float32)
+    x = resample_square(crop.image, cfg.image_size)[None].astype(np.float32)
     u_lambda = (2.0 * (wl - cfg.lambda_min_nm) / (cfg.lambda_max_nm - cfg.lambda_min_nm) - 1.0).astype(np.float32)
     tables = be.make_tables(x, u_lambda)
     rp = evaluate_grid(be, tables, wl.size, progress=progress, cancel=cancel)
@@ -279,7 +293,8 @@ def generate_brdf(image, weights=None, wavelengths_nm=None, backend: str = "torc
                            "(broken weights?)")
     src = "image" if not isinstance(image, (str, Path)) else str(image)
     meta = {"source": "specgen", "input_image": src, "backend": backend,
-            "weights": str(_weights_path(weights)), "description": "SpecGen prediction"}
+            "weights": str(_weights_path(weights)), "input_sphere": "copied" if crop.copied else "resampled",
+            "description": "SpecGen prediction"}
     return BRDFTable(values, wl, metadata=meta)
 
 

@@ -30,6 +30,7 @@ from __future__ import annotations
 
 import functools
 import warnings
+from dataclasses import dataclass
 from pathlib import Path
 from typing import Callable
 
@@ -236,12 +237,31 @@ def _read_png16_rgb(path: Path) -> np.ndarray | None:
     return arr
 
 
+@dataclass(frozen=True)
+class SphereCrop:
+    """The canonical input cut from a user's image, and how it was cut.
+
+    ``copied`` is True when the sphere was framed exactly on whole pixels at the canonical size and
+    copied pixel for pixel (a canonical render); False when it was resampled (off the grid,
+    antialiased, another size: every camera photo). The two kinds of input look different to the
+    network, and the shipped weights hold one network for each (:func:`specgen_addon.model.shipped_weights`).
+    """
+
+    image: np.ndarray  # (size, size, 3) linear sRGB, float32
+    copied: bool
+
+
 def load_sphere_image(path: str | Path, size: int = CANONICAL_SIZE) -> np.ndarray:
     """A user's sphere image as the canonical input: linear sRGB (size, size, 3) float32.
 
     Raises :class:`~specgen_addon.errors.ImageInputError` if the file is unreadable, has other than
     3 (RGB) or 4 (RGBA) channels, holds NaN/Inf, or shows no sphere.
     """
+    return load_sphere_crop(path, size).image
+
+
+def load_sphere_crop(path: str | Path, size: int = CANONICAL_SIZE) -> SphereCrop:
+    """:func:`load_sphere_image`, with whether the sphere was copied or resampled."""
     path = Path(path)
     arr = None
     if path.is_file():
@@ -251,13 +271,18 @@ def load_sphere_image(path: str | Path, size: int = CANONICAL_SIZE) -> np.ndarra
     if arr is None:
         arr = read_image(path)
     try:
-        return prepare_sphere_array(arr, size)
+        return crop_sphere(arr, size)
     except ImageInputError as exc:
         raise ImageInputError(f"{path}: {exc}") from None
 
 
 def prepare_sphere_array(arr: np.ndarray, size: int = CANONICAL_SIZE) -> np.ndarray:
     """Find, crop and resample the sphere of a linear RGB/RGBA array (H, W, 3|4) to (size, size, 3)."""
+    return crop_sphere(arr, size).image
+
+
+def crop_sphere(arr: np.ndarray, size: int = CANONICAL_SIZE) -> SphereCrop:
+    """:func:`prepare_sphere_array`, with whether the sphere was copied or resampled."""
     raw = np.asarray(arr)
     if raw.dtype.kind not in "biuf":
         raise ImageInputError(f"expected an array of numbers, got dtype {raw.dtype}")
@@ -290,8 +315,8 @@ def prepare_sphere_array(arr: np.ndarray, size: int = CANONICAL_SIZE) -> np.ndar
                 raise exc from None
     framed = _whole_pixel_framing(rough, mask)
     if framed is not None:  # a sphere already framed exactly stays untouched
-        return _resample_circle(rgb, *framed, size)
-    return _resample_circle(rgb, *_refined_circle(contrast, rough), size)
+        return SphereCrop(_resample_circle(rgb, *framed, size), copied=2.0 * framed[2] == size)
+    return SphereCrop(_resample_circle(rgb, *_refined_circle(contrast, rough), size), copied=False)
 
 
 def _ndimage():

@@ -4,7 +4,9 @@
    (:func:`specgen_addon.input_image.load_sphere_image`);
 2. it is brought to the canonical white level of its input lighting
    (:meth:`~specgen_addon.input_lighting.InputLighting.network_gain`) and the network generates the
-   table (:func:`specgen_addon.infer.generate_brdf`);
+   table (:func:`specgen_addon.infer.generate_brdf`): unless weights are given, the shipped network
+   for a sphere copied from a canonical frame, or the one for a sphere resampled from a photo
+   (:func:`specgen_addon.model.shipped_weights`);
 3. unless switched off, the table is refined against the photo under that lighting
    (:func:`specgen_addon.refine.refine_brdf`). Without refinement the network's table is returned
    untouched.
@@ -18,11 +20,14 @@ from __future__ import annotations
 
 from dataclasses import dataclass
 from pathlib import Path
-from typing import Callable
+from typing import TYPE_CHECKING, Callable
 
 import numpy as np
 
 from .table import BRDFTable
+
+if TYPE_CHECKING:
+    from .input_image import SphereCrop
 
 ProgressFn = Callable[[float], None]
 CancelFn = Callable[[], bool]
@@ -50,11 +55,17 @@ class Generated:
 def load_photo(image) -> tuple[np.ndarray, bool]:
     """The canonical sphere crop (S, S, 3) of a path or array, and whether it is linear HDR (EXR
     or array: no pixel counts as clipped) rather than an 8/16-bit sRGB file."""
-    from . import input_image
+    crop, linear = load_photo_crop(image)
+    return crop.image.astype(np.float64), linear
 
-    if isinstance(image, (str, Path)):
-        return input_image.load_sphere_image(image).astype(np.float64), Path(image).suffix.lower() == ".exr"
-    return input_image.prepare_sphere_array(np.asarray(image)).astype(np.float64), True
+
+def load_photo_crop(image) -> tuple[SphereCrop, bool]:
+    """:func:`load_photo` as a :class:`~specgen_addon.input_image.SphereCrop` (which also says
+    whether the sphere was copied or resampled, and so which shipped network it gets)."""
+    from .infer import sphere_crop
+
+    linear = not isinstance(image, (str, Path)) or Path(image).suffix.lower() == ".exr"
+    return sphere_crop(image), linear
 
 
 def generate(image, lighting=None, refine: bool = True, weights=None, wavelengths_nm=None,
@@ -74,7 +85,8 @@ def generate(image, lighting=None, refine: bool = True, weights=None, wavelength
     if model not in MODELS:
         raise SpecGenError(f"unknown model {model!r}; choose one of {', '.join(MODELS)}")
     lighting = lighting or InputLighting()
-    photo, linear = load_photo(image)
+    crop, linear = load_photo_crop(image)
+    photo = crop.image.astype(np.float64)
     src = str(image) if isinstance(image, (str, Path)) else "image"
 
     def sub(lo: float, hi: float) -> ProgressFn | None:
@@ -92,6 +104,10 @@ def generate(image, lighting=None, refine: bool = True, weights=None, wavelength
         table.metadata = {**table.metadata, "input_image": src, "input_lighting": lighting.label}
         return Generated(table, film_fit=fit)
     share = NETWORK_SHARE if refine else 1.0
+    if weights is None:  # the crop below is always whole-pixel: choose by how the photo was cut
+        from .model import shipped_weights
+
+        weights = shipped_weights(crop.copied)
     table = generate_brdf(photo * lighting.network_gain(), weights=weights, wavelengths_nm=wavelengths_nm,
                           backend=backend, progress=sub(0.0, share), cancel=cancel)
     table.metadata = {**table.metadata, "input_image": src, "input_lighting": lighting.label}

@@ -8,7 +8,7 @@ import torch
 
 from specgen_addon import infer
 from specgen_addon.errors import WeightsError
-from specgen_addon.model import Config, SpecGen, save_weights
+from specgen_addon.model import Config, SpecGen, load_weights, save_weights
 from specgen_addon.model.export_onnx import export_onnx
 
 pytest.importorskip("onnxruntime")
@@ -81,3 +81,33 @@ def test_a_model_with_a_detail_branch_exports_and_agrees(tmp_path):
     for ta, tb in zip(infer.get_backend(weights, "onnx").make_tables(x, u),
                       infer.get_backend(weights, "torch").make_tables(x, u)):
         assert np.abs(ta - tb.numpy()).max() < 1e-4
+
+
+def test_float16_storage_is_lossless_and_halves_the_graph(tmp_path):
+    torch.manual_seed(0)
+    model = SpecGen(Config(**SMALL))
+    weights = save_weights(model, tmp_path / "h.pt", half=True)       # as the shipped weights
+    wide = save_weights(load_weights(weights), tmp_path / "wide.pt")  # the same numbers, float32 file
+    export_onnx(weights, half=True)
+    export_onnx(wide, half=False)
+    half_graph, wide_graph = infer.onnx_paths(weights)[0], infer.onnx_paths(wide)[0]
+    assert half_graph.stat().st_size < 0.7 * wide_graph.stat().st_size
+    x = np.random.default_rng(2).random((1, 3, 32, 32)).astype(np.float32)
+    u = np.linspace(-1, 1, 4).astype(np.float32)
+    for a, b in zip(infer.get_backend(weights, "onnx").make_tables(x, u),
+                    infer.get_backend(wide, "onnx").make_tables(x, u)):
+        assert np.array_equal(a, b)
+
+
+def test_float16_storage_changes_no_output_of_float32_weights(tmp_path):
+    torch.manual_seed(0)
+    model = SpecGen(Config(**SMALL))
+    a = save_weights(model, tmp_path / "a.pt")            # float32 numbers float16 cannot hold
+    b = save_weights(model, tmp_path / "b.pt")
+    export_onnx(a, half=True)
+    export_onnx(b, half=False)
+    x = np.random.default_rng(3).random((1, 3, 32, 32)).astype(np.float32)
+    u = np.linspace(-1, 1, 4).astype(np.float32)
+    for ta, tb in zip(infer.get_backend(a, "onnx").make_tables(x, u),
+                      infer.get_backend(b, "onnx").make_tables(x, u)):
+        assert np.array_equal(ta, tb)

@@ -11,6 +11,11 @@ Two graphs, beside the ``.pt`` weights (see :func:`specgen_addon.infer.onnx_path
 
 The model config travels in the graphs' metadata (``specgen_config``), so the onnx backend does
 not need the ``.pt`` file's pickle.
+
+Large weights that float16 holds exactly are stored as float16 and widened by a ``Cast`` at load
+time (:func:`store_weights_half`): the shipped ``.pt`` holds float16 weights already, so the graph
+computes with the same numbers in float32 at half the file size (two networks fit the repository's
+40 MB and the extension's 60 MiB; docs/model.md).
 """
 
 from __future__ import annotations
@@ -26,20 +31,60 @@ from .fast import GridHead, GridHeadChannelsFirst, GridTables, lambda_coords
 from .specgen import SpecGen, load_weights
 
 OPSET = 17
+#: Initializers with at least this many elements are stored as float16 (:func:`store_weights_half`).
+HALF_MIN_ELEMENTS = 256
 
 
-def _add_metadata(path: Path, cfg_json: str) -> None:
+def store_weights_half(model, min_elements: int = HALF_MIN_ELEMENTS) -> int:
+    """Store each float32 initializer of ``model`` (an ``onnx.ModelProto``) with at least
+    ``min_elements`` elements that float16 holds exactly as float16, widened back to float32 by a
+    ``Cast`` node at the head of the graph (onnxruntime folds it once when the session opens).
+    Lossless: the graph computes with the same numbers. Returns how many it stored."""
+    from onnx import TensorProto, helper, numpy_helper
+
+    graph = model.graph
+    casts, kept, n = [], [], 0
+    for init in graph.initializer:
+        if init.data_type != TensorProto.FLOAT or int(np.prod(init.dims)) < min_elements:
+            kept.append(init)
+            continue
+        full = numpy_helper.to_array(init)
+        narrow = full.astype(np.float16)
+        if not np.array_equal(narrow.astype(np.float32), full):  # (float32 weights stay float32)
+            kept.append(init)
+            continue
+        half = numpy_helper.from_array(narrow, f"{init.name}__f16")
+        kept.append(half)
+        casts.append(helper.make_node("Cast", [half.name], [init.name], to=TensorProto.FLOAT,
+                                      name=f"{init.name}__widen"))
+        n += 1
+    del graph.initializer[:]
+    graph.initializer.extend(kept)
+    nodes = casts + list(graph.node)
+    del graph.node[:]
+    graph.node.extend(nodes)
+    return n
+
+
+def _finish_graph(path: Path, cfg_json: str, half: bool) -> None:
+    """Add the model config to a graph's metadata and, with ``half``, store its weights as float16."""
     import onnx
 
     model = onnx.load(str(path))
     entry = model.metadata_props.add()
     entry.key, entry.value = "specgen_config", cfg_json
+    if half:
+        store_weights_half(model)
+    onnx.checker.check_model(model)
     onnx.save(model, str(path))
 
 
 def export_onnx(weights: str | Path | None = None, out_stem: str | Path | None = None,
-                overwrite: bool = True) -> tuple[Path, Path]:
-    """Export the tables and head graphs of a weights file; returns their paths."""
+                overwrite: bool = True, half: bool = True) -> tuple[Path, Path]:
+    """Export the tables and head graphs of a weights file; returns their paths.
+
+    ``half`` stores the graphs' large weights as float16 where that is exact
+    (:func:`store_weights_half`); computing stays float32."""
     from ..infer import CHANNELS_FIRST_INPUTS, channels_first_block, channels_first_tables, onnx_paths
     from ..spectra import DEFAULT_WAVELENGTHS_NM
 
@@ -83,7 +128,7 @@ def export_onnx(weights: str | Path | None = None, out_stem: str | Path | None =
                 torch.onnx.export(module, args, str(tmp), input_names=list(in_names),
                                   output_names=list(outs), dynamic_axes=dyn, opset_version=OPSET,
                                   dynamo=False)
-            _add_metadata(tmp, cfg_json)
+            _finish_graph(tmp, cfg_json, half)
     return tables_path, head_path
 
 
