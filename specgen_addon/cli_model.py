@@ -203,12 +203,18 @@ def run_train(args: argparse.Namespace) -> int:
         plot_history(res.history, out / "loss_curve.png",
                      title=f"SpecGen training: seed {tcfg.seed}, {res.steps} steps, "
                            f"{res.wall_seconds / 60:.1f} min")
-    n = count_parameters(load_weights(res.weights))
+    print(train_summary(res, count_parameters(load_weights(res.weights))))
+    return 0
+
+
+def train_summary(res, parameters: int) -> str:
+    """The line ``train`` ends with, for a :class:`~specgen_addon.train.loop.TrainResult`; a run
+    stopped by ``--max-minutes`` before its first step has no validation figure to report."""
     note = " (stopped by --max-minutes)" if res.stopped_early else ""
     val = res.history[-1].get("val") if res.history else None
     tail = f"final validation μ-law MSE {val:.4g}" if val is not None else "no step was trained in this call"
-    print(f"{res.weights}: {n:,} parameters, {res.steps} steps in {res.wall_seconds:.0f} s{note}; {tail}")
-    return 0
+    return (f"{res.weights}: {parameters:,} parameters, {res.steps} steps in {res.wall_seconds:.0f} s{note}; "
+            f"{tail}")
 
 
 def run_infer(args: argparse.Namespace) -> int:

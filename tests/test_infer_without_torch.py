@@ -22,6 +22,13 @@ from specgen_addon.infer import generate_brdf
 t = generate_brdf("examples/sphere.png", wavelengths_nm=np.array([450.0, 650.0]), backend="onnx")
 assert t.values.shape == (90, 90, 180, 2), t.values.shape
 assert np.isfinite(t.values).all() and t.values.min() >= 0
+# a photo's sphere (half a pixel off the grid) takes the resampled-input network's graphs
+from specgen_addon.input_image import load_sphere_image
+img = np.pad(load_sphere_image("examples/sphere.png"), ((8, 8), (8, 9), (0, 0)))
+off = 0.5 * (img[:, :-1] + img[:, 1:])
+r = generate_brdf(off, wavelengths_nm=np.array([550.0]), backend="onnx")
+assert r.metadata["weights"].endswith("specgen_resampled.pt") and r.metadata["input_sphere"] == "resampled", r.metadata
+assert np.isfinite(r.values).all()
 print("ok", float(t.values.mean()))
 """
 

@@ -373,3 +373,14 @@ def test_snapshots_hold_what_the_run_would_ship_at_their_step_and_average(tmp_pa
         assert torch.equal(v, shipped.state_dict()[k]), k
     with pytest.raises(SpecGenError, match="snapshot_every"):
         TrainConfig(snapshot_every=-1).validate()
+
+
+def test_a_run_stopped_before_its_first_step_saves_its_start_and_says_so(tmp_path):
+    from specgen_addon.cli_model import train_summary
+
+    spec, rgb, val = sets()
+    res = train(Config(**SMALL), TrainConfig(**{**FAST, "steps": 5, "max_minutes": 1e-9}), spec, rgb, val,
+                tmp_path / "r", show_progress=False)
+    assert res.steps == 0 and res.history == [] and res.stopped_early and Path(res.weights).is_file()
+    assert train_summary(res, 10).endswith("0 steps in 0 s (stopped by --max-minutes); "
+                                           "no step was trained in this call")
