@@ -208,7 +208,8 @@ def evaluate_families(weights: str | Path | None = None, per_family: int = 4, en
     rows = []
     for i, mat in enumerate(mats):
         table = generate_brdf(input_of(mat), weights=weights, wavelengths_nm=WAVELENGTHS_NM, backend=backend)
-        row: dict[str, Any] = {"material": mat.name, "family": material_family(mat), "kind": mat.kind}
+        row: dict[str, Any] = {"material": mat.name, "family": material_family(mat), "kind": mat.kind,
+                               "network": Path(table.metadata["weights"]).name}  # which network served
         for label, kw in scenes:
             gt = render_spectral(mat, geo, wavelengths_nm=WAVELENGTHS_NM, **kw).spectral
             pred = render_spectral(table, geo, wavelengths_nm=WAVELENGTHS_NM, **kw).spectral
@@ -229,6 +230,7 @@ def evaluate_families(weights: str | Path | None = None, per_family: int = 4, en
         pred = render_spectral(table, geo, lights=DISTANT_LIGHTS, wavelengths_nm=WAVELENGTHS_NM).rgb
         res = metrics.spectral_metrics(gt, pred, geo.mask)
         rows.append({"material": path.stem, "family": "rgl (real, RGB)", "kind": "measured",
+                     "network": Path(table.metadata["weights"]).name,
                      "psnr_distant": float(res.psnr_mean), "ssim_distant": float(res.ssim_mean)})
         if progress is not None:
             progress((len(mats) + j + 1) / total)
@@ -245,8 +247,8 @@ def evaluate_families(weights: str | Path | None = None, per_family: int = 4, en
     return {"materials": rows, "families": by_family, "means": means, "scenes": labels,
             "per_family": per_family, "resolution": resolution, "input": input_env or "canonical",
             "input_shift_px": input_shift_px, "input_antialias": input_antialias,
-            "weights": str(weights) if weights else "default", "backend": backend,
-            "corpus": {"size": MIXED_CORPUS_SIZE, "seed": MIXED_CORPUS_SEED},
+            "weights": str(weights) if weights else "default: the shipped pair, chosen by each sphere's cut",
+            "backend": backend, "corpus": {"size": MIXED_CORPUS_SIZE, "seed": MIXED_CORPUS_SEED},
             "metrics": getattr(metrics, "NORMALISATION_TEXT", "")}
 
 
