@@ -24,6 +24,8 @@ refined to a fraction of a pixel from the outline's partly covered pixels
 (:mod:`specgen_addon.sphere_edge`). A sphere framed on whole pixels is cropped to its bounding
 square and copied pixel for pixel; any other (off the grid, antialiased, another size) is
 resampled bilinearly about the refined circle. Either way the background becomes 0.
+:func:`crop_sphere` also says which of the two it did (:class:`SphereCrop`), and the pipeline gives
+each kind its own shipped network.
 """
 
 from __future__ import annotations
@@ -244,7 +246,8 @@ class SphereCrop:
     ``copied`` is True when the sphere was framed exactly on whole pixels at the canonical size and
     copied pixel for pixel (a canonical render); False when it was resampled (off the grid,
     antialiased, another size: every camera photo). The two kinds of input look different to the
-    network, and the shipped weights hold one network for each (:func:`specgen_addon.model.shipped_weights`).
+    network, and the shipped weights hold one network for each
+    (:func:`specgen_addon.model.shipped_weights`).
     """
 
     image: np.ndarray  # (size, size, 3) linear sRGB, float32

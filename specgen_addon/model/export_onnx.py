@@ -31,7 +31,7 @@ from .fast import GridHead, GridHeadChannelsFirst, GridTables, lambda_coords
 from .specgen import SpecGen, load_weights
 
 OPSET = 17
-#: Initializers with at least this many elements are stored as float16 (:func:`store_weights_half`).
+#: Smaller initializers stay float32 (:func:`store_weights_half`): a Cast node would outweigh them.
 HALF_MIN_ELEMENTS = 256
 
 
