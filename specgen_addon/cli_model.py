@@ -238,6 +238,8 @@ def run_infer(args: argparse.Namespace) -> int:
     dt = time.perf_counter() - t0
     table.save(out, overwrite=args.overwrite)
     print(f"{out}: spectral BRDF {table.values.shape} ({wl[0]:g}–{wl[-1]:g} nm) in {dt:.1f} s")
+    if "input_sphere" in table.metadata:  # which network: the sphere was copied, or resampled from a photo
+        print(f"network: {table.metadata['weights']} (sphere {table.metadata['input_sphere']})")
     print_refinement(generated)
     if generated.film_fit is not None:
         print(film_fit_summary(generated.film_fit, lighting.label))

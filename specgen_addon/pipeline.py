@@ -110,7 +110,8 @@ def generate(image, lighting=None, refine: bool = True, weights=None, wavelength
         weights = shipped_weights(crop.copied)
     table = generate_brdf(photo * lighting.network_gain(), weights=weights, wavelengths_nm=wavelengths_nm,
                           backend=backend, progress=sub(0.0, share), cancel=cancel)
-    table.metadata = {**table.metadata, "input_image": src, "input_lighting": lighting.label}
+    table.metadata = {**table.metadata, "input_image": src, "input_lighting": lighting.label,
+                      "input_sphere": "copied" if crop.copied else "resampled"}  # (the photo's cut)
     if not refine:
         return Generated(table)
     from .refine import CLIP_LEVEL, RefineOptions, refine_brdf

@@ -75,8 +75,10 @@ def test_the_pipeline_chooses_by_the_photo_not_by_its_own_crop(canonical):
 
     out = generate(displaced_input(canonical, 0.5), refine=False, wavelengths_nm=BANDS)
     assert out.table.metadata["weights"] == str(RESAMPLED_WEIGHTS)
+    assert out.table.metadata["input_sphere"] == "resampled"
     out = generate(canonical, refine=False, wavelengths_nm=BANDS)
     assert out.table.metadata["weights"] == str(DEFAULT_WEIGHTS)
+    assert out.table.metadata["input_sphere"] == "copied"
 
 
 def test_the_shipped_resampled_graphs_match_its_torch_weights():
@@ -86,3 +88,14 @@ def test_the_shipped_resampled_graphs_match_its_torch_weights():
     u = np.linspace(-1, 1, 3).astype(np.float32)
     for ta, tb in zip(infer.get_backend(RESAMPLED_WEIGHTS, "onnx").make_tables(x, u), be_t.make_tables(x, u)):
         assert np.abs(ta - tb.numpy()).max() < 1e-3 * max(1.0, float(np.abs(ta).max()))
+
+
+def test_infer_says_which_network_served_a_photo(canonical, tmp_path, capsys):
+    from specgen_addon.cli import main as cli_main
+    from specgen_addon.image_io import write_exr
+
+    photo = displaced_input(canonical, 0.5)
+    path = write_exr(tmp_path / "photo.exr", {c: photo[..., i] for i, c in enumerate("RGB")})
+    out = tmp_path / "t.npz"
+    assert cli_main(["infer", str(path), "-o", str(out), "--bands", "2", "--no-refine", "--quiet"]) == 0
+    assert f"network: {RESAMPLED_WEIGHTS} (sphere resampled)" in capsys.readouterr().out
