@@ -226,9 +226,12 @@ def get_backend(weights=None, backend: str = "torch"):
     if backend not in BACKENDS:
         raise SpecGenError(f"unknown backend {backend!r} (choose from {', '.join(BACKENDS)})")
     path = _weights_path(weights)
-    if not path.is_file():
+    anchor = path
+    if backend == "onnx" and not path.is_file() and onnx_paths(path)[0].is_file():
+        anchor = onnx_paths(path)[0]  # the graphs stand alone: the extension ships no .pt (torch only)
+    elif not path.is_file():
         raise WeightsError(f"{path}: weights file not found")
-    key = (backend, str(path.resolve()), path.stat().st_mtime_ns)
+    key = (backend, str(anchor.resolve()), anchor.stat().st_mtime_ns)
     with _LOCK:
         if key not in _MODEL_CACHE:
             _MODEL_CACHE[key] = _TorchBackend(path) if backend == "torch" else _OnnxBackend(path)

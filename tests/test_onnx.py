@@ -111,3 +111,18 @@ def test_float16_storage_changes_no_output_of_float32_weights(tmp_path):
     for ta, tb in zip(infer.get_backend(a, "onnx").make_tables(x, u),
                       infer.get_backend(b, "onnx").make_tables(x, u)):
         assert np.array_equal(ta, tb)
+
+
+def test_onnx_backend_needs_only_the_graphs(tmp_path):
+    # the extension ships the graphs without the .pt (torch reads only the .pt)
+    torch.manual_seed(0)
+    weights = save_weights(SpecGen(Config(**SMALL)), tmp_path / "alone.pt")
+    export_onnx(weights)
+    x = np.random.default_rng(4).random((1, 3, 32, 32)).astype(np.float32)
+    u = np.linspace(-1, 1, 3).astype(np.float32)
+    before = infer.get_backend(weights, "onnx").make_tables(x, u)
+    weights.unlink()
+    after = infer.get_backend(weights, "onnx").make_tables(x, u)
+    assert all(np.array_equal(a, b) for a, b in zip(before, after))
+    with pytest.raises(WeightsError, match="not found"):
+        infer.get_backend(weights, "torch")
