@@ -45,9 +45,11 @@ def network_input(image, image_size: int) -> np.ndarray:
 
 def sphere_crop(image) -> SphereCrop:
     """The canonical crop of an image (path, or array H×W×3/4 linear RGB), and how it was cut
-    (:class:`specgen_addon.input_image.SphereCrop`)."""
+    (:class:`specgen_addon.input_image.SphereCrop`); a crop already made is returned as it is."""
     from . import input_image
 
+    if isinstance(image, input_image.SphereCrop):
+        return image
     if isinstance(image, (str, Path)):
         return input_image.load_sphere_crop(image)
     return input_image.crop_sphere(np.asarray(image))
@@ -246,7 +248,8 @@ def generate_brdf(image, weights=None, wavelengths_nm=None, backend: str = "torc
     Parameters
     ----------
     image
-        Path to an image of a material sphere (EXR/PNG/JPEG) or an H×W×3/4 linear RGB array.
+        Path to an image of a material sphere (EXR/PNG/JPEG), an H×W×3/4 linear RGB array, or a
+        :class:`~specgen_addon.input_image.SphereCrop` already cut from one (not cut again).
     weights
         ``.pt`` weights file; ``None`` picks the shipped network for how the sphere was cut
         (:func:`specgen_addon.model.shipped_weights`: the default network for a sphere copied from a

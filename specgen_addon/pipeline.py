@@ -80,6 +80,7 @@ def generate(image, lighting=None, refine: bool = True, weights=None, wavelength
     """
     from .errors import SpecGenError
     from .infer import generate_brdf
+    from .input_image import SphereCrop
     from .input_lighting import InputLighting
 
     if model not in MODELS:
@@ -104,14 +105,11 @@ def generate(image, lighting=None, refine: bool = True, weights=None, wavelength
         table.metadata = {**table.metadata, "input_image": src, "input_lighting": lighting.label}
         return Generated(table, film_fit=fit)
     share = NETWORK_SHARE if refine else 1.0
-    if weights is None:  # the crop below is always whole-pixel: choose by how the photo was cut
-        from .model import shipped_weights
-
-        weights = shipped_weights(crop.copied)
-    table = generate_brdf(photo * lighting.network_gain(), weights=weights, wavelengths_nm=wavelengths_nm,
+    # the photo's crop, not cut again: how the photo was cut chooses the shipped network
+    network_input = SphereCrop(photo * lighting.network_gain(), crop.copied)
+    table = generate_brdf(network_input, weights=weights, wavelengths_nm=wavelengths_nm,
                           backend=backend, progress=sub(0.0, share), cancel=cancel)
-    table.metadata = {**table.metadata, "input_image": src, "input_lighting": lighting.label,
-                      "input_sphere": "copied" if crop.copied else "resampled"}  # (the photo's cut)
+    table.metadata = {**table.metadata, "input_image": src, "input_lighting": lighting.label}
     if not refine:
         return Generated(table)
     from .refine import CLIP_LEVEL, RefineOptions, refine_brdf
