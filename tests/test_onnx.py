@@ -83,6 +83,13 @@ def test_a_model_with_a_detail_branch_exports_and_agrees(tmp_path):
         assert np.abs(ta - tb.numpy()).max() < 1e-4
 
 
+def _graph_tables(weights) -> tuple[np.ndarray, ...]:
+    """The six grid tables onnxruntime makes from the graphs of ``weights`` for one fixed input."""
+    x = np.random.default_rng(2).random((1, 3, 32, 32)).astype(np.float32)
+    u = np.linspace(-1, 1, 4).astype(np.float32)
+    return infer.get_backend(weights, "onnx").make_tables(x, u)
+
+
 def test_float16_storage_is_lossless_and_halves_the_graph(tmp_path):
     torch.manual_seed(0)
     model = SpecGen(Config(**SMALL))
@@ -92,11 +99,7 @@ def test_float16_storage_is_lossless_and_halves_the_graph(tmp_path):
     export_onnx(wide, half=False)
     half_graph, wide_graph = infer.onnx_paths(weights)[0], infer.onnx_paths(wide)[0]
     assert half_graph.stat().st_size < 0.7 * wide_graph.stat().st_size
-    x = np.random.default_rng(2).random((1, 3, 32, 32)).astype(np.float32)
-    u = np.linspace(-1, 1, 4).astype(np.float32)
-    for a, b in zip(infer.get_backend(weights, "onnx").make_tables(x, u),
-                    infer.get_backend(wide, "onnx").make_tables(x, u)):
-        assert np.array_equal(a, b)
+    assert all(np.array_equal(a, b) for a, b in zip(_graph_tables(weights), _graph_tables(wide)))
 
 
 def test_float16_storage_changes_no_output_of_float32_weights(tmp_path):
@@ -106,11 +109,7 @@ def test_float16_storage_changes_no_output_of_float32_weights(tmp_path):
     b = save_weights(model, tmp_path / "b.pt")
     export_onnx(a, half=True)
     export_onnx(b, half=False)
-    x = np.random.default_rng(3).random((1, 3, 32, 32)).astype(np.float32)
-    u = np.linspace(-1, 1, 4).astype(np.float32)
-    for ta, tb in zip(infer.get_backend(a, "onnx").make_tables(x, u),
-                      infer.get_backend(b, "onnx").make_tables(x, u)):
-        assert np.array_equal(ta, tb)
+    assert all(np.array_equal(ta, tb) for ta, tb in zip(_graph_tables(a), _graph_tables(b)))
 
 
 def test_onnx_backend_needs_only_the_graphs(tmp_path):
@@ -118,11 +117,9 @@ def test_onnx_backend_needs_only_the_graphs(tmp_path):
     torch.manual_seed(0)
     weights = save_weights(SpecGen(Config(**SMALL)), tmp_path / "alone.pt")
     export_onnx(weights)
-    x = np.random.default_rng(4).random((1, 3, 32, 32)).astype(np.float32)
-    u = np.linspace(-1, 1, 3).astype(np.float32)
-    before = infer.get_backend(weights, "onnx").make_tables(x, u)
+    before = _graph_tables(weights)
     weights.unlink()
-    after = infer.get_backend(weights, "onnx").make_tables(x, u)
+    after = _graph_tables(weights)
     assert all(np.array_equal(a, b) for a, b in zip(before, after))
     with pytest.raises(WeightsError, match="not found"):
         infer.get_backend(weights, "torch")
