@@ -83,6 +83,9 @@ def add_parser(sub: argparse._SubParsersAction) -> argparse.ArgumentParser:
                    help="with --families: take each input sphere as a camera or an antialiased render "
                         "does, each pixel the mean over its area (rendered at 4× and box-filtered; "
                         "--input-shift then moves it by quarter pixels)")
+    p.add_argument("--family", action="append", default=None, metavar="NAME",
+                   help="with --families: score only this corpus family (classic, tinted_coat, car_paint, "
+                        "thin_film, sheen, lobes; repeat for several); the real RGL files are then skipped")
     p.add_argument("--family-resolution", type=int, default=64,
                    help="sphere size (px) of the per-family renders (default 64)")
     p.add_argument("--quiet", action="store_true", help="no progress bar")
@@ -269,7 +272,9 @@ def run_evaluate(args: argparse.Namespace) -> int:
 
         with progress_bar("evaluate families", enabled=not args.quiet) as update:
             res["by_family"] = evaluate_families(weights=args.weights, per_family=args.families,
-                                                 envs=not args.no_envs, rgl_dir=SHARED_RGL_DIR,
+                                                 envs=not args.no_envs,
+                                                 rgl_dir=None if args.family else SHARED_RGL_DIR,
+                                                 families=args.family,
                                                  resolution=args.family_resolution,
                                                  backend=args.backend, progress=update,
                                                  input_env=args.input_env,

@@ -136,6 +136,16 @@ def _evaluate(a) -> None:
         raise SpecGenError(f"--input-shift must be a number of pixels in [-8, 8], got {shift}")
     if shift and not a.families:
         raise SpecGenError("--input-shift needs --families N (it applies to the per-family evaluation)")
+    if getattr(a, "family", None):
+        if not a.families:
+            raise SpecGenError("--family needs --families N "
+                               "(it selects the families of the per-family evaluation)")
+        from .corpus.families import FAMILY_NAMES
+
+        unknown = [f for f in a.family if f not in FAMILY_NAMES]
+        if unknown:
+            raise SpecGenError(f"unknown corpus family {unknown[0]!r} "
+                               f"(choose from {', '.join(FAMILY_NAMES)})")
     if getattr(a, "input_antialias", False):
         if not a.families:
             raise SpecGenError("--input-antialias needs --families N "

@@ -57,3 +57,30 @@ def test_input_env_photographs_the_input_under_that_map(shared_dir):
     assert under_map["materials"][0]["psnr_distant"] != pytest.approx(canonical["materials"][0]["psnr_distant"], abs=1e-3)
     assert "'courtyard'" in format_family_results(under_map)
     assert "courtyard" not in format_family_results(canonical)
+
+
+def test_evaluate_family_option_scores_only_that_family_and_skips_rgl(monkeypatch, tmp_path):
+    """``evaluate --families N --family sheen`` hands the family list on and leaves out the RGL rows."""
+    import specgen_addon.train.evaluate as ev
+    from specgen_addon.cli import main as cli_main
+
+    seen = {}
+
+    def fake_families(**kw):
+        seen.update(kw)
+        return {"materials": [], "families": {}, "means": {}, "scenes": ["distant"],
+                "per_family": kw["per_family"],
+                "resolution": kw["resolution"], "input": "canonical", "input_shift_px": 0.0,
+                "input_antialias": False, "weights": "w", "backend": "torch", "corpus": {}, "metrics": ""}
+
+    monkeypatch.setattr(ev, "evaluate_test_split", lambda **kw: {"materials": [], "psnr_mean": 0.0})
+    monkeypatch.setattr(ev, "format_results", lambda res: "")
+    monkeypatch.setattr(ev, "evaluate_families", fake_families)
+    monkeypatch.setattr(ev, "format_family_results", lambda res: "")
+    assert cli_main(["evaluate", "--families", "200", "--family", "sheen", "--family", "lobes",
+                     "--no-envs", "--no-refine", "--limit", "1", "--quiet"]) == 0
+    assert seen["families"] == ["sheen", "lobes"] and seen["per_family"] == 200 and seen["rgl_dir"] is None
+    seen.clear()
+    assert cli_main(["evaluate", "--families", "1", "--no-envs", "--no-refine", "--limit", "1",
+                     "--quiet"]) == 0
+    assert seen["families"] is None and seen["rgl_dir"] is not None
