@@ -140,12 +140,9 @@ def _evaluate(a) -> None:
         if not a.families:
             raise SpecGenError("--family needs --families N "
                                "(it selects the families of the per-family evaluation)")
-        from .corpus.families import FAMILY_NAMES
+        from .corpus.generate import check_family_names
 
-        unknown = [f for f in a.family if f not in FAMILY_NAMES]
-        if unknown:
-            raise SpecGenError(f"unknown corpus family {unknown[0]!r} "
-                               f"(choose from {', '.join(FAMILY_NAMES)})")
+        check_family_names(a.family)
     if getattr(a, "input_antialias", False):
         if not a.families:
             raise SpecGenError("--input-antialias needs --families N "

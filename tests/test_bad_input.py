@@ -307,7 +307,7 @@ CLI_CASES = {
                                                "courtyard", Q], "--input-env"),
     "evaluate-family-without-families": (lambda w: ["evaluate", "--family", "sheen", Q], "--families"),
     "evaluate-family-unknown": (lambda w: ["evaluate", "--families", "1", "--family", "velvet", Q],
-                                "unknown corpus family 'velvet'"),
+                                "unknown material family 'velvet'"),
     "evaluate-limit-negative": (lambda w: ["evaluate", "--limit", "-1", Q], "--limit"),
     "evaluate-json-folder": (lambda w: ["evaluate", "--json", str(w.out), Q], "is a folder"),
     "evaluate-json-existing": (lambda w: ["evaluate", "--json", str(_touch(w.out / "r.json")), Q], "already exists"),

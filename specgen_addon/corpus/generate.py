@@ -10,7 +10,7 @@ within :data:`~.spectra_sources.DUPLICATE_RMS` of any spectrum of another split.
 
 from __future__ import annotations
 
-from typing import Callable
+from typing import Callable, Iterable
 
 import numpy as np
 
@@ -109,17 +109,24 @@ FILM_ETA = (1.33, 2.4)
 FILM_THICKNESS_NM = (100.0, 900.0)
 
 
-def check_mix(mix: dict[str, float]) -> dict[str, float]:
-    """``mix`` normalised to sum 1; SpecGenError naming an unknown family or a bad weight."""
+def check_family_names(names: Iterable[str]) -> None:
+    """SpecGenError naming every entry of ``names`` that is not a corpus family."""
     from ..errors import SpecGenError
     from .families import FAMILY_NAMES
 
-    if not isinstance(mix, dict) or not mix:
-        raise SpecGenError("the family mix must be a non-empty mapping of family → weight")
-    unknown = sorted(set(mix) - set(FAMILY_NAMES))
+    unknown = sorted(set(names) - set(FAMILY_NAMES))
     if unknown:
         raise SpecGenError(f"unknown material famil{'y' if len(unknown) == 1 else 'ies'} "
                            f"{', '.join(map(repr, unknown))}; known: {', '.join(FAMILY_NAMES)}")
+
+
+def check_mix(mix: dict[str, float]) -> dict[str, float]:
+    """``mix`` normalised to sum 1; SpecGenError naming an unknown family or a bad weight."""
+    from ..errors import SpecGenError
+
+    if not isinstance(mix, dict) or not mix:
+        raise SpecGenError("the family mix must be a non-empty mapping of family → weight")
+    check_family_names(mix)
     bad = [k for k, v in mix.items() if not isinstance(v, (int, float)) or not np.isfinite(v) or v < 0]
     if bad or sum(mix.values()) <= 0:
         raise SpecGenError(f"family weights must be non-negative numbers with a positive sum, got {mix}")
