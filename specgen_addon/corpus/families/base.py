@@ -158,9 +158,10 @@ def material_from_dict(d: dict[str, Any]):
     family = d.get("family", "classic")
     if family == "classic":
         return Material.from_dict({k: v for k, v in d.items() if k != "family"})
-    cls = FAMILIES.get(family)
-    if cls is None:
-        raise SpecGenError(f"unknown material family {family!r}; known: classic, {', '.join(sorted(FAMILIES))}")
+    from ..generate import check_family_names
+
+    check_family_names([family])
+    cls = FAMILIES[family]
     try:
         kwargs = {f.name: _decode(d[f.name]) for f in dataclasses.fields(cls) if f.name in d}
         return cls(**kwargs)
