@@ -17,8 +17,12 @@ import sys
 import tempfile
 import time
 from pathlib import Path
+from typing import TYPE_CHECKING
 
 from machine import describe_machine  # bench/machine.py, beside this script
+
+if TYPE_CHECKING:
+    import numpy as np
 
 REPO = Path(__file__).resolve().parents[1]
 TARGET_GB = 2.0
@@ -43,7 +47,7 @@ def peak_gb(path: Path) -> tuple[float, float]:
     return float(gb), float(seconds)
 
 
-def sphere_photo(size: int) -> "np.ndarray":
+def sphere_photo(size: int) -> np.ndarray:
     """8-bit sRGB (size, size, 3): a diffuse orange sphere lit from the upper left, black around."""
     import numpy as np
 

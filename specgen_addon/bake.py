@@ -39,7 +39,7 @@ from __future__ import annotations
 import os
 from dataclasses import dataclass, field
 from pathlib import Path
-from typing import Callable
+from typing import TYPE_CHECKING, Callable
 
 import numpy as np
 
@@ -47,6 +47,9 @@ from .errors import Cancelled, OutputExistsError, SpecGenError
 from .io_utils import atomic_write
 from .limits import check_output_dir
 from .table import N_PHI_D, N_THETA_D, N_THETA_H
+
+if TYPE_CHECKING:  # for the annotation only; the baker imports the fit where it reads one back
+    from .fit import ClosureFit
 
 COEFFS_PER_RENDER = 4   # coefficient slots per Cycles render: one RGBA lookup group, 4 passes
 #: Atlas layout: 2 = slots c_k + o_k c_0 (1 had a constant slot 0 and absolute shifts).
@@ -91,7 +94,7 @@ class AtlasInfo:
     tiles_x: int
     tiles_y: int
     rel_error: float = 0.0
-    closures: "ClosureFit | None" = None  # native closure fit for the full-scene render
+    closures: ClosureFit | None = None  # native closure fit for the full-scene render
     refinement: object | None = None   # specgen_addon.refine.RefineResult of a generated table
     film_fit: object | None = None     # specgen_addon.fit.thin_film.ThinFilmFit (model "thin-film")
 

@@ -11,7 +11,6 @@ from __future__ import annotations
 
 import math
 import os
-from pathlib import Path
 
 from .errors import SpecGenError
 from .limits import check_input_file

@@ -17,7 +17,7 @@ import pytest
 bpy = pytest.importorskip("bpy")
 
 import batch  # noqa: E402
-from addon_modules import PKG, addon_module, psnr as _psnr  # noqa: E402  (after the bpy skip)
+from addon_modules import addon_module, psnr as _psnr  # noqa: E402  (after the bpy skip)
 bake = addon_module("specgen_addon.bake")
 render = addon_module("ops.render")
 fullscene = addon_module("ops.render_fullscene")

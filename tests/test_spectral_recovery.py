@@ -25,7 +25,7 @@ def test_numpy_otsu_2018_matches_colour_science_on_random_colours():
 
 
 def test_cluster_walk_matches_colour_science_dataset_selection():
-    colour = pytest.importorskip("colour")
+    pytest.importorskip("colour")
     from colour.recovery.otsu2018 import DATASET_REFERENCE_OTSU2018 as dataset
 
     for xyz in _random_xyz(200, seed=3):

@@ -21,7 +21,7 @@ import numpy as np
 from ..errors import SpecGenError
 from ..io_utils import atomic_write
 from . import ablation as abl
-from . import baselines, plots, protocol, report, tables
+from . import baselines, plots, protocol, tables
 from .cache import read_json, write_json
 
 #: Full configuration (docs/results.md) and the CI smoke configuration.
@@ -228,7 +228,6 @@ def make_figures(h: tables.Harness, mats: Sequence[Any], specgen_arm: str, img_d
     """The three PNGs; returns their paths by role."""
     wl = h.wl
     methods = [specgen_arm] + list(h.s.baselines)
-    labels = _labels(specgen_arm)
     names = [m.name for m in mats]
     panels = {}
     for role in ("env_unseen1", "distant", "shape_env"):
@@ -278,10 +277,6 @@ def figure_pixels(mask: np.ndarray) -> list[tuple[int, int]]:
     hgt, wid = mask.shape
     cands = [(hgt // 2, wid // 2), (int(hgt * 0.3), int(wid * 0.3)), (int(hgt * 0.72), int(wid * 0.68))]
     return [p for p in cands if mask[p]] or [tuple(np.argwhere(mask)[0])]
-
-
-def _labels(specgen_arm: str) -> dict[str, str]:
-    return {specgen_arm: "SpecGen", **baselines.LABELS}
 
 
 # -- report ---------------------------------------------------------------------------------------

@@ -8,7 +8,7 @@ every size is a field below, so the default trains on two CPU cores in well unde
 from __future__ import annotations
 
 import dataclasses
-from dataclasses import dataclass, field
+from dataclasses import dataclass
 from typing import Any
 
 from ..errors import SpecGenError

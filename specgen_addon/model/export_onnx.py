@@ -28,7 +28,7 @@ import torch
 
 from ..io_utils import atomic_write
 from .fast import GridHead, GridHeadChannelsFirst, GridTables, lambda_coords
-from .specgen import SpecGen, load_weights
+from .specgen import load_weights
 
 OPSET = 17
 #: Smaller initializers stay float32 (:func:`store_weights_half`): a Cast node would outweigh them.
