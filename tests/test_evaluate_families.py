@@ -44,6 +44,11 @@ def test_family_rows_average_to_the_family_means(shared_dir):
     # the least-squares brightness minimises the summed error; the band-averaged dB may move a hair
     assert rows[0]["psnr_brightness_fitted_distant"] >= rows[0]["psnr_distant"] - 0.5
     assert "brightness fitted" in format_family_results(res)
+    # every fidelity row comes with its self-reproduction against the input photo
+    assert np.isfinite(rows[0]["self_psnr"]) and rows[0]["self_de"] >= 0.0
+    assert res["families"]["sheen"]["self_psnr"] == pytest.approx(rows[0]["self_psnr"])
+    assert res["means"]["self_de"] == pytest.approx(rows[0]["self_de"])
+    assert "self-reproduction dB / ΔE2000" in format_family_results(res)
 
 
 @pytest.mark.slow
@@ -56,6 +61,8 @@ def test_input_env_photographs_the_input_under_that_map(shared_dir):
     # another input image gives another table, so another score against the same truth
     assert under_map["materials"][0]["psnr_distant"] != pytest.approx(canonical["materials"][0]["psnr_distant"], abs=1e-3)
     assert "'courtyard'" in format_family_results(under_map)
+    # reproduced in the scene it was photographed in, not the canonical one
+    assert under_map["materials"][0]["self_psnr"] != pytest.approx(canonical["materials"][0]["self_psnr"], abs=1e-3)
     assert "courtyard" not in format_family_results(canonical)
 
 
@@ -81,3 +88,22 @@ def test_evaluate_family_option_scores_only_that_family_and_skips_rgl(monkeypatc
     assert cli_main(["evaluate", "--families", "1", "--no-envs", "--no-refine", "--limit", "1",
                      "--quiet"]) == 0
     assert seen["families"] is None and seen["rgl_dir"] is not None
+
+
+@pytest.mark.parametrize("input_env", [None, "courtyard"])
+def test_a_material_reproduces_its_own_photo_and_another_material_does_not(input_env):
+    """The self-reproduction scores a BRDF in the very scene its input photo was taken in: the true
+    material gives its photo back (to float32 rounding), another material does not."""
+    from specgen_addon import input_image
+    from specgen_addon.evaluation.protocol import input_under_environment, test_materials
+    from specgen_addon.evaluation.self_reproduction import self_reproduction
+    from specgen_addon.input_lighting import InputLighting
+
+    truth, other = test_materials(2)
+    if input_env is None:
+        photo, light = input_image.render_input(truth), InputLighting()
+    else:
+        photo, light = input_under_environment(truth, input_env), InputLighting(input_env, key_light=True)
+    own, wrong = self_reproduction(truth, photo, light), self_reproduction(other, photo, light)
+    assert own.psnr_db > 80.0 and own.delta_e2000 < 0.01
+    assert wrong.psnr_db < 40.0 and wrong.delta_e2000 > 1.0

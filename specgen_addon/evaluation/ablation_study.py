@@ -61,7 +61,8 @@ def run_arm(settings: abl.AblationSettings, arm: str, seed: int, cache_dir: str,
     score_path = _score_path(res.weights.parent, per_family, resolution)
     score = read_json(score_path)
     if score is None:
-        ev = evaluate_families(weights=res.weights, per_family=per_family, envs=False, resolution=resolution)
+        ev = evaluate_families(weights=res.weights, per_family=per_family, envs=False, resolution=resolution,
+                               self_reproduction=False)  # the arms compare PSNR only
         score = {"psnr_distant": ev["means"]["psnr_distant"], "ssim_distant": ev["means"]["ssim_distant"],
                  "families": {f: s["psnr_distant"] for f, s in ev["families"].items()}}
         write_json(score_path, score)

@@ -33,6 +33,25 @@ def photo_under(brdf, lighting) -> np.ndarray:
     return input_image.photo_in_scene(brdf, scene, lighting.image_exposure).astype(np.float64)
 
 
+def self_reproduction(brdf, photo: np.ndarray, lighting) -> Any:
+    """How well ``brdf`` reproduces ``photo``: rendered under ``lighting`` (an
+    :class:`~specgen_addon.input_lighting.InputLighting`) exactly as an input photo is made, against
+    the photo (linear sRGB, canonical sphere crop), over the sphere without its grazing rim as the
+    refinement scores it. Returns a :class:`specgen_addon.refine.report.Reproduction` (RGB PSNR in
+    dB, mean ΔE2000). A table renders at its own bands, an analytic material at the default ones."""
+    from .. import spectra
+    from ..refine.report import reproduction
+    from .photo_fit import observed_pixels
+
+    photo = np.asarray(photo, np.float64)
+    scene = lighting.scene(photo.shape[0])
+    wl = getattr(brdf, "wavelengths", None)
+    wl = spectra.DEFAULT_WAVELENGTHS_NM if wl is None else wl
+    rendered = np.clip(scene.render_spectral(brdf, wl).rgb, 0.0, None) * lighting.image_exposure
+    seen = observed_pixels(scene)
+    return reproduction(photo.reshape(-1, 3)[seen], rendered.reshape(-1, 3)[seen])
+
+
 def _novel_scores(truth, network, refined, rgb_only: bool, envs: Sequence[str]) -> dict[str, dict]:
     """Spectral (or RGB) PSNR of network and refined tables against the truth in novel lighting."""
     from ..evaluation.protocol import DISTANT_LIGHTS, WAVELENGTHS_NM

@@ -264,21 +264,11 @@ class Harness:
         the sphere without its grazing rim, as the refinement scores it;
         :func:`specgen_addon.refine.report.reproduction`). Another SpecGen variant (e.g.
         the refined table) gets its column by calling this with its own arm and BRDF."""
-        from .. import spectra
         from ..input_lighting import InputLighting
-        from ..refine.report import reproduction
+        from .self_reproduction import self_reproduction
 
         t0 = time.perf_counter()
-        photo = self.input_photo(material)
-        light = InputLighting()
-        scene = light.scene(photo.shape[0])
-        wl = getattr(brdf, "wavelengths", None)   # a table renders at its own bands
-        wl = spectra.DEFAULT_WAVELENGTHS_NM if wl is None else wl
-        rendered = np.clip(scene.render_spectral(brdf, wl).rgb, 0.0, None) * light.image_exposure
-        from .photo_fit import observed_pixels
-
-        seen = observed_pixels(scene)
-        rep = reproduction(photo.reshape(-1, 3)[seen], rendered.reshape(-1, 3)[seen])
+        rep = self_reproduction(brdf, self.input_photo(material), InputLighting())
         cell = {"rgb_psnr": rep.psnr_db, "delta_e2000": rep.delta_e2000,
                 "seconds": time.perf_counter() - t0}
         write_json(self.cell_path(arm, material.name, SELF_ROLE), cell)

@@ -166,8 +166,9 @@ def evaluate_families(weights: str | Path | None = None, per_family: int = 4, en
                       resolution: int = RESOLUTION, families: list[str] | None = None,
                       progress: Callable[[float], None] | None = None,
                       input_env: str | None = None, input_shift_px: float = 0.0,
-                      input_antialias: bool = False) -> dict[str, Any]:
-    """PSNR/SSIM per family of the mixed test split, network alone (no refinement).
+                      input_antialias: bool = False, self_reproduction: bool = True) -> dict[str, Any]:
+    """PSNR/SSIM per family of the mixed test split, network alone (no refinement), each family
+    with its self-reproduction (the photo is the measurement).
 
     Scenes: the protocol's distant lights and, with ``envs``, the two held-out environment maps
     (:data:`specgen_addon.lighting.HELDOUT_ENVS`). The input is the canonical sphere, or with
@@ -180,6 +181,10 @@ def evaluate_families(weights: str | Path | None = None, per_family: int = 4, en
     by ``input_shift_px``), as a camera or an antialiased render takes it.
     ``rgl_dir``: real RGL RGB files (``*.bsdf``) scored in linear sRGB under the distant lights
     (the project renderer's slice assignment: the light direction selects the measured slice).
+    ``self_reproduction``: also render each predicted table under the lighting its input photo was
+    taken in and score it against that photo (RGB PSNR dB, mean ΔE2000;
+    :func:`specgen_addon.evaluation.self_reproduction.self_reproduction`). Not for a moved or
+    area-sampled input, whose photo is not the renderer's frame.
     """
     from .. import input_image, lighting, metrics
     from ..evaluation.protocol import DISTANT_LIGHTS, WAVELENGTHS_NM
@@ -205,11 +210,28 @@ def evaluate_families(weights: str | Path | None = None, per_family: int = 4, en
             image = input_under_environment(brdf, input_env)
         return displaced_input(image, input_shift_px) if input_shift_px else image
 
+    photo_lighting = None
+    if self_reproduction and not input_shift_px and not input_antialias:
+        from ..input_lighting import InputLighting
+
+        # the scene input_under_environment photographs in: the map plus the canonical key light
+        photo_lighting = InputLighting() if input_env is None else InputLighting(input_env, key_light=True)
+
+    def scored_reproduction(table, photo: np.ndarray) -> dict[str, Any]:
+        if photo_lighting is None:
+            return {}
+        from ..evaluation.self_reproduction import self_reproduction as reproduce
+
+        rep = reproduce(table, photo, photo_lighting)
+        return {"self_psnr": rep.psnr_db, "self_de": rep.delta_e2000}
+
     rows = []
     for i, mat in enumerate(mats):
-        table = generate_brdf(input_of(mat), weights=weights, wavelengths_nm=WAVELENGTHS_NM, backend=backend)
+        photo = input_of(mat)
+        table = generate_brdf(photo, weights=weights, wavelengths_nm=WAVELENGTHS_NM, backend=backend)
         row: dict[str, Any] = {"material": mat.name, "family": material_family(mat), "kind": mat.kind,
-                               "network": Path(table.metadata["weights"]).name}  # which network served
+                               "network": Path(table.metadata["weights"]).name,  # which network served
+                               **scored_reproduction(table, photo)}
         for label, kw in scenes:
             gt = render_spectral(mat, geo, wavelengths_nm=WAVELENGTHS_NM, **kw).spectral
             pred = render_spectral(table, geo, wavelengths_nm=WAVELENGTHS_NM, **kw).spectral
@@ -225,13 +247,15 @@ def evaluate_families(weights: str | Path | None = None, per_family: int = 4, en
         from ..formats import load_brdf
 
         brdf = load_brdf(path)
-        table = generate_brdf(input_of(brdf), weights=weights, wavelengths_nm=WAVELENGTHS_NM, backend=backend)
+        photo = input_of(brdf)
+        table = generate_brdf(photo, weights=weights, wavelengths_nm=WAVELENGTHS_NM, backend=backend)
         gt = render_rgb(brdf, geo, lights=DISTANT_LIGHTS).rgb
         pred = render_spectral(table, geo, lights=DISTANT_LIGHTS, wavelengths_nm=WAVELENGTHS_NM).rgb
         res = metrics.spectral_metrics(gt, pred, geo.mask)
         rows.append({"material": path.stem, "family": "rgl (real, RGB)", "kind": "measured",
                      "network": Path(table.metadata["weights"]).name,
-                     "psnr_distant": float(res.psnr_mean), "ssim_distant": float(res.ssim_mean)})
+                     "psnr_distant": float(res.psnr_mean), "ssim_distant": float(res.ssim_mean),
+                     **scored_reproduction(table, photo)})
         if progress is not None:
             progress((len(mats) + j + 1) / total)
     labels = [lab for lab, _ in scenes]
@@ -240,10 +264,12 @@ def evaluate_families(weights: str | Path | None = None, per_family: int = 4, en
         sel = [r for r in rows if r["family"] == fam]
         by_family[fam] = {"n": len(sel), **{f"{k}_{lab}": float(np.mean([r[f"{k}_{lab}"] for r in sel]))
                                           for lab in labels for k in ("psnr", "ssim")
-                                          if all(f"{k}_{lab}" in r for r in sel)}}
+                                          if all(f"{k}_{lab}" in r for r in sel)},
+                          **_reproduction_means(sel)}
     synth = [r for r in rows if r["kind"] != "measured"]
     means = {f"{k}_{lab}": float(np.mean([r[f"{k}_{lab}"] for r in synth]))
              for lab in labels for k in ("psnr", "ssim", "psnr_brightness_fitted")} if synth else {}
+    means |= _reproduction_means(synth)
     return {"materials": rows, "families": by_family, "means": means, "scenes": labels,
             "per_family": per_family, "resolution": resolution, "input": input_env or "canonical",
             "input_shift_px": input_shift_px, "input_antialias": input_antialias,
@@ -252,14 +278,28 @@ def evaluate_families(weights: str | Path | None = None, per_family: int = 4, en
             "metrics": getattr(metrics, "NORMALISATION_TEXT", "")}
 
 
+def _reproduction_means(rows: list[dict[str, Any]]) -> dict[str, float]:
+    """Mean self-reproduction PSNR (dB) and ΔE2000 of rows that all carry them (else nothing)."""
+    return {k: float(np.mean([r[k] for r in rows])) for k in ("self_psnr", "self_de")
+            if rows and all(r.get(k) is not None for r in rows)}
+
+
 def family_rows(res: dict[str, Any], mean_label: str = "mean (synthetic)") -> tuple[list[str], list[list[str]]]:
     """(header, rows) of :func:`evaluate_families`' summary: PSNR dB / SSIM per family and scene
-    (synthetic families first, then the real files), then the mean over the synthetic materials."""
+    (synthetic families first, then the real files), then the mean over the synthetic materials;
+    with a last column of the self-reproduction (photo RGB PSNR dB / ΔE2000) where it was scored."""
     labels = res["scenes"]
+    reproduced = any("self_psnr" in s for s in res["families"].values())
     header = ["family", "n"] + [f"{lab} PSNR / SSIM" for lab in labels]
+    if reproduced:
+        header.append("self-reproduction dB / ΔE2000")
 
     def cells(s: dict) -> list[str]:
-        return [f"{s[f'psnr_{lab}']:.2f} / {s[f'ssim_{lab}']:.4f}" if f"psnr_{lab}" in s else "—" for lab in labels]
+        out = [f"{s[f'psnr_{lab}']:.2f} / {s[f'ssim_{lab}']:.4f}" if f"psnr_{lab}" in s else "—" for lab in labels]
+        if reproduced:
+            out.append(f"{s['self_psnr']:.2f} / {s['self_de']:.2f}" if "self_psnr" in s and "self_de" in s
+                       else "—")
+        return out
 
     # a fixed order (a cached JSON comes back with sorted keys): synthetic families, then real files
     order = sorted(res["families"], key=lambda f: (f.startswith("rgl"), f))
