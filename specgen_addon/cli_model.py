@@ -68,7 +68,9 @@ def add_parser(sub: argparse._SubParsersAction) -> argparse.ArgumentParser:
     p.add_argument("--families", type=int, default=0, metavar="N",
                    help="also score N test materials per corpus family (mixed corpus of "
                         "configs/default.json) under the distant lights and the held-out maps, and "
-                        "the real RGL files in ../shared/data/rgl (default 0: off)")
+                        "the real RGL files in ../shared/data/rgl, each with its self-reproduction "
+                        "(the network's table in its photo's own lighting against the photo: RGB "
+                        "PSNR, ΔE2000) (default 0: off)")
     p.add_argument("--no-envs", action="store_true", help="with --families: distant lights only")
     p.add_argument("--input-env", default=None, metavar="MAP",
                    help="with --families: photograph each input sphere under this environment map "
