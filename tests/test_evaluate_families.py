@@ -95,7 +95,7 @@ def test_a_material_reproduces_its_own_photo_and_another_material_does_not(input
     """The self-reproduction scores a BRDF in the very scene its input photo was taken in: the true
     material gives its photo back (to float32 rounding), another material does not."""
     from specgen_addon import input_image
-    from specgen_addon.evaluation.protocol import input_under_environment, test_materials
+    from specgen_addon.evaluation.protocol import input_lighting_under, input_under_environment, test_materials
     from specgen_addon.evaluation.self_reproduction import self_reproduction
     from specgen_addon.input_lighting import InputLighting
 
@@ -103,7 +103,7 @@ def test_a_material_reproduces_its_own_photo_and_another_material_does_not(input
     if input_env is None:
         photo, light = input_image.render_input(truth), InputLighting()
     else:
-        photo, light = input_under_environment(truth, input_env), InputLighting(input_env, key_light=True)
+        photo, light = input_under_environment(truth, input_env), input_lighting_under(input_env)
     own, wrong = self_reproduction(truth, photo, light), self_reproduction(other, photo, light)
     assert own.psnr_db > 80.0 and own.delta_e2000 < 0.01
     assert wrong.psnr_db < 40.0 and wrong.delta_e2000 > 1.0

@@ -91,18 +91,24 @@ def env_choice() -> EnvChoice:
     return EnvChoice(input_image.training_variant(1)[0], (held[0], held[1]))
 
 
+def input_lighting_under(env: str):
+    """The :class:`~specgen_addon.input_lighting.InputLighting` of :func:`input_under_environment`:
+    map ``env`` (unit mean luminance, unrotated) plus the canonical key light. A score of a table
+    against such a photo renders it in this same lighting."""
+    from ..input_lighting import InputLighting
+
+    return InputLighting(env, key_light=True)
+
+
 def input_under_environment(brdf, env: str) -> np.ndarray:
     """The sphere input image of ``brdf`` photographed under environment map ``env`` instead of the
     canonical one: same geometry, key light, exposure and sampling as
     :func:`specgen_addon.input_image.render_input` (linear sRGB, float32)."""
-    from .. import input_image, lighting
-    from ..render import Scene as RenderScene
+    from .. import input_image
 
-    key = DistantLight(input_image.KEY_LIGHT_DIRECTION, input_image.KEY_LIGHT_IRRADIANCE,
-                       spectra.DEFAULT_ILLUMINANT)
-    scene = RenderScene(sphere_geometry(input_image.CANONICAL_SIZE), [key], lighting.load_environment(env),
-                        sampling=input_image.input_sampling())
-    return input_image.photo_in_scene(brdf, scene, input_image.EXPOSURE)  # RGB-only files through eval_rgb
+    light = input_lighting_under(env)
+    scene = light.scene(input_image.CANONICAL_SIZE)
+    return input_image.photo_in_scene(brdf, scene, light.image_exposure)  # RGB-only files through eval_rgb
 
 
 def scene_list(envs: EnvChoice) -> dict[str, Scene]:

@@ -212,16 +212,15 @@ def evaluate_families(weights: str | Path | None = None, per_family: int = 4, en
 
     photo_lighting = None
     if self_reproduction and not input_shift_px and not input_antialias:
+        from ..evaluation.protocol import input_lighting_under
+        from ..evaluation.self_reproduction import self_reproduction as reproduce
         from ..input_lighting import InputLighting
 
-        # the scene input_under_environment photographs in: the map plus the canonical key light
-        photo_lighting = InputLighting() if input_env is None else InputLighting(input_env, key_light=True)
+        photo_lighting = InputLighting() if input_env is None else input_lighting_under(input_env)
 
     def scored_reproduction(table, photo: np.ndarray) -> dict[str, Any]:
         if photo_lighting is None:
             return {}
-        from ..evaluation.self_reproduction import self_reproduction as reproduce
-
         rep = reproduce(table, photo, photo_lighting)
         return {"self_psnr": rep.psnr_db, "self_de": rep.delta_e2000}
 
