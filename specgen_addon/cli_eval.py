@@ -66,6 +66,10 @@ def add_ablate_parser(subparsers: argparse._SubParsersAction) -> argparse.Argume
     p.add_argument("--out", type=Path, default=None, help="markdown tables to write")
     p.add_argument("--json", type=Path, default=None, help="all records and the summary as JSON")
     p.add_argument("--figure", type=Path, default=None, help="PNG dot plot of every arm's per-seed scores")
+    p.add_argument("--with-records", type=Path, nargs="+", default=[], metavar="JSON",
+                   help="pool this run's arms with an earlier study's records (its --json file, same "
+                        "--steps); an (arm, seed) in both must score the same to 0.005 dB, so retraining "
+                        "one checks the earlier figures")
     p.set_defaults(func=run_ablate)
     return p
 
@@ -73,10 +77,17 @@ def add_ablate_parser(subparsers: argparse._SubParsersAction) -> argparse.Argume
 def run_ablate(args: argparse.Namespace) -> int:
     import json
 
-    from .evaluation.ablation_study import format_markdown, plot_study, run_study
+    from .evaluation.ablation_study import (format_markdown, load_records, plot_study, pool_records, run_study,
+                                            summarise)
     from .io_utils import atomic_write
 
+    earlier = [r for path in args.with_records for r in load_records(path, args.steps)]
     study = run_study(args.steps, seeds=args.seeds, arms=args.arms, workers=args.workers)
+    if earlier:
+        records = pool_records(study["records"], earlier)
+        study.update(records=records, seeds=sorted({r["seed"] for r in records}),
+                     arms=list(dict.fromkeys(r["arm"] for r in records)),
+                     pooled_with=[str(p) for p in args.with_records], **summarise(records))
     text = format_markdown(study)
     print(text)
     for path, content in ((args.out, text), (args.json, json.dumps(study, indent=1))):

@@ -205,6 +205,7 @@ def _paper_tables(a) -> None:
 
 def _ablate(a) -> None:
     from .evaluation.ablation import ARMS_BY_NAME
+    from .evaluation.ablation_study import load_records
 
     for f in (a.out, a.json, a.figure):
         if f is not None:
@@ -220,6 +221,8 @@ def _ablate(a) -> None:
     unknown = [x for x in a.arms if x not in ARMS_BY_NAME]
     if unknown:
         raise SpecGenError(f"unknown arm {unknown[0]!r}; available: {', '.join(ARMS_BY_NAME)}")
+    for f in a.with_records:  # read now, so a bad file is refused before any arm trains
+        load_records(limits.check_input_file(f, "ablation records file"), a.steps)
 
 
 def _average_weights(a) -> None:

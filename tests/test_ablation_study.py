@@ -66,3 +66,56 @@ def test_the_study_figure_is_a_png(tmp_path):
             for s in (0, 1, 2)]
     out = plot_study({"steps": 10, "seeds": [0, 1, 2], **summarise(recs)}, tmp_path / "f.png")
     assert out.read_bytes()[:8] == b"\x89PNG\r\n\x1a\n"
+
+
+def _records_file(path, steps, recs):
+    import json
+
+    path.write_text(json.dumps({"steps": steps, "records": [
+        {"arm": a, "seed": s, "psnr_distant": v} for a, s, v in recs]}), encoding="utf-8")
+    return path
+
+
+def test_pooled_records_keep_every_seed_and_recompute_the_paired_effect(tmp_path):
+    from specgen_addon.evaluation.ablation_study import load_records, pool_records
+
+    earlier = load_records(_records_file(tmp_path / "old.json", 3000, [
+        ("joint-aff", 0, 28.27), ("joint-hadamard", 0, 26.40), ("joint-aff", 1, 28.03), ("joint-hadamard", 1, 27.96)]),
+        3000)
+    new = [{"arm": "joint-aff", "seed": 0, "psnr_distant": 28.2712},  # a retrained arm: agrees to the table's 0.01
+           {"arm": "joint-aff", "seed": 5, "psnr_distant": 29.0}, {"arm": "joint-hadamard", "seed": 5, "psnr_distant": 28.0}]
+    pooled = pool_records(new, earlier)
+    assert [(r["arm"], r["seed"]) for r in pooled] == [
+        ("joint-aff", 0), ("joint-hadamard", 0), ("joint-aff", 1), ("joint-hadamard", 1),
+        ("joint-aff", 5), ("joint-hadamard", 5)]
+    assert pooled[0]["psnr_distant"] == 28.2712  # this run's figure is kept
+    e = summarise(pooled)["effects"]["AFF − Hadamard (joint training)"]
+    d = np.array([28.2712 - 26.40, 28.03 - 27.96, 1.0])
+    assert e["n"] == 3 and e["mean"] == pytest.approx(d.mean()) and e["std"] == pytest.approx(d.std(ddof=1))
+
+
+def test_pooling_refuses_a_retrained_arm_that_disagrees_with_its_earlier_score(tmp_path):
+    from specgen_addon.errors import SpecGenError
+    from specgen_addon.evaluation.ablation_study import pool_records
+
+    with pytest.raises(SpecGenError, match="joint-aff seed 0 scores 28.300 dB now but 28.270"):
+        pool_records([{"arm": "joint-aff", "seed": 0, "psnr_distant": 28.30}],
+                     [{"arm": "joint-aff", "seed": 0, "psnr_distant": 28.27}])
+
+
+@pytest.mark.parametrize("content, needle", [
+    ('{"steps": 3000, "records": []}', "trained 3000 steps, this study 4000"),
+    ('{"steps": 4000}', "has no list of 'records'"),
+    ('{"steps": 4000, "records": [{"arm": "nope", "seed": 0, "psnr_distant": 1.0}]}', "unknown arm"),
+    ('{"steps": 4000, "records": [{"arm": "joint-aff"}]}', "lacks an arm, a seed or a psnr_distant"),
+    ("not json", "not a readable JSON file"),
+])
+def test_ablate_refuses_bad_records_files_before_any_work(content, needle, tmp_path):
+    (tmp_path / "r.json").write_text(content, encoding="utf-8")
+    r = subprocess.run([sys.executable, "-m", "specgen_addon", "ablate", "--steps", "4000", "--with-records", "r.json",
+                        "--out", "study.md"], capture_output=True, text=True, cwd=tmp_path,
+                       env={"PYTHONPATH": str(__import__("pathlib").Path(__file__).resolve().parents[1]),
+                            "PATH": "/usr/bin:/bin"})
+    assert r.returncode == 2
+    assert needle in r.stderr and "Traceback" not in r.stderr
+    assert sorted(p.name for p in tmp_path.iterdir()) == ["r.json"]

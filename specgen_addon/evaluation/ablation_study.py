@@ -142,6 +142,59 @@ def summarise(records: Sequence[dict[str, Any]]) -> dict[str, Any]:
     return {"by_arm": arms, "effects": effects}
 
 
+#: Two scores of one (arm, seed) agree when they differ by no more than this (dB): the rounding
+#: of a two-decimal table, the form in which earlier studies were published.
+SAME_SCORE_DB = 0.005
+
+
+def load_records(path: str | Path, steps: int) -> list[dict[str, Any]]:
+    """The records of an earlier study (an ``ablate --json`` file, or any JSON object with
+    ``steps`` and ``records`` of ``arm``, ``seed``, ``psnr_distant``), refused unless it was trained
+    at ``steps`` steps with known arms: pooling different budgets would mix two experiments."""
+    import json
+
+    from ..errors import SpecGenError
+    from .ablation import ARMS_BY_NAME
+
+    path = Path(path)
+    try:
+        data = json.loads(path.read_text(encoding="utf-8"))
+    except (OSError, UnicodeDecodeError, json.JSONDecodeError) as e:
+        raise SpecGenError(f"{path}: not a readable JSON file of ablation records ({e})") from None
+    if not isinstance(data, dict) or not isinstance(data.get("records"), list):
+        raise SpecGenError(f"{path}: has no list of 'records' (an `ablate --json` output is expected)")
+    if data.get("steps") != steps:
+        raise SpecGenError(f"{path}: its arms trained {data.get('steps')} steps, this study {steps}; "
+                           "only studies of one budget can be pooled")
+    records = []
+    for r in data["records"]:
+        try:
+            rec = {**r, "arm": str(r["arm"]), "seed": int(r["seed"]), "psnr_distant": float(r["psnr_distant"])}
+        except (TypeError, KeyError, ValueError):
+            raise SpecGenError(f"{path}: a record lacks an arm, a seed or a psnr_distant: {r!r}") from None
+        if rec["arm"] not in ARMS_BY_NAME or not math.isfinite(rec["psnr_distant"]):
+            raise SpecGenError(f"{path}: a record has an unknown arm or a non-finite score: {r!r}")
+        records.append(rec)
+    return records
+
+
+def pool_records(new: Sequence[dict[str, Any]], earlier: Sequence[dict[str, Any]]) -> list[dict[str, Any]]:
+    """This run's records with an earlier study's. Where both scored one (arm, seed) the two must
+    agree to :data:`SAME_SCORE_DB` (training and scoring are deterministic, so a retrained arm is a
+    check of the earlier figure) and this run's is kept; a disagreement is an error."""
+    from ..errors import SpecGenError
+
+    pooled = {(r["arm"], int(r["seed"])): r for r in earlier}
+    for r in new:
+        key = (r["arm"], int(r["seed"]))
+        old = pooled.get(key)
+        if old is not None and abs(float(old["psnr_distant"]) - float(r["psnr_distant"])) > SAME_SCORE_DB:
+            raise SpecGenError(f"{key[0]} seed {key[1]} scores {r['psnr_distant']:.3f} dB now but "
+                               f"{float(old['psnr_distant']):.3f} dB in the earlier records; they cannot be pooled")
+        pooled[key] = r
+    return [pooled[k] for k in sorted(pooled, key=lambda k: (k[1], k[0]))]
+
+
 def format_markdown(study: dict[str, Any]) -> str:
     """The study as two markdown tables: arms (per seed, mean ± std) and effects (paired)."""
     seeds = study["seeds"]
