@@ -544,6 +544,9 @@ def cases(have_rgl: bool, big: bool) -> list[Case]:
     add(C("ablate --workers 0", ab("--workers", "0"), mentions=("workers",)))
     add(C("ablate --out dir missing", cli("ablate", "--out", "{out}/no/such/a.md")))
     add(C("ablate --json folder", cli("ablate", "--json", "{out}")))
+    add(C("ablate --with-records missing", ab("--with-records", "{fx}/nope.json"), mentions=("not found",)))
+    add(C("ablate --with-records bad json", ab("--with-records", "{fx}/bad_manifest.json"), mentions=("json",)))
+    add(C("ablate --with-records a folder", ab("--with-records", "{fx}"), mentions=("folder",)))
 
     # ---- paper-tables
     pt = lambda *a: cli("paper-tables", "--out", "{out}/r.md", "--quiet", *a)  # noqa: E731
