@@ -17,6 +17,7 @@ from __future__ import annotations
 import dataclasses
 import math
 import signal
+import textwrap
 from multiprocessing import get_context
 from pathlib import Path
 from typing import Any, Callable, Sequence
@@ -218,18 +219,27 @@ def plot_study(study: dict[str, Any], path: Path) -> Path:
     import matplotlib.pyplot as plt
 
     arms = list(study["by_arm"])
-    fig, ax = plt.subplots(figsize=(1.8 + 1.4 * len(arms), 3.4), dpi=110)
+    seeds = sorted({int(k) for arm in arms for k in study["by_arm"][arm]["per_seed"]})
+    offsets = dict(zip(seeds, np.linspace(-0.12, 0.12, len(seeds))))
+    fig, ax = plt.subplots(figsize=(2.4 + 1.4 * len(arms), 3.6), dpi=110)
+    for seed in seeds:  # one grey line per seed joins its arms: the effects are paired by seed
+        xs = [i + offsets[seed] for i, arm in enumerate(arms) if str(seed) in study["by_arm"][arm]["per_seed"]]
+        ys = [study["by_arm"][arm]["per_seed"][str(seed)] for arm in arms
+              if str(seed) in study["by_arm"][arm]["per_seed"]]
+        ax.plot(xs, ys, color="0.75", lw=0.8, zorder=2)
     for i, arm in enumerate(arms):
         s = study["by_arm"][arm]
-        vals = [s["per_seed"][k] for k in sorted(s["per_seed"], key=int)]
-        ax.scatter(np.full(len(vals), i) + np.linspace(-0.12, 0.12, len(vals)), vals, s=22, color="C0", zorder=3)
+        keys = sorted(s["per_seed"], key=int)
+        ax.scatter([i + offsets[int(k)] for k in keys], [s["per_seed"][k] for k in keys], s=22, color="C0",
+                   zorder=3)
         ax.errorbar(i + 0.28, s["mean"], yerr=0 if not np.isfinite(s["std"]) else s["std"], fmt="s", color="k",
                     capsize=4, zorder=3)
     ax.set_xticks(range(len(arms)), arms)
     ax.set_xlim(-0.5, len(arms) - 0.3)
     ax.set_ylabel("spectral PSNR (dB), held-out split")
-    ax.set_title(f"{study['steps']} steps from scratch, seeds {', '.join(map(str, study['seeds']))}: "
-                 "dots per seed, ■ mean ± std", fontsize=9)
+    title = (f"{study['steps']} steps from scratch, seeds {', '.join(map(str, study['seeds']))}: "
+             "dots per seed (grey lines join a seed's arms), ■ mean ± std")
+    ax.set_title(textwrap.fill(title, 48), fontsize=9)
     ax.grid(axis="y", alpha=0.3)
     fig.tight_layout()
     path.parent.mkdir(parents=True, exist_ok=True)
