@@ -223,10 +223,8 @@ def plot_study(study: dict[str, Any], path: Path) -> Path:
     offsets = dict(zip(seeds, np.linspace(-0.12, 0.12, len(seeds))))
     fig, ax = plt.subplots(figsize=(2.4 + 1.4 * len(arms), 3.6), dpi=110)
     for seed in seeds:  # one grey line per seed joins its arms: the effects are paired by seed
-        xs = [i + offsets[seed] for i, arm in enumerate(arms) if str(seed) in study["by_arm"][arm]["per_seed"]]
-        ys = [study["by_arm"][arm]["per_seed"][str(seed)] for arm in arms
-              if str(seed) in study["by_arm"][arm]["per_seed"]]
-        ax.plot(xs, ys, color="0.75", lw=0.8, zorder=2)
+        scores = [(i + offsets[seed], study["by_arm"][arm]["per_seed"].get(str(seed))) for i, arm in enumerate(arms)]
+        ax.plot(*zip(*[(x, y) for x, y in scores if y is not None]), color="0.75", lw=0.8, zorder=2)
     for i, arm in enumerate(arms):
         s = study["by_arm"][arm]
         keys = sorted(s["per_seed"], key=int)
