@@ -68,6 +68,14 @@ def test_the_study_figure_is_a_png(tmp_path):
     assert out.read_bytes()[:8] == b"\x89PNG\r\n\x1a\n"
 
 
+def test_figure_titles_write_consecutive_seeds_as_ranges():
+    from specgen_addon.evaluation.ablation_study import seed_ranges
+
+    assert seed_ranges([5, 6, 7, 8, 9, 10, 11, 13]) == "5–11, 13"
+    assert seed_ranges([19, 5, 6, 5]) == "5–6, 19"
+    assert seed_ranges([3]) == "3"
+
+
 def _records_file(path, steps, recs):
     import json
 

@@ -211,6 +211,17 @@ def format_markdown(study: dict[str, Any]) -> str:
     return "\n".join(lines) + "\n"
 
 
+def seed_ranges(seeds: Sequence[int]) -> str:
+    """Seeds written compactly, consecutive runs as ranges: ``[5, 6, 7, 9]`` → ``"5–7, 9"``."""
+    runs: list[list[int]] = []
+    for s in sorted(set(seeds)):
+        if runs and s == runs[-1][-1] + 1:
+            runs[-1].append(s)
+        else:
+            runs.append([s])
+    return ", ".join(str(r[0]) if len(r) == 1 else f"{r[0]}–{r[-1]}" for r in runs)
+
+
 def plot_study(study: dict[str, Any], path: Path) -> Path:
     """Dot plot: each arm's per-seed PSNR (dots) and mean ± std (bar), held-out split, distant lights."""
     import matplotlib
@@ -235,7 +246,7 @@ def plot_study(study: dict[str, Any], path: Path) -> Path:
     ax.set_xticks(range(len(arms)), arms)
     ax.set_xlim(-0.5, len(arms) - 0.3)
     ax.set_ylabel("spectral PSNR (dB), held-out split")
-    title = (f"{study['steps']} steps from scratch, seeds {', '.join(map(str, study['seeds']))}: "
+    title = (f"{study['steps']} steps from scratch, {len(study['seeds'])} seeds ({seed_ranges(study['seeds'])}): "
              "dots per seed (grey lines join a seed's arms), ■ mean ± std")
     ax.set_title(textwrap.fill(title, 48), fontsize=9)
     ax.grid(axis="y", alpha=0.3)
