@@ -21,6 +21,14 @@ def test_paired_effect_is_the_mean_and_sample_std_of_per_seed_differences():
     assert e["sign"] == "positive"
 
 
+def test_paired_effect_reports_the_median_and_how_often_the_first_arm_is_ahead():
+    e = paired_effect([30.0, 28.0, 29.0, 25.0], [29.0, 28.5, 28.9, 30.0])  # differences 1, −0.5, 0.1, −5
+    assert e["median"] == pytest.approx(-0.2)
+    assert e["ahead"] == 2 and e["n"] == 4
+    assert "| -0.20 | 2 of 4 |" in format_markdown({"steps": 1, "seeds": [0, 1, 2, 3], "by_arm": {},
+                                                     "effects": {"x": e}})
+
+
 def test_an_effect_within_two_standard_errors_is_not_called():
     e = paired_effect([30.0, 31.0, 29.0], [30.5, 30.0, 29.2])
     assert e["sign"].startswith("not resolved")

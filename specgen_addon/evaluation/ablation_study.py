@@ -110,7 +110,9 @@ def run_study(steps: int, seeds: Sequence[int] = STUDY_SEEDS, arms: Sequence[str
 
 
 def paired_effect(a: Sequence[float], b: Sequence[float]) -> dict[str, float | str]:
-    """Mean ± sample std of the per-seed differences a − b, its standard error and the called sign."""
+    """Mean ± sample std of the per-seed differences a − b, its standard error and the called sign,
+    with the median difference and the number of seeds where ``a`` is ahead beside them: a mean
+    carried by a few failed runs shows as a median near zero (the call stays on the mean)."""
     d = np.asarray(a, float) - np.asarray(b, float)
     n = d.size
     std = float(d.std(ddof=1)) if n > 1 else math.nan
@@ -122,7 +124,8 @@ def paired_effect(a: Sequence[float], b: Sequence[float]) -> dict[str, float | s
         sign = "positive" if mean > 0 else "negative"
     else:
         sign = "not resolved (|mean| < 2 standard errors)"
-    return {"mean": mean, "std": std, "se": se, "n": n, "sign": sign}
+    return {"mean": mean, "std": std, "se": se, "n": n, "sign": sign,
+            "median": float(np.median(d)), "ahead": int((d > 0).sum())}
 
 
 def summarise(records: Sequence[dict[str, Any]]) -> dict[str, Any]:
@@ -204,10 +207,11 @@ def format_markdown(study: dict[str, Any]) -> str:
     for arm, s in study["by_arm"].items():
         cells = [f"{s['per_seed'][str(k)]:.2f}" if str(k) in s["per_seed"] else "—" for k in seeds]
         lines.append(f"| {arm} | " + " | ".join(cells) + f" | {s['mean']:.2f} ± {s['std']:.2f} |")
-    lines += ["", "| effect (paired by seed) | mean ± std (dB) | standard error | sign |",
-              "| --- | ---: | ---: | --- |"]
+    lines += ["", "| effect (paired by seed) | mean ± std (dB) | standard error | sign | median (dB) | ahead in |",
+              "| --- | ---: | ---: | --- | ---: | ---: |"]
     for label, e in study["effects"].items():
-        lines.append(f"| {label} | {e['mean']:+.2f} ± {e['std']:.2f} | {e['se']:.2f} | {e['sign']} |")
+        lines.append(f"| {label} | {e['mean']:+.2f} ± {e['std']:.2f} | {e['se']:.2f} | {e['sign']} "
+                     f"| {e['median']:+.2f} | {e['ahead']} of {e['n']} |")
     return "\n".join(lines) + "\n"
 
 
