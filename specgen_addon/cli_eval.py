@@ -66,6 +66,12 @@ def add_ablate_parser(subparsers: argparse._SubParsersAction) -> argparse.Argume
     p.add_argument("--out", type=Path, default=None, help="markdown tables to write")
     p.add_argument("--json", type=Path, default=None, help="all records and the summary as JSON")
     p.add_argument("--figure", type=Path, default=None, help="PNG dot plot of every arm's per-seed scores")
+    p.add_argument("--sign-bar", type=float, default=2.0, metavar="SE",
+                   help="call an effect's sign only when its paired mean is at least this many standard "
+                        "errors from zero (default 2; raise it for a study extended after earlier looks, "
+                        "e.g. 2.36, Pocock's constant for four looks)")
+    p.add_argument("--failure-below", type=float, default=None, metavar="DB",
+                   help="also count each arm's failed runs: seeds scoring under this PSNR (dB)")
     p.add_argument("--with-records", type=Path, nargs="+", default=[], metavar="JSON",
                    help="pool this run's arms with an earlier study's records (its --json file, same "
                         "--steps); an (arm, seed) in both must score the same to 0.005 dB, so retraining "
@@ -83,11 +89,12 @@ def run_ablate(args: argparse.Namespace) -> int:
 
     earlier = [r for path in args.with_records for r in load_records(path, args.steps)]
     study = run_study(args.steps, seeds=args.seeds, arms=args.arms, workers=args.workers)
+    records = pool_records(study["records"], earlier) if earlier else study["records"]
+    study.update(records=records, seeds=sorted({r["seed"] for r in records}),
+                 arms=list(dict.fromkeys(r["arm"] for r in records)),
+                 **summarise(records, sign_bar=args.sign_bar, failure_below=args.failure_below))
     if earlier:
-        records = pool_records(study["records"], earlier)
-        study.update(records=records, seeds=sorted({r["seed"] for r in records}),
-                     arms=list(dict.fromkeys(r["arm"] for r in records)),
-                     pooled_with=[str(p) for p in args.with_records], **summarise(records))
+        study["pooled_with"] = [str(p) for p in args.with_records]
     text = format_markdown(study)
     print(text)
     for path, content in ((args.out, text), (args.json, json.dumps(study, indent=1))):

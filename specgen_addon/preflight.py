@@ -214,6 +214,8 @@ def _ablate(a) -> None:
         raise SpecGenError(f"--figure {a.figure}: must end in .png")
     limits.check_numbers({"steps": a.steps})
     limits.check_number("workers", a.workers, bounds=(1, 64))
+    limits.check_number("sign-bar", a.sign_bar, bounds=(1.0, 10.0), integer=False)
+    limits.check_number("failure-below", a.failure_below, bounds=(0.0, 200.0), integer=False)
     for s in a.seeds:
         limits.check_number("seeds", s, bounds=(0, 2 ** 31 - 1))
     if len(set(a.seeds)) != len(a.seeds):

@@ -9,7 +9,7 @@ import sys
 import numpy as np
 import pytest
 
-from specgen_addon.evaluation.ablation_study import format_markdown, paired_effect, summarise
+from specgen_addon.evaluation.ablation_study import format_markdown, paired_effect, summarise, wilcoxon_p
 
 
 def test_paired_effect_is_the_mean_and_sample_std_of_per_seed_differences():
@@ -35,6 +35,51 @@ def test_an_effect_within_two_standard_errors_is_not_called():
     assert paired_effect([20.0, 21.0, 20.5], [25.0, 26.0, 25.2])["sign"] == "negative"
 
 
+def test_a_higher_sign_bar_leaves_an_effect_the_two_standard_error_rule_would_call_unresolved():
+    d = np.array([1.0, 0.2, 1.5, -0.3, 0.9, 1.1, -0.4, 0.8])  # mean / SE ≈ 2.7
+    z = d.mean() / (d.std(ddof=1) / math.sqrt(d.size))
+    assert 2.36 < z < 3.0
+    assert paired_effect(d, np.zeros_like(d))["sign"] == "positive"
+    strict = paired_effect(d, np.zeros_like(d), sign_bar=3.0)
+    assert strict["sign"] == "not resolved (mean within 3 standard errors of zero)"
+    assert strict["passes_two_se"] and strict["z"] == pytest.approx(z)
+
+
+def _wilcoxon_p_by_enumeration(d):
+    """Exact two-sided signed-rank p by enumerating every sign pattern (no ties, no zeros)."""
+    import itertools
+
+    ranks = np.argsort(np.argsort(np.abs(d))) + 1.0
+    w_plus = ranks[d > 0].sum()
+    null = np.array([ranks[list(signs)].sum() for signs in itertools.product([False, True], repeat=d.size)])
+    centre = ranks.sum() / 2
+    return float(np.mean(np.abs(null - centre) >= abs(w_plus - centre) - 1e-9))
+
+
+def test_the_wilcoxon_p_value_matches_an_exact_enumeration_of_sign_patterns():
+    d = np.array([1.27, 0.21, 4.91, -1.45, -0.83, 2.05, 2.73, -1.92, 0.18, -1.38])
+    assert wilcoxon_p(d) == pytest.approx(_wilcoxon_p_by_enumeration(d), abs=1e-12)
+    assert wilcoxon_p(np.array([1.0, 2.0, 3.0, 4.0, 5.0, 6.0])) == pytest.approx(2 / 64)
+    assert math.isnan(wilcoxon_p(np.array([0.0, 0.0, 1.0])))
+
+
+def test_a_few_large_differences_carry_the_mean_but_not_the_signed_rank_test():
+    d = np.array([6.0, 5.0, 0.2, -0.3, 0.1, -0.2, 0.3, -0.1, 0.25, -0.15])
+    e = paired_effect(d, np.zeros_like(d), sign_bar=1.0)
+    assert e["sign"] == "positive" and e["wilcoxon_p"] > 0.2
+
+
+def test_the_summary_counts_each_arms_failed_runs_under_the_threshold():
+    recs = [{"arm": a, "seed": s, "psnr_distant": v} for a, s, v in [
+        ("joint-aff", 0, 27.0), ("joint-aff", 1, 26.5), ("joint-hadamard", 0, 23.4), ("joint-hadamard", 1, 28.0)]]
+    s = summarise(recs, failure_below=26.0)
+    assert s["by_arm"]["joint-aff"]["failures"]["seeds"] == []
+    assert s["by_arm"]["joint-hadamard"]["failures"] == {"below_db": 26.0, "seeds": [0]}
+    text = format_markdown({"seeds": [0, 1], **s})
+    assert "Failed runs (under 26 dB): joint-aff 0 of 2; joint-hadamard 1 of 2 (seeds 0)." in text
+    assert "failures" not in summarise(recs)["by_arm"]["joint-aff"]
+
+
 def test_summary_pairs_arms_by_seed_and_reports_both_effects():
     recs = [{"arm": a, "seed": s, "psnr_distant": v} for a, s, v in [
         ("joint-aff", 0, 30.0), ("joint-aff", 1, 31.0), ("joint-aff", 2, 32.0),
@@ -57,6 +102,8 @@ def test_summary_pairs_arms_by_seed_and_reports_both_effects():
     (["--arms", "nope"], "unknown arm 'nope'"),
     (["--steps", "0"], "--steps must be between"),
     (["--workers", "0"], "--workers must be between"),
+    (["--sign-bar", "0.5"], "--sign-bar must be between"),
+    (["--failure-below", "nan"], "--failure-below must be between"),
 ])
 def test_ablate_refuses_bad_arguments_before_any_work(args, needle, tmp_path):
     r = subprocess.run([sys.executable, "-m", "specgen_addon", "ablate", *args], capture_output=True, text=True,
@@ -74,6 +121,8 @@ def test_the_study_figure_is_a_png(tmp_path):
             for s in (0, 1, 2)]
     out = plot_study({"steps": 10, "seeds": [0, 1, 2], **summarise(recs)}, tmp_path / "f.png")
     assert out.read_bytes()[:8] == b"\x89PNG\r\n\x1a\n"
+    marked = plot_study({"steps": 10, "seeds": [0, 1, 2], **summarise(recs, failure_below=29.5)}, tmp_path / "g.png")
+    assert marked.read_bytes()[:8] == b"\x89PNG\r\n\x1a\n"
 
 
 def test_figure_titles_write_consecutive_seeds_as_ranges():

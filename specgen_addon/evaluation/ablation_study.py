@@ -5,7 +5,10 @@ and scored, network alone, on the held-out mixed test split under the protocol's
 (the issue-11 measure: spectral PSNR in dB, first ``per_family`` test materials of each corpus
 family). An effect is the per-seed *paired* difference of two arms (the same seed gives both arms
 the same spectral batches), reported as mean ± sample standard deviation over seeds with its
-standard error; its sign is called only when the mean is at least two standard errors from zero.
+standard error; its sign is called only when the mean is at least ``sign_bar`` standard errors from
+zero (two by default; more for a study that has been looked at, and extended, before: Pocock's
+constant for the number of looks). A Wilcoxon signed-rank test and each arm's count of failed runs
+(scores under ``failure_below`` dB) are reported beside it and decide nothing.
 
 Arms train in separate processes (one torch thread each), so ``workers`` arms run at once on as
 many cores. Trained arms and their scores are cached under ``cache_root()/ablation``: a rerun
@@ -109,40 +112,65 @@ def run_study(steps: int, seeds: Sequence[int] = STUDY_SEEDS, arms: Sequence[str
             **summarise(records)}
 
 
-def paired_effect(a: Sequence[float], b: Sequence[float]) -> dict[str, float | str]:
-    """Mean ± sample std of the per-seed differences a − b, its standard error and the called sign,
-    with the median difference and the number of seeds where ``a`` is ahead beside them: a mean
-    carried by a few failed runs shows as a median near zero (the call stays on the mean)."""
+#: The default bar for calling an effect's sign, in standard errors of the paired mean.
+SIGN_BAR_SE = 2.0
+
+
+def paired_effect(a: Sequence[float], b: Sequence[float], sign_bar: float = SIGN_BAR_SE) -> dict[str, Any]:
+    """Mean ± sample std of the per-seed differences a − b, its standard error and the sign, called
+    when |mean| ≥ ``sign_bar`` standard errors; beside them (deciding nothing) the median
+    difference, the number of seeds where ``a`` is ahead, ``z`` = mean / standard error, whether the
+    plain two-standard-error rule would call it, and the two-sided Wilcoxon signed-rank p-value,
+    which a few large differences (failed runs) cannot carry as they can the mean."""
     d = np.asarray(a, float) - np.asarray(b, float)
     n = d.size
     std = float(d.std(ddof=1)) if n > 1 else math.nan
     se = std / math.sqrt(n) if n > 1 else math.nan
     mean = float(d.mean())
+    z = mean / se if n > 1 and se > 0 else math.nan
     if n < 2 or not math.isfinite(se):
         sign = "undetermined (one seed)"
-    elif abs(mean) >= 2.0 * se:
+    elif abs(mean) >= sign_bar * se:
         sign = "positive" if mean > 0 else "negative"
     else:
-        sign = "not resolved (|mean| < 2 standard errors)"
-    return {"mean": mean, "std": std, "se": se, "n": n, "sign": sign,
-            "median": float(np.median(d)), "ahead": int((d > 0).sum())}
+        sign = f"not resolved (mean within {sign_bar:g} standard errors of zero)"
+    return {"mean": mean, "std": std, "se": se, "n": n, "sign": sign, "sign_bar": float(sign_bar),
+            "z": float(z), "passes_two_se": bool(n > 1 and abs(mean) >= 2.0 * se),
+            "median": float(np.median(d)), "ahead": int((d > 0).sum()), "wilcoxon_p": wilcoxon_p(d)}
 
 
-def summarise(records: Sequence[dict[str, Any]]) -> dict[str, Any]:
-    """Per-arm mean ± std over seeds and the paired effects of :data:`EFFECTS`."""
+def wilcoxon_p(differences: Sequence[float]) -> float:
+    """Two-sided Wilcoxon signed-rank p-value of paired differences (scipy: exact for small samples
+    without ties or zeros, the normal approximation otherwise); NaN under two non-zero differences."""
+    d = np.asarray(differences, float)
+    if np.count_nonzero(d) < 2:
+        return math.nan
+    from scipy.stats import wilcoxon
+
+    return float(wilcoxon(d, alternative="two-sided").pvalue)
+
+
+def summarise(records: Sequence[dict[str, Any]], sign_bar: float = SIGN_BAR_SE,
+              failure_below: float | None = None) -> dict[str, Any]:
+    """Per-arm mean ± std over seeds (and, with ``failure_below`` in dB, the seeds that scored under
+    it) and the paired effects of :data:`EFFECTS`, signs called at ``sign_bar`` standard errors."""
     by_arm: dict[str, dict[int, float]] = {}
     for r in records:
         by_arm.setdefault(r["arm"], {})[int(r["seed"])] = float(r["psnr_distant"])
     arms = {a: {"mean": float(np.mean(list(v.values()))),
                 "std": float(np.std(list(v.values()), ddof=1)) if len(v) > 1 else math.nan,
                 "per_seed": {str(k): v[k] for k in sorted(v)}} for a, v in by_arm.items()}
+    if failure_below is not None:
+        for a, v in by_arm.items():
+            arms[a]["failures"] = {"below_db": float(failure_below),
+                                   "seeds": [k for k in sorted(v) if v[k] < failure_below]}
     effects = {}
     for label, with_it, without in EFFECTS:
         if with_it in by_arm and without in by_arm:
             common = sorted(set(by_arm[with_it]) & set(by_arm[without]))
             if common:
                 effects[label] = paired_effect([by_arm[with_it][s] for s in common],
-                                               [by_arm[without][s] for s in common])
+                                               [by_arm[without][s] for s in common], sign_bar)
     return {"by_arm": arms, "effects": effects}
 
 
@@ -200,18 +228,27 @@ def pool_records(new: Sequence[dict[str, Any]], earlier: Sequence[dict[str, Any]
 
 
 def format_markdown(study: dict[str, Any]) -> str:
-    """The study as two markdown tables: arms (per seed, mean ± std) and effects (paired)."""
+    """The study as markdown: a table of arms (per seed, mean ± std), each arm's failed runs where a
+    threshold was given, and a table of effects (paired)."""
     seeds = study["seeds"]
     lines = ["| arm | " + " | ".join(f"seed {s}" for s in seeds) + " | mean ± std |",
              "| --- | " + " | ".join("---:" for _ in seeds) + " | ---: |"]
     for arm, s in study["by_arm"].items():
         cells = [f"{s['per_seed'][str(k)]:.2f}" if str(k) in s["per_seed"] else "—" for k in seeds]
         lines.append(f"| {arm} | " + " | ".join(cells) + f" | {s['mean']:.2f} ± {s['std']:.2f} |")
-    lines += ["", "| effect (paired by seed) | mean ± std (dB) | standard error | sign | median (dB) | ahead in |",
-              "| --- | ---: | ---: | --- | ---: | ---: |"]
+    failed = [(arm, s["failures"], len(s["per_seed"])) for arm, s in study["by_arm"].items() if "failures" in s]
+    if failed:
+        lines += ["", f"Failed runs (under {failed[0][1]['below_db']:g} dB): " + "; ".join(
+            f"{arm} {len(f['seeds'])} of {n}" + (f" (seeds {', '.join(map(str, f['seeds']))})" if f["seeds"] else "")
+            for arm, f, n in failed) + "."]
+    lines += ["", "| effect (paired by seed) | mean ± std (dB) | standard error | sign | median (dB) | ahead in "
+                  "| mean / SE | Wilcoxon p |",
+              "| --- | ---: | ---: | --- | ---: | ---: | ---: | ---: |"]
     for label, e in study["effects"].items():
+        z, p = e.get("z", math.nan), e.get("wilcoxon_p", math.nan)
         lines.append(f"| {label} | {e['mean']:+.2f} ± {e['std']:.2f} | {e['se']:.2f} | {e['sign']} "
-                     f"| {e['median']:+.2f} | {e['ahead']} of {e['n']} |")
+                     f"| {e['median']:+.2f} | {e['ahead']} of {e['n']} "
+                     f"| {z:+.2f} | {'—' if not math.isfinite(p) else f'{p:.3f}'} |")
     return "\n".join(lines) + "\n"
 
 
@@ -247,6 +284,10 @@ def plot_study(study: dict[str, Any], path: Path) -> Path:
                    zorder=3)
         ax.errorbar(i + 0.28, s["mean"], yerr=0 if not np.isfinite(s["std"]) else s["std"], fmt="s", color="k",
                     capsize=4, zorder=3)
+    thresholds = {s["failures"]["below_db"] for s in study["by_arm"].values() if "failures" in s}
+    for t in thresholds:  # the failure threshold the study counted runs under, if any
+        ax.axhline(t, color="C3", ls="--", lw=0.8, zorder=1)
+        ax.text(-0.48, t, f"failed: under {t:g} dB", color="C3", fontsize=7, ha="left", va="bottom")
     ax.set_xticks(range(len(arms)), arms)
     ax.set_xlim(-0.5, len(arms) - 0.3)
     ax.set_ylabel("spectral PSNR (dB), held-out split")
