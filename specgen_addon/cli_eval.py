@@ -88,13 +88,14 @@ def run_ablate(args: argparse.Namespace) -> int:
     from .io_utils import atomic_write
 
     earlier = [r for path in args.with_records for r in load_records(path, args.steps)]
-    study = run_study(args.steps, seeds=args.seeds, arms=args.arms, workers=args.workers)
-    records = pool_records(study["records"], earlier) if earlier else study["records"]
-    study.update(records=records, seeds=sorted({r["seed"] for r in records}),
-                 arms=list(dict.fromkeys(r["arm"] for r in records)),
-                 **summarise(records, sign_bar=args.sign_bar, failure_below=args.failure_below))
+    study = run_study(args.steps, seeds=args.seeds, arms=args.arms, workers=args.workers,
+                      sign_bar=args.sign_bar, failure_below=args.failure_below)
     if earlier:
-        study["pooled_with"] = [str(p) for p in args.with_records]
+        records = pool_records(study["records"], earlier)
+        study.update(records=records, seeds=sorted({r["seed"] for r in records}),
+                     arms=list(dict.fromkeys(r["arm"] for r in records)),
+                     pooled_with=[str(p) for p in args.with_records],
+                     **summarise(records, sign_bar=args.sign_bar, failure_below=args.failure_below))
     text = format_markdown(study)
     print(text)
     for path, content in ((args.out, text), (args.json, json.dumps(study, indent=1))):

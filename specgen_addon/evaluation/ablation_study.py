@@ -38,6 +38,8 @@ EFFECTS = (("AFF − Hadamard (joint training)", "joint-aff", "joint-hadamard"),
            ("joint − spectral-only (AFF)", "joint-aff", "spectral-aff"))
 PER_FAMILY = 3
 RESOLUTION = 64
+#: The default bar for calling an effect's sign, in standard errors of the paired mean.
+SIGN_BAR_SE = 2.0
 
 
 def study_settings(steps: int, seeds: Sequence[int] = STUDY_SEEDS,
@@ -80,8 +82,10 @@ def _ignore_sigint() -> None:
 
 def run_study(steps: int, seeds: Sequence[int] = STUDY_SEEDS, arms: Sequence[str] = STUDY_ARMS,
               workers: int = 2, per_family: int = PER_FAMILY, resolution: int = RESOLUTION,
-              cache_dir: Path | None = None, log: Callable[[str], None] = print) -> dict[str, Any]:
-    """Train and score every (arm, seed); returns the records and the summary of :func:`summarise`."""
+              cache_dir: Path | None = None, log: Callable[[str], None] = print, sign_bar: float = SIGN_BAR_SE,
+              failure_below: float | None = None) -> dict[str, Any]:
+    """Train and score every (arm, seed); returns the records and the summary of :func:`summarise`
+    (signs called at ``sign_bar`` standard errors, failed runs counted under ``failure_below`` dB)."""
     settings = study_settings(steps, seeds, arms)
     cache = Path(cache_dir) if cache_dir is not None else cache_root() / "ablation"
     jobs = [(a, s) for s in settings.seeds for a in settings.arms]
@@ -109,11 +113,7 @@ def run_study(steps: int, seeds: Sequence[int] = STUDY_SEEDS, arms: Sequence[str
             pool.join()
     return {"steps": settings.steps, "seeds": list(settings.seeds), "arms": list(settings.arms),
             "per_family": per_family, "resolution": resolution, "records": records,
-            **summarise(records)}
-
-
-#: The default bar for calling an effect's sign, in standard errors of the paired mean.
-SIGN_BAR_SE = 2.0
+            **summarise(records, sign_bar=sign_bar, failure_below=failure_below)}
 
 
 def paired_effect(a: Sequence[float], b: Sequence[float], sign_bar: float = SIGN_BAR_SE) -> dict[str, Any]:
@@ -245,7 +245,7 @@ def format_markdown(study: dict[str, Any]) -> str:
                   "| mean / SE | Wilcoxon p |",
               "| --- | ---: | ---: | --- | ---: | ---: | ---: | ---: |"]
     for label, e in study["effects"].items():
-        z, p = e.get("z", math.nan), e.get("wilcoxon_p", math.nan)
+        z, p = e["z"], e["wilcoxon_p"]
         lines.append(f"| {label} | {e['mean']:+.2f} ± {e['std']:.2f} | {e['se']:.2f} | {e['sign']} "
                      f"| {e['median']:+.2f} | {e['ahead']} of {e['n']} "
                      f"| {z:+.2f} | {'—' if not math.isfinite(p) else f'{p:.3f}'} |")
