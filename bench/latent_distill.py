@@ -171,6 +171,19 @@ def cmd_regress(args) -> int:
     for p in enc.parameters():
         p.requires_grad_(True)
     opt = torch.optim.Adam(enc.parameters(), lr=args.lr)
+    if enc.detail is not None or len(list(enc.res.parameters())):
+        raise SystemExit("regress: the encoder must have no detail branch and no latent blocks")
+
+    def pre_activation(x: torch.Tensor) -> torch.Tensor:
+        """The encoder's latent before its final ReLU (the shipped encoder's forward, less the ReLU)."""
+        h = enc.compress(x)
+        h = torch.cat([h, enc.coords.expand(h.shape[0], -1, -1, -1)], dim=1)
+        return enc.fc(enc.convs(h).flatten(1))
+
+    def surrogate(a: torch.Tensor, z: torch.Tensor) -> torch.Tensor:
+        """(ReLU(a) − z)², except that a unit whose target is positive is pulled up even while its
+        pre-activation is negative: a plain loss through the ReLU gives a dead unit no gradient."""
+        return torch.where(z > 0, (a - z).pow(2), torch.relu(a).pow(2)).mean()
     xv = torch.from_numpy(np.stack([spectral.images[i][0] for i in val]).astype(np.float32))
     zv = torch.stack([z_all[i] for i in val])
     z0v = None
@@ -179,8 +192,13 @@ def cmd_regress(args) -> int:
         with torch.no_grad():
             return float((enc(xv) - zv).pow(2).mean())
 
+    def alive() -> int:
+        with torch.no_grad():
+            return int((enc(xv) > 0).any(0).sum())
+
     z0v = val_error()
-    print(f"step 0: held-out latent MSE (canonical input) {z0v:.4e}", flush=True)
+    print(f"step 0: held-out latent MSE (canonical input) {z0v:.4e}, {alive()} latent units active "
+          f"on held-out inputs ({int((zv > 0).any(0).sum())} in their targets)", flush=True)
     t0 = time.perf_counter()
     for step in range(1, args.steps + 1):
         lr = args.lr * 0.5 ** (step // max(1, args.decay_every))
@@ -190,15 +208,16 @@ def cmd_regress(args) -> int:
         x = torch.from_numpy(np.stack([mix_lighting(spectral.images[i], rng, canonical_p=args.canonical)
                                        for i in pick]))
         z = torch.stack([z_all[i] for i in pick])
-        loss = (enc(x) - z).pow(2).mean()
+        loss = surrogate(pre_activation(x), z)
         opt.zero_grad(set_to_none=True)
         loss.backward()
         opt.step()
         if step % args.log_every == 0 or step == args.steps:
-            print(f"step {step}: train latent MSE {float(loss):.4e}, held-out {val_error():.4e} "
-                  f"(start {z0v:.4e}), lr {lr:.1e}, {time.perf_counter() - t0:.0f} s", flush=True)
+            print(f"step {step}: train loss {float(loss.detach()):.4e}, held-out latent MSE {val_error():.4e} "
+                  f"(start {z0v:.4e}), {alive()} latent units active on held-out inputs, lr {lr:.1e}, "
+                  f"{time.perf_counter() - t0:.0f} s", flush=True)
     args.out.parent.mkdir(parents=True, exist_ok=True)
-    save_weights(model, args.out, meta={"probe": "bench/latent_distill.py regress", "steps": args.steps,
+    save_weights(model, args.out, half=True, meta={"probe": "bench/latent_distill.py regress", "steps": args.steps,
                                          "lr": args.lr, "targets": len(idx)})
     print(f"wrote {args.out}", flush=True)
     return 0
