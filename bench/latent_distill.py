@@ -165,6 +165,17 @@ def cmd_regress(args) -> int:
     train = np.setdiff1d(idx, val)
     z_all = {i: torch.from_numpy(targets[i].astype(np.float32)) for i in idx}
     print(f"{len(train)} training materials, {len(val)} held out for the latent error", flush=True)
+    if args.recycle:
+        from specgen_addon.model.recycle import recycle_dormant
+
+        census = torch.from_numpy(np.concatenate([
+            np.stack([spectral.images[i][0] for i in train]).astype(np.float32),
+            np.stack([mix_lighting(spectral.images[i], rng, canonical_p=0.0) for i in train])]))
+        # Not the latent stage: that would zero the decoder's columns for the dead latent units,
+        # which the targets z* were fitted through (the surrogate loss revives those units).
+        renewed = recycle_dormant(model, census, stages=("encoder",), seed=args.seed)
+        print("recycled dormant units (incoming weights renewed, outgoing zeroed): " +
+              ", ".join(f"{k} {v}" for k, v in renewed.items()), flush=True)
     enc = model.encoder
     for p in model.parameters():
         p.requires_grad_(False)
@@ -246,6 +257,8 @@ def main() -> int:
     r.add_argument("--decay-every", type=int, default=1000)
     r.add_argument("--canonical", type=float, default=0.95, help="canonical share of the input lighting")
     r.add_argument("--threads", type=int, default=1)
+    r.add_argument("--recycle", action="store_true",
+                   help="renew the encoder convs' dormant units first (specgen_addon.model.recycle)")
     r.add_argument("--seed", type=int, default=0)
     r.add_argument("--log-every", type=int, default=100)
     r.add_argument("--out", type=Path, required=True)

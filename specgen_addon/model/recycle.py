@@ -1,0 +1,112 @@
+"""Recycle dormant ReLU units without changing what the network computes.
+
+A ReLU unit that is off for every input gets no gradient, so training never brings it back
+(:mod:`.activity` counts them; the shipped encoder uses 56 of its 256 latent units). Following
+ReDo (Sokar et al. 2023, "The Dormant Neuron Phenomenon in Deep Reinforcement Learning"), each
+dormant unit gets fresh incoming weights and its outgoing weights are set to zero: the network's
+output is unchanged for every input, and the unit is alive again, so the next training step can
+use it. Here the fresh unit's bias is set so that it is on for half of the census inputs (ReDo
+redraws it at random, which can leave the unit dead again).
+
+Stages: each encoder conv, the latent (the encoder's linear layer), each decoder trunk conv and
+each plane head's hidden conv. The decoder's seed map is left alone: its units are single
+positions of a map whose next layer is a convolution, so one of them cannot be silenced alone.
+"""
+
+from __future__ import annotations
+
+import math
+
+import torch
+import torch.nn.functional as F
+from torch import nn
+
+from .specgen import SpecGen
+
+#: Stages :func:`recycle_dormant` can renew.
+STAGES = ("encoder", "latent", "trunk", "heads")
+
+
+def _layers(model: SpecGen) -> list[tuple[str, str, nn.Module, list[tuple[nn.Module, int]]]]:
+    """``(stage, name, layer, consumers)``: each ReLU-fed layer and the layers reading its units
+    (a consumer ``(module, block)`` reads unit k through input columns ``k*block … (k+1)*block``)."""
+    enc, gen = model.encoder, model.generator
+    if enc.detail is not None or len(enc.res) or len(gen.refine) or model.cfg.trunk_res_blocks:
+        raise ValueError("recycling supports networks without a detail branch, latent or trunk blocks "
+                         "and finer trunk stages")
+    out = []
+    convs = [m for m in enc.convs if isinstance(m, nn.Conv2d)]
+    side = (model.cfg.image_size // model.cfg.detail_factor) // 2 ** len(convs)
+    for i, conv in enumerate(convs):
+        nxt = [(convs[i + 1], 1)] if i + 1 < len(convs) else [(enc.fc, side * side)]
+        out.append(("encoder", f"encoder conv {i + 1}", conv, nxt))
+    readers = [(gen.seed, 1)] + ([(gen.spectral, 1)] if gen.spectral is not None else [])
+    out.append(("latent", "latent", enc.fc, readers))
+    tconvs = [m for m in gen.trunk if isinstance(m, nn.Conv2d)]
+    for i, conv in enumerate(tconvs):
+        nxt = [(tconvs[i + 1], 1)] if i + 1 < len(tconvs) else [(h[0], 1) for h in gen.heads.values()]
+        out.append(("trunk", f"decoder trunk conv {i + 1}", conv, nxt))
+    for name, head in gen.heads.items():
+        out.append(("heads", f"plane head {name}", head[0], [(head[2], 1)]))
+    return out
+
+
+def _inputs_and_preactivations(model: SpecGen, images: torch.Tensor, layer: nn.Module
+                               ) -> tuple[torch.Tensor, torch.Tensor]:
+    """The input of ``layer`` and its output (pre-activation) for ``images``."""
+    seen: dict[str, torch.Tensor] = {}
+
+    def keep(_m, inp, out):
+        seen["x"], seen["y"] = inp[0].detach(), out.detach()
+
+    in_encoder = any(m is layer for m in model.encoder.modules())
+    handle = layer.register_forward_hook(keep)
+    try:
+        with torch.no_grad():
+            model.encoder(images) if in_encoder else model.planes(images)
+    finally:
+        handle.remove()
+    return seen["x"], seen["y"]
+
+
+def _unit_on(y: torch.Tensor) -> torch.Tensor:
+    """``(units,)``: a unit (a channel of a map) is on if positive anywhere for any input."""
+    return (y > 0).transpose(0, 1).reshape(y.shape[1], -1).any(1)
+
+
+@torch.no_grad()
+def recycle_dormant(model: SpecGen, images: torch.Tensor, stages: tuple[str, ...] = STAGES,
+                    seed: int = 0) -> dict[str, int]:
+    """Renew the units of ``stages`` that are off for all ``images`` ``(B, 3, S, S)``; returns the
+    number renewed per layer. The model's output is unchanged for every input."""
+    unknown = set(stages) - set(STAGES)
+    if unknown:
+        raise ValueError(f"unknown stage {sorted(unknown)[0]!r}; choose from {', '.join(STAGES)}")
+    gen = torch.Generator().manual_seed(seed)
+    renewed: dict[str, int] = {}
+    for stage, name, layer, consumers in _layers(model):
+        if stage not in stages:
+            continue
+        x, y = _inputs_and_preactivations(model, images, layer)
+        dead = torch.nonzero(~_unit_on(y)).flatten()
+        renewed[name] = int(dead.numel())
+        if not dead.numel():
+            continue
+        w = layer.weight
+        fan_in = w[0].numel()
+        bound = 1.0 / math.sqrt(fan_in)          # PyTorch's default init: kaiming_uniform(a=√5)
+        fresh = (torch.rand((dead.numel(), *w.shape[1:]), generator=gen) * 2.0 - 1.0) * bound
+        w[dead] = fresh.to(w.dtype)
+        if isinstance(layer, nn.Conv2d):
+            pre = F.conv2d(x, fresh.to(x.dtype), None, layer.stride, layer.padding)
+            pre = pre.transpose(0, 1).reshape(dead.numel(), -1)
+        else:
+            pre = (x @ fresh.to(x.dtype).T).T
+        layer.bias[dead] = -pre.median(dim=1).values.to(layer.bias.dtype)   # on for half the inputs
+        for reader, block in consumers:
+            cols = (dead[:, None] * block + torch.arange(block)[None]).flatten()
+            reader.weight[:, cols] = 0.0
+    return renewed
+
+
+__all__ = ["STAGES", "recycle_dormant"]

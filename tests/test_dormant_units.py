@@ -1,0 +1,103 @@
+"""The dead-unit census, and recycling dormant units without changing the network's output."""
+
+from __future__ import annotations
+
+import math
+
+import pytest
+import torch
+
+from specgen_addon.model import Config, SpecGen
+from specgen_addon.model.activity import unit_census
+from specgen_addon.model.recycle import recycle_dormant
+
+SMALL = dict(image_size=32, encoder_channels=(8, 16), latent_dim=32, decoder_seed_hw=(4, 4),
+             decoder_channels=(16, 8), head_channels=8, res_theta_h=8, res_theta_d=8, res_phi_d=12,
+             res_lambda=6, feature_dim=16, aff_map_hw=(4, 4), mlp_hidden=(16, 16), spectral_code_knots=3)
+
+KILLED = {"encoder conv 1": [0, 3], "encoder conv 2": [5], "latent": [1, 2, 7, 30]}
+
+
+def outputs(model: SpecGen, images: torch.Tensor) -> torch.Tensor:
+    g = torch.Generator().manual_seed(1)
+    n, b = 200, images.shape[0]
+    q = (torch.rand(b, n, generator=g) * math.pi / 2, torch.rand(b, n, generator=g) * math.pi / 2,
+         torch.rand(b, n, generator=g) * math.pi, 380 + 400 * torch.rand(b, n, generator=g))
+    with torch.no_grad():
+        return model(images, *q)
+
+
+def damaged_model() -> SpecGen:
+    """A small network with some units switched off for good (a large negative bias)."""
+    torch.manual_seed(0)
+    model = SpecGen(Config(**SMALL)).eval()
+    convs = [m for m in model.encoder.convs if isinstance(m, torch.nn.Conv2d)]
+    with torch.no_grad():
+        convs[0].bias[KILLED["encoder conv 1"]] = -1e3
+        convs[1].bias[KILLED["encoder conv 2"]] = -1e3
+        model.encoder.fc.bias[KILLED["latent"]] = -1e3
+    return model
+
+
+def census(model: SpecGen, images: torch.Tensor) -> dict[str, tuple[int, int]]:
+    return {s.stage: (s.ever_active, s.units) for s in unit_census(model, images)}
+
+
+def test_census_counts_the_units_that_never_switch_on():
+    model, images = damaged_model(), torch.rand(16, 3, 32, 32)
+    c = census(model, images)
+    assert c["encoder conv 1"] == (8 - 2, 8)
+    assert c["encoder conv 2"][0] <= 16 - 1
+    assert c["latent (encoder output)"][0] <= 32 - 4
+    assert list(c)[:3] == ["encoder conv 1", "encoder conv 2", "latent (encoder output)"]
+    assert {"decoder seed map", "decoder trunk conv 1", "plane heads (all six)"} <= set(c)
+
+
+def test_recycling_revives_dead_units_and_leaves_the_output_unchanged():
+    model, images = damaged_model(), torch.rand(16, 3, 32, 32)
+    fresh = torch.rand(4, 3, 32, 32)           # inputs the census never saw
+    before_census, before = census(model, images), outputs(model, fresh)
+    renewed = recycle_dormant(model, images, seed=3)
+    after_census = census(model, images)
+    assert renewed["encoder conv 1"] == 2 and renewed["latent"] >= 4
+    assert after_census["encoder conv 1"] == (8, 8)
+    assert after_census["latent (encoder output)"][0] > before_census["latent (encoder output)"][0]
+    torch.testing.assert_close(outputs(model, fresh), before, rtol=0, atol=1e-6)
+
+
+def test_recycling_leaves_live_units_alone():
+    model, images = damaged_model(), torch.rand(16, 3, 32, 32)
+    with torch.no_grad():
+        h = model.encoder.convs(torch.cat([model.encoder.compress(images),
+                                           model.encoder.coords.expand(16, -1, -1, -1)], 1)).flatten(1)
+        live = (model.encoder.fc(h) > 0).any(0)
+    fc_before = model.encoder.fc.weight.detach().clone()
+    recycle_dormant(model, images, stages=("latent",))
+    renewed = (model.encoder.fc.weight != fc_before).any(1)
+    assert renewed[KILLED["latent"]].all()
+    assert torch.equal(renewed, ~live)                  # exactly the units that were off
+    convs = [m for m in model.encoder.convs if isinstance(m, torch.nn.Conv2d)]
+    assert (convs[0].bias[KILLED["encoder conv 1"]] == -1e3).all()   # a stage not asked for
+
+
+def test_a_recycled_unit_gets_gradient_again():
+    model, images = damaged_model(), torch.rand(16, 3, 32, 32)
+    outputs_grad(model, images).backward()
+    assert model.generator.seed.weight.grad[:, KILLED["latent"]].abs().sum() == 0
+    model.zero_grad()
+    recycle_dormant(model, images, stages=("latent",))
+    outputs_grad(model, images).backward()
+    assert (model.generator.seed.weight.grad[:, KILLED["latent"]].abs().sum(0) > 0).all()
+
+
+def outputs_grad(model: SpecGen, images: torch.Tensor) -> torch.Tensor:
+    g = torch.Generator().manual_seed(2)
+    b, n = images.shape[0], 100
+    q = (torch.rand(b, n, generator=g) * math.pi / 2, torch.rand(b, n, generator=g) * math.pi / 2,
+         torch.rand(b, n, generator=g) * math.pi, 380 + 400 * torch.rand(b, n, generator=g))
+    return model(images, *q).pow(2).mean()
+
+
+def test_recycling_refuses_an_unknown_stage():
+    with pytest.raises(ValueError, match="unknown stage"):
+        recycle_dormant(damaged_model(), torch.rand(2, 3, 32, 32), stages=("planes",))
