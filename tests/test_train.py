@@ -286,6 +286,8 @@ def test_lighting_mix_honours_the_configured_canonical_fraction():
     ({"linear_loss_weight": -1.0}, "linear_loss_weight must be"),
     ({"data_workers": -1}, "data_workers must be an integer ≥ 0"),
     ({"init_weights": "/nonexistent/w.pt"}, "not found"),
+    ({"recycle_dormant": ["planes"]}, "recycle_dormant must list stages"),
+    ({"recycle_dormant": ["latent"]}, "recycle_dormant needs init_weights"),
 ])
 def test_bad_training_configs_are_refused_with_one_clear_error(tmp_path, bad, message):
     from specgen_addon.cli import main as cli_main
@@ -337,6 +339,29 @@ def test_a_run_warm_starts_from_one_knot_weights_into_a_knotted_model(tmp_path):
     # the grown network starts where the old one ended: its first loss is the old one's loss there
     again = train(one, dataclasses.replace(tcfg, steps=1), spec, rgb, val, tmp_path / "c", show_progress=False)
     assert grown.history[0]["loss"] == pytest.approx(again.history[0]["loss"], rel=1e-5)
+
+
+def test_a_warm_start_that_recycles_dead_units_starts_where_the_old_weights_ended(tmp_path):
+    from specgen_addon.model import save_weights
+
+    spec, rgb, val = sets()
+    first = train(Config(**SMALL), TrainConfig(**{**FAST, "steps": 3}), spec, rgb, val, tmp_path / "a",
+                  show_progress=False)
+    model = load_weights(first.weights)
+    killed = [0, 5, 9]
+    with torch.no_grad():
+        model.encoder.fc.bias[killed] = -1e3          # units no input switches on
+    damaged = save_weights(model, tmp_path / "damaged.pt")
+    tcfg = TrainConfig(**{**FAST, "steps": 1, "init_weights": str(damaged)})
+    plain = train(Config(**SMALL), tcfg, spec, rgb, val, tmp_path / "b", show_progress=False)
+    recycled = train(Config(**SMALL), dataclasses.replace(tcfg, recycle_dormant=["encoder", "latent"]),
+                     spec, rgb, val, tmp_path / "c", show_progress=False)
+    # the same function at the first step (its loss is computed before the update) ...
+    assert recycled.history[0]["loss"] == pytest.approx(plain.history[0]["loss"], rel=1e-6)
+    # ... but the dead units were renewed
+    bias = load_weights(recycled.weights).encoder.fc.bias.detach()
+    assert (bias[killed] > -10).all()
+    assert (load_weights(plain.weights).encoder.fc.bias.detach()[killed] < -900).all()
 
 
 def test_train_command_refuses_weights_of_another_model_before_any_work(tmp_path, repo_dir):

@@ -4,8 +4,9 @@ A ReLU unit that is off for every input gets no gradient, so training never brin
 (:mod:`.activity` counts them; the shipped encoder uses 56 of its 256 latent units). Following
 ReDo (Sokar et al. 2023, "The Dormant Neuron Phenomenon in Deep Reinforcement Learning"), each
 dormant unit gets fresh incoming weights and its outgoing weights are set to zero: the network's
-output is unchanged for every input, and the unit is alive again, so the next training step can
-use it. Here the fresh unit's bias is set so that it is on for half of the census inputs (ReDo
+output is unchanged for every input on which the unit was off (every census input; a unit off
+for a large, varied census is off almost everywhere), and the unit is alive again, so the next
+training step can use it. Here the fresh unit's bias is set so that it is on for half of the census inputs (ReDo
 redraws it at random, which can leave the unit dead again).
 
 Stages: each encoder conv, the latent (the encoder's linear layer), each decoder trunk conv and
@@ -78,7 +79,8 @@ def _unit_on(y: torch.Tensor) -> torch.Tensor:
 def recycle_dormant(model: SpecGen, images: torch.Tensor, stages: tuple[str, ...] = STAGES,
                     seed: int = 0) -> dict[str, int]:
     """Renew the units of ``stages`` that are off for all ``images`` ``(B, 3, S, S)``; returns the
-    number renewed per layer. The model's output is unchanged for every input."""
+    number renewed per layer. The model's output is unchanged for every input on which the renewed
+    units were off, the census ``images`` included."""
     unknown = set(stages) - set(STAGES)
     if unknown:
         raise ValueError(f"unknown stage {sorted(unknown)[0]!r}; choose from {', '.join(STAGES)}")

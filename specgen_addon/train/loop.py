@@ -88,6 +88,10 @@ class TrainConfig:
     lighting: str = "variants"
     #: Start from these weights (same model config) instead of a random initialisation.
     init_weights: str | None = None
+    #: Stages whose dormant ReLU units are renewed at the warm start, before the first step
+    #: (:func:`specgen_addon.model.recycle.recycle_dormant`: "encoder", "latent", "trunk",
+    #: "heads"; empty: off). The census is the training inputs (:func:`recycle_census`).
+    recycle_dormant: list[str] = field(default_factory=list)
     #: Processes rendering missing input images before training.
     render_workers: int = 2
     #: Processes making step batches ahead of the network (:mod:`.prefetch`; the same run, bit for
@@ -161,6 +165,17 @@ class TrainConfig:
             check_mix(self.families)
         if self.init_weights is not None and not Path(self.init_weights).is_file():
             raise SpecGenError(f"training config: init_weights {self.init_weights}: file not found")
+        if self.recycle_dormant:
+            from ..model.recycle import STAGES
+
+            bad = [s for s in self.recycle_dormant if s not in STAGES] if isinstance(
+                self.recycle_dormant, list) else [self.recycle_dormant]
+            if bad:
+                raise SpecGenError(f"training config: recycle_dormant must list stages out of "
+                                   f"{', '.join(STAGES)}, got {bad[0]!r}")
+            if self.init_weights is None:
+                raise SpecGenError("training config: recycle_dormant needs init_weights (it renews the "
+                                   "dead units of trained weights)")
         return self
 
 
@@ -241,6 +256,21 @@ def _draw(rng: np.random.Generator, mset: MaterialSet, k: int, canonical_fractio
         mats.append(mset.materials[i])
         imgs.append(stack[j])
     return mats, imgs
+
+
+def recycle_census(spectral: MaterialSet, rgb: MaterialSet, tcfg: TrainConfig,
+                   limit: int = 1024) -> torch.Tensor:
+    """The inputs the dead-unit census of a warm start sees: the canonical input of up to
+    ``limit`` training materials and, with ``lighting="mix"``, each again under a drawn
+    lighting (drawn from the run's seed, so a run stays reproducible)."""
+    from .lighting_mix import mix_lighting
+
+    stacks = [s for mset in (spectral, rgb) for s in mset.images][:limit]
+    rng = np.random.default_rng([tcfg.seed, 0x5EED])
+    images = [np.asarray(s[0], np.float32) for s in stacks]
+    if tcfg.lighting == "mix":
+        images += [mix_lighting(s, rng, canonical_p=0.0) for s in stacks]
+    return torch.from_numpy(np.stack(images))
 
 
 def _tensors(b: Batch, device: torch.device | None = None) -> dict[str, torch.Tensor]:
@@ -396,6 +426,14 @@ def train(mcfg: Config, tcfg: TrainConfig, spectral: MaterialSet, rgb: MaterialS
         if not can_grow(init.cfg, mcfg):
             raise SpecGenError(f"{tcfg.init_weights}: weights were made with a different model config")
         model.load_state_dict(grow_state_dict(init.state_dict(), init.cfg, mcfg, fresh=model.state_dict()))
+        if tcfg.recycle_dormant:
+            from ..model.recycle import recycle_dormant
+
+            renewed = recycle_dormant(model, recycle_census(spectral, rgb, tcfg),
+                                      stages=tuple(tcfg.recycle_dormant), seed=tcfg.seed)
+            if show_progress and dctx.is_main:
+                print("recycled dormant units: " + ", ".join(f"{k} {v}" for k, v in renewed.items()),
+                      flush=True)
     model.to(device)  # before the optimiser, so its state lives there too
     opt = torch.optim.Adam(model.parameters(), lr=tcfg.lr, betas=(0.9, 0.999))
     ema = None
@@ -412,7 +450,7 @@ def train(mcfg: Config, tcfg: TrainConfig, spectral: MaterialSet, rgb: MaterialS
                        if resume and dctx.is_main and ckpt_path.is_file() else None, dctx)
     if ck is not None:
         # keys that older checkpoints lack take their defaults
-        saved = {"ema_decay": 0.0, "linear_loss_weight": 0.0, "input_jitter_px": 0.0,
+        saved = {"ema_decay": 0.0, "linear_loss_weight": 0.0, "input_jitter_px": 0.0, "recycle_dormant": [],
                  "input_scale_jitter": 0.0, "input_offgrid_fraction": 0.0, "input_finder_error_px": 0.07,
                  **ck["train_config"]}
         if ck["model_config"] != mcfg.to_dict() or saved != _tdict(tcfg, ignore_budget=True):
