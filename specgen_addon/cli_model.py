@@ -181,6 +181,11 @@ def run_train(args: argparse.Namespace) -> int:
 
         if not can_grow(load_weights(tcfg.init_weights).cfg, mcfg):
             raise SpecGenError(f"{tcfg.init_weights}: weights were made with a different model config")
+    if tcfg.recycle_dormant:
+        from .model.recycle import unsupported
+
+        if unsupported(mcfg):
+            raise SpecGenError(f"training config: recycle_dormant: {unsupported(mcfg)}")
     out: Path = args.out
     if out.exists() and not out.is_dir():
         raise SpecGenError(f"{out}: exists and is not a directory")

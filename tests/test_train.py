@@ -377,6 +377,21 @@ def test_train_command_refuses_weights_of_another_model_before_any_work(tmp_path
     assert not (tmp_path / "run").exists()
 
 
+def test_train_command_refuses_to_recycle_a_network_it_cannot_before_any_work(tmp_path, capsys):
+    from specgen_addon.cli import main as cli_main
+    from specgen_addon.model import SpecGen, save_weights
+
+    torch.manual_seed(0)
+    blocks = {**SMALL, "trunk_res_blocks": 1}
+    init = save_weights(SpecGen(Config(**blocks)), tmp_path / "blocks.pt")
+    path = tmp_path / "cfg.json"
+    path.write_text(json.dumps({"model": blocks, "train": {"init_weights": str(init), "steps": 1,
+                                                           "recycle_dormant": ["trunk"]}}))
+    assert cli_main(["train", "--config", str(path), "--out", str(tmp_path / "run"), "--quiet"]) == 2
+    assert not (tmp_path / "run").exists()
+    assert "recycle_dormant" in capsys.readouterr().err
+
+
 def test_snapshots_hold_what_the_run_would_ship_at_their_step_and_average(tmp_path):
     from specgen_addon.model.average import average_models
 

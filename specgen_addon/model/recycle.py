@@ -28,13 +28,21 @@ from .specgen import SpecGen
 STAGES = ("encoder", "latent", "trunk", "heads")
 
 
+def unsupported(cfg) -> str | None:
+    """Why a network of config ``cfg`` cannot be recycled, or None if it can."""
+    if cfg.detail_factor > 1 or cfg.latent_res_blocks or cfg.trunk_res_blocks or cfg.trunk_upsample_stages:
+        return ("recycling supports networks without an encoder detail branch, latent or trunk blocks "
+                "and finer trunk stages")
+    return None
+
+
 def _layers(model: SpecGen) -> list[tuple[str, str, nn.Module, list[tuple[nn.Module, int]]]]:
     """``(stage, name, layer, consumers)``: each ReLU-fed layer and the layers reading its units
     (a consumer ``(module, block)`` reads unit k through input columns ``k*block … (k+1)*block``)."""
     enc, gen = model.encoder, model.generator
-    if enc.detail is not None or len(enc.res) or len(gen.refine) or model.cfg.trunk_res_blocks:
-        raise ValueError("recycling supports networks without a detail branch, latent or trunk blocks "
-                         "and finer trunk stages")
+    why = unsupported(model.cfg)
+    if why:
+        raise ValueError(why)
     out = []
     convs = [m for m in enc.convs if isinstance(m, nn.Conv2d)]
     side = (model.cfg.image_size // model.cfg.detail_factor) // 2 ** len(convs)
@@ -111,4 +119,4 @@ def recycle_dormant(model: SpecGen, images: torch.Tensor, stages: tuple[str, ...
     return renewed
 
 
-__all__ = ["STAGES", "recycle_dormant"]
+__all__ = ["STAGES", "recycle_dormant", "unsupported"]
