@@ -62,17 +62,24 @@ def _layers(model: SpecGen) -> list[tuple[str, str, nn.Module, list[tuple[nn.Mod
 
 def _inputs_and_preactivations(model: SpecGen, images: torch.Tensor, layer: nn.Module
                                ) -> tuple[torch.Tensor, torch.Tensor]:
-    """The input of ``layer`` and its output (pre-activation) for ``images``."""
+    """The input of ``layer`` and its output (pre-activation) for ``images``; the forward pass
+    stops at ``layer`` (the census of a large training set runs it once per layer)."""
     seen: dict[str, torch.Tensor] = {}
+
+    class Captured(Exception):
+        pass
 
     def keep(_m, inp, out):
         seen["x"], seen["y"] = inp[0].detach(), out.detach()
+        raise Captured
 
     in_encoder = any(m is layer for m in model.encoder.modules())
     handle = layer.register_forward_hook(keep)
     try:
         with torch.no_grad():
             model.encoder(images) if in_encoder else model.planes(images)
+    except Captured:
+        pass
     finally:
         handle.remove()
     return seen["x"], seen["y"]
