@@ -63,9 +63,8 @@ def fit_latent(model, x, mat, steps: int, rng: np.random.Generator, pool: int = 
     def draw(n):
         th, td, pd = sample_angles(rng, n)
         tgt, valid = material_targets(mat, th, td, pd, WAVELENGTH_GRID_NM, model.cfg.mu)
-        keep = valid
-        t = lambda a: torch.from_numpy(np.asarray(a[keep], np.float32))  # noqa: E731
-        return t(th), t(td), t(pd), torch.from_numpy(tgt[keep].astype(np.float32))
+        t = lambda a: torch.from_numpy(np.asarray(a[valid], np.float32))  # noqa: E731
+        return t(th), t(td), t(pd), torch.from_numpy(tgt[valid].astype(np.float32))
 
     fit_set, test_set = draw(pool), draw(pool)
     wl = torch.from_numpy(WAVELENGTH_GRID_NM.astype(np.float32))
@@ -181,9 +180,9 @@ def cmd_regress(args) -> int:
         p.requires_grad_(False)
     for p in enc.parameters():
         p.requires_grad_(True)
-    opt = torch.optim.Adam(enc.parameters(), lr=args.lr)
     if enc.detail is not None or len(list(enc.res.parameters())):
         raise SystemExit("regress: the encoder must have no detail branch and no latent blocks")
+    opt = torch.optim.Adam(enc.parameters(), lr=args.lr)
 
     def pre_activation(x: torch.Tensor) -> torch.Tensor:
         """The encoder's latent before its final ReLU (the shipped encoder's forward, less the ReLU)."""
@@ -195,9 +194,9 @@ def cmd_regress(args) -> int:
         """(ReLU(a) − z)², except that a unit whose target is positive is pulled up even while its
         pre-activation is negative: a plain loss through the ReLU gives a dead unit no gradient."""
         return torch.where(z > 0, (a - z).pow(2), torch.relu(a).pow(2)).mean()
+
     xv = torch.from_numpy(np.stack([spectral.images[i][0] for i in val]).astype(np.float32))
     zv = torch.stack([z_all[i] for i in val])
-    z0v = None
 
     def val_error() -> float:
         with torch.no_grad():
