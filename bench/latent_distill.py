@@ -14,6 +14,11 @@ MLP on 25 k points to move the encoder a little. This probe splits the work:
    drawn per step as in training (:func:`specgen_addon.train.lighting_mix.mix_lighting`), to
    z*; the decoder, the fusion and the MLP are untouched. A step costs the encoder only.
 
+Outcome (the twenty-fourth session, docs/model.md): the held-out latent error fell by a quarter
+and the network got 2.8 dB *worse* on the 18-material split: a uniform error on the latent is
+the wrong measure for a decoder that is far more sensitive along some directions. Kept as the
+record of a ruled-out shortcut.
+
 The result is an ordinary weights file: score it with
 ``python -m specgen_addon evaluate --no-refine --no-envs --limit 1 --families 3 --weights W``.
 
