@@ -189,12 +189,6 @@ def cmd_regress(args) -> int:
         raise SystemExit("regress: the encoder must have no detail branch and no latent blocks")
     opt = torch.optim.Adam(enc.parameters(), lr=args.lr)
 
-    def pre_activation(x: torch.Tensor) -> torch.Tensor:
-        """The encoder's latent before its final ReLU (the shipped encoder's forward, less the ReLU)."""
-        h = enc.compress(x)
-        h = torch.cat([h, enc.coords.expand(h.shape[0], -1, -1, -1)], dim=1)
-        return enc.fc(enc.convs(h).flatten(1))
-
     def surrogate(a: torch.Tensor, z: torch.Tensor) -> torch.Tensor:
         """(ReLU(a) − z)², except that a unit whose target is positive is pulled up even while its
         pre-activation is negative: a plain loss through the ReLU gives a dead unit no gradient."""
@@ -223,7 +217,7 @@ def cmd_regress(args) -> int:
         x = torch.from_numpy(np.stack([mix_lighting(spectral.images[i], rng, canonical_p=args.canonical)
                                        for i in pick]))
         z = torch.stack([z_all[i] for i in pick])
-        loss = surrogate(pre_activation(x), z)
+        loss = surrogate(enc.pre_activation(x), z)
         opt.zero_grad(set_to_none=True)
         loss.backward()
         opt.step()

@@ -184,8 +184,9 @@ def run_train(args: argparse.Namespace) -> int:
     if tcfg.recycle_dormant:
         from .model.recycle import unsupported
 
-        if unsupported(mcfg):
-            raise SpecGenError(f"training config: recycle_dormant: {unsupported(mcfg)}")
+        why = unsupported(mcfg)
+        if why:
+            raise SpecGenError(f"training config: recycle_dormant: {why}")
     out: Path = args.out
     if out.exists() and not out.is_dir():
         raise SpecGenError(f"{out}: exists and is not a directory")

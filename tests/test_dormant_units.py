@@ -68,9 +68,7 @@ def test_recycling_revives_dead_units_and_leaves_the_output_unchanged():
 def test_recycling_leaves_live_units_alone():
     model, images = damaged_model(), torch.rand(16, 3, 32, 32)
     with torch.no_grad():
-        h = model.encoder.convs(torch.cat([model.encoder.compress(images),
-                                           model.encoder.coords.expand(16, -1, -1, -1)], 1)).flatten(1)
-        live = (model.encoder.fc(h) > 0).any(0)
+        live = (model.encoder.pre_activation(images) > 0).any(0)
     fc_before = model.encoder.fc.weight.detach().clone()
     recycle_dormant(model, images, stages=("latent",))
     renewed = (model.encoder.fc.weight != fc_before).any(1)

@@ -52,12 +52,7 @@ def unit_census(model: SpecGen, images: torch.Tensor) -> list[StageActivity]:
     try:
         with torch.no_grad():
             enc = model.encoder
-            x = enc.compress(enc.base_image(images))
-            x = torch.cat([x, enc.coords.expand(x.shape[0], -1, -1, -1)], dim=1)
-            h = enc.convs(x) if enc.detail is None else enc.convs[1:](
-                enc.convs[0](x) + enc.detail(torch.cat([enc.compress(images),
-                                                        enc.coords_full.expand(x.shape[0], -1, -1, -1)], 1)))
-            latent_relu = torch.relu(enc.fc(h.flatten(1)))
+            latent_relu = torch.relu(enc.pre_activation(images))
             records.append(("latent (encoder output)", latent_relu > 0))
             latent = enc.res(latent_relu)
             records.append(("decoder seed map", torch.relu(model.generator.seed(latent)) > 0))

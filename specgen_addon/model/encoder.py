@@ -78,7 +78,9 @@ class ImageEncoder(nn.Module):
         """Mean log-compressed RGB over the frame ``(B, 3)``: the sphere's overall colour."""
         return self.compress(self.base_image(image)).mean(dim=(2, 3))
 
-    def forward(self, image: torch.Tensor) -> torch.Tensor:
+    def pre_activation(self, image: torch.Tensor) -> torch.Tensor:
+        """The latent before its final ReLU ``(B, latent_dim)`` (a unit negative here for every
+        input is dead: :mod:`.activity`, :mod:`.recycle`)."""
         x = self.compress(self.base_image(image))
         x = torch.cat([x, self.coords.expand(x.shape[0], -1, -1, -1)], dim=1)
         if self.detail is None:
@@ -86,4 +88,7 @@ class ImageEncoder(nn.Module):
         else:
             full = torch.cat([self.compress(image), self.coords_full.expand(x.shape[0], -1, -1, -1)], dim=1)
             h = self.convs[1:](self.convs[0](x) + self.detail(full))
-        return self.res(torch.relu(self.fc(h.flatten(1))))
+        return self.fc(h.flatten(1))
+
+    def forward(self, image: torch.Tensor) -> torch.Tensor:
+        return self.res(torch.relu(self.pre_activation(image)))

@@ -1,7 +1,7 @@
 """Recycle dormant ReLU units without changing what the network computes.
 
 A ReLU unit that is off for every input gets no gradient, so training never brings it back
-(:mod:`.activity` counts them; the shipped encoder uses 56 of its 256 latent units). Following
+(:mod:`.activity` counts them; the shipped encoder uses 66 of its 256 latent units). Following
 ReDo (Sokar et al. 2023, "The Dormant Neuron Phenomenon in Deep Reinforcement Learning"), each
 dormant unit gets fresh incoming weights and its outgoing weights are set to zero: the network's
 output is unchanged for every input on which the unit was off (every census input; a unit off
