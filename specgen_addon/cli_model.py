@@ -179,7 +179,7 @@ def run_train(args: argparse.Namespace) -> int:
     if tcfg.init_weights is not None and not args.resume:  # before the input renders, not after
         from .model.grow import can_grow
 
-        if not can_grow(load_weights(tcfg.init_weights).cfg, mcfg):
+        if not can_grow(load_weights(tcfg.init_weights).cfg, mcfg, fresh_encoder=tcfg.fresh_encoder):
             raise SpecGenError(f"{tcfg.init_weights}: weights were made with a different model config")
     if tcfg.recycle_dormant:
         from .model.recycle import unsupported

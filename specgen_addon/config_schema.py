@@ -37,7 +37,7 @@ TRAIN_BOUNDS: dict[str, tuple[float | None, float | None]] = {
 MODEL_BOUNDS: dict[str, tuple[float | None, float | None]] = {
     "image_size": (8, 1024), "lambda_min_nm": (300.0, 1100.0), "lambda_max_nm": (300.0, 1100.0),
     "mu": (1e-3, 1e6), "latent_res_blocks": (0, 64), "trunk_res_blocks": (0, 64),
-    "trunk_upsample_stages": (0, 4),
+    "trunk_upsample_stages": (0, 4), "encoder_negative_slope": (0.0, 0.999),
 }
 
 

@@ -9,7 +9,7 @@ import torch
 
 from specgen_addon.model import Config, SpecGen
 from specgen_addon.model.activity import unit_census
-from specgen_addon.model.recycle import recycle_dormant
+from specgen_addon.model.recycle import recycle_dormant, unsupported
 
 SMALL = dict(image_size=32, encoder_channels=(8, 16), latent_dim=32, decoder_seed_hw=(4, 4),
              decoder_channels=(16, 8), head_channels=8, res_theta_h=8, res_theta_d=8, res_phi_d=12,
@@ -99,3 +99,23 @@ def outputs_grad(model: SpecGen, images: torch.Tensor) -> torch.Tensor:
 def test_recycling_refuses_an_unknown_stage():
     with pytest.raises(ValueError, match="unknown stage"):
         recycle_dormant(damaged_model(), torch.rand(2, 3, 32, 32), stages=("planes",))
+
+
+def test_a_leaky_encoder_keeps_learning_where_a_relu_unit_dies():
+    import dataclasses
+
+    torch.manual_seed(0)
+    relu = SpecGen(Config(**SMALL))
+    leaky = SpecGen(dataclasses.replace(relu.cfg, encoder_negative_slope=0.1))
+    leaky.load_state_dict(relu.state_dict())            # same parameters: the slope is not one
+    with torch.no_grad():
+        for m in (relu, leaky):
+            m.encoder.fc.bias[:4] = -1e3                  # four latent units below zero for every input
+    images = torch.rand(6, 3, 32, 32)
+    for m in (relu, leaky):
+        m.encoder(images).sum().backward()
+    assert relu.encoder.fc.bias.grad[:4].abs().max() == 0
+    assert (leaky.encoder.fc.bias.grad[:4].abs() > 0).all()
+    latent = [s for s in unit_census(leaky, images) if s.stage.startswith("latent")][0]
+    assert latent.ever_active <= relu.cfg.latent_dim - 4   # the census still counts them as off
+    assert unsupported(leaky.cfg) is not None                # and recycling refuses a leaky encoder

@@ -288,6 +288,10 @@ def test_lighting_mix_honours_the_configured_canonical_fraction():
     ({"init_weights": "/nonexistent/w.pt"}, "not found"),
     ({"recycle_dormant": ["planes"]}, "recycle_dormant must list stages"),
     ({"recycle_dormant": ["latent"]}, "recycle_dormant needs init_weights"),
+    ({"frozen": ["planes"]}, "frozen must list modules"),
+    ({"frozen": ["generator"]}, "need init_weights"),
+    ({"fresh_encoder": True}, "need init_weights"),
+    ({"fresh_encoder": "yes"}, "fresh_encoder must be true or false"),
 ])
 def test_bad_training_configs_are_refused_with_one_clear_error(tmp_path, bad, message):
     from specgen_addon.cli import main as cli_main
@@ -424,3 +428,34 @@ def test_a_run_stopped_before_its_first_step_saves_its_start_and_says_so(tmp_pat
     assert res.steps == 0 and res.history == [] and res.stopped_early and Path(res.weights).is_file()
     assert train_summary(res, 10).endswith("0 steps in 0 s (stopped by --max-minutes); "
                                            "no step was trained in this call")
+
+
+def test_a_fresh_encoder_trains_for_the_frozen_decoder_it_was_given(tmp_path):
+    spec, rgb, val = sets()
+    first = train(Config(**SMALL), TrainConfig(**{**FAST, "steps": 3}), spec, rgb, val, tmp_path / "a",
+                  show_progress=False)
+    old = load_weights(first.weights)
+    leaky = Config(**{**SMALL, "encoder_channels": (8, 16, 16), "encoder_negative_slope": 0.05})
+    tcfg = TrainConfig(**{**FAST, "steps": 4, "lr": 1e-2, "init_weights": str(first.weights),
+                          "fresh_encoder": True, "frozen": ["generator", "fusion", "mapping"]})
+    run = train(leaky, tcfg, spec, rgb, val, tmp_path / "b", show_progress=False)
+    new = load_weights(run.weights)
+    assert new.cfg.encoder_negative_slope == 0.05 and len(new.cfg.encoder_channels) == 3
+    for name in ("generator", "fusion", "mapping"):          # carried over and never moved
+        for key, value in getattr(old, name).state_dict().items():
+            assert torch.equal(getattr(new, name).state_dict()[key], value), f"{name}.{key} changed"
+    again = train(leaky, tcfg, spec, rgb, val, tmp_path / "c", show_progress=False)
+    assert torch.equal(load_weights(again.weights).encoder.fc.weight, new.encoder.fc.weight)  # seeded
+    fresh_start = train(leaky, dataclasses.replace(tcfg, steps=1, lr=1e-12), spec, rgb, val, tmp_path / "d",
+                        show_progress=False)
+    assert not torch.allclose(load_weights(fresh_start.weights).encoder.fc.weight, new.encoder.fc.weight)
+
+
+def test_a_warm_start_refuses_an_encoder_change_unless_the_encoder_is_fresh(tmp_path):
+    from specgen_addon.model.grow import can_grow
+
+    wider = Config(**{**SMALL, "encoder_channels": (8, 24)})
+    assert not can_grow(Config(**SMALL), wider)
+    assert can_grow(Config(**SMALL), wider, fresh_encoder=True)
+    assert not can_grow(Config(**SMALL), Config(**{**SMALL, "head_channels": 4}), fresh_encoder=True)
+    assert not can_grow(Config(**SMALL), Config(**{**SMALL, "latent_dim": 16}), fresh_encoder=True)

@@ -44,7 +44,8 @@ def unit_census(model: SpecGen, images: torch.Tensor) -> list[StageActivity]:
             records.append((name, _channels_on(out.detach())))
         return keep
 
-    relus = [(f"encoder conv {i // 2 + 1}", m) for i, m in enumerate(model.encoder.convs) if isinstance(m, nn.ReLU)]
+    relus = [(f"encoder conv {i // 2 + 1}", m) for i, m in enumerate(model.encoder.convs)
+             if isinstance(m, (nn.ReLU, nn.LeakyReLU))]
     relus += [(f"decoder trunk conv {k + 1}", m) for k, m in
               enumerate(m for m in model.generator.trunk if isinstance(m, nn.ReLU))]
     relus += [(f"plane head {name}", head[1]) for name, head in model.generator.heads.items()]
@@ -52,9 +53,9 @@ def unit_census(model: SpecGen, images: torch.Tensor) -> list[StageActivity]:
     try:
         with torch.no_grad():
             enc = model.encoder
-            latent_relu = torch.relu(enc.pre_activation(images))
-            records.append(("latent (encoder output)", latent_relu > 0))
-            latent = enc.res(latent_relu)
+            pre = enc.pre_activation(images)
+            records.append(("latent (encoder output)", pre > 0))
+            latent = enc.res(enc.activate(pre))
             records.append(("decoder seed map", torch.relu(model.generator.seed(latent)) > 0))
             model.generator(latent, enc.colour(images))
     finally:

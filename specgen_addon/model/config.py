@@ -29,6 +29,11 @@ class Config:
     image_size: int = 64
     # encoder: stride-2 3×3 convs, then a linear layer to the latent vector
     encoder_channels: tuple[int, ...] = (32, 64, 96, 128)
+    #: Slope of the encoder's activations below zero, its convs' and the latent's: 0 is the ReLU
+    #: (every weights file before the twenty-fifth session); a small slope (leaky ReLU) keeps a
+    #: unit that is negative for every input learning, where a ReLU unit dies for good
+    #: (:mod:`.activity`).
+    encoder_negative_slope: float = 0.0
     #: The convs see the image at image_size / detail_factor; with a factor k > 1 (a power of
     #: two) a detail branch sees it at full size (:class:`.encoder.ImageEncoder`). Default 1: none.
     detail_factor: int = 1
@@ -87,6 +92,9 @@ class Config:
             n = getattr(self, name)
             if not (isinstance(n, int) and not isinstance(n, bool) and n >= 0):
                 raise SpecGenError(f"{name} must be an integer ≥ 0, got {n!r}")
+        s = self.encoder_negative_slope
+        if not (isinstance(s, (int, float)) and not isinstance(s, bool) and 0.0 <= s < 1.0):
+            raise SpecGenError(f"encoder_negative_slope must be a number in [0, 1), got {s!r}")
         k = self.detail_factor
         if not (isinstance(k, int) and not isinstance(k, bool) and k >= 1 and k & (k - 1) == 0):
             raise SpecGenError(f"detail_factor must be a power of two ≥ 1, got {k!r}")

@@ -5,6 +5,7 @@ from __future__ import annotations
 import math
 
 import torch
+import torch.nn.functional as F
 from torch import nn
 
 from .config import Config
@@ -18,7 +19,9 @@ def _coords(size: int) -> torch.Tensor:
 
 
 class ImageEncoder(nn.Module):
-    """Stride-2 3×3 convolutions with ReLU, then a linear layer to ``latent_dim``.
+    """Stride-2 3×3 convolutions with ReLU, then a linear layer to ``latent_dim`` and a ReLU.
+
+    With ``encoder_negative_slope`` s > 0 every one of those ReLUs is a leaky ReLU of slope s.
 
     Input ``(B, 3, S, S)`` linear RGB in roughly [0, 1] (S = ``image_size``); the image is
     log-compressed first (``log1p(16·x)/log(17)``) so specular highlights do not dominate.
@@ -37,8 +40,10 @@ class ImageEncoder(nn.Module):
         super().__init__()
         layers: list[nn.Module] = []
         c_in = 5
+        self.negative_slope = float(cfg.encoder_negative_slope)
         for c in cfg.encoder_channels:
-            layers += [nn.Conv2d(c_in, c, 3, stride=2, padding=1), nn.ReLU(inplace=True)]
+            act = nn.LeakyReLU(self.negative_slope, inplace=True) if self.negative_slope else nn.ReLU(inplace=True)
+            layers += [nn.Conv2d(c_in, c, 3, stride=2, padding=1), act]
             c_in = c
         self.convs = nn.Sequential(*layers)
         base = cfg.image_size // cfg.detail_factor
@@ -78,9 +83,13 @@ class ImageEncoder(nn.Module):
         """Mean log-compressed RGB over the frame ``(B, 3)``: the sphere's overall colour."""
         return self.compress(self.base_image(image)).mean(dim=(2, 3))
 
+    def activate(self, pre: torch.Tensor) -> torch.Tensor:
+        """The encoder's activation: ReLU, or a leaky ReLU with ``encoder_negative_slope`` > 0."""
+        return F.leaky_relu(pre, self.negative_slope) if self.negative_slope else torch.relu(pre)
+
     def pre_activation(self, image: torch.Tensor) -> torch.Tensor:
-        """The latent before its final ReLU ``(B, latent_dim)`` (a unit negative here for every
-        input is dead: :mod:`.activity`, :mod:`.recycle`)."""
+        """The latent before its final activation ``(B, latent_dim)`` (with a ReLU, a unit negative
+        here for every input is dead: :mod:`.activity`, :mod:`.recycle`)."""
         x = self.compress(self.base_image(image))
         x = torch.cat([x, self.coords.expand(x.shape[0], -1, -1, -1)], dim=1)
         if self.detail is None:
@@ -91,4 +100,4 @@ class ImageEncoder(nn.Module):
         return self.fc(h.flatten(1))
 
     def forward(self, image: torch.Tensor) -> torch.Tensor:
-        return self.res(torch.relu(self.pre_activation(image)))
+        return self.res(self.activate(self.pre_activation(image)))

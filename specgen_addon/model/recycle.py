@@ -33,6 +33,8 @@ def unsupported(cfg) -> str | None:
     if cfg.detail_factor > 1 or cfg.latent_res_blocks or cfg.trunk_res_blocks or cfg.trunk_upsample_stages:
         return ("recycling supports networks without an encoder detail branch, latent or trunk blocks "
                 "and finer trunk stages")
+    if cfg.encoder_negative_slope:
+        return "recycling supports ReLU encoders only (a leaky unit below zero is not silent)"
     return None
 
 

@@ -39,6 +39,8 @@ from .prefetch import step_batches
 
 #: Band grid (nm) the spectral targets are evaluated on: 10 nm steps over the visible range.
 TARGET_WAVELENGTHS_NM = wavelength_grid(380.0, 780.0, 41)
+#: The network's top-level modules, as ``frozen`` names them.
+MODULES = ("encoder", "generator", "fusion", "mapping")
 
 
 @dataclass
@@ -92,6 +94,12 @@ class TrainConfig:
     #: (:func:`specgen_addon.model.recycle.recycle_dormant`: "encoder", "latent", "trunk",
     #: "heads"; empty: off). The census is the training inputs (:func:`recycle_census`).
     recycle_dormant: list[str] = field(default_factory=list)
+    #: Start the encoder at a random initialisation and take only the decoder, fusion and mapping
+    #: from ``init_weights`` (the encoder's config may then differ: :func:`.grow.can_grow`).
+    fresh_encoder: bool = False
+    #: Top-level modules that do not train ("encoder", "generator", "fusion", "mapping"; empty:
+    #: all train): a new encoder can learn for a fixed, trained decoder.
+    frozen: list[str] = field(default_factory=list)
     #: Processes rendering missing input images before training.
     render_workers: int = 2
     #: Processes making step batches ahead of the network (:mod:`.prefetch`; the same run, bit for
@@ -176,6 +184,18 @@ class TrainConfig:
             if self.init_weights is None:
                 raise SpecGenError("training config: recycle_dormant needs init_weights (it renews the "
                                    "dead units of trained weights)")
+        if not isinstance(self.fresh_encoder, bool):
+            raise SpecGenError(f"training config: fresh_encoder must be true or false, got {self.fresh_encoder!r}")
+        if not isinstance(self.frozen, list) or any(m not in MODULES for m in self.frozen):
+            raise SpecGenError(f"training config: frozen must list modules out of {', '.join(MODULES)}, "
+                               f"got {self.frozen!r}")
+        if set(self.frozen) == set(MODULES):
+            raise SpecGenError("training config: frozen lists every module, so nothing would train")
+        if (self.fresh_encoder or self.frozen) and self.init_weights is None:
+            raise SpecGenError("training config: fresh_encoder and frozen need init_weights (the trained "
+                               "modules they keep)")
+        if self.fresh_encoder and "encoder" in self.frozen:
+            raise SpecGenError("training config: a fresh encoder cannot be frozen (it would stay random)")
         return self
 
 
@@ -423,9 +443,10 @@ def train(mcfg: Config, tcfg: TrainConfig, spectral: MaterialSet, rgb: MaterialS
         from ..model.grow import can_grow, grow_state_dict
 
         init = load_weights(tcfg.init_weights)
-        if not can_grow(init.cfg, mcfg):
+        if not can_grow(init.cfg, mcfg, fresh_encoder=tcfg.fresh_encoder):
             raise SpecGenError(f"{tcfg.init_weights}: weights were made with a different model config")
-        model.load_state_dict(grow_state_dict(init.state_dict(), init.cfg, mcfg, fresh=model.state_dict()))
+        model.load_state_dict(grow_state_dict(init.state_dict(), init.cfg, mcfg, fresh=model.state_dict(),
+                                              fresh_encoder=tcfg.fresh_encoder))
         if tcfg.recycle_dormant:
             from ..model.recycle import recycle_dormant
 
@@ -435,7 +456,9 @@ def train(mcfg: Config, tcfg: TrainConfig, spectral: MaterialSet, rgb: MaterialS
                 print("recycled dormant units: " + ", ".join(f"{k} {v}" for k, v in renewed.items()),
                       flush=True)
     model.to(device)  # before the optimiser, so its state lives there too
-    opt = torch.optim.Adam(model.parameters(), lr=tcfg.lr, betas=(0.9, 0.999))
+    for name in tcfg.frozen:
+        getattr(model, name).requires_grad_(False)
+    opt = torch.optim.Adam([p for p in model.parameters() if p.requires_grad], lr=tcfg.lr, betas=(0.9, 0.999))
     ema = None
     if tcfg.ema_decay > 0:
         from torch.optim.swa_utils import AveragedModel, get_ema_multi_avg_fn
@@ -451,6 +474,7 @@ def train(mcfg: Config, tcfg: TrainConfig, spectral: MaterialSet, rgb: MaterialS
     if ck is not None:
         # keys that older checkpoints lack take their defaults
         saved = {"ema_decay": 0.0, "linear_loss_weight": 0.0, "input_jitter_px": 0.0, "recycle_dormant": [],
+                 "fresh_encoder": False, "frozen": [],
                  "input_scale_jitter": 0.0, "input_offgrid_fraction": 0.0, "input_finder_error_px": 0.07,
                  **ck["train_config"]}
         if ck["model_config"] != mcfg.to_dict() or saved != _tdict(tcfg, ignore_budget=True):
