@@ -83,6 +83,26 @@ def test_a_model_with_a_detail_branch_exports_and_agrees(tmp_path):
         assert np.abs(ta - tb.numpy()).max() < 1e-4
 
 
+def test_a_model_with_a_leaky_encoder_exports_and_agrees(tmp_path):
+    torch.manual_seed(0)
+    model = SpecGen(Config(**SMALL, encoder_negative_slope=0.2))
+    with torch.no_grad():
+        model.encoder.fc.bias[:8] = -5.0                      # latent units below zero: the slope shows
+    weights = save_weights(model, tmp_path / "leaky.pt")
+    export_onnx(weights)
+    x = np.random.default_rng(1).random((1, 3, 32, 32)).astype(np.float32)
+    u = np.linspace(-1, 1, 5).astype(np.float32)
+    onnx = infer.get_backend(weights, "onnx").make_tables(x, u)
+    for ta, tb in zip(onnx, infer.get_backend(weights, "torch").make_tables(x, u)):
+        assert np.abs(ta - tb.numpy()).max() < 1e-4
+    relu = save_weights(SpecGen(Config(**SMALL)), tmp_path / "relu.pt")
+    model_relu = load_weights(relu)
+    model_relu.load_state_dict(model.state_dict())             # the same weights without the slope
+    save_weights(model_relu, relu)
+    export_onnx(relu)
+    assert any(np.abs(a - b).max() > 1e-3 for a, b in zip(onnx, infer.get_backend(relu, "onnx").make_tables(x, u)))
+
+
 def _graph_tables(weights) -> tuple[np.ndarray, ...]:
     """The six grid tables onnxruntime makes from the graphs of ``weights`` for one fixed input."""
     x = np.random.default_rng(2).random((1, 3, 32, 32)).astype(np.float32)

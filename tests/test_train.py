@@ -459,3 +459,12 @@ def test_a_warm_start_refuses_an_encoder_change_unless_the_encoder_is_fresh(tmp_
     assert can_grow(Config(**SMALL), wider, fresh_encoder=True)
     assert not can_grow(Config(**SMALL), Config(**{**SMALL, "head_channels": 4}), fresh_encoder=True)
     assert not can_grow(Config(**SMALL), Config(**{**SMALL, "latent_dim": 16}), fresh_encoder=True)
+
+
+def test_the_recycling_census_holds_each_training_input_once():
+    from specgen_addon.train.loop import recycle_census
+
+    spec, rgb, _ = sets(3)                      # the RGB versions share their originals' images
+    images = recycle_census(spec, rgb, TrainConfig(**FAST))
+    assert images.shape[0] == 3
+    assert len({tuple(im.flatten()[:64].tolist()) for im in images}) == 3

@@ -17,6 +17,7 @@ positions of a map whose next layer is a convolution, so one of them cannot be s
 from __future__ import annotations
 
 import math
+from typing import Callable
 
 import torch
 import torch.nn.functional as F
@@ -62,10 +63,10 @@ def _layers(model: SpecGen) -> list[tuple[str, str, nn.Module, list[tuple[nn.Mod
     return out
 
 
-def _inputs_and_preactivations(model: SpecGen, images: torch.Tensor, layer: nn.Module
+def _inputs_and_preactivations(forward: Callable[[], object], layer: nn.Module
                                ) -> tuple[torch.Tensor, torch.Tensor]:
-    """The input of ``layer`` and its output (pre-activation) for ``images``; the forward pass
-    stops at ``layer`` (the census of a large training set runs it once per layer)."""
+    """The input of ``layer`` and its output (pre-activation) in the pass ``forward`` runs; the
+    pass stops at ``layer`` (the census of a large training set runs it once per layer)."""
     seen: dict[str, torch.Tensor] = {}
 
     class Captured(Exception):
@@ -75,11 +76,10 @@ def _inputs_and_preactivations(model: SpecGen, images: torch.Tensor, layer: nn.M
         seen["x"], seen["y"] = inp[0].detach(), out.detach()
         raise Captured
 
-    in_encoder = any(m is layer for m in model.encoder.modules())
     handle = layer.register_forward_hook(keep)
     try:
         with torch.no_grad():
-            model.encoder(images) if in_encoder else model.planes(images)
+            forward()
     except Captured:
         pass
     finally:
@@ -103,10 +103,18 @@ def recycle_dormant(model: SpecGen, images: torch.Tensor, stages: tuple[str, ...
         raise ValueError(f"unknown stage {sorted(unknown)[0]!r}; choose from {', '.join(STAGES)}")
     gen = torch.Generator().manual_seed(seed)
     renewed: dict[str, int] = {}
+    decoder_input: tuple[torch.Tensor, torch.Tensor] | None = None
     for stage, name, layer, consumers in _layers(model):
         if stage not in stages:
             continue
-        x, y = _inputs_and_preactivations(model, images, layer)
+        if stage in ("encoder", "latent"):
+            x, y = _inputs_and_preactivations(lambda: model.encoder(images), layer)
+        else:
+            # the encoder's stages are all renewed by now (they come first), so its output, which
+            # the decoder's census reads, is computed once for every decoder layer
+            if decoder_input is None:
+                decoder_input = (model.encoder(images), model.encoder.colour(images))
+            x, y = _inputs_and_preactivations(lambda: model.generator(*decoder_input), layer)
         dead = torch.nonzero(~_unit_on(y)).flatten()
         renewed[name] = int(dead.numel())
         if not dead.numel():

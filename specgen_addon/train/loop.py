@@ -285,7 +285,9 @@ def recycle_census(spectral: MaterialSet, rgb: MaterialSet, tcfg: TrainConfig,
     lighting (drawn from the run's seed, so a run stays reproducible)."""
     from .lighting_mix import mix_lighting
 
-    stacks = [s for mset in (spectral, rgb) for s in mset.images][:limit]
+    seen: set[int] = set()      # an RGB version shares its spectral original's input stack
+    stacks = [s for mset in (spectral, rgb) for s in mset.images
+              if id(s) not in seen and not seen.add(id(s))][:limit]
     rng = np.random.default_rng([tcfg.seed, 0x5EED])
     images = [np.asarray(s[0], np.float32) for s in stacks]
     if tcfg.lighting == "mix":
