@@ -9,7 +9,7 @@ import torch
 
 from specgen_addon.model import Config, SpecGen
 from specgen_addon.model.activity import unit_census
-from specgen_addon.model.recycle import recycle_dormant, unsupported
+from specgen_addon.model.recycle import recycle_dormant, revive_at_boundary, unsupported
 
 SMALL = dict(image_size=32, encoder_channels=(8, 16), latent_dim=32, decoder_seed_hw=(4, 4),
              decoder_channels=(16, 8), head_channels=8, res_theta_h=8, res_theta_d=8, res_phi_d=12,
@@ -119,3 +119,22 @@ def test_a_leaky_encoder_keeps_learning_where_a_relu_unit_dies():
     latent = [s for s in unit_census(leaky, images) if s.stage.startswith("latent")][0]
     assert latent.ever_active <= relu.cfg.latent_dim - 4   # the census still counts them as off
     assert unsupported(leaky.cfg) is not None                # and recycling refuses a leaky encoder
+
+
+def test_revival_at_the_boundary_lets_a_frozen_decoder_keep_reading_the_revived_units():
+    model, images = damaged_model(), torch.rand(16, 3, 32, 32)
+    fresh = torch.rand(4, 3, 32, 32)
+    before, seed_before = outputs(model, fresh), model.generator.seed.weight.detach().clone()
+    with torch.no_grad():
+        live = (model.encoder.pre_activation(images) > 0).any(0)
+    revived = revive_at_boundary(model, images, epsilon=1e-5)
+    assert revived["encoder conv 1"] == 2 and revived["latent"] == int((~live).sum())
+    assert torch.equal(model.generator.seed.weight, seed_before)         # outgoing columns kept
+    assert (model.encoder.fc.weight[~live] == 0).all() and (model.encoder.fc.bias[~live] == 1e-5).all()
+    torch.testing.assert_close(outputs(model, fresh), before, rtol=0, atol=1e-3)   # moved by ε only
+    model.requires_grad_(False)
+    model.encoder.requires_grad_(True)                                    # the decoder frozen
+    outputs_grad(model, images).backward()
+    assert (model.encoder.fc.weight.grad[KILLED["latent"]].abs().sum(1) > 0).all()
+    with pytest.raises(ValueError, match="epsilon"):
+        revive_at_boundary(model, images, epsilon=0.0)

@@ -292,6 +292,7 @@ def test_lighting_mix_honours_the_configured_canonical_fraction():
     ({"frozen": ["generator"]}, "need init_weights"),
     ({"fresh_encoder": True}, "need init_weights"),
     ({"fresh_encoder": "yes"}, "fresh_encoder must be true or false"),
+    ({"recycle_mode": "gentle"}, "recycle_mode must be"),
 ])
 def test_bad_training_configs_are_refused_with_one_clear_error(tmp_path, bad, message):
     from specgen_addon.cli import main as cli_main

@@ -136,4 +136,35 @@ def recycle_dormant(model: SpecGen, images: torch.Tensor, stages: tuple[str, ...
     return renewed
 
 
-__all__ = ["STAGES", "recycle_dormant", "unsupported"]
+@torch.no_grad()
+def revive_at_boundary(model: SpecGen, images: torch.Tensor, stages: tuple[str, ...] = ("encoder", "latent"),
+                       epsilon: float = 1e-4) -> dict[str, int]:
+    """Put the units of ``stages`` that are off for all ``images`` just above their ReLU's kink:
+    incoming weights zero, bias ``epsilon``; returns the number revived per layer.
+
+    Unlike :func:`recycle_dormant` the units' outgoing weights are kept, so a consumer that does
+    not train (a frozen decoder reading the latent) still reads them through its columns, which
+    never trained either (a dead unit passes no gradient to them). The output moves by
+    ``epsilon`` times those columns; each revived unit is on for every input and takes gradient.
+    """
+    unknown = set(stages) - set(STAGES)
+    if unknown:
+        raise ValueError(f"unknown stage {sorted(unknown)[0]!r}; choose from {', '.join(STAGES)}")
+    if not epsilon > 0:
+        raise ValueError(f"epsilon must be > 0, got {epsilon!r}")
+    revived: dict[str, int] = {}
+    for stage, name, layer, _consumers in _layers(model):
+        if stage not in stages:
+            continue
+        if stage in ("encoder", "latent"):
+            _x, y = _inputs_and_preactivations(lambda: model.encoder(images), layer)
+        else:
+            _x, y = _inputs_and_preactivations(lambda: model.planes(images), layer)
+        dead = torch.nonzero(~_unit_on(y)).flatten()
+        revived[name] = int(dead.numel())
+        layer.weight[dead] = 0.0
+        layer.bias[dead] = epsilon
+    return revived
+
+
+__all__ = ["STAGES", "recycle_dormant", "revive_at_boundary", "unsupported"]

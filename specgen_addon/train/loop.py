@@ -94,6 +94,11 @@ class TrainConfig:
     #: (:func:`specgen_addon.model.recycle.recycle_dormant`: "encoder", "latent", "trunk",
     #: "heads"; empty: off). The census is the training inputs (:func:`recycle_census`).
     recycle_dormant: list[str] = field(default_factory=list)
+    #: How ``recycle_dormant`` renews a unit: "redo" (fresh incoming weights, outgoing zeroed:
+    #: :func:`~specgen_addon.model.recycle.recycle_dormant`) or "boundary" (incoming zeroed, bias
+    #: just above the kink, outgoing kept: :func:`~specgen_addon.model.recycle.revive_at_boundary`,
+    #: for a consumer that is ``frozen``).
+    recycle_mode: str = "redo"
     #: Start the encoder at a random initialisation and take only the decoder, fusion and mapping
     #: from ``init_weights`` (the encoder's config may then differ: :func:`.grow.can_grow`).
     fresh_encoder: bool = False
@@ -184,6 +189,8 @@ class TrainConfig:
             if self.init_weights is None:
                 raise SpecGenError("training config: recycle_dormant needs init_weights (it renews the "
                                    "dead units of trained weights)")
+        if self.recycle_mode not in ("redo", "boundary"):
+            raise SpecGenError(f"training config: recycle_mode must be 'redo' or 'boundary', got {self.recycle_mode!r}")
         if not isinstance(self.fresh_encoder, bool):
             raise SpecGenError(f"training config: fresh_encoder must be true or false, got {self.fresh_encoder!r}")
         if not isinstance(self.frozen, list) or any(m not in MODULES for m in self.frozen):
@@ -450,10 +457,11 @@ def train(mcfg: Config, tcfg: TrainConfig, spectral: MaterialSet, rgb: MaterialS
         model.load_state_dict(grow_state_dict(init.state_dict(), init.cfg, mcfg, fresh=model.state_dict(),
                                               fresh_encoder=tcfg.fresh_encoder))
         if tcfg.recycle_dormant:
-            from ..model.recycle import recycle_dormant
+            from ..model.recycle import recycle_dormant, revive_at_boundary
 
-            renewed = recycle_dormant(model, recycle_census(spectral, rgb, tcfg),
-                                      stages=tuple(tcfg.recycle_dormant), seed=tcfg.seed)
+            census, stages = recycle_census(spectral, rgb, tcfg), tuple(tcfg.recycle_dormant)
+            renewed = (recycle_dormant(model, census, stages=stages, seed=tcfg.seed)
+                       if tcfg.recycle_mode == "redo" else revive_at_boundary(model, census, stages=stages))
             if show_progress and dctx.is_main:
                 print("recycled dormant units: " + ", ".join(f"{k} {v}" for k, v in renewed.items()),
                       flush=True)
@@ -476,7 +484,7 @@ def train(mcfg: Config, tcfg: TrainConfig, spectral: MaterialSet, rgb: MaterialS
     if ck is not None:
         # keys that older checkpoints lack take their defaults
         saved = {"ema_decay": 0.0, "linear_loss_weight": 0.0, "input_jitter_px": 0.0, "recycle_dormant": [],
-                 "fresh_encoder": False, "frozen": [],
+                 "fresh_encoder": False, "frozen": [], "recycle_mode": "redo",
                  "input_scale_jitter": 0.0, "input_offgrid_fraction": 0.0, "input_finder_error_px": 0.07,
                  **ck["train_config"]}
         if ck["model_config"] != mcfg.to_dict() or saved != _tdict(tcfg, ignore_budget=True):
