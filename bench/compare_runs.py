@@ -4,7 +4,7 @@ Each run is ``LABEL=RUN_DIR`` (the folder holding the run's ``history.csv``). ``
 draws a horizontal line at a validation MSE to beat (e.g. the shipped weights').
 
 Usage: ``python bench/compare_runs.py fresh=out/s25/fresh warm=out/s25/warm --reference 7.6e-4
---figure docs/img/encoder_runs_s25.png``
+--reference-label "run19 level (≈7.6e-4)" --figure docs/img/encoder_runs_s25.png``
 """
 
 from __future__ import annotations
@@ -41,6 +41,7 @@ def main() -> int:
     ap.add_argument("runs", nargs="+", help="LABEL=RUN_DIR")
     ap.add_argument("--window", type=int, default=500, help="steps in the training-loss running mean")
     ap.add_argument("--reference", type=float, default=None, help="a validation MSE to draw as a line")
+    ap.add_argument("--reference-label", default="reference", help="legend text of that line")
     ap.add_argument("--figure", type=Path, required=True, help="PNG to write")
     args = ap.parse_args()
     runs = []
@@ -65,7 +66,7 @@ def main() -> int:
         print(f"{label}: {steps[-1]} steps, last {args.window}-step mean loss {loss[-args.window:].mean():.3e}, "
               f"last validation {val[-1][1]:.3e}" if val else f"{label}: {steps[-1]} steps")
     if args.reference is not None:
-        b.axhline(args.reference, color="k", ls="--", lw=1, label="reference")
+        b.axhline(args.reference, color="k", ls="--", lw=1, label=args.reference_label)
     for ax, title in ((a, f"training loss ({args.window}-step mean)"), (b, "validation μ-law MSE")):
         ax.set_yscale("log")
         ax.set_xlabel("step")
