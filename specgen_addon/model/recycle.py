@@ -17,7 +17,7 @@ positions of a map whose next layer is a convolution, so one of them cannot be s
 from __future__ import annotations
 
 import math
-from typing import Callable
+from typing import Callable, Iterator
 
 import torch
 import torch.nn.functional as F
@@ -92,17 +92,15 @@ def _unit_on(y: torch.Tensor) -> torch.Tensor:
     return (y > 0).transpose(0, 1).reshape(y.shape[1], -1).any(1)
 
 
-@torch.no_grad()
-def recycle_dormant(model: SpecGen, images: torch.Tensor, stages: tuple[str, ...] = STAGES,
-                    seed: int = 0) -> dict[str, int]:
-    """Renew the units of ``stages`` that are off for all ``images`` ``(B, 3, S, S)``; returns the
-    number renewed per layer. The model's output is unchanged for every input on which the renewed
-    units were off, the census ``images`` included."""
+def _dead_units(model: SpecGen, images: torch.Tensor, stages: tuple[str, ...]
+                ) -> Iterator[tuple[str, nn.Module, list[tuple[nn.Module, int]], torch.Tensor, torch.Tensor]]:
+    """``(name, layer, consumers, layer input, dead unit indices)`` for each layer of ``stages``,
+    input to output, its census taken when it is reached, so it sees what the caller did to the
+    layers before it. The encoder's stages come first; once they are done, the encoder's output
+    (which the decoder's census reads) is computed once for every decoder layer."""
     unknown = set(stages) - set(STAGES)
     if unknown:
         raise ValueError(f"unknown stage {sorted(unknown)[0]!r}; choose from {', '.join(STAGES)}")
-    gen = torch.Generator().manual_seed(seed)
-    renewed: dict[str, int] = {}
     decoder_input: tuple[torch.Tensor, torch.Tensor] | None = None
     for stage, name, layer, consumers in _layers(model):
         if stage not in stages:
@@ -110,12 +108,21 @@ def recycle_dormant(model: SpecGen, images: torch.Tensor, stages: tuple[str, ...
         if stage in ("encoder", "latent"):
             x, y = _inputs_and_preactivations(lambda: model.encoder(images), layer)
         else:
-            # the encoder's stages are all renewed by now (they come first), so its output, which
-            # the decoder's census reads, is computed once for every decoder layer
             if decoder_input is None:
                 decoder_input = (model.encoder(images), model.encoder.colour(images))
             x, y = _inputs_and_preactivations(lambda: model.generator(*decoder_input), layer)
-        dead = torch.nonzero(~_unit_on(y)).flatten()
+        yield name, layer, consumers, x, torch.nonzero(~_unit_on(y)).flatten()
+
+
+@torch.no_grad()
+def recycle_dormant(model: SpecGen, images: torch.Tensor, stages: tuple[str, ...] = STAGES,
+                    seed: int = 0) -> dict[str, int]:
+    """Renew the units of ``stages`` that are off for all ``images`` ``(B, 3, S, S)``; returns the
+    number renewed per layer. The model's output is unchanged for every input on which the renewed
+    units were off, the census ``images`` included."""
+    gen = torch.Generator().manual_seed(seed)
+    renewed: dict[str, int] = {}
+    for name, layer, consumers, x, dead in _dead_units(model, images, stages):
         renewed[name] = int(dead.numel())
         if not dead.numel():
             continue
@@ -147,20 +154,10 @@ def revive_at_boundary(model: SpecGen, images: torch.Tensor, stages: tuple[str, 
     never trained either (a dead unit passes no gradient to them). The output moves by
     ``epsilon`` times those columns; each revived unit is on for every input and takes gradient.
     """
-    unknown = set(stages) - set(STAGES)
-    if unknown:
-        raise ValueError(f"unknown stage {sorted(unknown)[0]!r}; choose from {', '.join(STAGES)}")
     if not epsilon > 0:
         raise ValueError(f"epsilon must be > 0, got {epsilon!r}")
     revived: dict[str, int] = {}
-    for stage, name, layer, _consumers in _layers(model):
-        if stage not in stages:
-            continue
-        if stage in ("encoder", "latent"):
-            _x, y = _inputs_and_preactivations(lambda: model.encoder(images), layer)
-        else:
-            _x, y = _inputs_and_preactivations(lambda: model.planes(images), layer)
-        dead = torch.nonzero(~_unit_on(y)).flatten()
+    for name, layer, _consumers, _x, dead in _dead_units(model, images, stages):
         revived[name] = int(dead.numel())
         layer.weight[dead] = 0.0
         layer.bias[dead] = epsilon
