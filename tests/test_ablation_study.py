@@ -184,3 +184,31 @@ def test_ablate_refuses_bad_records_files_before_any_work(content, needle, tmp_p
     assert r.returncode == 2
     assert needle in r.stderr and "Traceback" not in r.stderr
     assert sorted(p.name for p in tmp_path.iterdir()) == ["r.json"]
+
+
+def test_arms_cached_before_newer_config_fields_keep_their_keys():
+    """Fields added to the configs later, at their defaults, leave an arm's cache key unchanged.
+
+    The keys are those the twenty-third session recorded (docs/ablation_3000_six_knots.json), so the
+    documented command still finds its trained arms instead of training them again."""
+    import json
+    from pathlib import Path
+
+    from specgen_addon.evaluation.ablation import ARMS_BY_NAME, ablation_settings
+
+    doc = Path(__file__).resolve().parents[1] / "docs" / "ablation_3000_six_knots.json"
+    records = json.loads(doc.read_text())["records"]
+    settings = ablation_settings(steps=3000, log=lambda m: None)
+    for r in (records[0], records[-1]):
+        assert settings.key(ARMS_BY_NAME[r["arm"]], r["seed"]) == r["key"]
+
+
+def test_a_newer_config_field_away_from_its_default_changes_the_key():
+    import dataclasses
+
+    from specgen_addon.evaluation.ablation import ARMS_BY_NAME, ablation_settings
+
+    settings = ablation_settings(steps=3000, log=lambda m: None)
+    leaky = dataclasses.replace(settings, model={**settings.model, "encoder_negative_slope": 0.01})
+    arm = ARMS_BY_NAME["joint-aff"]
+    assert leaky.key(arm, 5) != settings.key(arm, 5)

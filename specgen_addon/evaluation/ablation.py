@@ -53,6 +53,11 @@ SMOKE_STEPS = 3
 SMOKE_TRAIN = {"corpus_size": 12, "input_variants": 1, "val_every": 10 ** 9, "val_materials": 2}
 #: Seeds every arm is trained with (the smoke run uses the first only).
 SEEDS = (0, 1)
+#: Fields added to the model / training configs after arms were first cached. At their defaults
+#: they leave a run unchanged, so :meth:`AblationSettings.key` leaves them out and the arms cached
+#: before they existed keep their keys (a documented table's command then trains nothing).
+KEY_NEUTRAL_AT_DEFAULT = {"m": ("encoder_negative_slope",),
+                          "t": ("recycle_dormant", "recycle_mode", "fresh_encoder", "frozen")}
 
 
 @dataclass
@@ -85,7 +90,13 @@ class AblationSettings:
         mcfg, tcfg = self.configs(arm, seed)
         t = dataclasses.asdict(tcfg)
         t.pop("device")  # where an arm trains is not part of what it is (and keeps older keys valid)
-        blob = json.dumps({"m": mcfg.to_dict(), "t": t}, sort_keys=True, default=str)
+        parts = {"m": mcfg.to_dict(), "t": t}
+        defaults = {"m": _field_defaults(type(mcfg)), "t": _field_defaults(type(tcfg))}
+        for part, names in KEY_NEUTRAL_AT_DEFAULT.items():
+            for name in names:
+                if name in parts[part] and parts[part][name] == defaults[part][name]:
+                    del parts[part][name]
+        blob = json.dumps(parts, sort_keys=True, default=str)
         return f"{arm.name}-{hashlib.sha1(blob.encode()).hexdigest()[:10]}"
 
     def describe_markdown(self, results: dict[str, "ArmResult"]) -> str:
@@ -101,6 +112,17 @@ class AblationSettings:
                 "Wall times are as measured (the machine was shared, so they vary; the step budget does not).\n\n")
         return text + report.md_table(["Arm", "Fusion", "Training data", "Steps", "Seed", "Wall time"], rows,
                                       "lllrrr")
+
+
+def _field_defaults(cls: type) -> dict[str, Any]:
+    """Default value of each field of the dataclass ``cls``."""
+    out = {}
+    for f in dataclasses.fields(cls):
+        if f.default is not dataclasses.MISSING:
+            out[f.name] = f.default
+        elif f.default_factory is not dataclasses.MISSING:
+            out[f.name] = f.default_factory()
+    return out
 
 
 @dataclass
