@@ -212,3 +212,12 @@ def test_a_newer_config_field_away_from_its_default_changes_the_key():
     leaky = dataclasses.replace(settings, model={**settings.model, "encoder_negative_slope": 0.01})
     arm = ARMS_BY_NAME["joint-aff"]
     assert leaky.key(arm, 5) != settings.key(arm, 5)
+
+
+def test_a_one_seed_study_prints_dashes_where_the_spread_is_undefined():
+    recs = [{"arm": "joint-aff", "seed": 7, "psnr_distant": 29.4}, {"arm": "joint-hadamard", "seed": 7,
+                                                                      "psnr_distant": 26.25}]
+    text = format_markdown({"seeds": [7], **summarise(recs)})
+    assert "nan" not in text
+    assert "| joint-aff | 29.40 | 29.40 |" in text
+    assert "| AFF − Hadamard (joint training) | +3.15 | — |" in text

@@ -235,7 +235,7 @@ def format_markdown(study: dict[str, Any]) -> str:
              "| --- | " + " | ".join("---:" for _ in seeds) + " | ---: |"]
     for arm, s in study["by_arm"].items():
         cells = [f"{s['per_seed'][str(k)]:.2f}" if str(k) in s["per_seed"] else "—" for k in seeds]
-        lines.append(f"| {arm} | " + " | ".join(cells) + f" | {s['mean']:.2f} ± {s['std']:.2f} |")
+        lines.append(f"| {arm} | " + " | ".join(cells) + f" | {_mean_pm_std(s['mean'], s['std'])} |")
     failed = [(arm, s["failures"], len(s["per_seed"])) for arm, s in study["by_arm"].items() if "failures" in s]
     if failed:
         lines += ["", f"Failed runs (under {failed[0][1]['below_db']:g} dB): " + "; ".join(
@@ -246,10 +246,21 @@ def format_markdown(study: dict[str, Any]) -> str:
               "| --- | ---: | ---: | --- | ---: | ---: | ---: | ---: |"]
     for label, e in study["effects"].items():
         z, p = e["z"], e["wilcoxon_p"]
-        lines.append(f"| {label} | {e['mean']:+.2f} ± {e['std']:.2f} | {e['se']:.2f} | {e['sign']} "
-                     f"| {e['median']:+.2f} | {e['ahead']} of {e['n']} "
-                     f"| {z:+.2f} | {'—' if not math.isfinite(p) else f'{p:.3f}'} |")
+        lines.append(f"| {label} | {_mean_pm_std(e['mean'], e['std'], signed=True)} | {_number(e['se'], '.2f')} "
+                     f"| {e['sign']} | {e['median']:+.2f} | {e['ahead']} of {e['n']} "
+                     f"| {_number(z, '+.2f')} | {_number(p, '.3f')} |")
     return "\n".join(lines) + "\n"
+
+
+def _number(x: float, spec: str) -> str:
+    """``x`` formatted, or a dash where it is undefined (a std or standard error of one seed)."""
+    return format(x, spec) if math.isfinite(x) else "—"
+
+
+def _mean_pm_std(mean: float, std: float, signed: bool = False) -> str:
+    """``mean ± std``, or the mean alone where one seed leaves the std undefined."""
+    m = format(mean, "+.2f" if signed else ".2f")
+    return f"{m} ± {std:.2f}" if math.isfinite(std) else m
 
 
 def seed_ranges(seeds: Sequence[int]) -> str:
