@@ -13,16 +13,27 @@ from __future__ import annotations
 
 import argparse
 import json
+import sys
 from pathlib import Path
+
+REPO = Path(__file__).resolve().parents[1]
+sys.path.insert(0, str(REPO))
 
 
 def scores(path: Path) -> tuple[int, dict[tuple[str, int], float]]:
-    """``(steps, {(arm, seed): PSNR dB})`` of one ``ablate --json`` study."""
+    """``(steps, {(arm, seed): PSNR dB})`` of one ``ablate --json`` study, its records checked by
+    ``ablate``'s own reader (:func:`specgen_addon.evaluation.ablation_study.load_records`)."""
+    from specgen_addon.errors import SpecGenError
+    from specgen_addon.evaluation.ablation_study import load_records
+
     try:
-        study = json.loads(path.read_text())
-        return int(study["steps"]), {(r["arm"], int(r["seed"])): float(r["psnr_distant"]) for r in study["records"]}
+        steps = json.loads(path.read_text(encoding="utf-8"))["steps"]
+        records = load_records(path, steps)
     except (OSError, ValueError, KeyError, TypeError) as e:
         raise SystemExit(f"{path}: not an ablate --json study ({e.__class__.__name__}: {e})") from None
+    except SpecGenError as e:
+        raise SystemExit(str(e)) from None
+    return int(steps), {(r["arm"], r["seed"]): r["psnr_distant"] for r in records}
 
 
 def main() -> int:

@@ -92,7 +92,8 @@ class AblationSettings:
         t = dataclasses.asdict(tcfg)
         t.pop("device")  # where an arm trains is not part of what it is (and keeps older keys valid)
         parts = {"m": mcfg.to_dict(), "t": t}
-        defaults = {"m": _field_defaults(type(mcfg)), "t": _field_defaults(type(tcfg))}
+        # the defaults written the same way as the key's parts, so a value compares like with like
+        defaults = {"m": type(mcfg)().to_dict(), "t": dataclasses.asdict(type(tcfg)())}
         for part, names in KEY_NEUTRAL_AT_DEFAULT.items():
             for name in names:
                 if name in parts[part] and parts[part][name] == defaults[part][name]:
@@ -113,17 +114,6 @@ class AblationSettings:
                 "Wall times are as measured (the machine was shared, so they vary; the step budget does not).\n\n")
         return text + report.md_table(["Arm", "Fusion", "Training data", "Steps", "Seed", "Wall time"], rows,
                                       "lllrrr")
-
-
-def _field_defaults(cls: type) -> dict[str, Any]:
-    """Default value of each field of the dataclass ``cls``."""
-    out = {}
-    for f in dataclasses.fields(cls):
-        if f.default is not dataclasses.MISSING:
-            out[f.name] = f.default
-        elif f.default_factory is not dataclasses.MISSING:
-            out[f.name] = f.default_factory()
-    return out
 
 
 @dataclass
