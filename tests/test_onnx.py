@@ -74,9 +74,13 @@ def test_a_model_with_a_detail_branch_exports_and_agrees(tmp_path):
     torch.manual_seed(0)
     model = SpecGen(Config(**{**SMALL, "image_size": 64}, detail_factor=2))
     torch.nn.init.normal_(model.encoder.detail[-1].weight, std=0.3)     # a trained, non-zero branch
-    weights = save_weights(model, tmp_path / "d.pt")
+    assert_exported_graphs_agree(save_weights(model, tmp_path / "d.pt"), size=64)
+
+
+def assert_exported_graphs_agree(weights, size: int = 32) -> None:
+    """Export ``weights`` and check onnxruntime's tables against torch's for one random input."""
     export_onnx(weights)
-    x = np.random.default_rng(0).random((1, 3, 64, 64)).astype(np.float32)
+    x = np.random.default_rng(0).random((1, 3, size, size)).astype(np.float32)
     u = np.linspace(-1, 1, 5).astype(np.float32)
     for ta, tb in zip(infer.get_backend(weights, "onnx").make_tables(x, u),
                       infer.get_backend(weights, "torch").make_tables(x, u)):
@@ -143,3 +147,10 @@ def test_onnx_backend_needs_only_the_graphs(tmp_path):
     assert all(np.array_equal(a, b) for a, b in zip(before, after))
     with pytest.raises(WeightsError, match="not found"):
         infer.get_backend(weights, "torch")
+
+
+def test_a_model_with_a_boost_encoder_exports_and_agrees(tmp_path):
+    torch.manual_seed(0)
+    model = SpecGen(Config(**SMALL, boost_channels=(8, 8), boost_width=8))
+    torch.nn.init.normal_(model.boost.head[-1].weight, std=0.5)          # a trained, non-zero boost
+    assert_exported_graphs_agree(save_weights(model, tmp_path / "b.pt"))

@@ -469,3 +469,35 @@ def test_the_recycling_census_holds_each_training_input_once():
     images = recycle_census(spec, rgb, TrainConfig(**FAST))
     assert images.shape[0] == 3
     assert len({tuple(im.flatten()[:64].tolist()) for im in images}) == 3
+
+
+def test_a_boost_encoder_trains_alone_against_everything_else_frozen(tmp_path):
+    spec, rgb, val = sets()
+    first = train(Config(**SMALL), TrainConfig(**{**FAST, "steps": 3}), spec, rgb, val, tmp_path / "a",
+                  show_progress=False)
+    old = load_weights(first.weights)
+    boosted = Config(**SMALL, boost_channels=(8, 8), boost_width=8)
+    tcfg = TrainConfig(**{**FAST, "steps": 3, "lr": 1e-2, "init_weights": str(first.weights),
+                          "frozen": ["encoder", "generator", "fusion", "mapping"]})
+    new = load_weights(train(boosted, tcfg, spec, rgb, val, tmp_path / "b", show_progress=False).weights)
+    for name in ("encoder", "generator", "fusion", "mapping"):
+        for key, value in getattr(old, name).state_dict().items():
+            assert torch.equal(getattr(new, name).state_dict()[key], value), f"{name}.{key} changed"
+    assert new.boost.head[-1].weight.abs().sum() > 0                 # the boost moved off zero
+
+
+def test_a_frozen_list_that_leaves_nothing_to_train_or_names_a_missing_boost_is_refused(tmp_path):
+    from specgen_addon.train.loop import check_frozen
+
+    plain, boosted = Config(**SMALL), Config(**SMALL, boost_channels=(8,))
+    four = ["encoder", "generator", "fusion", "mapping"]
+    with pytest.raises(SpecGenError, match="nothing would train"):
+        check_frozen(plain, TrainConfig(frozen=four, init_weights="w.pt"))
+    check_frozen(boosted, TrainConfig(frozen=four, init_weights="w.pt"))          # the boost trains
+    with pytest.raises(SpecGenError, match="no boost_channels"):
+        check_frozen(plain, TrainConfig(frozen=["boost"], init_weights="w.pt"))
+    (tmp_path / "w.pt").write_bytes(b"")
+    cfg = tmp_path / "c.json"
+    cfg.write_text(json.dumps({"model": {}, "train": {"frozen": four, "init_weights": "w.pt"}}))
+    with pytest.raises(SpecGenError, match="nothing would train"):
+        load_config(cfg)

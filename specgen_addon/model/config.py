@@ -38,6 +38,11 @@ class Config:
     #: two) a detail branch sees it at full size (:class:`.encoder.ImageEncoder`). Default 1: none.
     detail_factor: int = 1
     latent_dim: int = 256
+    #: A second encoder whose output is added to the latent (:mod:`.boost`): the widths of its
+    #: stride-2 convs (empty: none, every weights file before the twenty-seventh session) and of
+    #: its bottleneck layer. Its last layer starts at zero, so :mod:`.grow` adds it exactly.
+    boost_channels: tuple[int, ...] = ()
+    boost_width: int = 96
     # plane generator: latent -> seed map -> upsampling convs -> per-plane heads
     decoder_seed_hw: tuple[int, int] = (4, 8)
     decoder_channels: tuple[int, ...] = (128, 96, 64)
@@ -100,6 +105,12 @@ class Config:
             raise SpecGenError(f"detail_factor must be a power of two ≥ 1, got {k!r}")
         if self.image_size % (k * 2 ** len(self.encoder_channels)) != 0:
             raise SpecGenError("image_size must be divisible by detail_factor × 2**len(encoder_channels)")
+        if not all(isinstance(c, int) and not isinstance(c, bool) and c >= 1 for c in self.boost_channels):
+            raise SpecGenError(f"boost_channels must be positive integers, got {list(self.boost_channels)!r}")
+        if self.boost_channels and self.image_size % (k * 2 ** len(self.boost_channels)) != 0:
+            raise SpecGenError("image_size must be divisible by detail_factor × 2**len(boost_channels)")
+        if not (isinstance(self.boost_width, int) and not isinstance(self.boost_width, bool) and self.boost_width >= 1):
+            raise SpecGenError(f"boost_width must be a positive integer, got {self.boost_width!r}")
 
     @property
     def plane_shapes(self) -> dict[str, tuple[int, int]]:

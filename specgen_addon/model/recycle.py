@@ -109,7 +109,7 @@ def _dead_units(model: SpecGen, images: torch.Tensor, stages: tuple[str, ...]
             x, y = _inputs_and_preactivations(lambda: model.encoder(images), layer)
         else:
             if decoder_input is None:
-                decoder_input = (model.encoder(images), model.encoder.colour(images))
+                decoder_input = (model.latent(images), model.encoder.colour(images))
             x, y = _inputs_and_preactivations(lambda: model.generator(*decoder_input), layer)
         yield name, layer, consumers, x, torch.nonzero(~_unit_on(y)).flatten()
 

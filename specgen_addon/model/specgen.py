@@ -17,6 +17,7 @@ from ..errors import WeightsError
 from ..io_utils import atomic_write
 from .config import Config
 from .decoder import BRDFMapping
+from .boost import BoostEncoder
 from .encoder import ImageEncoder
 from .fusion import make_fusion
 from .planes import PlaneGenerator, normalized_coords, project, tv_loss
@@ -33,13 +34,19 @@ class SpecGen(nn.Module):
         super().__init__()
         self.cfg = cfg
         self.encoder = ImageEncoder(cfg)
+        self.boost = BoostEncoder(cfg) if cfg.boost_channels else None
         self.generator = PlaneGenerator(cfg)
         self.fusion = make_fusion(cfg)
         self.mapping = BRDFMapping(cfg)
 
+    def latent(self, image: torch.Tensor) -> torch.Tensor:
+        """The latent ``(B, latent_dim)`` the decoder reads: the encoder's, plus the boost's if any."""
+        z = self.encoder(image)
+        return z if self.boost is None else z + self.boost(image, self.encoder)
+
     def planes(self, image: torch.Tensor) -> dict[str, torch.Tensor]:
         """The six planes ``{d1..e3: (B, C, rows, cols)}`` for images ``(B, 3, S, S)``."""
-        return self.generator(self.encoder(image), self.encoder.colour(image))
+        return self.generator(self.latent(image), self.encoder.colour(image))
 
     def query(self, planes: dict[str, torch.Tensor], theta_h: torch.Tensor, theta_d: torch.Tensor,
               phi_d: torch.Tensor, wavelength_nm: torch.Tensor | None = None) -> torch.Tensor:

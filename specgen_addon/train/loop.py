@@ -40,7 +40,7 @@ from .prefetch import step_batches
 #: Band grid (nm) the spectral targets are evaluated on: 10 nm steps over the visible range.
 TARGET_WAVELENGTHS_NM = wavelength_grid(380.0, 780.0, 41)
 #: The network's top-level modules, as ``frozen`` names them.
-MODULES = ("encoder", "generator", "fusion", "mapping")
+MODULES = ("encoder", "boost", "generator", "fusion", "mapping")
 
 
 @dataclass
@@ -228,7 +228,18 @@ def load_config(path: str | Path) -> tuple[Config, TrainConfig]:
     if isinstance(init, str) and not Path(init).is_absolute():
         # relative to the config file's directory (e.g. "../weights/specgen_default.pt")
         train_d["init_weights"] = str((path.parent / init).resolve())
-    return Config.from_dict(d.get("model", {})), TrainConfig.from_dict(train_d)
+    mcfg, tcfg = Config.from_dict(d.get("model", {})), TrainConfig.from_dict(train_d)
+    check_frozen(mcfg, tcfg)
+    return mcfg, tcfg
+
+
+def check_frozen(mcfg: Config, tcfg: TrainConfig) -> None:
+    """Refuse a ``frozen`` list that names a module the model lacks or leaves nothing to train."""
+    present = [m for m in MODULES if m != "boost" or mcfg.boost_channels]
+    if "boost" in tcfg.frozen and not mcfg.boost_channels:
+        raise SpecGenError("training config: frozen names boost, but the model has no boost_channels")
+    if set(present) <= set(tcfg.frozen):
+        raise SpecGenError("training config: frozen lists every module of this model, so nothing would train")
 
 
 @dataclass
@@ -444,6 +455,7 @@ def train(mcfg: Config, tcfg: TrainConfig, spectral: MaterialSet, rgb: MaterialS
     # interpolation accumulate with atomics and have no deterministic kernel, so a run there is
     # reproducible only to float rounding.
     torch.use_deterministic_algorithms(device.type == "cpu")
+    check_frozen(mcfg, tcfg)
     torch.manual_seed(tcfg.seed)
     model = SpecGen(mcfg)
     if tcfg.init_weights is not None and not (resume and (out / "checkpoint.pt").is_file()):
