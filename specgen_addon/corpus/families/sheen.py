@@ -41,7 +41,7 @@ def sheen_lobe(cos_i, cos_o, cos_h, roughness: float) -> np.ndarray:
     return charlie_d(cos_h, roughness) / (4.0 * (cos_i + cos_o - cos_i * cos_o))
 
 
-@functools.lru_cache(maxsize=64)
+@functools.lru_cache(maxsize=4096)  # one per corpus roughness: a smaller cache thrashes every step
 def sheen_albedo(roughness: float) -> np.ndarray:
     """``E_s(μ)`` at :data:`MU_NODES` of the unscaled lobe (hemisphere quadrature)."""
     fn = lambda ci, co, ch, cd, w: sheen_lobe(ci, co, ch, roughness)[:, None]  # noqa: E731
