@@ -138,3 +138,17 @@ def test_revival_at_the_boundary_lets_a_frozen_decoder_keep_reading_the_revived_
     assert (model.encoder.fc.weight.grad[KILLED["latent"]].abs().sum(1) > 0).all()
     with pytest.raises(ValueError, match="epsilon"):
         revive_at_boundary(model, images, epsilon=0.0)
+
+
+def test_the_census_of_a_boosted_model_counts_each_encoder_unit_once_and_feeds_the_decoder_its_latent():
+    torch.manual_seed(0)
+    cfg = Config(**{**SMALL, "boost_channels": (8,), "boost_width": 8})
+    model = SpecGen(cfg).eval()
+    images = torch.rand(6, 3, cfg.image_size, cfg.image_size)
+    plain = {s.stage: s for s in unit_census(model, images)}
+    assert plain["encoder conv 1"].units == cfg.encoder_channels[0]
+    with torch.no_grad():                                  # a boost that moves the latent a lot
+        model.boost.head[-1].bias.fill_(-50.0)
+    boosted = {s.stage: s for s in unit_census(model, images)}
+    assert boosted["encoder conv 1"].units == cfg.encoder_channels[0]
+    assert boosted["decoder seed map"].mean_active != plain["decoder seed map"].mean_active

@@ -56,6 +56,8 @@ def unit_census(model: SpecGen, images: torch.Tensor) -> list[StageActivity]:
             pre = enc.pre_activation(images)
             records.append(("latent (encoder output)", pre > 0))
             latent = enc.res(enc.activate(pre))
+            if model.boost is not None:                   # what the decoder reads (the hooks fire once)
+                latent = latent + model.boost(images, enc)
             records.append(("decoder seed map", torch.relu(model.generator.seed(latent)) > 0))
             model.generator(latent, enc.colour(images))
     finally:

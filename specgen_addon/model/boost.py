@@ -17,7 +17,7 @@ import torch
 from torch import nn
 
 from .config import Config
-from .encoder import ImageEncoder, _coords
+from .encoder import ImageEncoder, pixel_coords
 
 #: Slope below zero of every activation in the branch.
 NEGATIVE_SLOPE = 0.01
@@ -44,7 +44,7 @@ class BoostEncoder(nn.Module):
                                   nn.Linear(cfg.boost_width, cfg.latent_dim))
         nn.init.zeros_(self.head[-1].weight)
         nn.init.zeros_(self.head[-1].bias)
-        self.register_buffer("coords", _coords(base), persistent=False)
+        self.register_buffer("coords", pixel_coords(base), persistent=False)
 
     def forward(self, image: torch.Tensor, encoder: ImageEncoder) -> torch.Tensor:
         x = encoder.compress(encoder.base_image(image))

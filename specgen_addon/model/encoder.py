@@ -12,7 +12,7 @@ from .config import Config
 from .residual import mlp_blocks
 
 
-def _coords(size: int) -> torch.Tensor:
+def pixel_coords(size: int) -> torch.Tensor:
     """``(1, 2, size, size)``: pixel x and y in [-1, 1] (image rows run down the sphere)."""
     ys, xs = torch.meshgrid(torch.linspace(-1, 1, size), torch.linspace(-1, 1, size), indexing="ij")
     return torch.stack([xs, ys])[None]
@@ -50,14 +50,14 @@ class ImageEncoder(nn.Module):
         side = base // 2 ** len(cfg.encoder_channels)
         self.fc = nn.Linear(c_in * side * side, cfg.latent_dim)
         self.res = mlp_blocks(cfg.latent_res_blocks, cfg.latent_dim)
-        self.register_buffer("coords", _coords(base), persistent=False)
+        self.register_buffer("coords", pixel_coords(base), persistent=False)
         self.detail: nn.Sequential | None = None
         if cfg.detail_factor > 1:
             from ..infer import _aa_bilinear_weights
 
             w = torch.from_numpy(_aa_bilinear_weights(cfg.image_size, base)).float()
             self.register_buffer("down", w, persistent=False)          # (base, S): rows and columns alike
-            self.register_buffer("coords_full", _coords(cfg.image_size), persistent=False)
+            self.register_buffer("coords_full", pixel_coords(cfg.image_size), persistent=False)
             width = max(8, cfg.encoder_channels[0] // 2)
             stages: list[nn.Module] = []
             c = 5

@@ -15,9 +15,9 @@ from torch import nn
 
 from ..errors import WeightsError
 from ..io_utils import atomic_write
+from .boost import BoostEncoder
 from .config import Config
 from .decoder import BRDFMapping
-from .boost import BoostEncoder
 from .encoder import ImageEncoder
 from .fusion import make_fusion
 from .planes import PlaneGenerator, normalized_coords, project, tv_loss
