@@ -55,9 +55,7 @@ def unit_census(model: SpecGen, images: torch.Tensor) -> list[StageActivity]:
             enc = model.encoder
             pre = enc.pre_activation(images)
             records.append(("latent (encoder output)", pre > 0))
-            latent = enc.res(enc.activate(pre))
-            if model.boost is not None:                   # what the decoder reads (the hooks fire once)
-                latent = latent + model.boost(images, enc)
+            latent = model.boosted(enc.res(enc.activate(pre)), images)  # the encoder's hooks fire once
             records.append(("decoder seed map", torch.relu(model.generator.seed(latent)) > 0))
             model.generator(latent, enc.colour(images))
     finally:

@@ -41,7 +41,10 @@ class SpecGen(nn.Module):
 
     def latent(self, image: torch.Tensor) -> torch.Tensor:
         """The latent ``(B, latent_dim)`` the decoder reads: the encoder's, plus the boost's if any."""
-        z = self.encoder(image)
+        return self.boosted(self.encoder(image), image)
+
+    def boosted(self, z: torch.Tensor, image: torch.Tensor) -> torch.Tensor:
+        """The encoder's latent ``z`` of ``image`` plus the boost encoder's correction, if the model has one."""
         return z if self.boost is None else z + self.boost(image, self.encoder)
 
     def planes(self, image: torch.Tensor) -> dict[str, torch.Tensor]:

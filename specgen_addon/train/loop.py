@@ -196,8 +196,6 @@ class TrainConfig:
         if not isinstance(self.frozen, list) or any(m not in MODULES for m in self.frozen):
             raise SpecGenError(f"training config: frozen must list modules out of {', '.join(MODULES)}, "
                                f"got {self.frozen!r}")
-        if set(self.frozen) == set(MODULES):
-            raise SpecGenError("training config: frozen lists every module, so nothing would train")
         if (self.fresh_encoder or self.frozen) and self.init_weights is None:
             raise SpecGenError("training config: fresh_encoder and frozen need init_weights (the trained "
                                "modules they keep)")
