@@ -210,11 +210,26 @@ def _data_cache() -> Path:
     return cache_root() / "train-data"
 
 
+#: TrainConfig fields a caller may change for one run of an arm: where and how fast it trains, and
+#: when this run stops (a stopped arm resumes from its checkpoint). None of them changes the batches
+#: or the schedule, so an arm keeps its key; a GPU repeats a CPU run to float rounding only.
+RUN_ONLY_FIELDS = ("device", "data_workers", "render_workers", "max_minutes")
+
+
 def train_arms(settings: AblationSettings, cache_dir: Path, progress: bool = True,
-               log: Callable[[str], None] = print) -> dict[str, ArmResult]:
-    """Train (or resume, or load) every arm with every seed; results by ``"<arm>/seed<k>"``."""
+               log: Callable[[str], None] = print,
+               run_overrides: dict[str, Any] | None = None) -> dict[str, ArmResult]:
+    """Train (or resume, or load) every arm with every seed; results by ``"<arm>/seed<k>"``.
+
+    ``run_overrides`` sets :data:`RUN_ONLY_FIELDS` for this run (e.g. ``{"device": "cuda"}``). An arm
+    that stops before its budget (``max_minutes``) is left without ``arm.json``, so it is neither
+    scored nor reported until a later run finishes it; it is then missing from the result."""
     from ..train.loop import train
 
+    overrides = dict(run_overrides or {})
+    unknown = sorted(set(overrides) - set(RUN_ONLY_FIELDS))
+    if unknown:
+        raise ValueError(f"run_overrides may only set {', '.join(RUN_ONLY_FIELDS)}, not {', '.join(unknown)}")
     out: dict[str, ArmResult] = {}
     for seed in settings.seeds:
         for name in settings.arms:
@@ -225,10 +240,14 @@ def train_arms(settings: AblationSettings, cache_dir: Path, progress: bool = Tru
             info = read_json(info_path)
             if info is None or not (arm_dir / "specgen.pt").is_file():
                 mcfg, tcfg = settings.configs(arm, seed)
+                tcfg = dataclasses.replace(tcfg, **overrides)
                 log(f"ablation: training {arm.label} for {settings.steps} steps (seed {seed})")
                 spectral, rgb, val = _material_sets(tcfg, mcfg, _data_cache(), log)
                 res = train(mcfg, tcfg, spectral, rgb, val, arm_dir, resume=True, show_progress=progress,
                             meta={"ablation_arm": arm.name})
+                if res.steps < settings.steps:
+                    log(f"ablation: {arm.label} (seed {seed}) stopped at step {res.steps} of {settings.steps}")
+                    continue
                 info = {"steps": res.steps, "wall_seconds": res.wall_seconds, "seed": seed}
                 write_json(info_path, info)
             out[f"{name}/seed{seed}"] = ArmResult(name, key, arm.label, arm.fusion, arm.joint,
