@@ -119,23 +119,31 @@ def pack(args: argparse.Namespace) -> int:
 
 
 def unpack(args: argparse.Namespace) -> int:
-    """Extract a tar written by :func:`pack` into the cache, each arm's ``arm.json`` last (so an arm
-    copied in part is never taken as complete); refuses any member outside ``KEY/NAME``."""
+    """Extract a tar written by :func:`pack` into the cache. A tar cut short (chunks left behind) gives
+    the arms it holds whole; an arm is written only with all of :data:`ARM_FILES`, ``arm.json``
+    last, so an arm copied in part is never taken as complete. Refuses any member outside
+    ``KEY/NAME``."""
     import tarfile
 
     cache = Path(args.cache) if args.cache else cache_root() / "ablation"
-    with tarfile.open(args.unpack, "r") as tar:
-        members = tar.getmembers()
-        for m in members:
-            key, _, name = m.name.partition("/")
-            if not m.isfile() or name not in ARM_FILES or "/" in name or not key.replace("-", "").isalnum():
-                raise SystemExit(f"gpu_ablate: {args.unpack} holds {m.name!r}, which is not an arm's file")
-        for m in sorted(members, key=lambda m: (m.name.split("/")[0], m.name.endswith("arm.json"))):
-            dest = cache / m.name
-            dest.parent.mkdir(parents=True, exist_ok=True)
-            dest.write_bytes(tar.extractfile(m).read())
-        for key in sorted({m.name.split("/")[0] for m in members}):
-            print(f"gpu_ablate: unpacked {key}")
+    files: dict[str, dict[str, bytes]] = {}
+    with tarfile.open(args.unpack, "r|") as tar:
+        try:
+            for m in tar:
+                key, _, name = m.name.partition("/")
+                if not m.isfile() or name not in ARM_FILES or not key.replace("-", "").isalnum():
+                    raise SystemExit(f"gpu_ablate: {args.unpack} holds {m.name!r}, which is not an arm's file")
+                files.setdefault(key, {})[name] = tar.extractfile(m).read()
+        except tarfile.ReadError:
+            print(f"gpu_ablate: {args.unpack} is cut short after {sum(map(len, files.values()))} whole files")
+    for key, got in sorted(files.items()):
+        if set(got) != set(ARM_FILES):
+            print(f"gpu_ablate: {key} lacks {', '.join(sorted(set(ARM_FILES) - set(got)))}; skipped")
+            continue
+        (cache / key).mkdir(parents=True, exist_ok=True)
+        for name in sorted(ARM_FILES, key=lambda n: n == "arm.json"):
+            (cache / key / name).write_bytes(got[name])
+        print(f"gpu_ablate: unpacked {key}")
     return 0
 
 

@@ -431,6 +431,23 @@ def test_a_run_stopped_before_its_first_step_saves_its_start_and_says_so(tmp_pat
                                            "no step was trained in this call")
 
 
+def test_max_minutes_of_a_resumed_run_counts_only_that_calls_time(tmp_path):
+    """`--max-minutes` on `--resume` gives the call its own budget: an earlier call's hours (here a
+    checkpoint that says it took 10⁶ s) do not stop it before its first step."""
+    spec, rgb, val = sets()
+    tcfg = TrainConfig(**{**FAST, "steps": 4})
+    first = train(Config(**SMALL), dataclasses.replace(tcfg, max_minutes=1e-9), spec, rgb, val, tmp_path / "r",
+                  show_progress=False)
+    assert first.steps == 0 and first.stopped_early
+    ck_path = tmp_path / "r" / "checkpoint.pt"
+    ck = torch.load(ck_path, weights_only=True)
+    ck["elapsed"] = 1e6
+    torch.save(ck, ck_path)
+    again = train(Config(**SMALL), dataclasses.replace(tcfg, max_minutes=30.0), spec, rgb, val, tmp_path / "r",
+                  resume=True, show_progress=False)
+    assert again.steps == 4 and not again.stopped_early and again.wall_seconds > 1e6
+
+
 def test_a_fresh_encoder_trains_for_the_frozen_decoder_it_was_given(tmp_path):
     spec, rgb, val = sets()
     first = train(Config(**SMALL), TrainConfig(**{**FAST, "steps": 3}), spec, rgb, val, tmp_path / "a",

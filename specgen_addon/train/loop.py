@@ -440,7 +440,8 @@ def train(mcfg: Config, tcfg: TrainConfig, spectral: MaterialSet, rgb: MaterialS
     """Train SpecGen; writes ``checkpoint.pt``, ``history.csv`` and ``specgen.pt`` into ``out_dir``.
 
     With ``resume`` an existing checkpoint in ``out_dir`` is continued (same configs required).
-    ``max_minutes`` stops early at a step boundary (the weights then say how many steps ran).
+    ``max_minutes`` stops this call early at a step boundary (the weights then say how many steps
+    ran); a resumed run's earlier calls do not count against it.
     """
     if len(spectral) == 0 and len(rgb) == 0:
         raise SpecGenError("no training materials")
@@ -536,8 +537,8 @@ def train(mcfg: Config, tcfg: TrainConfig, spectral: MaterialSet, rgb: MaterialS
                                          start_step, tcfg.steps, tcfg.data_workers)) as batches:
         # (closing: the data workers, if any, stop however the loop ends)
         for b_spec, b_rgb in batches:
-            elapsed = elapsed0 + time.perf_counter() - t0
-            if tcfg.max_minutes is not None and elapsed > 60.0 * tcfg.max_minutes:
+            # this call's time: a resumed run gets its own budget, whatever the earlier calls took
+            if tcfg.max_minutes is not None and time.perf_counter() - t0 > 60.0 * tcfg.max_minutes:
                 stopped = True
                 break
             for g in opt.param_groups:
