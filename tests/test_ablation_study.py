@@ -221,3 +221,43 @@ def test_a_one_seed_study_prints_dashes_where_the_spread_is_undefined():
     assert "nan" not in text
     assert "| joint-aff | 29.40 | 29.40 |" in text
     assert "| AFF − Hadamard (joint training) | +3.15 | — |" in text
+
+
+def test_a_single_stratum_reduces_to_the_one_sample_t_interval():
+    from scipy import stats
+
+    from specgen_addon.evaluation.ablation_study import stratified_effect
+
+    d = [0.23, -0.4, 1.1, 0.7]
+    r = stratified_effect({"all": (1.0, d)})
+    se = np.std(d, ddof=1) / math.sqrt(4)
+    assert r["estimate"] == pytest.approx(np.mean(d)) and r["se"] == pytest.approx(se)
+    assert r["df"] == pytest.approx(3.0)
+    assert r["ci95"] == pytest.approx(list(stats.t.interval(0.95, 3, loc=np.mean(d), scale=se)))
+
+
+def test_the_stratified_estimate_weighs_each_stratum_by_its_share_hand_computed():
+    """Shares 1/4 and 3/4; strata [1, 2, 3] (mean 2, s 1) and [0, 0, 3, 1] (mean 1, s √2):
+    d̂ = 0.5 + 0.75, SE² = (1/16)·1/3 + (9/16)·2/4, ν = SE⁴ / (v₁²/2 + v₂²/3)."""
+    from specgen_addon.evaluation.ablation_study import stratified_effect
+
+    r = stratified_effect({"fail": (0.25, [1, 2, 3]), "ctrl": (0.75, [0, 0, 3, 1])})
+    v1, v2 = 1 / 48, 9 / 32
+    assert r["estimate"] == pytest.approx(1.25)
+    assert r["se"] == pytest.approx(math.sqrt(v1 + v2))
+    assert r["df"] == pytest.approx((v1 + v2) ** 2 / (v1 ** 2 / 2 + v2 ** 2 / 3))
+    assert r["sign"] == "positive"  # 1.25 ≥ 2 × 0.55
+    from scipy.stats import t
+
+    half = t.ppf(0.975, r["df"]) * r["se"]  # ν ≈ 3.4: wider than 2 SE, reported, deciding nothing
+    assert r["ci95"] == pytest.approx([1.25 - half, 1.25 + half]) and half > 2 * r["se"]
+    assert r["strata"]["ctrl"]["std"] == pytest.approx(math.sqrt(2))
+
+
+def test_the_stratified_estimate_waits_for_three_seeds_in_every_stratum_and_checks_shares():
+    from specgen_addon.evaluation.ablation_study import stratified_effect
+
+    r = stratified_effect({"fail": (5 / 23, [1.3, 3.2, 1.4]), "ctrl": (18 / 23, [0.2, 0.1])})
+    assert math.isnan(r["estimate"]) and r["sign"].startswith("not computed")
+    with pytest.raises(ValueError, match="sum to 1"):
+        stratified_effect({"a": (0.5, [1, 2, 3]), "b": (0.6, [1, 2, 3])})

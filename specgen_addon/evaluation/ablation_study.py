@@ -139,6 +139,44 @@ def paired_effect(a: Sequence[float], b: Sequence[float], sign_bar: float = SIGN
             "median": float(np.median(d)), "ahead": int((d > 0).sum()), "wilcoxon_p": wilcoxon_p(d)}
 
 
+def stratified_effect(strata: dict[str, tuple[float, Sequence[float]]], sign_bar: float = SIGN_BAR_SE,
+                      min_per_stratum: int = 3) -> dict[str, Any]:
+    """Stratified mean of per-seed paired differences (dB): d̂ = Σ_h W_h·mean_h over strata h with
+    population shares W_h (summing to 1), standard error √(Σ_h W_h²·s_h²/n_h) with each stratum's
+    sample std s_h over its n_h seeds; the sign is called at ``sign_bar`` standard errors, and only
+    once every stratum has ``min_per_stratum`` seeds. Beside it, deciding nothing: the
+    Welch–Satterthwaite degrees of freedom ν = (Σ v_h)² / Σ v_h²/(n_h − 1), v_h = W_h²·s_h²/n_h, and
+    the t-based 95 % interval d̂ ± t₀.₉₇₅(ν)·SE (a stratum of three seeds knows its own spread
+    poorly, which the plain two-standard-error rule ignores)."""
+    from scipy.stats import t as student_t
+
+    weights = {h: float(w) for h, (w, _) in strata.items()}
+    if abs(sum(weights.values()) - 1.0) > 1e-9 or min(weights.values()) <= 0:
+        raise ValueError(f"stratum shares must be positive and sum to 1, got {weights}")
+    rows = {}
+    for h, (w, diffs) in strata.items():
+        d = np.asarray(diffs, float)
+        n = d.size
+        rows[h] = {"share": float(w), "n": n, "mean": float(d.mean()) if n else math.nan,
+                   "std": float(d.std(ddof=1)) if n > 1 else math.nan}
+    if any(r["n"] < max(2, min_per_stratum) for r in rows.values()):
+        short = ", ".join(f"{h} {r['n']}" for h, r in rows.items())
+        return {"strata": rows, "estimate": math.nan, "se": math.nan, "df": math.nan,
+                "ci95": [math.nan, math.nan], "sign_bar": float(sign_bar),
+                "sign": f"not computed (each stratum needs {min_per_stratum} seeds; has {short})"}
+    v = {h: r["share"] ** 2 * r["std"] ** 2 / r["n"] for h, r in rows.items()}
+    est = sum(r["share"] * r["mean"] for r in rows.values())
+    se = math.sqrt(sum(v.values()))
+    df = sum(v.values()) ** 2 / sum(v[h] ** 2 / (rows[h]["n"] - 1) for h in rows) if se > 0 else math.inf
+    half = float(student_t.ppf(0.975, df)) * se if math.isfinite(df) else 1.959963984540054 * se
+    if se > 0 and abs(est) >= sign_bar * se:
+        sign = "positive" if est > 0 else "negative"
+    else:
+        sign = f"not resolved (estimate within {sign_bar:g} standard errors of zero)"
+    return {"strata": rows, "estimate": est, "se": se, "z": est / se if se > 0 else math.inf, "df": df,
+            "ci95": [est - half, est + half], "sign_bar": float(sign_bar), "sign": sign}
+
+
 def wilcoxon_p(differences: Sequence[float]) -> float:
     """Two-sided Wilcoxon signed-rank p-value of paired differences (scipy: exact for small samples
     without ties or zeros, the normal approximation otherwise); NaN under two non-zero differences."""
