@@ -124,10 +124,12 @@ def plot(path: Path, d_short: dict[int, float], d_long: dict[int, float], stratu
     fig, ax = plt.subplots(figsize=(7.5, 4.2), dpi=110)
     for seed, d in d_short.items():
         ax.scatter(0, d, s=14, color=colours[stratum[seed]], alpha=0.35)
-    for seed, d in d_long.items():
+    label_at = -1e9
+    for seed, d in sorted(d_long.items(), key=lambda kv: kv[1]):
         ax.plot([0, 1], [d_short[seed], d], color=colours[stratum[seed]], lw=1)
         ax.scatter(1, d, s=22, color=colours[stratum[seed]])
-        ax.annotate(str(seed), (1, d), xytext=(5, 0), textcoords="offset points", fontsize=7, va="center")
+        label_at = max(d, label_at + 0.32)  # seeds with near-equal differences get stacked labels
+        ax.annotate(f"seed {seed}", (1, d), xytext=(1.04, label_at), fontsize=7, va="center")
     est, se = result["estimate"], result["se"]
     if est == est:
         ax.errorbar(1.35, est, yerr=2 * se, fmt="D", color="black", capsize=4,
