@@ -23,23 +23,11 @@ from pathlib import Path
 
 REPO = Path(__file__).resolve().parents[1]
 sys.path.insert(0, str(REPO))
+sys.path.insert(0, str(REPO / "bench"))
+
+from ablation_budget import scores  # noqa: E402  (the same reader of `ablate --json` studies)
 
 WITH, WITHOUT = "joint-aff", "joint-hadamard"
-
-
-def scores(path: Path) -> tuple[int, dict[tuple[str, int], float]]:
-    """``(steps, {(arm, seed): PSNR dB})`` of one ``ablate --json`` study, read by ``ablate``'s reader."""
-    from specgen_addon.errors import SpecGenError
-    from specgen_addon.evaluation.ablation_study import load_records
-
-    try:
-        steps = int(json.loads(path.read_text(encoding="utf-8"))["steps"])
-        records = load_records(path, steps)
-    except (OSError, ValueError, KeyError, TypeError) as e:
-        raise SystemExit(f"{path}: not an ablate --json study ({e.__class__.__name__}: {e})") from None
-    except SpecGenError as e:
-        raise SystemExit(str(e)) from None
-    return steps, {(r["arm"], int(r["seed"])): float(r["psnr_distant"]) for r in records}
 
 
 def paired(s: dict[tuple[str, int], float]) -> dict[int, float]:

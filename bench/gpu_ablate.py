@@ -36,6 +36,11 @@ from specgen_addon.evaluation.cache import cache_root  # noqa: E402
 ARM_FILES = ("specgen.pt", "arm.json", "history.csv")
 
 
+def arms_cache(args: argparse.Namespace) -> Path:
+    """Where the arms live: ``--cache``, or the folder ``ablate`` reads."""
+    return Path(args.cache) if args.cache else cache_root() / "ablation"
+
+
 def settings_for(args: argparse.Namespace) -> abl.AblationSettings:
     settings = study_settings(args.steps, args.seeds, args.arms)
     if args.smoke:
@@ -53,7 +58,7 @@ def _train_one(settings: abl.AblationSettings, arm: str, seed: int, cache: str, 
 
 def train_all(args: argparse.Namespace) -> int:
     settings = settings_for(args)
-    cache = Path(args.cache) if args.cache else cache_root() / "ablation"
+    cache = arms_cache(args)
     t0 = time.perf_counter()
     # 1. the inputs, once, before the arms start (each would otherwise render them itself)
     arm0 = "joint-aff" if any(abl.ARMS_BY_NAME[a].joint for a in settings.arms) else settings.arms[0]
@@ -101,7 +106,7 @@ def pack(args: argparse.Namespace) -> int:
     import tarfile
 
     settings = settings_for(args)
-    cache = Path(args.cache) if args.cache else cache_root() / "ablation"
+    cache = arms_cache(args)
     with tarfile.open(args.pack, "w", format=tarfile.PAX_FORMAT) as tar:
         for seed in settings.seeds:
             for arm in settings.arms:
@@ -125,7 +130,7 @@ def unpack(args: argparse.Namespace) -> int:
     ``KEY/NAME``."""
     import tarfile
 
-    cache = Path(args.cache) if args.cache else cache_root() / "ablation"
+    cache = arms_cache(args)
     files: dict[str, dict[str, bytes]] = {}
     with tarfile.open(args.unpack, "r|") as tar:
         try:

@@ -245,7 +245,7 @@ def train_arms(settings: AblationSettings, cache_dir: Path, progress: bool = Tru
                 spectral, rgb, val = _material_sets(tcfg, mcfg, _data_cache(), log)
                 res = train(mcfg, tcfg, spectral, rgb, val, arm_dir, resume=True, show_progress=progress,
                             meta={"ablation_arm": arm.name})
-                if res.steps < settings.steps:
+                if res.stopped_early:
                     log(f"ablation: {arm.label} (seed {seed}) stopped at step {res.steps} of {settings.steps}")
                     continue
                 info = {"steps": res.steps, "wall_seconds": res.wall_seconds, "seed": seed}
