@@ -16,7 +16,7 @@ import sys
 import time
 from pathlib import Path
 
-from machine import describe_machine  # bench/machine.py, beside this script
+from machine import copy_bandwidth_gbs, describe_machine  # bench/machine.py, beside this script
 
 REPO = Path(__file__).resolve().parents[1]
 sys.path.insert(0, str(REPO))
@@ -66,6 +66,8 @@ def main() -> int:
         print(f"{backend}: wall best {min(t):.2f} s, median {float(np.median(t)):.2f} s over {args.repeat} "
               f"runs; CPU (all threads) best {min(cpu[backend]):.2f} s")
     print(f"peak RSS: {rss_mb():.0f} MB total, {rss_mb() - base:.0f} MB above the loaded models")
+    # after the peak is read: the copy's own arrays would raise it
+    print(f"memory copy: {copy_bandwidth_gbs():.1f} GB/s (one thread)")
     return 0
 
 

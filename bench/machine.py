@@ -5,6 +5,7 @@ from __future__ import annotations
 import os
 import platform
 import sys
+import time
 
 import numpy as np
 
@@ -23,3 +24,19 @@ def describe_machine() -> str:
     return (f"{platform.machine()}, {os.cpu_count()} cores{mem}, {accel}; Python "
             f"{platform.python_version()}, numpy {np.__version__}; "
             f"load average {os.getloadavg()[0]:.2f}")
+
+
+def copy_bandwidth_gbs(megabytes: int = 200, repeat: int = 5) -> float:
+    """Best memory bandwidth of one thread copying a ``megabytes`` array (GB/s, read + write).
+
+    Printed beside timings so that machines of the same core count can be told apart: the same
+    code's full-table inference took 2.0–2.9 s on earlier sessions' 2-core machines and 7–10 s on
+    the twenty-ninth session's (docs/model.md, "Inference")."""
+    src = np.ones(megabytes * 2**20 // 8)
+    dst = np.empty_like(src)
+    best = float("inf")
+    for _ in range(repeat):
+        t0 = time.perf_counter()
+        np.copyto(dst, src)
+        best = min(best, time.perf_counter() - t0)
+    return 2 * src.nbytes / best / 1e9
