@@ -2,8 +2,10 @@
 
 :func:`generate_brdf` is the entry point used by the CLI and the Blender add-on. Two backends run
 the same computation (:mod:`specgen_addon.model.fast`): ``"torch"`` and ``"onnx"`` (onnxruntime,
-for a stock Blender without torch). The grid is filled in blocks of θh × θd rows so memory stays
-bounded (a few tens of MB besides the output), two blocks at a time on two worker threads.
+for a stock Blender without torch); torch runs the AFF head as a weighted gather
+(:mod:`specgen_addon.model.gather`, same output to float rounding, about half the memory passes).
+The grid is filled in blocks of θh × θd rows so memory stays bounded (a few tens of MB besides the
+output), two blocks at a time on two worker threads.
 """
 
 from __future__ import annotations
@@ -24,9 +26,9 @@ if TYPE_CHECKING:
     from .input_image import SphereCrop
 
 BACKENDS = ("torch", "onnx")
-#: θd rows per block: 10 × 180 × Λ points (~38 k at 21 bands) keep torch's temporaries
-#: cache-sized; the channels-first ONNX head, whose ~12 elementwise passes over 32 × points
-#: temporaries dominate, runs best at 1–2 rows (7.6 k points: ~1 MB temporaries, one core's L2):
+#: θd rows per block: 10 × 180 × Λ points (~38 k at 21 bands) for torch's gather head (5–30 rows
+#: time the same; fewer pay per-op overhead: 1 row is ~2× slower); the channels-first ONNX head,
+#: whose ~12 elementwise passes over 32 × points temporaries dominate, runs best at 1–2 rows (7.6 k points: ~1 MB temporaries, one core's L2):
 #: ~8 % less CPU per point than 5 rows single-threaded, 15–20 % over the grid on two threads.
 BLOCK_THETA_D = {"torch": 10, "onnx": 2}
 
@@ -87,7 +89,7 @@ def resample_square(arr: np.ndarray, size: int) -> np.ndarray:
         return chw
     wy = _aa_bilinear_weights(chw.shape[1], size).astype(np.float32)
     wx = _aa_bilinear_weights(chw.shape[2], size).astype(np.float32)
-    return np.einsum("yh,chw,xw->cyx", wy, chw, wx).astype(np.float32)
+    return np.ascontiguousarray((wy @ chw) @ wx.T, dtype=np.float32)   # separable: rows, then columns
 
 
 # ---------------------------------------------------------------------------------- backends
@@ -125,15 +127,20 @@ class _TorchBackend:
             out = self.tables(self.torch.from_numpy(x), self.torch.from_numpy(u_lambda))
         return tuple(t.contiguous() for t in out)
 
-    def run_head(self, blocks) -> np.ndarray:
+    def prepare(self, tables, nd: int):
+        """AFF: the gather head for these tables (:class:`~specgen_addon.model.gather.GatherGridHead`);
+        Hadamard: the tables as they are."""
+        if self.cfg.fusion != "aff":
+            return tables
+        from .model.gather import GatherGridHead
+
+        return GatherGridHead(self.model, tables, nd)
+
+    def run_block(self, prepared, i: int, j: int, nd: int):
+        if not isinstance(prepared, tuple):
+            return prepared.block(i, j)
         with self.torch.no_grad():
-            return self.head.forward_inplace(*blocks)
-
-    def prepare(self, tables):
-        return tables
-
-    def block(self, tables, i: int, j: int, nd: int):
-        return table_block(tables, i, j, nd)
+            return self.head.forward_inplace(*table_block(prepared, i, j, nd))
 
 
 class _OnnxBackend:
@@ -177,11 +184,12 @@ class _OnnxBackend:
         """Whether the head graph is the channels-first export (12 inputs) or the plain one (6)."""
         return len(self.head.get_inputs()) == 12
 
-    def prepare(self, tables):
+    def prepare(self, tables, nd: int):
         return channels_first_tables(tables) if self.channels_first else tables
 
-    def block(self, tables, i: int, j: int, nd: int):
-        return channels_first_block(tables, i, j, nd) if self.channels_first else table_block(tables, i, j, nd)
+    def run_block(self, prepared, i: int, j: int, nd: int) -> np.ndarray:
+        cut = channels_first_block if self.channels_first else table_block
+        return self.run_head(cut(prepared, i, j, nd))
 
     def run_head(self, blocks) -> np.ndarray:
         if self.channels_first:
@@ -307,9 +315,9 @@ def generate_brdf(image, weights=None, wavelengths_nm=None, backend: str = "torc
 def evaluate_grid(be, tables, n_lambda: int, progress: ProgressFn | None = None,
                   cancel: CancelFn | None = None, workers: int = 2) -> np.ndarray:
     """r' (μ-law) on the full grid ``(90, 90, 180, Λ)``, block by block on ``workers`` threads."""
-    prepared = be.prepare(tables)
-    out = np.empty(GRID_SHAPE + (n_lambda,), dtype=np.float32)
     nd = BLOCK_THETA_D["torch" if isinstance(be, _TorchBackend) else "onnx"]
+    prepared = be.prepare(tables, nd)
+    out = np.empty(GRID_SHAPE + (n_lambda,), dtype=np.float32)
     blocks = [(i, j) for i in range(N_THETA_H) for j in range(0, N_THETA_D, nd)]
     done = [0]
     lock = threading.Lock()
@@ -319,7 +327,7 @@ def evaluate_grid(be, tables, n_lambda: int, progress: ProgressFn | None = None,
         if stop.is_set():
             return
         i, j = ij
-        r = be.run_head(be.block(prepared, i, j, nd))
+        r = be.run_block(prepared, i, j, nd)
         out[i:i + 1, j:j + nd] = np.asarray(r)
         with lock:
             done[0] += 1

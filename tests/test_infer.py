@@ -71,6 +71,41 @@ def test_inplace_head_equals_the_exportable_head(tmp_path):
     assert torch.allclose(a, b, atol=1e-6)
 
 
+def test_shifted_logit_segments_give_the_logits_minus_their_maximum(tmp_path):
+    from specgen_addon.model.gather import shifted_logit_segments
+
+    _, model = small_weights(tmp_path)
+    torch.nn.init.normal_(model.fusion.heads.weight, std=3.0)      # many arg-max changes
+    kinks, pq = shifted_logit_segments(model.fusion)
+    s = torch.linspace(-40.0, 40.0, 20001)
+    with torch.no_grad():
+        z = model.fusion.heads(torch.relu(model.fusion.expand(s[:, None])))     # Eq. (8)–(10) as written
+    seg = pq[torch.bucketize(s, kinks)]
+    shifted = seg[:, :6] * s[:, None] + seg[:, 6:]
+    assert torch.allclose(shifted, z - z.max(dim=1, keepdim=True).values, atol=1e-4)
+    assert shifted.max() <= 1e-4                                   # exp(·) ≤ 1: no overflow
+    assert torch.all(kinks[1:] > kinks[:-1])
+
+
+def test_gather_head_equals_the_exportable_head(tmp_path):
+    from specgen_addon.model.gather import GatherGridHead
+
+    _, model = small_weights(tmp_path)
+    with torch.no_grad():
+        tables = GridTables(model)(torch.rand(1, 3, 32, 32), lambda_coords(model, BANDS))
+    head = GridHead(model)
+    gather = GatherGridHead(model, tables, 7)                      # 90 = 12 × 7 + 6: a short last block
+    for i, j in ((0, 0), (3, 14), (89, 84)):
+        nd = min(7, 90 - j)
+        blocks = (tables[0][i:i + 1, j:j + nd], tables[1][i:i + 1], tables[2][j:j + nd],
+                  tables[3][i:i + 1], tables[4][j:j + nd], tables[5])
+        with torch.no_grad():
+            a = head(*blocks)
+        b = gather.block(i, j)
+        assert b.shape == a.shape == (1, nd, 180, 3)
+        assert torch.allclose(a, b, atol=1e-5)
+
+
 def test_generate_brdf_writes_a_full_spectral_table(tmp_path, sphere_image):
     path, _ = small_weights(tmp_path)
     ticks = []

@@ -100,3 +100,18 @@ def test_mu_law_round_trip_and_range():
     assert np.allclose(mu_law_decode(mu_law_encode(r)), r, rtol=1e-10)
     assert mu_law_encode(np.array([1.0]))[0] == pytest.approx(1.0)
     assert mu_law_encode(np.array([0.0]))[0] == 0.0
+
+
+def test_bad_values_counts_each_kind_and_passes_clean_tables():
+    from specgen_addon.limits import MAX_BRDF_VALUE, bad_values
+
+    clean = np.random.default_rng(0).random((3, 5_000_000)).astype(np.float32)   # several chunks
+    assert bad_values(clean) is None
+    dirty = clean.copy()
+    dirty[2, -3:] = np.nan
+    dirty[0, 0] = np.inf
+    dirty[1, 7] = -0.5
+    dirty[1, 8] = 10 * MAX_BRDF_VALUE
+    assert bad_values(dirty) == "3 NaN, 1 infinite, 1 overflowing, 1 negative of 15,000,000 values"
+    assert bad_values(np.float32([-0.5, 1.0]), allow_negative=True) is None
+    assert bad_values(np.float32([-0.5, 1.0])) == "1 negative of 2 values"

@@ -1,0 +1,150 @@
+"""The AFF grid head as a weighted gather: r' for a block of the MERL grid in ~3 memory passes.
+
+Per grid point u the head of :class:`~specgen_addon.model.fast.GridHead` computes (Eq. 8–11, then
+the MLP with its first layer folded into the tables)::
+
+    w = softmax(z(s)),   s = Σ_k s_k + b            (z: the AFF logits, piecewise linear in s)
+    h = ReLU(Σ_k w_k (W1 f_k) + b1)
+    r' = w3 · ReLU(W2 h + b2) + b3
+
+In eager torch every term of ``Σ_k w_k W1 f_k`` is a broadcast pass over a (points × h1) temporary,
+which makes the head memory-bound. Here the sum is one :func:`torch.nn.functional.embedding_bag`
+(a gather of six table rows per point, weighted by ``w_k``: one pass, no temporaries), and three
+exact rewrites remove the remaining passes:
+
+* **softmax without a max pass.** ``z_k(s) − max_m z_m(s)`` is itself piecewise linear in ``s``:
+  the AFF kinks are refined at the crossings where the arg-max branch changes, so one
+  ``bucketize`` + one row gather give the shifted logits, and ``e_k = exp(…) ≤ 1`` cannot overflow.
+* **normalisation at the end.** The gather uses the unnormalised ``e_k``. Each table row carries
+  ``W1 f_k + b1`` and a trailing 1, so the gathered row is ``[t·(h_pre), t]`` with ``t = Σ e_k``;
+  ``t`` rides through the ReLUs (it is positive) and the second layer (as the bias column
+  ``[W2 | b2]``), and ``r' = w3·g / t + b3`` divides once per point, not once per channel.
+* **θh rows at the end of the row table.** Rows that depend on θh (t1, t2, t4) sit after the
+  fixed rows (t3, t5, t6) in a per-thread buffer, so a block's gather indices depend only on its
+  θd rows and are built once per grid.
+
+Same output as :meth:`GridHead.forward_inplace` to float rounding (tests/test_infer.py).
+"""
+
+from __future__ import annotations
+
+import threading
+
+import numpy as np
+import torch
+import torch.nn.functional as F
+
+from ..table import N_PHI_D, N_THETA_D
+
+
+@torch.no_grad()
+def shifted_logit_segments(fusion) -> tuple[torch.Tensor, torch.Tensor]:
+    """Kinks ``(n,)`` and per-segment ``[P | Q]`` ``(n + 1, 12)`` with ``z_k(s) − max_m z_m(s) = P_k s + Q_k``.
+
+    ``z(s) = β · ReLU(a s + c) + β_b`` (Eq. 8–10) is linear between the kinks ``−c_i / a_i``;
+    inside each such interval the segments are cut again where the arg-max branch changes, so
+    the arg-max row of every segment is exactly zero. Segment ``r`` covers ``(kinks[r−1], kinks[r]]``
+    (:func:`torch.bucketize`); the forms agree at every cut, so the side a tie falls on is immaterial.
+    """
+    a = fusion.expand.weight[:, 0].double()
+    c = fusion.expand.bias.double()
+    beta, beta_b = fusion.heads.weight.double(), fusion.heads.bias.double()
+    nz = a != 0
+    edges = [-np.inf] + sorted(set((-c[nz] / a[nz]).tolist())) + [np.inf]
+
+    def inside(lo: float, hi: float) -> float:
+        if np.isfinite(lo) and np.isfinite(hi):
+            return (lo + hi) / 2
+        return hi - 1.0 if np.isfinite(hi) else (lo + 1.0 if np.isfinite(lo) else 0.0)
+
+    kinks: list[float] = []
+    rows: list[torch.Tensor] = []
+    for lo, hi in zip(edges[:-1], edges[1:]):
+        active = ((a * inside(lo, hi) + c) > 0).double()
+        p, q = beta @ (active * a), beta @ (active * c) + beta_b            # z_k = p_k s + q_k here
+        cuts = []
+        for k in range(p.numel()):
+            for m in range(k + 1, p.numel()):
+                dp = float(p[k] - p[m])
+                if dp != 0.0 and lo < float(q[m] - q[k]) / dp < hi:
+                    cuts.append(float(q[m] - q[k]) / dp)
+        points = [lo] + sorted(cuts) + [hi]
+        for u0, u1 in zip(points[:-1], points[1:]):
+            top = int(torch.argmax(p * inside(u0, u1) + q))
+            row = torch.cat([p - p[top], q - q[top]])
+            if rows and torch.equal(row, rows[-1]):
+                continue                                                    # same form: merge
+            if rows:
+                kinks.append(u0)
+            rows.append(row)
+    return torch.tensor(kinks, dtype=torch.float32), torch.stack(rows).float().contiguous()
+
+
+class GatherGridHead:
+    """r' on the full grid for one image's six tables (AFF only), block by block, thread-safe.
+
+    ``tables``: the six :class:`~specgen_addon.model.fast.GridTables` outputs ``(…, h1 + 1)``
+    (``W1·f`` and the AFF statistic); ``n_theta_d``: θd rows per block. :meth:`block` returns
+    r' ``(1, nd, 180, Λ)`` for θh row ``i`` and θd rows ``j … j + nd``.
+    """
+
+    def __init__(self, model, tables, n_theta_d: int):
+        fusion, mapping = model.fusion, model.mapping
+        self.kinks, self.pq = shifted_logit_segments(fusion)
+        _, bias = fusion.gap_functionals()
+        with torch.no_grad():
+            self.bias = bias.detach().clone()
+            self.w2_t = torch.cat([mapping.fc2.weight, mapping.fc2.bias[:, None]], 1).T.contiguous()
+            self.w3 = mapping.fc3.weight[0].detach().contiguous()
+            self.b3 = float(mapping.fc3.bias)
+            t1, t2, t3, t4, t5, t6 = tables
+            self.stat = tuple(t[..., -1].contiguous() for t in tables)
+            b1 = mapping.fc1.bias
+
+            def rows(t: torch.Tensor) -> torch.Tensor:                  # [W1 f + b1, 1]
+                return torch.cat([t[..., :-1] + b1, torch.ones(t.shape[:-1] + (1,))], -1)
+
+            self.theta_h_rows = (rows(t1), rows(t2), rows(t4))           # (90, ·, h1 + 1) each
+            fixed = (rows(t3).flatten(0, 1), rows(t5).flatten(0, 1), rows(t6).flatten(0, 1))
+        n_l = t4.shape[1]
+        self.n_lambda, self.nd = n_l, n_theta_d
+        self.fixed = torch.cat(fixed).contiguous()
+        o3, o5 = 0, N_THETA_D * N_PHI_D                                  # fixed rows: t3 | t5 | t6
+        o6 = o5 + N_THETA_D * n_l
+        o1 = self.fixed.shape[0]                                          # then t1[i] | t2[i] | t4[i]
+        o2, o4 = o1 + N_THETA_D, o1 + N_THETA_D + N_PHI_D
+        self.indices = {}
+        for j in range(0, N_THETA_D, n_theta_d):
+            nd = min(n_theta_d, N_THETA_D - j)
+            d, p, lam = torch.meshgrid(torch.arange(j, j + nd), torch.arange(N_PHI_D), torch.arange(n_l),
+                                       indexing="ij")
+            self.indices[j] = torch.stack([o1 + d, o2 + p, o3 + d * N_PHI_D + p, o4 + lam, o5 + d * n_l + lam,
+                                           o6 + p * n_l + lam], -1).reshape(-1, 6).int().contiguous()
+        self._local = threading.local()
+
+    def _row_table(self, i: int) -> torch.Tensor:
+        """This thread's row table with θh row ``i``'s rows at its end."""
+        local = self._local
+        if getattr(local, "rows", None) is None:
+            n_h = sum(t.shape[1] for t in self.theta_h_rows)
+            local.rows = torch.cat([self.fixed, torch.empty(n_h, self.fixed.shape[1])])
+            local.i = None
+        if local.i != i:
+            torch.cat([t[i] for t in self.theta_h_rows], out=local.rows[self.fixed.shape[0]:])
+            local.i = i
+        return local.rows
+
+    @torch.no_grad()
+    def block(self, i: int, j: int) -> torch.Tensor:
+        nd = min(self.nd, N_THETA_D - j)
+        s1, s2, s3, s4, s5, s6 = self.stat
+        s_dp = s3[j:j + nd] + s2[i][None, :] + s1[i, j:j + nd][:, None]          # (nd, φd)
+        s_dl = s5[j:j + nd] + (s4[i] + self.bias)[None, :]                         # (nd, Λ)
+        s = (s_dp[:, :, None] + s_dl[:, None, :] + s6[None]).reshape(-1)
+        pq = self.pq.index_select(0, torch.bucketize(s, self.kinks))
+        e = torch.addcmul(pq[:, 6:], pq[:, :6], s[:, None]).exp_()              # (P, 6), ≤ 1
+        h = F.embedding_bag(self.indices[j], self._row_table(i), per_sample_weights=e, mode="sum")
+        h.relu_()                                                                # [t·h_pre, t]
+        g = torch.mm(h, self.w2_t).relu_()                                       # t · ReLU(W2 h + b2)
+        r = torch.mv(g, self.w3).div_(h[:, -1]).add_(self.b3)
+        return r.reshape(1, nd, N_PHI_D, self.n_lambda)
