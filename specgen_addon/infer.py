@@ -28,8 +28,9 @@ if TYPE_CHECKING:
 BACKENDS = ("torch", "onnx")
 #: θd rows per block: 10 × 180 × Λ points (~38 k at 21 bands) for torch's gather head (5–30 rows
 #: time the same; fewer pay per-op overhead: 1 row is ~2× slower); the channels-first ONNX head,
-#: whose ~12 elementwise passes over 32 × points temporaries dominate, runs best at 1–2 rows (7.6 k points: ~1 MB temporaries, one core's L2):
-#: ~8 % less CPU per point than 5 rows single-threaded, 15–20 % over the grid on two threads.
+#: whose ~12 elementwise passes over 32 × points temporaries dominate, runs best at 1–2 rows
+#: (7.6 k points: ~1 MB temporaries, one core's L2): ~8 % less CPU per point than 5 rows
+#: single-threaded, 15–20 % over the grid on two threads.
 BLOCK_THETA_D = {"torch": 10, "onnx": 2}
 
 ProgressFn = Callable[[float], None]
