@@ -141,7 +141,7 @@ class _TorchBackend:
         if not isinstance(prepared, tuple):
             return prepared.block(i, j)
         with self.torch.no_grad():
-            return self.head.forward_inplace(*table_block(prepared, i, j, nd))
+            return self.head(*table_block(prepared, i, j, nd))
 
 
 class _OnnxBackend:

@@ -59,18 +59,6 @@ def test_fast_grid_equals_naive_per_query_evaluation(tmp_path, fusion, knots):
     assert np.abs(fast - naive).max() < 1e-5
 
 
-def test_inplace_head_equals_the_exportable_head(tmp_path):
-    _, model = small_weights(tmp_path)
-    tables = GridTables(model)(torch.rand(1, 3, 32, 32), lambda_coords(model, BANDS))
-    head = GridHead(model)
-    blocks = (tables[0][3:5, 10:17], tables[1][3:5], tables[2][10:17], tables[3][3:5], tables[4][10:17],
-              tables[5])
-    with torch.no_grad():
-        a, b = head(*blocks), head.forward_inplace(*blocks)
-    assert a.shape == (2, 7, 180, 3)
-    assert torch.allclose(a, b, atol=1e-6)
-
-
 def test_shifted_logit_segments_give_the_logits_minus_their_maximum(tmp_path):
     from specgen_addon.model.gather import shifted_logit_segments
 

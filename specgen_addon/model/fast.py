@@ -112,59 +112,6 @@ class GridHead(nn.Module):
         h = torch.relu(mapping.fc2(h))
         return mapping.fc3(h)[..., 0]
 
-    @torch.no_grad()
-    def forward_inplace(self, t1, t2, t3, t4, t5, t6) -> torch.Tensor:
-        """Same result as :meth:`forward` with fewer memory passes (torch backend, AFF only).
-
-        The branch logits ``z_i(s) = β_i · ReLU(a s + c) + b_i`` are piecewise linear in the
-        scalar ``s`` with at most d kinks, so they are evaluated exactly as ``P_i[seg] s + Q_i[seg]``
-        after locating ``s`` among the kinks, instead of through the d-wide expansion.
-        """
-        if not self.aff:
-            return self.forward(t1, t2, t3, t4, t5, t6)
-        if not hasattr(self, "_pwl"):
-            self._pwl = _piecewise_logits(self.model.fusion)
-        kinks, p_seg, q_seg, bias = self._pwl
-        b = (t1[:, :, None, None], t2[:, None, :, None], t3[None, :, :, None],
-             t4[:, None, None, :], t5[None, :, None, :], t6[None, None, :, :])
-        mapping = self.model.mapping
-        s = b[0][..., -1] + b[1][..., -1]
-        for k in range(2, 6):
-            s = s + b[k][..., -1]
-        s += bias
-        seg = torch.bucketize(s, kinks)
-        logits = p_seg[:, seg] * s + q_seg[:, seg]                 # (6, ...) branch-major
-        logits -= logits.max(dim=0).values
-        w = logits.exp_()
-        w /= w.sum(dim=0)
-        h = torch.mul(w[0][..., None], b[0][..., :-1])
-        for k in range(1, 6):
-            h.addcmul_(w[k][..., None], b[k][..., :-1])
-        h += mapping.fc1.bias
-        h.relu_()
-        h = mapping.fc2(h).relu_()
-        return mapping.fc3(h)[..., 0]
-
-
-@torch.no_grad()
-def _piecewise_logits(fusion) -> tuple[torch.Tensor, torch.Tensor, torch.Tensor, torch.Tensor]:
-    """Kinks and per-segment slopes/offsets ``(6, n+1)`` of the AFF logits as functions of ``s``."""
-    a = fusion.expand.weight[:, 0].double()
-    c = fusion.expand.bias.double()
-    beta, beta_b = fusion.heads.weight.double(), fusion.heads.bias.double()
-    nz = a != 0
-    kinks = torch.unique(-c[nz] / a[nz])                           # sorted
-    if kinks.numel() == 0:
-        reps = torch.zeros(1, dtype=torch.float64)
-    else:
-        mids = (kinks[1:] + kinks[:-1]) / 2
-        reps = torch.cat([kinks[:1] - 1.0, mids, kinks[-1:] + 1.0])
-    active = ((a[None, :] * reps[:, None] + c[None, :]) > 0).double()      # (n+1, d)
-    p_seg = (beta @ (active * a).T)                                        # (6, n+1)
-    q_seg = (beta @ (active * c).T) + beta_b[:, None]
-    _, bias = fusion.gap_functionals()
-    return kinks.float(), p_seg.float(), q_seg.float(), bias.detach()
-
 
 class GridHeadChannelsFirst(GridHead):
     """:class:`GridHead` rearranged for onnxruntime: the same operations (same output to float

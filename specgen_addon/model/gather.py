@@ -23,7 +23,7 @@ exact rewrites remove the remaining passes:
   fixed rows (t3, t5, t6) in a per-thread buffer, so a block's gather indices depend only on its
   θd rows and are built once per grid.
 
-Same output as :meth:`GridHead.forward_inplace` to float rounding (tests/test_infer.py).
+Same output as :class:`~specgen_addon.model.fast.GridHead` to float rounding (tests/test_infer.py).
 """
 
 from __future__ import annotations
