@@ -29,6 +29,7 @@ Same output as :class:`~specgen_addon.model.fast.GridHead` to float rounding (te
 from __future__ import annotations
 
 import threading
+from itertools import pairwise
 
 import numpy as np
 import torch
@@ -39,7 +40,8 @@ from ..table import N_PHI_D, N_THETA_D
 
 @torch.no_grad()
 def shifted_logit_segments(fusion) -> tuple[torch.Tensor, torch.Tensor]:
-    """Kinks ``(n,)`` and per-segment ``[P | Q]`` ``(n + 1, 12)`` with ``z_k(s) − max_m z_m(s) = P_k s + Q_k``.
+    """Kinks ``(n,)`` and per-segment rows ``[P | Q]`` ``(n + 1, 12)``:
+    ``z_k(s) − max_m z_m(s) = P_k s + Q_k`` on each segment.
 
     ``z(s) = β · ReLU(a s + c) + β_b`` (Eq. 8–10) is linear between the kinks ``−c_i / a_i``;
     inside each such interval the segments are cut again where the arg-max branch changes, so
@@ -59,7 +61,7 @@ def shifted_logit_segments(fusion) -> tuple[torch.Tensor, torch.Tensor]:
 
     kinks: list[float] = []
     rows: list[torch.Tensor] = []
-    for lo, hi in zip(edges[:-1], edges[1:]):
+    for lo, hi in pairwise(edges):
         active = ((a * inside(lo, hi) + c) > 0).double()
         p, q = beta @ (active * a), beta @ (active * c) + beta_b            # z_k = p_k s + q_k here
         cuts = []
@@ -69,7 +71,7 @@ def shifted_logit_segments(fusion) -> tuple[torch.Tensor, torch.Tensor]:
                 if dp != 0.0 and lo < float(q[m] - q[k]) / dp < hi:
                     cuts.append(float(q[m] - q[k]) / dp)
         points = [lo] + sorted(cuts) + [hi]
-        for u0, u1 in zip(points[:-1], points[1:]):
+        for u0, u1 in pairwise(points):
             top = int(torch.argmax(p * inside(u0, u1) + q))
             row = torch.cat([p - p[top], q - q[top]])
             if rows and torch.equal(row, rows[-1]):
