@@ -293,13 +293,7 @@ def generate_brdf(image, weights=None, wavelengths_nm=None, backend: str = "torc
     x = resample_square(crop.image, cfg.image_size)[None].astype(np.float32)
     u_lambda = (2.0 * (wl - cfg.lambda_min_nm) / (cfg.lambda_max_nm - cfg.lambda_min_nm) - 1.0).astype(np.float32)
     tables = be.make_tables(x, u_lambda)
-    rp = evaluate_grid(be, tables, wl.size, progress=progress, cancel=cancel)
-    # inverse μ-law in place: the table is 122 MB at 21 bands, temporaries would multiply it
-    np.clip(rp, 0.0, None, out=rp)
-    rp *= np.float32(math.log1p(cfg.mu))
-    np.expm1(rp, out=rp)
-    rp /= np.float32(cfg.mu)
-    values = rp
+    values = evaluate_grid(be, tables, wl.size, progress=progress, cancel=cancel, decode_mu=cfg.mu)
     from .limits import bad_values
 
     reason = bad_values(values)
@@ -313,9 +307,20 @@ def generate_brdf(image, weights=None, wavelengths_nm=None, backend: str = "torc
     return BRDFTable(values, wl, metadata=meta)
 
 
+def decode_mu_law_inplace(rp: np.ndarray, mu: float) -> None:
+    """r' (μ-law, clipped at 0) -> ``f_r = ((1 + μ)^r' − 1) / μ`` in sr⁻¹, in place (no temporaries)."""
+    np.clip(rp, 0.0, None, out=rp)
+    rp *= np.float32(math.log1p(mu))
+    np.expm1(rp, out=rp)
+    rp /= np.float32(mu)
+
+
 def evaluate_grid(be, tables, n_lambda: int, progress: ProgressFn | None = None,
-                  cancel: CancelFn | None = None, workers: int = 2) -> np.ndarray:
-    """r' (μ-law) on the full grid ``(90, 90, 180, Λ)``, block by block on ``workers`` threads."""
+                  cancel: CancelFn | None = None, workers: int = 2,
+                  decode_mu: float | None = None) -> np.ndarray:
+    """r' (μ-law) on the full grid ``(90, 90, 180, Λ)``, block by block on ``workers`` threads;
+    with ``decode_mu``, ``f_r`` (sr⁻¹) instead, each block decoded on its worker
+    (:func:`decode_mu_law_inplace`)."""
     nd = BLOCK_THETA_D["torch" if isinstance(be, _TorchBackend) else "onnx"]
     prepared = be.prepare(tables, nd)
     out = np.empty(GRID_SHAPE + (n_lambda,), dtype=np.float32)
@@ -330,6 +335,8 @@ def evaluate_grid(be, tables, n_lambda: int, progress: ProgressFn | None = None,
         i, j = ij
         r = be.run_block(prepared, i, j, nd)
         out[i:i + 1, j:j + nd] = np.asarray(r)
+        if decode_mu is not None:
+            decode_mu_law_inplace(out[i:i + 1, j:j + nd], decode_mu)
         with lock:
             done[0] += 1
 

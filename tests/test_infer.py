@@ -94,6 +94,18 @@ def test_gather_head_equals_the_exportable_head(tmp_path):
         assert torch.allclose(a, b, atol=1e-5)
 
 
+def test_grid_decoded_on_the_workers_equals_the_decoded_grid(tmp_path):
+    from specgen_addon.table import mu_law_decode
+
+    path, model = small_weights(tmp_path)
+    be = infer.get_backend(path, "torch")
+    x = np.random.default_rng(0).random((1, 3, 32, 32)).astype(np.float32)
+    tables = be.make_tables(x, lambda_coords(model, BANDS).numpy())
+    rp = infer.evaluate_grid(be, tables, BANDS.size)
+    fr = infer.evaluate_grid(be, tables, BANDS.size, decode_mu=model.cfg.mu)
+    np.testing.assert_allclose(fr, mu_law_decode(np.clip(rp, 0, None), model.cfg.mu), rtol=1e-6, atol=1e-9)
+
+
 def test_generate_brdf_writes_a_full_spectral_table(tmp_path, sphere_image):
     path, _ = small_weights(tmp_path)
     ticks = []
