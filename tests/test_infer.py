@@ -94,6 +94,21 @@ def test_gather_head_equals_the_exportable_head(tmp_path):
         assert torch.allclose(a, b, atol=1e-5)
 
 
+def test_gather_head_drops_units_that_are_dead_everywhere_and_gives_the_same_values(tmp_path):
+    from specgen_addon.model.gather import GatherGridHead
+
+    _, model = small_weights(tmp_path)
+    with torch.no_grad():
+        model.mapping.fc1.bias[:5] = -1e3                          # five units that never fire
+        tables = GridTables(model)(torch.rand(1, 3, 32, 32), lambda_coords(model, BANDS))
+    gather = GatherGridHead(model, tables, 10)
+    assert gather.units_dropped == 5
+    blocks = (tables[0][7:8, 20:30], tables[1][7:8], tables[2][20:30], tables[3][7:8], tables[4][20:30],
+              tables[5])
+    with torch.no_grad():
+        assert torch.allclose(GridHead(model)(*blocks), gather.block(7, 20), atol=1e-5)
+
+
 def test_grid_decoded_on_the_workers_equals_the_decoded_grid(tmp_path):
     from specgen_addon.table import mu_law_decode
 

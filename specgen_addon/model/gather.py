@@ -9,8 +9,8 @@ the MLP with its first layer folded into the tables)::
 
 In eager torch every term of ``Σ_k w_k W1 f_k`` is a broadcast pass over a (points × h1) temporary,
 which makes the head memory-bound. Here the sum is one :func:`torch.nn.functional.embedding_bag`
-(a gather of six table rows per point, weighted by ``w_k``: one pass, no temporaries), and three
-exact rewrites remove the remaining passes:
+(a gather of six table rows per point, weighted by ``w_k``: one pass, no temporaries), and four
+exact rewrites remove the remaining passes or shrink them:
 
 * **softmax without a max pass.** ``z_k(s) − max_m z_m(s)`` is itself piecewise linear in ``s``:
   the AFF kinks are refined at the crossings where the arg-max branch changes, so one
@@ -19,6 +19,10 @@ exact rewrites remove the remaining passes:
   ``W1 f_k + b1`` and a trailing 1, so the gathered row is ``[t·(h_pre), t]`` with ``t = Σ e_k``;
   ``t`` rides through the ReLUs (it is positive) and the second layer (as the bias column
   ``[W2 | b2]``), and ``r' = w3·g / t + b3`` divides once per point, not once per channel.
+* **dead first-layer units dropped.** ``h`` is a convex combination of six table rows, so a unit
+  whose entries are ≤ 0 in every row of this image's tables is ≤ 0 everywhere and its ReLU is 0:
+  its column of the row table and its row of ``[W2 | b2]`` are dropped (7 of 32 for ``run19`` on
+  ``examples/sphere.png``).
 * **θh rows at the end of the row table.** Rows that depend on θh (t1, t2, t4) sit after the
   fixed rows (t3, t5, t6) in a per-thread buffer, so a block's gather indices depend only on its
   θd rows and are built once per grid.
@@ -106,11 +110,18 @@ class GatherGridHead:
             def rows(t: torch.Tensor) -> torch.Tensor:                  # [W1 f + b1, 1]
                 return torch.cat([t[..., :-1] + b1, torch.ones(t.shape[:-1] + (1,))], -1)
 
-            self.theta_h_rows = (rows(t1), rows(t2), rows(t4))           # (90, ·, h1 + 1) each
-            fixed = (rows(t3).flatten(0, 1), rows(t5).flatten(0, 1), rows(t6).flatten(0, 1))
+            theta_h_rows = (rows(t1), rows(t2), rows(t4))                # (90, ·, h1 + 1) each
+            fixed = torch.cat([rows(t3).flatten(0, 1), rows(t5).flatten(0, 1), rows(t6).flatten(0, 1)])
+            # A unit of the first layer whose rows are ≤ 0 in every table is ≤ 0 at every grid point
+            # (h is a convex combination of six rows), so its ReLU is 0 there: drop it, exactly.
+            top = torch.stack([fixed.amax(0)] + [t.amax((0, 1)) for t in theta_h_rows]).amax(0)
+            keep = torch.nonzero(top > 0).flatten()                       # the trailing 1 is kept
+            self.units_dropped = int(top.numel() - keep.numel())
+            self.theta_h_rows = tuple(t[..., keep].contiguous() for t in theta_h_rows)
+            self.fixed = fixed[:, keep].contiguous()
+            self.w2_t = self.w2_t[keep].contiguous()
         n_l = t4.shape[1]
         self.n_lambda, self.nd = n_l, n_theta_d
-        self.fixed = torch.cat(fixed).contiguous()
         o3, o5 = 0, N_THETA_D * N_PHI_D                                  # fixed rows: t3 | t5 | t6
         o6 = o5 + N_THETA_D * n_l
         o1 = self.fixed.shape[0]                                          # then t1[i] | t2[i] | t4[i]
