@@ -10,7 +10,6 @@ output), two blocks at a time on two worker threads.
 
 from __future__ import annotations
 
-import math
 import threading
 from concurrent.futures import ThreadPoolExecutor
 from pathlib import Path
@@ -20,7 +19,7 @@ import numpy as np
 
 from .errors import Cancelled, ImageInputError, SpecGenError, WeightsError
 from .spectra import DEFAULT_WAVELENGTHS_NM
-from .table import GRID_SHAPE, N_THETA_D, N_THETA_H, BRDFTable
+from .table import GRID_SHAPE, N_THETA_D, N_THETA_H, BRDFTable, mu_law_decode_inplace
 
 if TYPE_CHECKING:
     from .input_image import SphereCrop
@@ -307,20 +306,12 @@ def generate_brdf(image, weights=None, wavelengths_nm=None, backend: str = "torc
     return BRDFTable(values, wl, metadata=meta)
 
 
-def decode_mu_law_inplace(rp: np.ndarray, mu: float) -> None:
-    """r' (μ-law, clipped at 0) -> ``f_r = ((1 + μ)^r' − 1) / μ`` in sr⁻¹, in place (no temporaries)."""
-    np.clip(rp, 0.0, None, out=rp)
-    rp *= np.float32(math.log1p(mu))
-    np.expm1(rp, out=rp)
-    rp /= np.float32(mu)
-
-
 def evaluate_grid(be, tables, n_lambda: int, progress: ProgressFn | None = None,
                   cancel: CancelFn | None = None, workers: int = 2,
                   decode_mu: float | None = None) -> np.ndarray:
     """r' (μ-law) on the full grid ``(90, 90, 180, Λ)``, block by block on ``workers`` threads;
     with ``decode_mu``, ``f_r`` (sr⁻¹) instead, each block decoded on its worker
-    (:func:`decode_mu_law_inplace`)."""
+    (:func:`specgen_addon.table.mu_law_decode_inplace`)."""
     nd = BLOCK_THETA_D["torch" if isinstance(be, _TorchBackend) else "onnx"]
     prepared = be.prepare(tables, nd)
     out = np.empty(GRID_SHAPE + (n_lambda,), dtype=np.float32)
@@ -336,7 +327,7 @@ def evaluate_grid(be, tables, n_lambda: int, progress: ProgressFn | None = None,
         r = be.run_block(prepared, i, j, nd)
         out[i:i + 1, j:j + nd] = np.asarray(r)
         if decode_mu is not None:
-            decode_mu_law_inplace(out[i:i + 1, j:j + nd], decode_mu)
+            mu_law_decode_inplace(out[i:i + 1, j:j + nd], decode_mu)
         with lock:
             done[0] += 1
 

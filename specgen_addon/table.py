@@ -9,6 +9,7 @@ any cosine), one column per wavelength (nm) or per RGB channel.
 from __future__ import annotations
 
 import json
+import math
 import zipfile
 from dataclasses import dataclass, field
 from pathlib import Path
@@ -40,6 +41,15 @@ def mu_law_encode(r: np.ndarray, mu: float = MU_LAW_MU) -> np.ndarray:
 def mu_law_decode(rp: np.ndarray, mu: float = MU_LAW_MU) -> np.ndarray:
     """Inverse μ-law for non-negative BRDF values: ``r = ((1 + μ)^r' − 1) / μ``."""
     return np.expm1(np.asarray(rp) * np.log1p(mu)) / mu
+
+
+def mu_law_decode_inplace(rp: np.ndarray, mu: float = MU_LAW_MU) -> None:
+    """:func:`mu_law_decode` of a float32 network output in place, clipped at 0 first (no
+    temporaries: a full table is 122 MB at 21 bands)."""
+    np.clip(rp, 0.0, None, out=rp)
+    rp *= np.float32(math.log1p(mu))
+    np.expm1(rp, out=rp)
+    rp /= np.float32(mu)
 
 
 def theta_h_index(theta_h: np.ndarray) -> np.ndarray:

@@ -72,8 +72,9 @@ def shifted_logit_segments(fusion) -> tuple[torch.Tensor, torch.Tensor]:
         for k in range(p.numel()):
             for m in range(k + 1, p.numel()):
                 dp = float(p[k] - p[m])
-                if dp != 0.0 and lo < float(q[m] - q[k]) / dp < hi:
-                    cuts.append(float(q[m] - q[k]) / dp)
+                cut = float(q[m] - q[k]) / dp if dp != 0.0 else lo               # z_k = z_m here
+                if lo < cut < hi:
+                    cuts.append(cut)
         points = [lo] + sorted(cuts) + [hi]
         for u0, u1 in pairwise(points):
             top = int(torch.argmax(p * inside(u0, u1) + q))
