@@ -3,7 +3,8 @@
 :func:`generate_brdf` is the entry point used by the CLI and the Blender add-on. Two backends run
 the same computation (:mod:`specgen_addon.model.fast`): ``"torch"`` and ``"onnx"`` (onnxruntime,
 for a stock Blender without torch); torch runs the AFF head as a weighted gather
-(:mod:`specgen_addon.model.gather`, same output to float rounding, about half the memory passes).
+(:mod:`specgen_addon.model.gather`, same output to float rounding, about half the memory passes),
+three stretches of it as numba loops where numba is installed.
 The grid is filled in blocks of θh × θd rows so memory stays bounded (a few tens of MB besides the
 output), two blocks at a time on two worker threads.
 """

@@ -1,5 +1,5 @@
 """A Python child process that can import numpy and the standard library but not the CLI's extra
-packages (torch, scipy, scikit-image, Pillow, colour-science, OpenEXR): the panel's path in a
+packages (torch, scipy, scikit-image, Pillow, colour-science, OpenEXR, numba): the panel's path in a
 stock Blender (guide principle 3)."""
 
 from __future__ import annotations
@@ -9,7 +9,7 @@ import sys
 import textwrap
 from pathlib import Path
 
-BLOCKED = ("torch", "scipy", "skimage", "PIL", "colour", "OpenEXR")
+BLOCKED = ("torch", "scipy", "skimage", "PIL", "colour", "OpenEXR", "numba", "llvmlite")
 
 
 def run_numpy_only(repo_dir: Path, body: str, timeout: float = 300) -> subprocess.CompletedProcess:

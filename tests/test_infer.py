@@ -75,7 +75,21 @@ def test_shifted_logit_segments_give_the_logits_minus_their_maximum(tmp_path):
     assert torch.all(kinks[1:] > kinks[:-1])
 
 
-def test_gather_head_equals_the_exportable_head(tmp_path):
+@pytest.fixture(params=["numba loops", "torch ops"])
+def gather_path(request, monkeypatch) -> str:
+    """Run a gather-head test on both of its paths: with the numba loops, and on torch ops alone."""
+    from specgen_addon.model import gather_kernels
+
+    if request.param == "torch ops":
+        monkeypatch.setenv(gather_kernels.ENV_VAR, "torch")
+    else:
+        monkeypatch.delenv(gather_kernels.ENV_VAR, raising=False)
+        if gather_kernels.load() is None:
+            pytest.skip("numba is not installed (requirements.txt lists it)")
+    return request.param
+
+
+def test_gather_head_equals_the_exportable_head(tmp_path, gather_path):
     from specgen_addon.model.gather import GatherGridHead
 
     _, model = small_weights(tmp_path)
@@ -83,6 +97,7 @@ def test_gather_head_equals_the_exportable_head(tmp_path):
         tables = GridTables(model)(torch.rand(1, 3, 32, 32), lambda_coords(model, BANDS))
     head = GridHead(model)
     gather = GatherGridHead(model, tables, 7)                      # 90 = 12 × 7 + 6: a short last block
+    assert (gather.kernels is not None) == (gather_path == "numba loops")
     for i, j in ((0, 0), (3, 14), (89, 84)):
         nd = min(7, 90 - j)
         blocks = (tables[0][i:i + 1, j:j + nd], tables[1][i:i + 1], tables[2][j:j + nd],
@@ -94,7 +109,7 @@ def test_gather_head_equals_the_exportable_head(tmp_path):
         assert torch.allclose(a, b, atol=1e-5)
 
 
-def test_gather_head_drops_units_that_are_dead_everywhere_and_gives_the_same_values(tmp_path):
+def test_gather_head_drops_units_that_are_dead_everywhere_and_gives_the_same_values(tmp_path, gather_path):
     from specgen_addon.model.gather import GatherGridHead
 
     _, model = small_weights(tmp_path)
@@ -107,6 +122,73 @@ def test_gather_head_drops_units_that_are_dead_everywhere_and_gives_the_same_val
               tables[5])
     with torch.no_grad():
         assert torch.allclose(GridHead(model)(*blocks), gather.block(7, 20), atol=1e-5)
+
+
+def test_numba_logit_loop_equals_bucketize_and_the_segment_rows(tmp_path):
+    from specgen_addon.model import gather_kernels
+    from specgen_addon.model.gather import shifted_logit_segments
+
+    kernels = gather_kernels.load()
+    if kernels is None:
+        pytest.skip("numba is not installed (requirements.txt lists it), or SPECGEN_KERNELS=torch")
+    _, model = small_weights(tmp_path)
+    torch.nn.init.normal_(model.fusion.heads.weight, std=3.0)      # many arg-max changes: many kinks
+    kinks, pq = shifted_logit_segments(model.fusion)
+    assert kinks.numel() > 8
+    rng = np.random.default_rng(3)
+    lo, hi = float(kinks[0]) - 2.0, float(kinks[-1]) + 2.0
+    stats = [rng.uniform(lo / 7, hi / 7, shape).astype(np.float32)
+             for shape in ((90, 90), (90, 180), (90, 180), (90, 3), (90, 3), (180, 3))]
+    s1, s2, s3, s4, s5, s6 = stats
+    i, j, nd, bias = 4, 85, 5, np.float32(0.25)
+    out = np.empty((nd * 180 * 3, 6), np.float32)
+    kernels.shifted_logits(i, j, nd, *stats, bias, kinks.numpy(), pq.numpy(), out)
+    d, p, lam = (a.reshape(-1) for a in np.meshgrid(np.arange(j, j + nd), np.arange(180), np.arange(3),
+                                                      indexing="ij"))
+    s = torch.from_numpy(((s1[i, d] + s2[i, p] + s3[d, p] + bias) + s4[i, lam] + s5[d, lam] + s6[p, lam])
+                         .astype(np.float32))
+    seg = pq[torch.bucketize(s, kinks)]
+    assert np.allclose(out, (seg[:, :6] * s[:, None] + seg[:, 6:]).numpy(), atol=1e-5)
+    assert out.max() <= 1e-5                                        # exp(·) ≤ 1, as the torch path
+
+
+def test_numba_gather_and_output_loops_equal_embedding_bag_and_the_last_layer():
+    from specgen_addon.model import gather_kernels
+
+    kernels = gather_kernels.load()
+    if kernels is None:
+        pytest.skip("numba is not installed (requirements.txt lists it), or SPECGEN_KERNELS=torch")
+    rng = np.random.default_rng(5)
+    rows = rng.normal(size=(500, 11)).astype(np.float32)
+    rows[:, -1] = 1.0                                               # the trailing column: Σ e
+    indices = rng.integers(0, 500, size=(257, 6)).astype(np.int32)
+    e = rng.uniform(0.0, 1.0, size=(257, 6)).astype(np.float32)
+    h, t = np.empty((257, 11), np.float32), np.empty(257, np.float32)
+    kernels.gather_relu(indices, rows, e, h, t)
+    want = torch.nn.functional.embedding_bag(torch.from_numpy(indices), torch.from_numpy(rows),
+                                             per_sample_weights=torch.from_numpy(e), mode="sum").relu()
+    assert np.allclose(h, want.numpy(), atol=1e-5)
+    assert np.array_equal(t, h[:, -1])
+    g = rng.normal(size=(257, 9)).astype(np.float32)
+    w3, b3 = rng.normal(size=9).astype(np.float32), np.float32(-0.5)
+    r = np.empty(257, np.float32)
+    kernels.mlp_output(g, t, w3, b3, r)
+    assert np.allclose(r, np.maximum(g, 0.0) @ w3 / t + b3, rtol=1e-5, atol=1e-5)
+    # a NaN (an overflow upstream) survives both ReLUs, as it does torch's, so limits.bad_values sees it
+    rows[indices[3, 2], 4], g[7, 5] = np.nan, np.nan
+    kernels.gather_relu(indices, rows, e, h, t)
+    want = torch.nn.functional.embedding_bag(torch.from_numpy(indices), torch.from_numpy(rows),
+                                             per_sample_weights=torch.from_numpy(e), mode="sum").relu()
+    assert np.array_equal(np.isnan(h), np.isnan(want.numpy())) and np.isnan(h[3, 4])
+    kernels.mlp_output(g, t, w3, b3, r)
+    assert np.isnan(r[7]) and np.isfinite(np.delete(r, 7)).all()
+
+
+def test_kernels_switch_off_with_the_environment_variable(monkeypatch):
+    from specgen_addon.model import gather_kernels
+
+    monkeypatch.setenv(gather_kernels.ENV_VAR, "torch")
+    assert gather_kernels.load() is None
 
 
 def test_grid_decoded_on_the_workers_equals_the_decoded_grid(tmp_path):

@@ -18,7 +18,7 @@ import pytest
 
 REPO = Path(__file__).resolve().parents[1]
 BUILD = REPO / "scripts" / "build_extension.py"
-BLOCKED = ("torch", "colour", "scipy", "PIL", "skimage", "OpenEXR", "onnx", "lazy_loader")
+BLOCKED = ("torch", "colour", "scipy", "PIL", "skimage", "OpenEXR", "onnx", "lazy_loader", "numba", "llvmlite")
 ZIP_LIMIT_BYTES = 60 * 1024 * 1024
 
 
