@@ -5,9 +5,8 @@ a (points × k) temporary:
 
 * the shifted AFF logits ``z_k(s) − max_m z_m(s) = P_k s + Q_k`` (building ``s`` from the six
   statistic tables, ``bucketize``, a row gather, ``addcmul``);
+* the weighted six-row gather and the first layer's ReLU (``embedding_bag``, then a ReLU pass);
 * the output ``r' = w3 · ReLU(g) / t + b3`` (a ReLU pass, a matrix-vector product, a division).
-
-* the weighted six-row gather and the first layer's ReLU (``embedding_bag``, then a ReLU pass).
 
 Here each is one loop over the points (numba, ``nogil``: the grid's worker threads run them side by
 side). The ``exp`` and the second layer's matrix product stay in torch (its vectorised ``exp`` and
