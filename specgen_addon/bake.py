@@ -36,6 +36,7 @@ Wavelengths are nanometres, angles radians, directions Blender world vectors (z 
 
 from __future__ import annotations
 
+import functools
 import os
 from dataclasses import dataclass, field
 from pathlib import Path
@@ -197,9 +198,13 @@ def spectral_basis(values: np.ndarray, tolerance: float = DEFAULT_TOLERANCE,
         k += COEFFS_PER_RENDER
 
 
+@functools.lru_cache(maxsize=4)
 def reachable_entries(n_phi_d: int = N_PHI_D) -> np.ndarray:
     """(90, 90, n_phi_d) bool: grid entries whose (ωi, ωo) both lie above the horizon, allowing
-    the one-cell reach of the trilinear lookup (a neighbour of a reachable node counts)."""
+    the one-cell reach of the trilinear lookup (a neighbour of a reachable node counts).
+
+    A constant of the lookup resolution, so it is made once per resolution (0.4 s) and returned
+    read-only."""
     from .rusinkiewicz import io_from_half_diff
     from .table import grid_angles
 
@@ -210,6 +215,7 @@ def reachable_entries(n_phi_d: int = N_PHI_D) -> np.ndarray:
     grown = above.copy()
     for axis in range(3):
         grown |= np.roll(above, 1, axis) | np.roll(above, -1, axis)
+    grown.flags.writeable = False
     return grown
 
 
@@ -221,15 +227,21 @@ def shifted_coefficients(coeffs: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
     dim: the body of a table whose peak is 10⁵ sr⁻¹ sits far below any fixed fraction of it),
     ``o_0 = 0``. Only entries with ``c_0 ≤ 0`` (zero spectra) are clipped.
     """
-    c = np.asarray(coeffs, dtype=np.float64)
-    c0 = np.maximum(c[..., :1], 0.0)
-    k = c.shape[-1]
+    coeffs = np.asarray(coeffs)
+    k = coeffs.shape[-1]
+    c0 = np.maximum(coeffs[..., 0].astype(np.float64), 0.0)   # one slot at a time, in float64:
+    live = c0 > 0.0                                            # no (…, K) float64 temporaries
+    c0_live = c0[live]
     offsets = np.zeros(k, np.float64)
-    live = c0[..., 0] > 0.0
-    if k > 1 and np.any(live):
-        offsets[1:] = np.maximum(0.0, (-c[live][:, 1:] / c0[live]).max(axis=0))
-    slots = np.concatenate([c0, c[..., 1:] + offsets[1:] * c0], axis=-1)
-    return np.maximum(slots, 0.0).astype(np.float32), offsets
+    slots = np.empty(coeffs.shape, np.float32)
+    slots[..., 0] = c0
+    for j in range(1, k):
+        cj = coeffs[..., j].astype(np.float64)
+        if c0_live.size:
+            offsets[j] = max(0.0, float((-cj[live] / c0_live).max()))
+        cj += offsets[j] * c0
+        slots[..., j] = np.maximum(cj, 0.0)
+    return slots, offsets
 
 
 def bake_atlas(table, path: str | os.PathLike, wavelengths_nm: np.ndarray | None = None,

@@ -184,6 +184,52 @@ def test_numba_gather_and_output_loops_equal_embedding_bag_and_the_last_layer():
     assert np.isnan(r[7]) and np.isfinite(np.delete(r, 7)).all()
 
 
+_CALL_THE_LOOPS = """
+import importlib.util, sys
+import numpy as np
+REPO, PACKAGE = sys.argv[1], sys.argv[2]
+if PACKAGE != "specgen_addon":       # the core under another package name, as the add-on loads it
+    spec = importlib.util.spec_from_file_location(PACKAGE, REPO + "/specgen_addon/__init__.py",
+                                                  submodule_search_locations=[REPO + "/specgen_addon"])
+    sys.modules[PACKAGE] = module = importlib.util.module_from_spec(spec)
+    spec.loader.exec_module(module)
+else:
+    sys.path.insert(0, REPO)
+kernels = importlib.import_module(PACKAGE + ".model.gather_kernels").load()
+f = np.float32
+stats = [np.zeros(shape, f) for shape in ((90, 90), (90, 180), (90, 180), (90, 2), (90, 2), (180, 2))]
+e = np.empty((180 * 2, 6), f)
+kernels.shifted_logits(0, 0, 1, *stats, f(0), np.zeros(1, f), np.zeros((2, 12), f), e)
+h, t = np.empty((360, 3), f), np.empty(360, f)
+kernels.gather_relu(np.zeros((360, 6), np.int32), np.ones((1, 3), f), np.exp(e), h, t)
+r = np.empty(360, f)
+kernels.mlp_output(np.ones((360, 4), f), t, np.ones(4, f), f(0), r)
+assert np.allclose(r, 4.0 / 6.0), r[:3]
+print("ok")
+"""
+
+
+@pytest.mark.slow
+def test_numba_cache_written_under_the_add_on_package_serves_the_command_line(tmp_path):
+    """numba's on-disk cache records each function's module name: a cache written while the core
+    was loaded under the add-on's package name must still load in a plain ``specgen_addon``."""
+    import subprocess
+    import sys
+    from pathlib import Path
+
+    from specgen_addon.model import gather_kernels
+
+    if gather_kernels.load() is None:
+        pytest.skip("numba is not installed (requirements.txt lists it), or SPECGEN_KERNELS=torch")
+    repo = str(Path(__file__).resolve().parents[1])
+    env = {**__import__("os").environ, "NUMBA_CACHE_DIR": str(tmp_path / "numba")}
+    for package in ("specgen_as_add_on", "specgen_addon", "specgen_as_add_on"):
+        res = subprocess.run([sys.executable, "-c", _CALL_THE_LOOPS, repo, package], env=env,
+                             capture_output=True, text=True, timeout=300)
+        assert res.returncode == 0 and res.stdout.strip() == "ok", (package, res.stderr[-2000:])
+    assert any((tmp_path / "numba").rglob("*.nbi"))                # the cache was written and reused
+
+
 def test_kernels_switch_off_with_the_environment_variable(monkeypatch):
     from specgen_addon.model import gather_kernels
 
