@@ -95,15 +95,45 @@ def _gaussian_kernel(sigma: float, truncate: float = 4.0) -> np.ndarray:
     return k / k.sum()
 
 
+def _gaussian_matrix(n: int, sigma: float, mode: str, truncate: float = 4.0) -> np.ndarray:
+    """(n, n) matrix of the 1-D Gaussian correlation along an axis of length ``n``: taps that fall
+    beyond the edge are dropped (``"constant"``) or land on the edge sample (``"nearest"``)."""
+    k = _gaussian_kernel(sigma, truncate)
+    r = k.size // 2
+    rows = np.repeat(np.arange(n), k.size)
+    cols = rows + np.tile(np.arange(-r, r + 1), n)
+    weights = np.tile(k, n)
+    if mode == "constant":
+        inside = (cols >= 0) & (cols < n)
+        rows, cols, weights = rows[inside], cols[inside], weights[inside]
+    else:
+        cols = np.clip(cols, 0, n - 1)
+    m = np.zeros((n, n))
+    np.add.at(m, (rows, cols), weights)
+    return m
+
+
+#: Axes up to this length are blurred as one matrix product (BLAS), longer ones tap by tap: the
+#: product costs n multiply-adds per value against the taps' 2r + 1 passes over the array, and on
+#: the refinement's 128 × 128 × 702 design stacks it is 3–7× faster than the taps and faster than
+#: scipy (docs/refinement.md, "Speed and memory").
+MATRIX_AXIS_MAX = 256
+
+
 def gaussian_filter(a: np.ndarray, sigma, mode: str = "nearest", truncate: float = 4.0) -> np.ndarray:
     """Separable Gaussian blur with edge replication (``mode="nearest"``) or zeros beyond the edge
-    (``mode="constant"``, cval 0)."""
+    (``mode="constant"``, cval 0); scipy's kernel (radius ``int(truncate·σ + 0.5)``)."""
     if mode not in ("nearest", "constant"):
         raise ValueError("only mode='nearest' and mode='constant' are implemented")
     out = np.asarray(a, dtype=np.float64)
     sigmas = np.broadcast_to(np.asarray(sigma, dtype=np.float64), (out.ndim,))
     for axis, s in enumerate(sigmas):
         if s <= 0:
+            continue
+        n = out.shape[axis]
+        if n <= MATRIX_AXIS_MAX:
+            m = _gaussian_matrix(n, float(s), mode, truncate)
+            out = np.moveaxis(np.tensordot(m, out, axes=([1], [axis])), 0, axis)
             continue
         k = _gaussian_kernel(float(s), truncate)
         r = k.size // 2
@@ -112,9 +142,9 @@ def gaussian_filter(a: np.ndarray, sigma, mode: str = "nearest", truncate: float
         padded = np.pad(out, pad, mode="edge" if mode == "nearest" else "constant")
         acc = np.zeros_like(out)
         for i, weight in enumerate(k):
-            acc += weight * np.take(padded, np.arange(i, i + out.shape[axis]), axis=axis)
+            acc += weight * np.take(padded, np.arange(i, i + n), axis=axis)
         out = acc
-    return out
+    return np.ascontiguousarray(out)
 
 
 def map_coordinates(a: np.ndarray, coords, order: int = 1, mode: str = "nearest") -> np.ndarray:

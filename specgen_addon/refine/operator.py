@@ -233,9 +233,11 @@ class PhotoOperator:
                                 idx_parts.append(((pix * na + a) * nb + b)[keep])
                                 val_parts.append(rgb[keep] * w[keep, None])
                 idx = np.concatenate(idx_parts)
-                vals = np.concatenate(val_parts)
-                for col in range(3 * nl):
-                    design[:, col] += np.bincount(idx, weights=vals[:, col], minlength=n_bins)
+                vals = np.concatenate(val_parts)                  # (M, 3L), C-contiguous
+                # one scatter-add for all 3L columns: entry (m, col) goes to bin idx[m]·3L + col, in
+                # the same order per bin as one bincount per column (the same sums, bit for bit)
+                cells = (idx[:, None] * (3 * nl) + np.arange(3 * nl)).ravel()
+                design += np.bincount(cells, weights=vals.ravel(), minlength=design.size).reshape(design.shape)
                 done += radiance.shape[0]
                 if progress is not None:
                     progress(done / total)
