@@ -8,12 +8,12 @@ table, without its grid interpolation), which makes scoring four arms on every t
 
 from __future__ import annotations
 
-import math
 from pathlib import Path
 
 import numpy as np
 
 from ..rusinkiewicz import half_diff_from_io
+from ..table import mu_law_decode_inplace
 
 #: Points per network call (bounded memory).
 CHUNK = 262_144
@@ -55,7 +55,6 @@ class NetworkBRDF:
             for s in range(0, n * k, CHUNK):
                 q = [torch.from_numpy(p[s:s + CHUNK])[None] for p in pts]
                 rp[s:s + CHUNK] = self.model.query(self.planes, *q)[0].numpy()
-        mu = self.model.cfg.mu
-        fr = np.expm1(np.clip(rp, 0.0, None) * math.log1p(mu)) / mu   # as generate_brdf decodes
+        mu_law_decode_inplace(rp, self.model.cfg.mu)                   # as generate_brdf decodes
         above = (wi[:, 2] > 0) & (wo[:, 2] > 0)
-        return fr.reshape(n, k).astype(np.float64) * above[:, None]
+        return rp.reshape(n, k).astype(np.float64) * above[:, None]

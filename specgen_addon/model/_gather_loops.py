@@ -33,7 +33,7 @@ def shifted_logits(i, j, nd, s1, s2, s3, s4, s5, s6, bias, kinks, pq, out):
             for lam in range(n_l):
                 s = s_dp + s4[i, lam] + s5[d, lam] + s6[p, lam]
                 seg = 0
-                step = top if n_k > 0 else 0
+                step = top
                 while step > 0:
                     if seg + step <= n_k and kinks[seg + step - 1] < s:
                         seg += step
