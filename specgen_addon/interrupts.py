@@ -57,7 +57,60 @@ def stop_requested() -> bool:
 def raise_if_stopped() -> None:
     """Raise :class:`Interrupted` if a stop was requested (call between long steps)."""
     if _requested:
-        raise Interrupted(_requested[0])
+        _act_in_main_thread(_requested[0])
+
+
+#: Acquired once per stop by whoever acts on it: the main thread (by raising :class:`Interrupted`
+#: in our code) or the watcher (a hard stop). The other side stands down, so a stop is never acted
+#: on twice, with one side cleaning the output folders while the other still writes into them.
+_stop_token = threading.Lock()
+_stop_owner: list[str] = []
+
+
+def _claim_stop(who: str) -> str:
+    """Claim the current stop for ``who`` ("main" or "watcher"); returns who owns it."""
+    if _stop_token.acquire(blocking=False):
+        _stop_owner.append(who)
+        return who
+    deadline = time.monotonic() + 1.0
+    while not _stop_owner and time.monotonic() < deadline:  # the owner is between its two steps
+        time.sleep(0.001)
+    return _stop_owner[0] if _stop_owner else who
+
+
+def _release_stop() -> None:
+    _stop_owner.clear()
+    if _stop_token.locked():
+        _stop_token.release()
+
+
+class _Parked(BaseException):
+    """Raised asynchronously in the main thread once the watcher owns a stop. CPython creates the
+    exception object when a handler (an ``except``, ``finally`` or ``with`` block, or Blender's C
+    code printing it) takes it, and creating it waits for the watcher's ``os._exit``: the main
+    thread runs none of that handler's code, nor anything after the C call it was in."""
+
+    def __init__(self, *args):
+        threading.Event().wait()
+        super().__init__(*args)  # pragma: no cover - the process ends first
+
+
+def _park_main_thread() -> None:
+    """Park the main thread at its next Python instruction (see :class:`_Parked`). A thread busy
+    in one C call (a Cycles render) is parked when, if ever, the call returns."""
+    import ctypes
+
+    with contextlib.suppress(Exception):
+        ctypes.pythonapi.PyThreadState_SetAsyncExc(ctypes.c_ulong(threading.main_thread().ident),
+                                                   ctypes.py_object(_Parked))
+
+
+def _act_in_main_thread(signum: int) -> None:
+    """Raise :class:`Interrupted` unless the watcher is already stopping the process; then wait
+    for its exit instead of going on (and writing more files) while it cleans up."""
+    if _claim_stop("main") == "main":
+        raise Interrupted(signum)
+    threading.Event().wait()  # the watcher ends the process with os._exit
 
 
 #: Clean-up steps a hard stop runs (newest first): see :func:`on_hard_stop`.
@@ -137,32 +190,33 @@ def stop_on_signals(message=None) -> Iterator[None]:
     """SIGINT and SIGTERM raise :class:`Interrupted` while the block runs (main thread only).
 
     Python runs signal handlers only between bytecodes, and a Cycles render (or any long C call)
-    keeps the main thread away from them for minutes. So a watcher thread is woken by the signal
-    itself (``signal.set_wakeup_fd``); if the main thread has not acted within
-    :data:`HARD_STOP_GRACE_S`, the watcher runs the registered clean-ups (:func:`on_hard_stop`:
-    new outputs and temporary folders removed), prints ``message(signal name)`` and ends the
-    process with 128 + signal number. A signal that lands in an import (where raising is unsafe)
-    is instead delivered again once the main thread is back in ordinary code (within
-    :data:`IMPORT_GRACE_S`), so a lazy import of a large library still ends in the command's own
-    clean stop and message.
+    keeps the main thread away from them for minutes. A signal that lands in Blender's own Python
+    or in an import is not raised there either (Blender would swallow the exception; raising in
+    bpy's C start-up crashes it). So a watcher thread is woken by the signal itself
+    (``signal.set_wakeup_fd``) and follows the main thread (:func:`_follow_main_thread`):
+
+    - while the main thread runs Python, or sits in an import, the watcher waits; once it is back
+      in our own code the signal is delivered again and raised there, so the command's own clean
+      stop and message follow;
+    - if the main thread stays in one C call outside an import for :data:`HARD_STOP_GRACE_S`, or
+      has not come back within :data:`MAX_DEFERRAL_S`, the watcher stops the process itself: it
+      runs the registered clean-ups (:func:`on_hard_stop`: new outputs and temporary folders
+      removed), prints ``message(signal name)`` and exits with 128 + signal number.
+
+    Whichever side acts first owns the stop (:func:`_claim_stop`); the other stands down.
     """
     if threading.current_thread() is not threading.main_thread():
         yield
         return
-    acted = threading.Event()
-
-    in_import = threading.Event()
 
     def handler(signum, frame):
-        _requested.append(signum)
-        reason = _deferral_reason(frame)
-        if reason is not None:  # Blender would swallow the exception: the watcher acts instead
-            if reason == "import":
-                in_import.set()
+        if not _requested or _requested[-1] != signum:
+            _requested.append(signum)
+        _last_handled[0] = time.monotonic()
+        if _deferral_reason(frame) is not None:  # the watcher follows the main thread instead
             return
-        if not acted.is_set():  # the first signal our code sees (a re-delivered one included)
-            acted.set()
-            raise Interrupted(signum)
+        if not _stop_owner:  # the first signal our code sees (a re-delivered one included)
+            _act_in_main_thread(signum)
 
     previous = {s: signal.signal(s, handler) for s in (signal.SIGINT, signal.SIGTERM)}
     read_fd, write_fd = os.pipe()
@@ -179,23 +233,20 @@ def stop_on_signals(message=None) -> Iterator[None]:
             if not data:
                 return
             signum = data[0]
-            if signum not in (signal.SIGINT, signal.SIGTERM) or acted.wait(HARD_STOP_GRACE_S):
+            if signum not in (signal.SIGINT, signal.SIGTERM) or _stop_owner:
                 continue
-            if in_import.is_set() and _wait_out_of_import(acted):
-                in_import.clear()
-                # the signal landed in an import (a lazy ``import onnxruntime``, say), where raising
-                # is unsafe; now the main thread is back in our code: deliver it again to raise there
-                with contextlib.suppress(OSError):
-                    os.kill(os.getpid(), signum)
+            if not _follow_main_thread(signum) or _claim_stop("watcher") != "watcher":
                 continue
+            with contextlib.suppress(Exception):
+                sys.stdout.flush()
+            _park_main_thread()  # nothing of the command runs on (and writes) while we clean up
             for cleanup in reversed(list(_cleanups)):
                 with contextlib.suppress(Exception):
                     cleanup()
             name = signal.Signals(signum).name
             with contextlib.suppress(Exception):
-                sys.stdout.flush()
-                print(message(name) if message else f"cancelled: stopped by {name}", file=sys.stderr,
-                      flush=True)
+                text = message(name) if message else f"cancelled: stopped by {name}"
+                os.write(sys.stderr.fileno(), (text + "\n").encode())
             os._exit(128 + signum)
 
     watcher = threading.Thread(target=watch, name="specgen-signal-watch", daemon=True)
@@ -213,39 +264,54 @@ def stop_on_signals(message=None) -> Iterator[None]:
         for s, h in previous.items():
             signal.signal(s, h if h is not None else signal.SIG_DFL)
         _requested.clear()
+        _release_stop()
 
 
 _OWN_ROOT = str(Path(__file__).resolve().parents[1])
+_THIS_FILE = __file__
 _BLENDER_SCRIPT_DIRS = tuple(os.sep + os.path.join("scripts", d) + os.sep
                              for d in ("addons_core", "modules", "startup", "addons"))
 
 
-#: Longest wait for the main thread to leave an import before a hard stop (seconds).
-IMPORT_GRACE_S = 30.0
+#: Longest wait for the main thread to come back to our code (from an import or from Blender's
+#: own Python that keeps running) before a hard stop (seconds).
+MAX_DEFERRAL_S = 30.0
+#: How often the watcher looks at the main thread, and delivers the signal again (seconds).
+_FOLLOW_POLL_S = 0.02
+_REDELIVER_S = 0.1
+#: When the main thread last ran our signal handler (time.monotonic()): its heartbeat.
+_last_handled = [0.0]
 
 
-def _main_thread_in_import() -> bool:
-    """True while the main thread's innermost frames are an import (before any of SpecGen's own)."""
+def _main_thread_position() -> str | None:
+    """Where the main thread is: :func:`_deferral_reason` of its innermost frame ("import",
+    "blender", or None for our own code)."""
     frame = sys._current_frames().get(threading.main_thread().ident)
-    while frame is not None:
-        name = frame.f_code.co_filename
-        if name.startswith("<frozen importlib"):
-            return True
-        if name.startswith(_OWN_ROOT) and "site-packages" not in name:
-            return False
-        frame = frame.f_back
-    return False
+    return None if frame is None else _deferral_reason(frame)
 
 
-def _wait_out_of_import(acted: threading.Event) -> bool:
-    """Wait (up to :data:`IMPORT_GRACE_S`) until the main thread is out of the import a signal
-    landed in; True when it is and nothing else has acted on the signal meanwhile."""
-    deadline = time.monotonic() + IMPORT_GRACE_S
-    while time.monotonic() < deadline:
-        if acted.wait(0.05):
-            return False
-        if not _main_thread_in_import():
+def _follow_main_thread(signum: int) -> bool:
+    """After a signal, deliver it again every :data:`_REDELIVER_S` until the main thread acts on
+    it (False): its handler raises as soon as it runs in our own code, and defers it, beating a
+    heartbeat, while it runs Blender's Python or an import. True when the watcher must stop the
+    process itself: no heartbeat for :data:`HARD_STOP_GRACE_S` outside an import (one long C
+    call, as a Cycles render), or no stop within :data:`MAX_DEFERRAL_S`. (A heartbeat, not a look
+    at the main thread's frame: a loop that spends its time in one C call shows the same frame
+    at every look, though it runs.)"""
+    start = time.monotonic()
+    last_kick = start
+    while not _stop_owner:
+        now = time.monotonic()
+        if now - start > MAX_DEFERRAL_S:
             return True
+        if _main_thread_position() != "import" and \
+                now - max(_last_handled[0], start) >= HARD_STOP_GRACE_S:
+            return True
+        if now - last_kick >= _REDELIVER_S:
+            last_kick = now
+            with contextlib.suppress(OSError):
+                os.kill(os.getpid(), signum)
+        time.sleep(_FOLLOW_POLL_S)
     return False
 
 
@@ -253,9 +319,14 @@ def _deferral_reason(frame) -> str | None:
     """Why a signal must not raise in the interrupted code: ``"blender"`` for Blender's own Python
     (add-on registration, Cycles' engine callbacks: Blender catches and prints exceptions raised
     there instead of passing them on), ``"import"`` for an import (it may run inside bpy's C
-    start-up, where raising crashes it), reached before any of SpecGen's frames; None otherwise."""
+    start-up, where raising crashes it), reached before any of SpecGen's frames; None otherwise.
+    This module's own frames (a signal handler running, or interrupted by a second signal) are
+    looked through, to the code they interrupted."""
     while frame is not None:
         name = frame.f_code.co_filename
+        if name == _THIS_FILE:
+            frame = frame.f_back
+            continue
         if any(d in name for d in _BLENDER_SCRIPT_DIRS):
             return "blender"
         if name.startswith("<frozen importlib"):
@@ -306,10 +377,16 @@ class OutputGuard:
         return self
 
     def __exit__(self, exc_type, exc, tb) -> bool:
-        with contextlib.suppress(ValueError):
-            _cleanups.remove(self.clean)
-        if exc_type is not None:
-            self.clean()
+        try:
+            if exc_type is not None:
+                try:
+                    self.clean()
+                except KeyboardInterrupt:  # a signal in the middle of the clean-up: finish it
+                    self.clean()
+                    raise
+        finally:  # registered until now, so a hard stop meanwhile also cleans
+            with contextlib.suppress(ValueError):
+                _cleanups.remove(self.clean)
         return False
 
     def clean(self) -> None:
@@ -328,13 +405,24 @@ class OutputGuard:
                 continue
             with contextlib.suppress(OSError):
                 if path.is_dir() and not path.is_symlink():
-                    path.rmdir()  # fails (kept) when a kept file is inside
+                    self._remove_new_folder(path)
                 else:
                     path.unlink()
                 self.removed.append(path)
         if before is None:
             with contextlib.suppress(OSError):
                 folder.rmdir()
+
+    def _remove_new_folder(self, path: Path) -> None:
+        """Remove a folder that appeared since entry: empty it too when what is inside was not in
+        the snapshot (a huge folder, or files written meanwhile), unless a kept path is inside."""
+        try:
+            path.rmdir()
+        except OSError:
+            resolved = path.resolve()
+            if any(resolved in k.parents for k in self.keep):
+                raise  # fails (kept) when a kept file is inside
+            shutil.rmtree(path)
 
     def left_behind(self) -> str:
         """One clause for a message: what the stopped command left on purpose, or that it left

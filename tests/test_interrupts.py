@@ -1,4 +1,5 @@
-"""Signal handling of :mod:`specgen_addon.interrupts` in processes forked inside a stop block."""
+"""Signal handling of :mod:`specgen_addon.interrupts`: forked workers, imports, Blender's own code
+and C calls, and the watcher's hard stop."""
 
 from __future__ import annotations
 
@@ -92,3 +93,142 @@ def test_a_signal_inside_a_slow_import_is_raised_in_the_code_after_it(tmp_path):
     assert proc.returncode == 130, out
     assert "IMPORTED" in out and "RAISED SIGINT" in out, out
     assert "cancelled: stopped by" not in out, out
+
+
+FAKE_BLENDER = r"""
+import os, time
+
+
+def busy_writing(folder, seconds):
+    # Blender's own Python (a startup script, an operator): running, writing files, for a while
+    t = time.monotonic()
+    i = 0
+    while time.monotonic() - t < seconds:
+        (folder / f"from_blender_{i % 500}.txt").write_text("x")
+        i += 1
+    return i
+
+
+def stuck_in_a_c_call(seconds):
+    # a Cycles render: one long C call under Blender's Python, where no Python signal handler runs
+    import signal
+    old = signal.pthread_sigmask(signal.SIG_BLOCK, {signal.SIGINT})   # the C handler runs on
+    try:                                                              # another thread meanwhile
+        time.sleep(seconds)
+    finally:
+        signal.pthread_sigmask(signal.SIG_SETMASK, old)
+"""
+
+#: A hard-stop clean-up step that takes a second (a large temporary folder), run before the
+#: output folder's own clean-up: the main thread comes back from its C call meanwhile.
+SLOW_CLEAN_UP = "from specgen_addon import interrupts; interrupts._cleanups.append(lambda: time.sleep(1.0))"
+
+GUARDED_SCRIPT = r"""
+import sys, time
+from pathlib import Path
+sys.path.insert(0, {repo!r})
+sys.path.insert(0, {blender!r})
+import fake_blender
+from specgen_addon import cli
+
+out = Path({out!r})
+
+def work():
+    (out / "lookup").mkdir()
+    (out / "lookup" / "table.json").write_text("{{}}")   # written before the stop, by our code
+    {before}
+    print("READY", flush=True)
+    {call}
+    print("BACK IN OUR CODE", flush=True)
+    t = time.monotonic()
+    while time.monotonic() - t < 20:
+        (out / "lookup" / "ours.txt").write_text("x")
+    return 0
+
+sys.exit(cli.run_guarded("the work", work, ([out], []), prog="s"))
+"""
+
+
+def _run_guarded_script(tmp_path, call: str, delay: float, before: str = ""):
+    """Start GUARDED_SCRIPT with ``call`` as the step the signal lands in; SIGINT after ``delay``."""
+    import subprocess
+    from pathlib import Path
+
+    blender = tmp_path / "blender" / "5.0" / "scripts" / "modules"  # a path Blender's own code has
+    blender.mkdir(parents=True)
+    (blender / "fake_blender.py").write_text(FAKE_BLENDER)
+    out = tmp_path / "out"
+    out.mkdir()
+    (out / "keep.txt").write_text("x")
+    script = tmp_path / "s.py"
+    script.write_text(GUARDED_SCRIPT.format(repo=str(Path(__file__).resolve().parents[1]),
+                                            blender=str(blender), out=str(out), call=call,
+                                            before=before))
+    proc = subprocess.Popen([sys.executable, str(script)], stdout=subprocess.PIPE,
+                            stderr=subprocess.STDOUT, text=True)
+    t0 = time.monotonic()
+    try:
+        assert proc.stdout.readline().strip() == "READY"
+        time.sleep(delay)
+        proc.send_signal(signal.SIGINT)
+        text, _ = proc.communicate(timeout=60)
+    finally:
+        if proc.poll() is None:
+            proc.kill()
+    left = sorted(str(p.relative_to(out)) for p in out.rglob("*"))
+    return proc.returncode, text, left, time.monotonic() - t0
+
+
+def test_a_signal_inside_blender_code_that_keeps_running_is_acted_on_once_in_our_code(tmp_path):
+    """The CI failure of the thirty-first session: a signal landing in Blender's own Python (bpy's
+    start-up, read_factory_settings) was deferred, and the watcher's hard stop cleaned the output
+    folder while the main thread went on writing and then raised the same stop itself. Files were
+    left behind. Now the watcher waits while the main thread runs, and the stop is acted on once."""
+    code, text, left, _ = _run_guarded_script(
+        tmp_path, "fake_blender.busy_writing(out / 'lookup', 3.0)", delay=0.3)
+    assert code == 130, text
+    assert left == ["keep.txt"], (left[:5], text)
+    assert text.count("cancelled:") == 1, text
+    assert "cancelled: the work stopped by SIGINT; nothing partial was left" in text, text
+    assert "BACK IN OUR CODE" in text, text   # the stop was raised in our code, not a hard stop
+
+
+def test_a_signal_during_a_long_c_call_under_blender_code_stops_within_seconds(tmp_path):
+    """A Cycles render keeps the main thread in one C call: the watcher stops the process itself,
+    removing what the work wrote, within a few seconds (not after the call)."""
+    code, text, left, seconds = _run_guarded_script(
+        tmp_path, "fake_blender.stuck_in_a_c_call(30.0)", delay=0.3)
+    assert code == 130, text
+    assert left == ["keep.txt"], (left, text)
+    assert text.count("cancelled:") == 1 and "nothing partial was left" in text, text
+    assert "BACK IN OUR CODE" not in text
+    assert seconds < 10, seconds
+
+
+def test_a_signal_handler_frame_is_looked_through_to_the_import_it_interrupted():
+    """A second signal (one the watcher delivers again) can land while the first one's handler
+    runs: the frame it interrupts is the handler's own, in our code. Raising there, inside an
+    import, crashed bpy's start-up (exit -11); the handler's frames must be looked through."""
+    from specgen_addon import interrupts
+
+    in_handler = compile("import sys\ndef handler_frame():\n    return sys._getframe()\n",
+                         interrupts._THIS_FILE, "exec")
+    scope: dict = {}
+    exec(in_handler, scope)
+    in_import = compile("frame = handler_frame()\n", "<frozen importlib._bootstrap>", "exec")
+    exec(in_import, scope)
+    assert scope["frame"].f_code.co_filename == interrupts._THIS_FILE
+    assert interrupts._deferral_reason(scope["frame"]) == "import"
+
+
+def test_a_hard_stop_parks_the_main_thread_that_comes_back_while_it_cleans_up(tmp_path):
+    """The main thread sits in a C call under Blender's code (loading the factory start-up file)
+    just longer than the watcher waits, then comes back while the watcher is still cleaning up,
+    and would go on writing into the output folder. It is parked at its first Python instruction,
+    so nothing it would write is left behind, and the stop is reported once."""
+    code, text, left, _ = _run_guarded_script(
+        tmp_path, "fake_blender.stuck_in_a_c_call(1.8)", delay=0.3, before=SLOW_CLEAN_UP)
+    assert code == 130, text
+    assert "BACK IN OUR CODE" not in text, text
+    assert left == ["keep.txt"], (left[:5], len(left), text)
+    assert text.count("cancelled:") == 1 and "nothing partial was left" in text, text
