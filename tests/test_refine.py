@@ -367,3 +367,28 @@ def test_a_blurred_photo_is_fitted_with_its_blur_modelled(ramp_table):
 def test_a_bad_blur_width_is_refused():
     with pytest.raises(SpecGenError, match="blur_px"):
         RefineOptions(blur_px=-1.0)
+
+
+def _kkt_residual(g, r, sol):
+    grad = g @ sol - r
+    free = sol > 0
+    return max(np.abs(grad[free]).max(initial=0.0), (-grad[~free]).max(initial=0.0), (-sol).max(initial=0.0))
+
+
+@pytest.mark.parametrize("seed", range(6))
+def test_nonneg_ridge_agrees_with_scipy_nnls_when_many_coordinates_bind(seed):
+    """A second implementation: for G = LLᵀ the problem is NNLS of ‖Lᵀθ − L⁻¹r‖, which
+    scipy.optimize.nnls (Lawson–Hanson) solves. Targets with negative coordinates and a correlated
+    design, so that many coordinates bind and some are released again."""
+    scipy_optimize = pytest.importorskip("scipy.optimize")
+    rng = np.random.default_rng(seed)
+    n = 40 + 30 * seed
+    a = rng.normal(size=(3 * n, n)) + 0.3 * rng.normal(size=(3 * n, 1))   # correlated columns
+    g = a.T @ a + 1e-3 * np.eye(n)
+    r = a.T @ (a @ rng.normal(size=n))
+    sol = nonneg_ridge(g, r)
+    lower = np.linalg.cholesky(g)
+    ref, _ = scipy_optimize.nnls(lower.T, np.linalg.solve(lower, r), maxiter=50 * n)
+    assert 0.1 * n < np.count_nonzero(sol == 0) < 0.95 * n
+    assert _kkt_residual(g, r, sol) < 1e-7 * (1 + np.abs(r).max())
+    assert np.allclose(sol, ref, rtol=1e-7, atol=1e-9)

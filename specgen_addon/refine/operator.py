@@ -227,17 +227,23 @@ class PhotoOperator:
                             for kb in range(d_idx.shape[1]):
                                 w = wa * d_val[j, kb]
                                 keep = w > 0
-                                if not np.any(keep):
-                                    continue
                                 b = d_idx[j, kb]
-                                idx_parts.append(((pix * na + a) * nb + b)[keep])
-                                val_parts.append(rgb[keep] * w[keep, None])
+                                if keep.all():                   # (no copies for the usual case)
+                                    idx_parts.append((pix * na + a) * nb + b)
+                                    val_parts.append(rgb * w[:, None])
+                                elif keep.any():
+                                    idx_parts.append(((pix * na + a) * nb + b)[keep])
+                                    val_parts.append(rgb[keep] * w[keep, None])
                 idx = np.concatenate(idx_parts)
                 vals = np.concatenate(val_parts)                  # (M, 3L), C-contiguous
                 # one scatter-add for all 3L columns: entry (m, col) goes to bin idx[m]·3L + col, in
-                # the same order per bin as one bincount per column (the same sums, bit for bit)
-                cells = (idx[:, None] * (3 * nl) + np.arange(3 * nl)).ravel()
-                design += np.bincount(cells, weights=vals.ravel(), minlength=design.size).reshape(design.shape)
+                # the same order per bin as one bincount per column (the same sums, bit for bit),
+                # over the bins this chunk reaches only (a chunk's samples are a few neighbouring
+                # pixels'; the others would gain exact zeros)
+                lo, hi = int(idx.min()), int(idx.max()) + 1
+                cells = ((idx - lo)[:, None] * (3 * nl) + np.arange(3 * nl)).ravel()
+                design[lo:hi] += np.bincount(cells, weights=vals.ravel(),
+                                             minlength=(hi - lo) * 3 * nl).reshape(hi - lo, 3 * nl)
                 done += radiance.shape[0]
                 if progress is not None:
                     progress(done / total)

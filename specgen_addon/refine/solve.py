@@ -28,30 +28,37 @@ def difference_operator(shape: tuple[int, ...], axis: int) -> np.ndarray:
 def nonneg_ridge(gram: np.ndarray, rhs: np.ndarray, max_iter: int = 200) -> np.ndarray:
     """``argmin ½θᵀGθ − rᵀθ`` s.t. ``θ ≥ 0`` for symmetric positive-definite ``G``.
 
-    Block-pivoting active set (Portugal, Júdice & Vicente 1994): coordinates that come out negative
-    are bound at zero, a bound coordinate whose gradient points inside is released, until the KKT
-    conditions hold. Converges in a few steps here, where the prior keeps most coordinates interior.
+    Block principal pivoting (Júdice & Pires 1994, as used for NNLS by Kim & Park 2011): solve on
+    the free set, then move *every* infeasible coordinate at once (a free one that came out
+    negative is bound at zero; a bound one whose gradient points inside is freed), with the
+    single-exchange backup rule when the number of infeasible coordinates stops falling. The
+    problem is strictly convex, so the answer is its unique KKT point; this reaches it in a few
+    solves where releasing one bound coordinate per solve took dozens.
     """
     gram = np.asarray(gram, dtype=np.float64)
     rhs = np.asarray(rhs, dtype=np.float64)
     n = rhs.size
     if gram.shape != (n, n):
         raise SpecGenError("internal: Gram matrix and right-hand side disagree")
+    tol = 1e-10 * (1 + np.abs(rhs))
     free = np.ones(n, dtype=bool)
     theta = np.zeros(n)
+    best, chances = n + 1, 3          # Júdice & Pires' safeguard against cycling
     for _ in range(max_iter):
-        sol = np.zeros(n)
+        theta = np.zeros(n)
         if np.any(free):
-            sol[free] = np.linalg.solve(gram[np.ix_(free, free)], rhs[free])
-        if np.all(sol[free] >= 0):
-            theta = sol
-            grad = gram @ theta - rhs                     # KKT: grad ≥ 0 on the bound set
-            bound = ~free
-            if not np.any(bound) or np.all(grad[bound] >= -1e-10 * (1 + np.abs(rhs[bound]))):
-                return theta
-            k = np.flatnonzero(bound)[np.argmin(grad[bound])]
-            free[k] = True
-            continue
-        # bind every coordinate that went negative (block pivoting) and solve again
-        free &= ~(sol < 0)
+            theta[free] = np.linalg.solve(gram[np.ix_(free, free)], rhs[free])
+        grad = gram @ theta - rhs                     # KKT: grad ≥ 0 where θ is bound at zero
+        infeasible = np.flatnonzero((free & (theta < 0)) | (~free & (grad < -tol)))
+        if infeasible.size == 0:
+            return theta
+        if infeasible.size < best:
+            best, chances = infeasible.size, 3
+            free[infeasible] = ~free[infeasible]
+        elif chances > 0:
+            chances -= 1
+            free[infeasible] = ~free[infeasible]
+        else:                                         # backup rule: exchange one coordinate
+            k = infeasible[-1]
+            free[k] = not free[k]
     return np.clip(theta, 0.0, None)
