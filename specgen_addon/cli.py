@@ -97,6 +97,11 @@ def run_guarded(what: str | Callable[[], str], work, outputs=([], []), verbose: 
                     code = int(work() or 0)
                     raise_if_stopped()  # a signal deferred inside Blender's own code
                     return code
+            except Exception:
+                # an error after a stop was asked for is the stop's doing (a system call it cut
+                # short inside Blender's code, say): report the stop, not the error
+                raise_if_stopped()
+                raise
             finally:
                 if sys.exc_info()[0] is not None:  # failed or stopped: remove new single outputs
                     remove_new_files()

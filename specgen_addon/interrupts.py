@@ -253,18 +253,22 @@ def stop_on_signals(message=None) -> Iterator[None]:
     watcher.start()
     try:
         yield
-    finally:
-        signal.set_wakeup_fd(old_wakeup)
-        with contextlib.suppress(ValueError):
-            _WAKEUP_PIPES.remove((read_fd, write_fd))
-        os.close(write_fd)
-        watcher.join(timeout=2.0 if not _requested else 0.1)
-        with contextlib.suppress(OSError):
-            os.close(read_fd)
-        for s, h in previous.items():
-            signal.signal(s, h if h is not None else signal.SIG_DFL)
-        _requested.clear()
-        _release_stop()
+    finally:  # nested, so that a signal landing here cannot skip the rest of the tear-down
+        try:
+            for s, h in previous.items():
+                signal.signal(s, h if h is not None else signal.SIG_DFL)
+            signal.set_wakeup_fd(old_wakeup)
+        finally:
+            try:
+                with contextlib.suppress(ValueError):
+                    _WAKEUP_PIPES.remove((read_fd, write_fd))
+                os.close(write_fd)
+                watcher.join(timeout=2.0 if not _requested else 0.1)
+                with contextlib.suppress(OSError):
+                    os.close(read_fd)
+            finally:
+                _requested.clear()
+                _release_stop()
 
 
 _OWN_ROOT = str(Path(__file__).resolve().parents[1])

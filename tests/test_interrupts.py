@@ -109,6 +109,14 @@ def busy_writing(folder, seconds):
     return i
 
 
+def fails_after(seconds):
+    # Blender's C code whose system call the signal cut short: it reports an error a while later
+    t = time.monotonic()
+    while time.monotonic() - t < seconds:
+        pass
+    raise RuntimeError("Error: cannot read file (Interrupted system call)")
+
+
 def stuck_in_a_c_call(seconds):
     # a Cycles render: one long C call under Blender's Python, where no Python signal handler runs
     import signal
@@ -232,3 +240,13 @@ def test_a_hard_stop_parks_the_main_thread_that_comes_back_while_it_cleans_up(tm
     assert "BACK IN OUR CODE" not in text, text
     assert left == ["keep.txt"], (left[:5], len(left), text)
     assert text.count("cancelled:") == 1 and "nothing partial was left" in text, text
+
+
+def test_an_error_that_follows_a_signal_is_reported_as_the_stop(tmp_path):
+    """The signal interrupts a system call in Blender's C code, which then fails with its own error:
+    the user asked to stop, so the command ends as stopped (130, its one line), not as an internal
+    error (2)."""
+    code, text, left, _ = _run_guarded_script(tmp_path, "fake_blender.fails_after(1.0)", delay=0.3)
+    assert code == 130, text
+    assert left == ["keep.txt"], (left, text)
+    assert text.count("cancelled:") == 1 and "internal error" not in text, text
