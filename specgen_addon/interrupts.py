@@ -91,8 +91,13 @@ class _Parked(BaseException):
     thread runs none of that handler's code, nor anything after the C call it was in."""
 
     def __init__(self, *args):
-        threading.Event().wait()
+        _wait_for_the_watchers_exit()
         super().__init__(*args)  # pragma: no cover - the process ends first
+
+
+def _wait_for_the_watchers_exit() -> None:
+    """Block this (main) thread for good: the watcher owns the stop and ends the process."""
+    threading.Event().wait()
 
 
 def _park_main_thread() -> None:
@@ -110,7 +115,7 @@ def _act_in_main_thread(signum: int) -> None:
     for its exit instead of going on (and writing more files) while it cleans up."""
     if _claim_stop("main") == "main":
         raise Interrupted(signum)
-    threading.Event().wait()  # the watcher ends the process with os._exit
+    _wait_for_the_watchers_exit()
 
 
 #: Clean-up steps a hard stop runs (newest first): see :func:`on_hard_stop`.

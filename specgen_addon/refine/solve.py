@@ -54,11 +54,9 @@ def nonneg_ridge(gram: np.ndarray, rhs: np.ndarray, max_iter: int = 200) -> np.n
             return theta
         if infeasible.size < best:
             best, chances = infeasible.size, 3
-            free[infeasible] = ~free[infeasible]
         elif chances > 0:
             chances -= 1
-            free[infeasible] = ~free[infeasible]
         else:                                         # backup rule: exchange one coordinate
-            k = infeasible[-1]
-            free[k] = not free[k]
+            infeasible = infeasible[-1:]
+        free[infeasible] = ~free[infeasible]
     return np.clip(theta, 0.0, None)
