@@ -95,7 +95,7 @@ def _gaussian_kernel(sigma: float, truncate: float = 4.0) -> np.ndarray:
     return k / k.sum()
 
 
-def _gaussian_matrix(n: int, sigma: float, mode: str, truncate: float = 4.0) -> np.ndarray:
+def gaussian_matrix(n: int, sigma: float, mode: str, truncate: float = 4.0) -> np.ndarray:
     """(n, n) matrix of the 1-D Gaussian correlation along an axis of length ``n``: taps that fall
     beyond the edge are dropped (``"constant"``) or land on the edge sample (``"nearest"``)."""
     k = _gaussian_kernel(sigma, truncate)
@@ -132,7 +132,7 @@ def gaussian_filter(a: np.ndarray, sigma, mode: str = "nearest", truncate: float
             continue
         n = out.shape[axis]
         if n <= MATRIX_AXIS_MAX:
-            m = _gaussian_matrix(n, float(s), mode, truncate)
+            m = gaussian_matrix(n, float(s), mode, truncate)
             out = np.moveaxis(np.tensordot(m, out, axes=([1], [axis])), 0, axis)
             continue
         k = _gaussian_kernel(float(s), truncate)

@@ -29,6 +29,7 @@ from __future__ import annotations
 
 import math
 import time
+from concurrent.futures import ThreadPoolExecutor
 from dataclasses import dataclass, field, replace
 from typing import Callable
 
@@ -37,7 +38,8 @@ import numpy as np
 from ..errors import Cancelled, SpecGenError
 from ..table import BRDFTable
 from .basis import CorrectionBasis
-from .blur import BLUR_CANDIDATES_PX, blur_image, blur_rows, rows_inside
+from .blur import (BLUR_CANDIDATES_PX, blur_image, blur_rows, embed_rows, gather_rows,
+                   gaussian_blur_stack, rows_inside)
 from .body import BODY_PRIORS, has_separate_body, natural_body
 from .operator import PhotoOperator, render_grid
 from .report import Reproduction, photo_scale, reproduction
@@ -197,8 +199,7 @@ def refine_brdf(table: BRDFTable, photo: np.ndarray, lighting=None, options: Ref
     n_lobe, nl = basis.n_lobe, s_hats.shape[1]
     a_lobe = a_lobe.reshape(b.shape[0], 3, -1)
     if options.additive:   # u: an added angular term h_a(θh) g_b(θd) s_l(λ), for near-Lambertian tables
-        unit = np.broadcast_to(np.ones(wl.size, np.float32), table.values.shape)
-        a_add = op.lobe_design(unit, np.zeros(wl.size), basis, progress=report(0.6, 0.65), cancel=cancel)
+        a_add = op.added_design(basis, progress=report(0.6, 0.65), cancel=cancel)
         a_lobe = np.concatenate([a_lobe, a_add.reshape(b.shape[0], 3, -1)], axis=2)
     sigma, a_lobe_fit, a_lamb_fit = _photo_blur(op, a_lobe, a_lamb, op.lambert_design(floor, s_hats), b,
                                                 clipped, n_lobe, nl, level, basis, options, check_cancel)
@@ -238,10 +239,12 @@ def refine_brdf(table: BRDFTable, photo: np.ndarray, lighting=None, options: Ref
         warnings.extend(_energy_warnings(table, refined))
     check_cancel()
 
-    before_img = render_under(table, scene, exposure)
-    if progress is not None:
-        progress(0.8)
-    after_img = render_under(refined, scene, exposure)
+    # the two checks are independent renders of one prepared scene: on two threads (numpy's
+    # lookups release the GIL), the same images as one after the other
+    with ThreadPoolExecutor(max_workers=2) as pool:
+        before_job = pool.submit(render_under, table, scene, exposure)
+        after_img = render_under(refined, scene, exposure)
+        before_img = before_job.result()
     if progress is not None:
         progress(0.9)
 
@@ -300,17 +303,30 @@ def _photo_blur(op: PhotoOperator, a_lobe: np.ndarray, a_lamb: np.ndarray, a_bod
         blur = blur_rows(op.shape, op.pixel_ids, float(options.blur_px))
         return float(options.blur_px), blur(a_lobe), blur(a_lamb)
     common = rows_inside(op.shape, op.pixel_ids, max(BLUR_CANDIDATES_PX), clipped)
-    best: tuple[float, float, np.ndarray, np.ndarray] | None = None
+    if not np.any(common):              # nothing every candidate sees (a clipped photo): no blur
+        return 0.0, a_lobe, a_lamb
+    n_lobe_cols, n_body = a_lobe.shape[2], a_body.shape[2]
+    # every candidate blurs one stack of all the design's columns; its rows are read with the
+    # fitted (common) rows first, in their own order, so that each fit reads a contiguous block
+    image = embed_rows(op.shape, op.pixel_ids, np.concatenate([a_lobe, a_body, a_lamb], axis=2))
+    order = np.concatenate([np.flatnonzero(common), np.flatnonzero(~common)])
+    n_common = int(common.sum())
+    b_common = b[common]
+    best: tuple[float, float, np.ndarray] | None = None
     for sigma in BLUR_CANDIDATES_PX:
-        blur = blur_rows(op.shape, op.pixel_ids, sigma)
-        lobe, lamb = blur(a_lobe), blur(a_lamb)
-        design = np.concatenate([lobe, blur(a_body), lamb], axis=2)[common]
-        theta = _solve_correction(design, b[common], n_lobe, nl, level, basis, options)
-        residual = float(np.mean((design @ theta - b[common]) ** 2))
+        blurred = gaussian_blur_stack(image, sigma) if sigma > 0 else image
+        rows = gather_rows(blurred, op.pixel_ids[order]).reshape(order.size, 3, -1)
+        del blurred
+        design = rows[:n_common]
+        theta = _solve_correction(design, b_common, n_lobe, nl, level, basis, options)
+        residual = float(np.mean((design @ theta - b_common) ** 2))
         if best is None or residual < best[0]:
-            best = (residual, sigma, lobe, lamb)
+            best = (residual, sigma, rows)
         check_cancel()
-    return best[1], best[2], best[3]
+    sigma, rows = best[1], best[2]
+    in_order = np.empty_like(rows)
+    in_order[order] = rows                                       # back to the operator's rows
+    return sigma, in_order[:, :, :n_lobe_cols], in_order[:, :, n_lobe_cols + n_body:]
 
 
 def _solve_correction(design: np.ndarray, photo: np.ndarray, n_lobe: int, nl: int, level: float,

@@ -71,6 +71,12 @@ class CorrectionBasis:
                                f"(choose from {', '.join(SPECTRAL_BASES)})")
         if self.spectral == "mallett2019" and len(self.wavelength_knots_nm) != 3:
             raise SpecGenError("the Mallett 2019 spectral basis has three members (blue, green, red)")
+        for name, knots, n in (("θh", self.theta_h_knots, N_THETA_H), ("θd", self.theta_d_knots, N_THETA_D)):
+            k = np.asarray(knots, dtype=np.float64)
+            if (k.ndim != 1 or k.size < 1 or np.any(k != np.round(k)) or np.any(k < 0) or np.any(k > n - 1)
+                    or np.any(np.diff(k) <= 0)):
+                raise SpecGenError(f"{name} knots must be increasing grid indices, whole numbers in 0…{n - 1}; "
+                                   f"got {tuple(knots)}")
 
     @property
     def shape(self) -> tuple[int, int, int]:
@@ -107,12 +113,3 @@ class CorrectionBasis:
         x = np.asarray(x, dtype=np.float64).reshape(self.shape)
         return np.einsum("ia,jb,abl,kl->ijk", self.theta_h_hats(), self.theta_d_hats(), x,
                          self.spectral_hats(wavelengths_nm), optimize=True)
-
-
-def sparse_hats(hats: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
-    """Each row's (at most) two non-zero hats: indices (n, 2) and values (n, 2)."""
-    order = np.argsort(-hats, axis=1, kind="stable")[:, :2]
-    values = np.take_along_axis(hats, order, axis=1)
-    if hats.shape[1] > 2 and np.any(np.abs(hats.sum(axis=1) - values.sum(axis=1)) > 1e-9):
-        raise SpecGenError("internal: a node has more than two non-zero hats")
-    return order, values

@@ -18,6 +18,8 @@ from typing import Callable
 
 import numpy as np
 
+from ..ndimage_np import gaussian_matrix
+
 #: Blur widths (Gaussian σ, canonical-crop pixels) the refinement chooses among. Two bilinear
 #: resamplings half a pixel off the grid blur by σ ≈ 0.71.
 BLUR_CANDIDATES_PX = (0.0, 0.35, 0.5, 0.7, 1.0, 1.4)
@@ -26,12 +28,41 @@ BLUR_CANDIDATES_PX = (0.0, 0.35, 0.5, 0.7, 1.0, 1.4)
 INSIDE_WEIGHT = 0.98
 
 
-def _gaussian_filter():
-    try:
-        from scipy.ndimage import gaussian_filter
-    except ImportError:
-        from ..ndimage_np import gaussian_filter
-    return gaussian_filter
+#: Output rows per band of the blur's matrix products: a block sees only its rows ± the kernel's
+#: radius, so the products skip the matrix's zeros (3–4× fewer operations than the full matrix).
+_BAND_ROWS = 32
+
+
+def _blur_axis0(img: np.ndarray, matrix: np.ndarray, radius: int) -> np.ndarray:
+    """``matrix @ img`` along axis 0 of an (N, ...) C-contiguous array, band by band."""
+    n = img.shape[0]
+    flat = img.reshape(n, -1)
+    out = np.empty_like(flat)
+    for start in range(0, n, _BAND_ROWS):
+        stop = min(start + _BAND_ROWS, n)
+        lo, hi = max(start - radius, 0), min(stop + radius, n)
+        np.matmul(matrix[start:stop, lo:hi], flat[lo:hi], out=out[start:stop])
+    return out.reshape(img.shape)
+
+
+def gaussian_blur_stack(img: np.ndarray, sigma_px: float, truncate: float = 4.0) -> np.ndarray:
+    """(H, W, C) stack of images blurred in H and W by a Gaussian of ``sigma_px`` pixels, zeros
+    beyond the edge: ``scipy.ndimage.gaussian_filter(img, (σ, σ, 0), mode="constant")`` to
+    rounding (the same truncated kernel), computed as banded matrix products, which numpy's BLAS
+    runs on every core (numpy only, as in a stock Blender)."""
+    img = np.ascontiguousarray(img, dtype=np.float64)
+    if sigma_px <= 0:
+        return img.copy()
+    h, w = img.shape[:2]
+    radius = int(truncate * sigma_px + 0.5)
+    rows = _blur_axis0(img, gaussian_matrix(h, float(sigma_px), "constant", truncate), radius)
+    cols = gaussian_matrix(w, float(sigma_px), "constant", truncate)
+    out = np.empty_like(rows)
+    for start in range(0, w, _BAND_ROWS):       # along W: the same bands, for every row at once
+        stop = min(start + _BAND_ROWS, w)
+        lo, hi = max(start - radius, 0), min(stop + radius, w)
+        np.matmul(cols[start:stop, lo:hi], rows[:, lo:hi], out=out[:, start:stop])
+    return out
 
 
 def blur_image(img: np.ndarray, sigma_px: float) -> np.ndarray:
@@ -39,7 +70,7 @@ def blur_image(img: np.ndarray, sigma_px: float) -> np.ndarray:
     img = np.asarray(img, dtype=np.float64)
     if sigma_px <= 0:
         return img
-    return _gaussian_filter()(img, sigma=(sigma_px, sigma_px, 0), mode="constant")
+    return gaussian_blur_stack(img, sigma_px)
 
 
 def blur_rows(shape: tuple[int, int], pixel_ids: np.ndarray, sigma_px: float
@@ -48,17 +79,26 @@ def blur_rows(shape: tuple[int, int], pixel_ids: np.ndarray, sigma_px: float
     their image blurred by a Gaussian of ``sigma_px`` (unobserved pixels count as 0)."""
     if sigma_px <= 0:
         return lambda rows: rows
-    h, w = shape
-    gaussian_filter = _gaussian_filter()
 
     def blur(rows: np.ndarray) -> np.ndarray:
-        flat = rows.reshape(rows.shape[0], -1)
-        img = np.zeros((h * w, flat.shape[1]))
-        img[pixel_ids] = flat
-        img = gaussian_filter(img.reshape(h, w, -1), sigma=(sigma_px, sigma_px, 0), mode="constant")
-        return img.reshape(h * w, -1)[pixel_ids].reshape(rows.shape)
+        return gather_rows(gaussian_blur_stack(embed_rows(shape, pixel_ids, rows), sigma_px),
+                           pixel_ids).reshape(rows.shape)
 
     return blur
+
+
+def embed_rows(shape: tuple[int, int], pixel_ids: np.ndarray, rows: np.ndarray) -> np.ndarray:
+    """Rows (P, ...) of the observed pixels → an (H, W, C) stack, zeros at the other pixels."""
+    h, w = shape
+    flat = rows.reshape(rows.shape[0], -1)
+    img = np.zeros((h * w, flat.shape[1]))
+    img[pixel_ids] = flat
+    return img.reshape(h, w, -1)
+
+
+def gather_rows(img: np.ndarray, pixel_ids: np.ndarray) -> np.ndarray:
+    """An (H, W, C) stack's rows (len(pixel_ids), C) at the flat pixel indices ``pixel_ids``."""
+    return img.reshape(-1, img.shape[-1])[pixel_ids]
 
 
 def rows_inside(shape: tuple[int, int], pixel_ids: np.ndarray, sigma_px: float,

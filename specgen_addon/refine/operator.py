@@ -25,7 +25,7 @@ from .. import spectra
 from ..errors import Cancelled, SpecGenError
 from ..rusinkiewicz import half_diff_from_io
 from ..table import N_PHI_D, N_THETA_D, N_THETA_H, phi_d_index, theta_d_index, theta_h_index
-from .basis import CorrectionBasis, sparse_hats
+from .basis import CorrectionBasis
 
 ProgressFn = Callable[[float], None]
 CancelFn = Callable[[], bool]
@@ -185,67 +185,113 @@ class PhotoOperator:
         are applied at the grid nodes, before the trilinear lookup, exactly as the corrected table
         is built — so the design reproduces the renderer's lookups of that table.
         """
-        na, nb, nl = basis.shape
-        s_hats = basis.spectral_hats(self.wavelengths_nm)
-        h_idx, h_val = sparse_hats(basis.theta_h_hats())
-        d_idx, d_val = sparse_hats(basis.theta_d_hats())
         flat = values.reshape(-1, values.shape[-1])
         floor32 = np.asarray(floor, np.float32)
+
+        def corner_rgb(rows: slice, g: SampleGroup, radiance: np.ndarray, to_rgb_l) -> list:
+            """(S, 3L) photo of each of the sample's four (θh, θd) corners, interpolated in φd."""
+            ih, jd, kp = g.ih[rows].astype(np.int64), g.jd[rows].astype(np.int64), g.kp[rows].astype(np.int64)
+            tp = g.tp[rows][:, None]
+            kp1 = (kp + 1) % N_PHI_D
+            out = []
+            for di in (0, 1):
+                for dj in (0, 1):
+                    base = ((ih + di) * N_THETA_D + jd + dj) * N_PHI_D
+                    q = flat[base + kp]
+                    q += tp * (flat[base + kp1] - q)
+                    q -= floor32
+                    out.append(to_rgb_l(q, radiance))
+            return out
+
+        return self._hat_design(basis, corner_rgb, progress, cancel)
+
+    def added_design(self, basis: CorrectionBasis, progress: ProgressFn | None = None,
+                     cancel: CancelFn | None = None) -> np.ndarray:
+        """(P, 3, Na, Nb, L): photo of the BRDF ``h_a(θh) g_b(θd) s_l(λ)`` (sr⁻¹) per hat triple.
+
+        The lobe design of the constant table 1 with no floor: every corner of a lookup holds the
+        same spectrum, so each sample is projected to RGB once."""
+        ones = np.ones((1, self.wavelengths_nm.size), np.float32)
+
+        def corner_rgb(rows: slice, g: SampleGroup, radiance: np.ndarray, to_rgb_l) -> list:
+            return [to_rgb_l(ones, radiance)] * 4
+
+        return self._hat_design(basis, corner_rgb, progress, cancel)
+
+    def _hat_design(self, basis: CorrectionBasis, corner_rgb, progress: ProgressFn | None,
+                    cancel: CancelFn | None) -> np.ndarray:
+        """Scatter every sample's photo into the (pixel, θh hat, θd hat) bins it reaches.
+
+        ``corner_rgb(rows, group, radiance, to_rgb_l)`` gives the samples' (S, 3L) photos at their
+        four lookup corners (θh, θd) = (0, 0), (0, 1), (1, 0), (1, 1). The hats' knots are grid
+        nodes, so both θh corners of a lookup lie in one knot interval ``[k_m, k_m+1]`` and reach
+        the same two hats ``m, m + 1`` (and likewise in θd): each sample adds to four bins, its
+        corners' photos weighted by trilinear weight × hat value at the corner.
+        """
+        na, nb, nl = basis.shape
+        s_hats = basis.spectral_hats(self.wavelengths_nm)
+        h_seg, h_lo, h_hi = _hat_slots(basis.theta_h_hats(), basis.theta_h_knots)
+        d_seg, d_lo, d_hi = _hat_slots(basis.theta_d_hats(), basis.theta_d_knots)
         # per spectral hat l: table bands × s_l → render grid (Λ, Λr), then radiance, then → RGB
         to_grid = [(s_hats[:, l:l + 1] * self.interp).astype(np.float32) for l in range(nl)]
         to_rgb = self.to_rgb.T.astype(np.float32)                                  # (Λr, 3)
-        n_bins = self.n_pixels * na * nb
-        design = np.zeros((n_bins, 3 * nl))
+
+        def to_rgb_l(q: np.ndarray, radiance: np.ndarray) -> np.ndarray:
+            rgb = np.empty((radiance.shape[0], 3, nl), dtype=np.float32)
+            for l in range(nl):
+                rgb[:, :, l] = ((q @ to_grid[l]) * radiance) @ to_rgb
+            return rgb.reshape(radiance.shape[0], 3 * nl)                   # (S, 3L), c-major
+
+        width = 3 * nl
+        design = np.zeros((self.n_pixels * na * nb, width))
         total = max(self.n_samples, 1)
         done = 0
         for g in self.groups:
             for start in range(0, g.pixel.size, 65536):
                 if cancel is not None and cancel():
                     raise Cancelled("refinement cancelled")
-                sl = slice(start, start + 65536)
-                radiance = (g.weights[sl].astype(np.float64) @ g.radiance_basis).astype(np.float32)
-                ih, jd, kp = g.ih[sl].astype(np.int64), g.jd[sl].astype(np.int64), g.kp[sl].astype(np.int64)
-                th, td, tp = g.th[sl], g.td[sl], g.tp[sl]
-                kp1 = (kp + 1) % N_PHI_D
-                pix = g.pixel[sl].astype(np.int64)
+                rows = slice(start, start + 65536)
+                radiance = (g.weights[rows].astype(np.float64) @ g.radiance_basis).astype(np.float32)
+                corners = corner_rgb(rows, g, radiance, to_rgb_l)       # [(0,0), (0,1), (1,0), (1,1)]
+                ih, jd = g.ih[rows].astype(np.int64), g.jd[rows].astype(np.int64)
+                th, td = g.th[rows], g.td[rows]
+                # weight of corner d ∈ {0, 1} for hat slot t: trilinear weight × hat value there
+                wh = [((1 - th) * h_lo[ih, t], th * h_hi[ih, t]) for t in range(h_lo.shape[1])]
+                wd = [((1 - td) * d_lo[jd, t], td * d_hi[jd, t]) for t in range(d_lo.shape[1])]
+                pix = g.pixel[rows].astype(np.int64)
                 idx_parts, val_parts = [], []
-                for di, wi in ((0, 1 - th), (1, th)):
-                    i = ih + di
-                    for dj, wj in ((0, 1 - td), (1, td)):
-                        j = jd + dj
-                        base = (i * N_THETA_D + j) * N_PHI_D
-                        q = (1 - tp)[:, None] * flat[base + kp] + tp[:, None] * flat[base + kp1]
-                        q -= floor32
-                        rgb = np.empty((q.shape[0], 3, nl), dtype=np.float32)
-                        for l in range(nl):
-                            rgb[:, :, l] = ((q @ to_grid[l]) * radiance) @ to_rgb
-                        rgb = rgb.reshape(q.shape[0], 3 * nl)     # (S, 3L), c-major
-                        w_ij = wi * wj
-                        for ka in range(h_idx.shape[1]):
-                            a = h_idx[i, ka]
-                            wa = w_ij * h_val[i, ka]
-                            for kb in range(d_idx.shape[1]):
-                                w = wa * d_val[j, kb]
-                                keep = w > 0
-                                b = d_idx[j, kb]
-                                if keep.all():                   # (no copies for the usual case)
-                                    idx_parts.append((pix * na + a) * nb + b)
-                                    val_parts.append(rgb * w[:, None])
-                                elif keep.any():
-                                    idx_parts.append(((pix * na + a) * nb + b)[keep])
-                                    val_parts.append(rgb[keep] * w[keep, None])
+                for ta, (wh0, wh1) in enumerate(wh):
+                    # Σ over the θh corner first: (S, 3L) per θd corner
+                    by_d = [corners[0 + dj] * wh0[:, None] + corners[2 + dj] * wh1[:, None] for dj in (0, 1)]
+                    a = h_seg[ih] + ta
+                    for tb, (wd0, wd1) in enumerate(wd):
+                        val_parts.append(by_d[0] * wd0[:, None] + by_d[1] * wd1[:, None])
+                        idx_parts.append((pix * na + a) * nb + d_seg[jd] + tb)
                 idx = np.concatenate(idx_parts)
                 vals = np.concatenate(val_parts)                  # (M, 3L), C-contiguous
-                # one scatter-add for all 3L columns: entry (m, col) goes to bin idx[m]·3L + col, in
-                # the same order per bin as one bincount per column (the same sums, bit for bit),
-                # over the bins this chunk reaches only (a chunk's samples are a few neighbouring
-                # pixels'; the others would gain exact zeros)
+                # one scatter-add for all 3L columns (entry (m, col) → bin idx[m]·3L + col), over
+                # the bins this chunk reaches only (a chunk's samples are a few neighbouring pixels')
                 lo, hi = int(idx.min()), int(idx.max()) + 1
-                cells = ((idx - lo)[:, None] * (3 * nl) + np.arange(3 * nl)).ravel()
+                cells = ((idx - lo)[:, None] * width + np.arange(width)).ravel()
                 design[lo:hi] += np.bincount(cells, weights=vals.ravel(),
-                                             minlength=(hi - lo) * 3 * nl).reshape(hi - lo, 3 * nl)
+                                             minlength=(hi - lo) * width).reshape(hi - lo, width)
                 done += radiance.shape[0]
                 if progress is not None:
                     progress(done / total)
         design = design.reshape(self.n_pixels, na, nb, 3, nl).transpose(0, 3, 1, 2, 4)
         return self.exposure * design
+
+
+def _hat_slots(hats: np.ndarray, knots) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """Per lower grid node i (0 … n − 2): the first hat m of the knot interval holding [i, i + 1],
+    and the hat values of slots m, m + 1 at node i (``lo``) and node i + 1 (``hi``), (n − 1, T)
+    with T = 2 (1 for a single hat)."""
+    n, n_hats = hats.shape
+    nodes = np.arange(n - 1)
+    seg = np.clip(np.searchsorted(np.asarray(knots, np.float64), nodes, side="right") - 1, 0, max(n_hats - 2, 0))
+    slots = min(n_hats, 2)
+    lo = np.stack([hats[nodes, seg + t] for t in range(slots)], axis=1).astype(np.float32)
+    hi = np.stack([hats[nodes + 1, seg + t] for t in range(slots)], axis=1).astype(np.float32)
+    if not np.allclose(lo.sum(axis=1), 1.0) or not np.allclose(hi.sum(axis=1), 1.0):
+        raise SpecGenError("internal: hat knots must be grid nodes (two hats per knot interval)")
+    return seg, lo, hi
