@@ -29,6 +29,8 @@ from .basis import CorrectionBasis
 
 ProgressFn = Callable[[float], None]
 CancelFn = Callable[[], bool]
+#: (rows, group, radiance (S, Λr), to_rgb_l) → the samples' four corner photos, each (S, 3L)
+CornerPhotos = Callable[[slice, "SampleGroup", np.ndarray, Callable], list]
 
 #: Pixels seen closer to grazing than this (cos θo < 0.15, θo > 81°) are not observed: in a photo
 #: the outermost ring of the silhouette mixes sphere and background (antialiasing, the circle fit
@@ -218,7 +220,7 @@ class PhotoOperator:
 
         return self._hat_design(basis, corner_rgb, progress, cancel)
 
-    def _hat_design(self, basis: CorrectionBasis, corner_rgb, progress: ProgressFn | None,
+    def _hat_design(self, basis: CorrectionBasis, corner_rgb: CornerPhotos, progress: ProgressFn | None,
                     cancel: CancelFn | None) -> np.ndarray:
         """Scatter every sample's photo into the (pixel, θh hat, θd hat) bins it reaches.
 
