@@ -1,0 +1,92 @@
+"""How close the network comes to the best table: each test material's own MERL-grid table, scored.
+
+The network outputs a table on the MERL grid (90 θh × 90 θd × 180 φd, trilinear lookups), and
+`evaluate --families` scores its renders against renders of the *analytic* material. Part of any
+table's error is therefore the grid's: a lobe a few tenths of a degree wide falls between θh nodes.
+This oracle tabulates each material's true BRDF at the grid nodes (``BRDFTable.tabulate``, the
+same wavelengths) and scores it exactly as the network's table is scored: a sphere under the
+protocol's two distant lights, 20 bands, spectral PSNR over the sphere, at 64² (`evaluate`'s
+default) and 128² renders (docs/results.md table (g)). The network alone is scored beside it
+(canonical input, the shipped weights).
+
+Usage: ``.venv/bin/python bench/table_ceiling.py [--per-family 3] [--families lobes sheen]
+[--resolutions 64 128] [--json out.json]``
+"""
+
+from __future__ import annotations
+
+import argparse
+import json
+import sys
+import time
+from pathlib import Path
+
+import numpy as np
+from machine import describe_machine  # bench/machine.py
+
+REPO = Path(__file__).resolve().parents[1]
+sys.path.insert(0, str(REPO))
+
+
+def main() -> int:
+    from specgen_addon import input_image, metrics
+    from specgen_addon.corpus.families import FAMILY_NAMES
+    from specgen_addon.corpus.generate import material_family
+    from specgen_addon.evaluation.protocol import DISTANT_LIGHTS, WAVELENGTHS_NM
+    from specgen_addon.infer import generate_brdf
+    from specgen_addon.render import render_spectral, sphere_geometry
+    from specgen_addon.rusinkiewicz import io_from_half_diff
+    from specgen_addon.table import BRDFTable
+    from specgen_addon.train.evaluate import mixed_test_materials
+
+    ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    ap.add_argument("--per-family", type=int, default=3, help="test materials per family (default 3)")
+    ap.add_argument("--families", nargs="+", choices=FAMILY_NAMES, default=None)
+    ap.add_argument("--resolutions", type=int, nargs="+", default=[64, 128])
+    ap.add_argument("--weights", type=Path, default=None, help="weights (.pt); default: shipped")
+    ap.add_argument("--json", type=Path, default=None)
+    args = ap.parse_args()
+    if args.per_family < 1 or any(not 16 <= r <= 512 for r in args.resolutions):
+        ap.error("--per-family must be ≥ 1 and every resolution 16–512")
+    if args.weights is not None and not args.weights.is_file():
+        ap.error(f"{args.weights}: weights file not found")
+
+    geos = {r: sphere_geometry(r) for r in args.resolutions}
+    rows = []
+    t0 = time.perf_counter()
+    for mat in mixed_test_materials(args.per_family, args.families):
+        def true_f(th, td, pd, mat=mat):
+            wi, wo = io_from_half_diff(th, td, pd)
+            return mat.eval(wi, wo, WAVELENGTHS_NM)
+
+        own = BRDFTable.tabulate(true_f, WAVELENGTHS_NM)
+        net = generate_brdf(input_image.render_input(mat), weights=args.weights, wavelengths_nm=WAVELENGTHS_NM)
+        row = {"material": mat.name, "family": material_family(mat)}
+        for r, geo in geos.items():
+            gt = render_spectral(mat, geo, lights=DISTANT_LIGHTS, wavelengths_nm=WAVELENGTHS_NM).spectral
+            for label, table in (("table", own), ("network", net)):
+                pred = render_spectral(table, geo, lights=DISTANT_LIGHTS, wavelengths_nm=WAVELENGTHS_NM).spectral
+                row[f"{label}_{r}"] = float(metrics.spectral_metrics(gt, pred, geo.mask).psnr_mean)
+        rows.append(row)
+        print(f"{mat.name} {row['family']:<12} " + "  ".join(
+            f"{r}²: own table {row[f'table_{r}']:.2f} dB, network {row[f'network_{r}']:.2f} dB"
+            for r in args.resolutions), flush=True)
+
+    print(f"\n{describe_machine()}; {len(rows)} test materials, {time.perf_counter() - t0:.0f} s")
+    header = " | ".join(f"own table {r}² | network {r}²" for r in args.resolutions)
+    print(f"| family | n | {header} |")
+    print("| --- | ---: |" + " ---: |" * (2 * len(args.resolutions)))
+    summary = {}
+    for fam in [*dict.fromkeys(r["family"] for r in rows), "mean"]:
+        sel = rows if fam == "mean" else [r for r in rows if r["family"] == fam]
+        summary[fam] = {k: float(np.mean([r[k] for r in sel])) for k in sel[0] if k not in ("material", "family")}
+        cells = " | ".join(f"{summary[fam][f'table_{r}']:.2f} | {summary[fam][f'network_{r}']:.2f}"
+                           for r in args.resolutions)
+        print(f"| {fam} | {len(sel)} | {cells} |")
+    if args.json is not None:
+        args.json.write_text(json.dumps({"materials": rows, "families": summary}, indent=1))
+    return 0
+
+
+if __name__ == "__main__":
+    raise SystemExit(main())
