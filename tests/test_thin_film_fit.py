@@ -11,7 +11,8 @@ import pytest
 from specgen_addon.corpus.families.thin_film import ThinFilm, airy_reflectance
 from specgen_addon.corpus.material import Conductor, Dielectric
 from specgen_addon.errors import SpecGenError
-from specgen_addon.fit.thin_film import fit_pixels, fit_thin_film, lobe_geometry, substrates, theta_d_response
+from specgen_addon.fit.thin_film import (AiryThicknessSeries, _ReducedDesign, fit_pixels, fit_thin_film,
+                                         lobe_geometry, substrates, theta_d_response)
 from specgen_addon.input_lighting import InputLighting
 from specgen_addon.refine import render_under
 from specgen_addon.refine.operator import PhotoOperator
@@ -132,3 +133,41 @@ def test_a_photo_no_film_explains_is_warned_about_by_name():
     fit = fit_thin_film(photo, clip_level=None)
     assert fit.reproduction.psnr_db < 30.0
     assert len(fit.warnings) == 1 and "does not explain this photo" in fit.warnings[0]
+
+
+@pytest.mark.parametrize("film_eta", [1.2, 1.93, 2.6])
+def test_the_thickness_series_equals_the_airy_summation_on_every_substrate(film_eta):
+    """Stage 2's real-arithmetic Airy reflectance over many thicknesses against the corpus's complex
+    Airy summation (itself checked against Fresnel at d = 0 and a quarter-wave zero)."""
+    cos = np.cos(grid_angles()[1])[:, None]
+    ds = np.arange(0.0, film_eta * 1500.0 + 1e-9, 4.0) / film_eta
+    for _, n2 in substrates(WL):
+        series = AiryThicknessSeries(cos, WL, film_eta, n2)(ds)
+        assert series.shape == (ds.size, cos.shape[0], WL.size)
+        assert np.allclose(series, airy_reflectance(cos, WL, film_eta, ds[:, None, None], n2), rtol=0, atol=1e-12)
+
+
+def test_the_thickness_series_refuses_a_film_index_it_cannot_handle():
+    with pytest.raises(SpecGenError, match="film index"):
+        AiryThicknessSeries(np.ones((3, 1)), WL, 0.9, np.full(WL.size, 1.5))
+
+
+@pytest.mark.parametrize("with_body", [False, True])
+def test_the_reduced_design_ranks_candidates_as_least_squares_does(with_body):
+    """Residuals in the reduced basis equal ‖b − K R − B ρ‖² (ρ free with a body) up to one constant
+    (the part of b outside the design's span), when the design's rank fits the reduction."""
+    rng = np.random.default_rng(3)
+    k = rng.normal(size=(240, 60)) @ rng.normal(size=(60, 90))        # rank 60
+    body = rng.normal(size=(240, 3))
+    b = rng.normal(size=240)
+    cands = rng.normal(size=(5, 9, 10))
+    reduced = _ReducedDesign(k, body, b).residuals(cands, with_body)
+    direct = []
+    for r in cands:
+        rest = b - k @ r.ravel()
+        if with_body:
+            rest = rest - body @ np.linalg.lstsq(body, rest, rcond=None)[0]
+        direct.append(rest @ rest)
+    offset = np.asarray(direct) - reduced
+    assert np.all(offset >= -1e-8)
+    assert np.allclose(offset, offset[0], rtol=0, atol=1e-8 * np.max(direct))

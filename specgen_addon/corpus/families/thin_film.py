@@ -38,7 +38,7 @@ from .base import (ALBEDO_WAVELENGTHS_NM, FamilyMaterial, check_alpha, curves_at
 THICKNESS_RANGE_NM = (0.0, 1500.0)
 
 
-def _amplitudes(cos0: np.ndarray, n1: np.ndarray, n2: np.ndarray):
+def film_amplitudes(cos0: np.ndarray, n1: np.ndarray, n2: np.ndarray):
     """Fresnel amplitude coefficients (s, p) of the air/film (0→1) and film/substrate (1→2) interfaces."""
     sin2 = 1.0 - cos0 * cos0
     cos1 = np.sqrt(1.0 - sin2 / (n1 * n1) + 0j)
@@ -62,7 +62,7 @@ def airy_reflectance(cos_theta: np.ndarray, wavelengths_nm: np.ndarray, film_eta
     lam = np.asarray(wavelengths_nm, dtype=np.float64)
     n1 = np.asarray(film_eta, dtype=np.float64) + 0j
     n2 = np.asarray(substrate_n) + 0j
-    cos1, s, p = _amplitudes(c, n1, n2)
+    cos1, s, p = film_amplitudes(c, n1, n2)
     phase = np.exp(1j * 4.0 * np.pi * n1 * np.asarray(thickness_nm, dtype=np.float64) * cos1 / lam)
     out = 0.0
     for r01, r12 in (s, p):
