@@ -29,6 +29,7 @@ Angles are radians, wavelengths nm, BRDF values sr⁻¹.
 
 from __future__ import annotations
 
+import functools
 from concurrent.futures import ThreadPoolExecutor
 from dataclasses import dataclass, field
 from typing import Callable
@@ -111,10 +112,19 @@ class ThinFilmFit:
                                   progress=progress, cancel=cancel)
 
 
+@functools.lru_cache(maxsize=1)
+def _grid_cosines() -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """cos θi, cos θo, cos θh at every MERL grid node (flat, read-only): the same for every α."""
+    th, td, pd = np.meshgrid(*grid_angles(), indexing="ij")
+    cosines = Material._hd_cosines(th, td, pd)[:3]
+    for c in cosines:
+        c.flags.writeable = False
+    return cosines
+
+
 def lobe_geometry(alpha: float) -> np.ndarray:
     """``G_α = D G₂ / (4 cos θi cos θo)`` (sr⁻¹) on the MERL grid nodes, (90, 90, 180)."""
-    th, td, pd = np.meshgrid(*grid_angles(), indexing="ij")
-    cos_i, cos_o, cos_h, _ = Material._hd_cosines(th, td, pd)
+    cos_i, cos_o, cos_h = _grid_cosines()
     return specular_geometry(cos_i, cos_o, cos_h, alpha).reshape(N_THETA_H, N_THETA_D, N_PHI_D)
 
 
