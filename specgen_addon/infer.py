@@ -13,6 +13,7 @@ from __future__ import annotations
 
 import threading
 from concurrent.futures import ThreadPoolExecutor
+from dataclasses import dataclass
 from pathlib import Path
 from typing import TYPE_CHECKING, Callable
 
@@ -27,10 +28,9 @@ if TYPE_CHECKING:
 
 BACKENDS = ("torch", "onnx")
 #: θd rows per block: 10 × 180 × Λ points (~38 k at 21 bands) for torch's gather head (5–30 rows
-#: time the same; fewer pay per-op overhead: 1 row is ~2× slower); the channels-first ONNX head,
-#: whose ~12 elementwise passes over 32 × points temporaries dominate, runs best at 1–2 rows
-#: (7.6 k points: ~1 MB temporaries, one core's L2): ~8 % less CPU per point than 5 rows
-#: single-threaded, 15–20 % over the grid on two threads.
+#: time the same; fewer pay per-op overhead: 1 row is ~2× slower); the ONNX head, whose passes over
+#: 32 × points temporaries dominate, runs best at 2 rows (7.6 k points: ~1 MB temporaries, one
+#: core's L2; 1, 3 and 5 rows ~10 % slower, 10 rows ~35 %; docs/blender.md).
 BLOCK_THETA_D = {"torch": 10, "onnx": 2}
 
 ProgressFn = Callable[[float], None]
@@ -169,6 +169,11 @@ class _OnnxBackend:
             self.head = ort.InferenceSession(str(head_path), opts, providers=["CPUExecutionProvider"])
         except Exception as exc:
             raise WeightsError(f"{tables_path.parent}: unreadable ONNX graph ({type(exc).__name__})") from None
+        names = tuple(i.name for i in self.head.get_inputs())
+        self._layout = HEAD_LAYOUTS.get(names)
+        if self._layout is None:
+            raise WeightsError(f"{head_path}: not a SpecGen head graph (inputs {', '.join(names)}); "
+                               "run `python -m specgen_addon export-onnx --overwrite`")
         meta = self.tables.get_modelmeta().custom_metadata_map
         try:
             from .model import Config
@@ -181,28 +186,36 @@ class _OnnxBackend:
         return tuple(self.tables.run(None, {"image": x, "u_lambda": u_lambda}))
 
     @property
-    def channels_first(self) -> bool:
-        """Whether the head graph is the channels-first export (12 inputs) or the plain one (6)."""
-        return len(self.head.get_inputs()) == 12
+    def head_layout(self) -> str:
+        """Which head graph this is, by its inputs: ``"low_rank"`` (the current export, 11 inputs),
+        ``"channels_first"`` (earlier exports, 12) or ``"plain"`` (Hadamard fusion, 6)."""
+        return self._layout
 
     def prepare(self, tables, nd: int):
-        return channels_first_tables(tables) if self.channels_first else tables
+        layout = self.head_layout
+        if layout == "low_rank":
+            return low_rank_tables(tables)
+        return channels_first_tables(tables) if layout == "channels_first" else tables
 
     def run_block(self, prepared, i: int, j: int, nd: int) -> np.ndarray:
-        cut = channels_first_block if self.channels_first else table_block
+        cut = {"low_rank": low_rank_block, "channels_first": channels_first_block}.get(self.head_layout, table_block)
         return self.run_head(cut(prepared, i, j, nd))
 
     def run_head(self, blocks) -> np.ndarray:
-        if self.channels_first:
-            names = CHANNELS_FIRST_INPUTS
+        layout = self.head_layout
+        if layout != "plain":
+            names = LOW_RANK_INPUTS if layout == "low_rank" else CHANNELS_FIRST_INPUTS
             r = self.head.run(None, {n: np.ascontiguousarray(b) for n, b in zip(names, blocks)})[0]
             return r.transpose(1, 2, 3, 0)                    # (Λ, nh, nd, φd) -> (nh, nd, φd, Λ)
-        names = ("t1", "t2", "t3", "t4", "t5", "t6")
-        feeds = {n: np.ascontiguousarray(b) for n, b in zip(names, blocks)}
+        feeds = {n: np.ascontiguousarray(b) for n, b in zip(PLAIN_INPUTS, blocks)}
         return self.head.run(None, feeds)[0]
 
 
 CHANNELS_FIRST_INPUTS = ("s1", "s2", "s3", "s4", "s5", "s6", "f1", "f2", "f3", "f4", "f5", "f6")
+LOW_RANK_INPUTS = ("s1", "s2", "s3", "s4", "s5", "s6", "low", "f2", "f3", "f6", "eye")
+PLAIN_INPUTS = ("t1", "t2", "t3", "t4", "t5", "t6")
+#: The head graphs the onnx backend runs, by their input names.
+HEAD_LAYOUTS = {LOW_RANK_INPUTS: "low_rank", CHANNELS_FIRST_INPUTS: "channels_first", PLAIN_INPUTS: "plain"}
 
 
 def table_block(tables, i: int, j: int, nd: int) -> tuple:
@@ -212,15 +225,61 @@ def table_block(tables, i: int, j: int, nd: int) -> tuple:
     return t1[si, sj], t2[si], t3[sj], t4[si], t5[sj], t6
 
 
-def channels_first_tables(tables) -> tuple[np.ndarray, ...]:
-    """The six grid tables (…, C+1) arranged once for the channels-first head
+def channels_first_tables(tables, features: bool = True) -> tuple[np.ndarray, ...]:
+    """The six grid tables (…, C+1) arranged once for the channels-first head of earlier exports
     (:class:`~specgen_addon.model.fast.GridHeadChannelsFirst`): statistic rows ``s_k``
-    (Λ|1, 90|1, 90|1, 180|1) and feature rows ``f_k`` (C, Λ|1, 90|1, 90|1, 180|1)."""
+    (Λ|1, 90|1, 90|1, 180|1) and, with ``features``, feature rows ``f_k`` (C, Λ|1, 90|1, 90|1, 180|1)."""
     t1, t2, t3, t4, t5, t6 = (np.asarray(t, dtype=np.float32) for t in tables)
     cf = (t1.transpose(2, 0, 1)[:, None, :, :, None], t2.transpose(2, 0, 1)[:, None, :, None, :],
           t3.transpose(2, 0, 1)[:, None, None, :, :], t4.transpose(2, 1, 0)[:, :, :, None, None],
           t5.transpose(2, 1, 0)[:, :, None, :, None], t6.transpose(2, 1, 0)[:, :, None, None, :])
-    return tuple(np.ascontiguousarray(a[-1]) for a in cf) + tuple(np.ascontiguousarray(a[:-1]) for a in cf)
+    stats = tuple(np.ascontiguousarray(a[-1]) for a in cf)
+    return stats + tuple(np.ascontiguousarray(a[:-1]) for a in cf) if features else stats
+
+
+@dataclass(frozen=True)
+class LowRankTables:
+    """The six grid tables arranged once for the low-rank head
+    (:class:`~specgen_addon.model.fast.GridHeadLowRank`): the statistic rows ``s_k`` of
+    :func:`channels_first_tables`, and the features ``f1 (90, 90, C)``, ``f4 (90, Λ, C)``,
+    ``f5 (90, Λ, C)`` as they are, ``f2 (90, C, 180)``, ``f3 (C, 90, 180)`` and
+    ``f6 (Λ, C, 1, 180)`` with the channels ahead of φd."""
+
+    stats: tuple[np.ndarray, ...]
+    f1: np.ndarray
+    f2: np.ndarray
+    f3: np.ndarray
+    f4: np.ndarray
+    f5: np.ndarray
+    f6: np.ndarray
+
+
+def low_rank_tables(tables) -> LowRankTables:
+    """The six grid tables (…, C+1) arranged once per grid for :func:`low_rank_block`."""
+    t1, t2, t3, t4, t5, t6 = (np.asarray(t, dtype=np.float32) for t in tables)
+    c = t1.shape[-1] - 1
+    return LowRankTables(
+        stats=channels_first_tables(tables, features=False),
+        f1=np.ascontiguousarray(t1[..., :c]), f4=np.ascontiguousarray(t4[..., :c]),
+        f5=np.ascontiguousarray(t5[..., :c]),
+        f2=np.ascontiguousarray(t2[..., :c].transpose(0, 2, 1)),
+        f3=np.ascontiguousarray(t3[..., :c].transpose(2, 0, 1)),
+        f6=np.ascontiguousarray(t6[..., :c].transpose(1, 2, 0)[:, :, None, :]))
+
+
+def low_rank_block(arranged: LowRankTables, i: int, j: int, nd: int) -> tuple[np.ndarray, ...]:
+    """The low-rank head's inputs (:data:`LOW_RANK_INPUTS`) for θh row ``i`` and θd rows
+    ``j … j+nd``."""
+    nd = min(nd, arranged.f1.shape[1] - j)
+    f1, f4, f5 = arranged.f1[i, j:j + nd], arranged.f4[i], arranged.f5[j:j + nd]   # (nd, C), (Λ, C), (nd, Λ, C)
+    n_l, c = f4.shape
+    low = np.empty((n_l, c, 2 * nd + 1), dtype=np.float32)
+    low[:, :, :nd] = f1.T[None]
+    low[:, :, nd] = f4
+    low[:, :, nd + 1:] = f5.transpose(1, 2, 0)
+    stats = channels_first_block(arranged.stats, i, j, nd)
+    return (*stats, low, arranged.f2[i][None, :, None, :], arranged.f3[None, :, j:j + nd], arranged.f6,
+            np.eye(nd, dtype=np.float32))
 
 
 def channels_first_block(arranged, i: int, j: int, nd: int) -> tuple[np.ndarray, ...]:

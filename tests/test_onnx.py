@@ -63,6 +63,59 @@ def test_onnx_and_torch_generate_the_same_brdf(exported):
     assert np.abs(ra - rb).max() < 1e-4
 
 
+def test_a_channels_first_head_exported_by_an_earlier_version_still_runs(exported, tmp_path):
+    """Graphs exported before the low-rank head (channels-first, 12 inputs) give the same table."""
+    import shutil
+
+    from specgen_addon.input_image import render_input
+    from specgen_addon.model.fast import GridHeadChannelsFirst, GridTables, lambda_coords
+    from specgen_standins import RampMaterial
+
+    weights, (tables, _) = exported
+    old = tmp_path / "w.pt"
+    shutil.copy(weights, old)
+    shutil.copy(tables, tmp_path / "w.tables.onnx")
+    model = load_weights(weights)
+    with torch.no_grad():
+        t = GridTables(model).eval()(torch.zeros(1, 3, 32, 32), lambda_coords(model, [420.0, 560.0, 660.0]))
+    arranged = infer.channels_first_tables([x.numpy() for x in t])
+    blocks = tuple(torch.from_numpy(np.ascontiguousarray(b)) for b in infer.channels_first_block(arranged, 0, 0, 2))
+    varying = ({"nh": 1, "nd": 2}, {"nh": 1}, {"nd": 2}, {"nl": 0, "nh": 1}, {"nl": 0, "nd": 2}, {"nl": 0})
+    names = infer.CHANNELS_FIRST_INPUTS
+    dyn = {n: {axis + (1 if n.startswith("f") else 0): name for name, axis in varying[k % 6].items()}
+           for k, n in enumerate(names)} | {"r": {0: "nl", 1: "nh", 2: "nd"}}
+    with torch.no_grad():
+        torch.onnx.export(GridHeadChannelsFirst(model).eval(), blocks, str(tmp_path / "w.head.onnx"),
+                          input_names=list(names), output_names=["r"], dynamic_axes=dyn, opset_version=17,
+                          dynamo=False)
+    assert infer.get_backend(old, "onnx").head_layout == "channels_first"
+    assert infer.get_backend(weights, "onnx").head_layout == "low_rank"
+    image = render_input(RampMaterial(alpha=0.08), size=64)
+    bands = np.array([420.0, 560.0, 660.0, 760.0])
+    a = infer.generate_brdf(image, weights=old, wavelengths_nm=bands, backend="onnx")
+    b = infer.generate_brdf(image, weights=weights, wavelengths_nm=bands, backend="onnx")
+    ra, rb = (np.log1p(255 * x.values) / np.log1p(255) for x in (a, b))
+    assert np.abs(ra - rb).max() < 1e-5
+
+
+def test_a_graph_that_is_no_specgen_head_is_refused_by_name(exported, tmp_path):
+    import shutil
+
+    import onnx
+    from onnx import TensorProto, helper
+
+    weights, (tables, _) = exported
+    w = tmp_path / "w.pt"
+    shutil.copy(weights, w)
+    shutil.copy(tables, tmp_path / "w.tables.onnx")
+    x = helper.make_tensor_value_info("x", TensorProto.FLOAT, [1])
+    graph = helper.make_graph([helper.make_node("Identity", ["x"], ["y"])], "g", [x],
+                              [helper.make_tensor_value_info("y", TensorProto.FLOAT, [1])])
+    onnx.save(helper.make_model(graph, opset_imports=[helper.make_opsetid("", 17)]), str(tmp_path / "w.head.onnx"))
+    with pytest.raises(WeightsError, match="not a SpecGen head graph"):
+        infer.get_backend(w, "onnx")
+
+
 def test_onnx_backend_without_exported_graphs_says_how_to_make_them(tmp_path):
     torch.manual_seed(0)
     weights = save_weights(SpecGen(Config(**SMALL)), tmp_path / "lonely.pt")

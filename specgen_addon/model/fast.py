@@ -151,3 +151,50 @@ class GridHeadChannelsFirst(GridHead):
         h = torch.relu(h).reshape(h.shape[0], -1)
         h = torch.relu(mapping.fc2.weight @ h + mapping.fc2.bias[:, None])
         return (mapping.fc3.weight @ h + mapping.fc3.bias[:, None]).reshape(shape)  # (Λ, nh, nd, φd)
+
+
+class GridHeadLowRank(GridHead):
+    """:class:`GridHeadChannelsFirst` with three of the six weighted features summed by one matrix
+    product per band, for onnxruntime: the same output to float rounding, ~25 % less time per block.
+
+    Within a block (one θh row, θd rows ``j … j+nd``) the features ``f1 (θh, θd)``, ``f4 (θh, λ)``
+    and ``f5 (θd, λ)`` take only ``2 nd + 1`` values per band, so their weighted sum with the
+    first layer's bias, ``b1 + w1 f1 + w4 f4 + w5 f5``, is the product ``L_λ (C, 2nd + 2) @ M_λ
+    (2nd + 2, nd·180)`` of those values with their AFF weights (each weight in the row of the value
+    it multiplies, ``eye`` sorting ``w1`` and ``w5`` by θd row): one pass instead of eight
+    elementwise ones. The three others, ``f2 (θh, φd)``, ``f3 (θd, φd)``, ``f6 (φd, λ)``, are
+    multiplied and added as in the channels-first head, and layers 2–3 are 1×1 convolutions over
+    the points of each band.
+
+    Inputs (:func:`specgen_addon.infer.low_rank_block`): the AFF statistic rows ``s1 … s6``
+    (Λ|1, 1, nd|1, 180|1) as :class:`GridHeadChannelsFirst`; ``low (Λ, C, 2nd + 1)`` =
+    ``[f1 of the nd rows | f4 | f5 of the nd rows]``; ``f2 (1, C, 1, 180)``, ``f3 (1, C, nd, 180)``,
+    ``f6 (Λ, C, 1, 180)``; ``eye (nd, nd)``. Output: r' (Λ, 1, nd, 180). AFF only.
+    """
+
+    def forward(self, s1, s2, s3, s4, s5, s6, low, f2, f3, f6, eye) -> torch.Tensor:
+        fusion, mapping = self.model.fusion, self.model.mapping
+        _, bias = fusion.gap_functionals()
+        s = s1 + s2 + s3 + s4 + s5 + s6 + bias                                     # (Λ, 1, nd, φd)
+        shape = s.shape
+        n_l, nd, n_phi = shape[0], shape[2], shape[3]
+        z = torch.relu(fusion.expand.weight @ s.reshape(1, -1) + fusion.expand.bias[:, None])
+        logits = fusion.heads.weight @ z + fusion.heads.bias[:, None]              # (6, P)
+        top = logits[0]                   # softmax with elementwise ops, as the channels-first head
+        for k in range(1, 6):
+            top = torch.maximum(top, logits[k])
+        e = torch.exp(logits - top)
+        w = (e / (e[0] + e[1] + e[2] + e[3] + e[4] + e[5])).reshape(6, n_l, nd, n_phi)
+        q = nd * n_phi
+        by_row = eye[None, :, :, None]                                            # θd row d → row d
+        m = torch.cat([torch.ones_like(w[3]).reshape(n_l, 1, q),
+                       (w[0][:, None] * by_row).reshape(n_l, nd, q),
+                       w[3].reshape(n_l, 1, q),
+                       (w[4][:, None] * by_row).reshape(n_l, nd, q)], 1)            # (Λ, 2nd + 2, Q)
+        b1 = mapping.fc1.bias[None, :, None].expand(n_l, -1, 1)
+        h = (torch.cat([b1, low], 2) @ m).reshape(n_l, -1, nd, n_phi)              # (Λ, C, nd, φd)
+        h = h + w[1][:, None] * f2 + w[2][:, None] * f3 + w[5][:, None] * f6
+        h = torch.relu(h).reshape(n_l, h.shape[1], q)
+        h = torch.relu(F.conv1d(h, mapping.fc2.weight[:, :, None], mapping.fc2.bias))
+        r = F.conv1d(h, mapping.fc3.weight[:, :, None], mapping.fc3.bias)           # (Λ, 1, Q)
+        return r.reshape(n_l, 1, nd, n_phi)
