@@ -2,6 +2,8 @@
 
 from __future__ import annotations
 
+from pathlib import Path
+
 import numpy as np
 import pytest
 import torch
@@ -63,18 +65,23 @@ def test_onnx_and_torch_generate_the_same_brdf(exported):
     assert np.abs(ra - rb).max() < 1e-4
 
 
-def test_a_channels_first_head_exported_by_an_earlier_version_still_runs(exported, tmp_path):
-    """Graphs exported before the low-rank head (channels-first, 12 inputs) give the same table."""
+def _copy_without_head(exported, folder):
+    """The exported weights and tables graph copied into ``folder``; the head graph is the test's."""
     import shutil
 
+    weights, (tables, _) = exported
+    shutil.copy(tables, folder / "w.tables.onnx")
+    return Path(shutil.copy(weights, folder / "w.pt")), folder / "w.head.onnx"
+
+
+def test_a_channels_first_head_exported_by_an_earlier_version_still_runs(exported, tmp_path):
+    """Graphs exported before the low-rank head (channels-first, 12 inputs) give the same table."""
     from specgen_addon.input_image import render_input
     from specgen_addon.model.fast import GridHeadChannelsFirst, GridTables, lambda_coords
     from specgen_standins import RampMaterial
 
-    weights, (tables, _) = exported
-    old = tmp_path / "w.pt"
-    shutil.copy(weights, old)
-    shutil.copy(tables, tmp_path / "w.tables.onnx")
+    weights = exported[0]
+    old, old_head = _copy_without_head(exported, tmp_path)
     model = load_weights(weights)
     with torch.no_grad():
         t = GridTables(model).eval()(torch.zeros(1, 3, 32, 32), lambda_coords(model, [420.0, 560.0, 660.0]))
@@ -85,7 +92,7 @@ def test_a_channels_first_head_exported_by_an_earlier_version_still_runs(exporte
     dyn = {n: {axis + (1 if n.startswith("f") else 0): name for name, axis in varying[k % 6].items()}
            for k, n in enumerate(names)} | {"r": {0: "nl", 1: "nh", 2: "nd"}}
     with torch.no_grad():
-        torch.onnx.export(GridHeadChannelsFirst(model).eval(), blocks, str(tmp_path / "w.head.onnx"),
+        torch.onnx.export(GridHeadChannelsFirst(model).eval(), blocks, str(old_head),
                           input_names=list(names), output_names=["r"], dynamic_axes=dyn, opset_version=17,
                           dynamo=False)
     assert infer.get_backend(old, "onnx").head_layout == "channels_first"
@@ -99,19 +106,14 @@ def test_a_channels_first_head_exported_by_an_earlier_version_still_runs(exporte
 
 
 def test_a_graph_that_is_no_specgen_head_is_refused_by_name(exported, tmp_path):
-    import shutil
-
     import onnx
     from onnx import TensorProto, helper
 
-    weights, (tables, _) = exported
-    w = tmp_path / "w.pt"
-    shutil.copy(weights, w)
-    shutil.copy(tables, tmp_path / "w.tables.onnx")
+    w, head = _copy_without_head(exported, tmp_path)
     x = helper.make_tensor_value_info("x", TensorProto.FLOAT, [1])
     graph = helper.make_graph([helper.make_node("Identity", ["x"], ["y"])], "g", [x],
                               [helper.make_tensor_value_info("y", TensorProto.FLOAT, [1])])
-    onnx.save(helper.make_model(graph, opset_imports=[helper.make_opsetid("", 17)]), str(tmp_path / "w.head.onnx"))
+    onnx.save(helper.make_model(graph, opset_imports=[helper.make_opsetid("", 17)]), str(head))
     with pytest.raises(WeightsError, match="not a SpecGen head graph"):
         infer.get_backend(w, "onnx")
 
