@@ -170,10 +170,12 @@ class _OnnxBackend:
         except Exception as exc:
             raise WeightsError(f"{tables_path.parent}: unreadable ONNX graph ({type(exc).__name__})") from None
         names = tuple(i.name for i in self.head.get_inputs())
-        self._layout = HEAD_LAYOUTS.get(names)
-        if self._layout is None:
+        if names not in HEAD_LAYOUTS:
             raise WeightsError(f"{head_path}: not a SpecGen head graph (inputs {', '.join(names)}); "
                                "run `python -m specgen_addon export-onnx --overwrite`")
+        #: "low_rank" (the current export), "channels_first" (earlier exports) or "plain" (Hadamard)
+        self.head_layout = HEAD_LAYOUTS[names]
+        self._inputs = names
         meta = self.tables.get_modelmeta().custom_metadata_map
         try:
             from .model import Config
@@ -185,30 +187,17 @@ class _OnnxBackend:
     def make_tables(self, x: np.ndarray, u_lambda: np.ndarray) -> tuple[np.ndarray, ...]:
         return tuple(self.tables.run(None, {"image": x, "u_lambda": u_lambda}))
 
-    @property
-    def head_layout(self) -> str:
-        """Which head graph this is, by its inputs: ``"low_rank"`` (the current export, 11 inputs),
-        ``"channels_first"`` (earlier exports, 12) or ``"plain"`` (Hadamard fusion, 6)."""
-        return self._layout
-
     def prepare(self, tables, nd: int):
-        layout = self.head_layout
-        if layout == "low_rank":
-            return low_rank_tables(tables)
-        return channels_first_tables(tables) if layout == "channels_first" else tables
+        return _ARRANGE[self.head_layout](tables)
 
     def run_block(self, prepared, i: int, j: int, nd: int) -> np.ndarray:
-        cut = {"low_rank": low_rank_block, "channels_first": channels_first_block}.get(self.head_layout, table_block)
-        return self.run_head(cut(prepared, i, j, nd))
+        return self.run_head(_CUT[self.head_layout](prepared, i, j, nd))
 
     def run_head(self, blocks) -> np.ndarray:
-        layout = self.head_layout
-        if layout != "plain":
-            names = LOW_RANK_INPUTS if layout == "low_rank" else CHANNELS_FIRST_INPUTS
-            r = self.head.run(None, {n: np.ascontiguousarray(b) for n, b in zip(names, blocks)})[0]
-            return r.transpose(1, 2, 3, 0)                    # (Λ, nh, nd, φd) -> (nh, nd, φd, Λ)
-        feeds = {n: np.ascontiguousarray(b) for n, b in zip(PLAIN_INPUTS, blocks)}
-        return self.head.run(None, feeds)[0]
+        r = self.head.run(None, {n: np.ascontiguousarray(b) for n, b in zip(self._inputs, blocks)})[0]
+        if self.head_layout == "plain":
+            return r
+        return r.transpose(1, 2, 3, 0)                        # (Λ, nh, nd, φd) -> (nh, nd, φd, Λ)
 
 
 CHANNELS_FIRST_INPUTS = ("s1", "s2", "s3", "s4", "s5", "s6", "f1", "f2", "f3", "f4", "f5", "f6")
@@ -289,6 +278,11 @@ def channels_first_block(arranged, i: int, j: int, nd: int) -> tuple[np.ndarray,
                  slice(j, j + nd) if a.shape[-2] > 1 else slice(None), :]
 
     return tuple(cut(a) for a in arranged)
+
+
+#: Per head layout: how the six grid tables are arranged once per grid, and cut per block.
+_ARRANGE = {"low_rank": low_rank_tables, "channels_first": channels_first_tables, "plain": lambda tables: tables}
+_CUT = {"low_rank": low_rank_block, "channels_first": channels_first_block, "plain": table_block}
 
 
 def get_backend(weights=None, backend: str = "torch"):

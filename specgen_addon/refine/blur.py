@@ -33,16 +33,18 @@ INSIDE_WEIGHT = 0.98
 _BAND_ROWS = 32
 
 
-def _blur_axis0(img: np.ndarray, matrix: np.ndarray, radius: int) -> np.ndarray:
-    """``matrix @ img`` along axis 0 of an (N, ...) C-contiguous array, band by band."""
-    n = img.shape[0]
-    flat = img.reshape(n, -1)
-    out = np.empty_like(flat)
+def _banded_product(matrix: np.ndarray, img: np.ndarray, axis: int, radius: int) -> np.ndarray:
+    """``matrix`` applied along ``axis`` of a C-contiguous array, band by band: each block of
+    output rows reads only its input rows ± ``radius`` (the matrix is zero beyond)."""
+    shape = img.shape
+    x = img.reshape(int(np.prod(shape[:axis], dtype=np.int64)), shape[axis], -1)   # (outer, n, inner)
+    out = np.empty_like(x)
+    n = shape[axis]
     for start in range(0, n, _BAND_ROWS):
         stop = min(start + _BAND_ROWS, n)
         lo, hi = max(start - radius, 0), min(stop + radius, n)
-        np.matmul(matrix[start:stop, lo:hi], flat[lo:hi], out=out[start:stop])
-    return out.reshape(img.shape)
+        np.matmul(matrix[start:stop, lo:hi], x[:, lo:hi], out=out[:, start:stop])
+    return out.reshape(shape)
 
 
 def gaussian_blur_stack(img: np.ndarray, sigma_px: float, truncate: float = 4.0) -> np.ndarray:
@@ -53,16 +55,11 @@ def gaussian_blur_stack(img: np.ndarray, sigma_px: float, truncate: float = 4.0)
     img = np.ascontiguousarray(img, dtype=np.float64)
     if sigma_px <= 0:
         return img.copy()
-    h, w = img.shape[:2]
     radius = int(truncate * sigma_px + 0.5)
-    rows = _blur_axis0(img, gaussian_matrix(h, float(sigma_px), "constant", truncate), radius)
-    cols = gaussian_matrix(w, float(sigma_px), "constant", truncate)
-    out = np.empty_like(rows)
-    for start in range(0, w, _BAND_ROWS):       # along W: the same bands, for every row at once
-        stop = min(start + _BAND_ROWS, w)
-        lo, hi = max(start - radius, 0), min(stop + radius, w)
-        np.matmul(cols[start:stop, lo:hi], rows[:, lo:hi], out=out[:, start:stop])
-    return out
+    for axis in (0, 1):
+        img = _banded_product(gaussian_matrix(img.shape[axis], float(sigma_px), "constant", truncate),
+                              img, axis, radius)
+    return img
 
 
 def blur_image(img: np.ndarray, sigma_px: float) -> np.ndarray:
