@@ -139,7 +139,9 @@ class SPECGEN_OT_generate_brdf(_Modal, bpy.types.Operator):
             mat["specgen_preview"] = img.name
         s.material = mat
         ref, fit = info.refinement, info.film_fit
-        s.refine_summary = "" if ref is None else f"Photo match: {ref.after.text()} (network {ref.before.text()})"
+        s.refine_summary = "" if ref is None else (
+            f"Photo match: {ref.after.text()}, network's lobe kept (within the renderer's sampling error)"
+            if ref.within_noise and ref.improved else f"Photo match: {ref.after.text()} (network {ref.before.text()})")
         if fit is not None:
             s.refine_summary = f"Thin-film fit, photo match: {fit.reproduction.text()}"
         s.refine_residual = -1.0 if ref is None else ref.after.psnr_db

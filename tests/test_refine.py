@@ -79,14 +79,16 @@ def test_photo_operator_reproduces_the_renderer_for_the_identity_correction(ramp
 
 def test_known_spectral_tint_is_recovered_from_its_own_render(ramp_table):
     """A table × a tint inside the spectral basis is recovered to ≤ 1 % from its own photo (with the
-    network's body spectrum kept: the correction alone)."""
+    network's body spectrum kept: the correction alone). The photo shares the operator's samples, so
+    the fit may go below the sampling error (``fit_floor=None``): this checks the solver's exactness."""
     basis = CorrectionBasis()
     knots_value = np.array([0.6, 1.05, 1.4])
     tint = basis.spectral_hats(WL) @ knots_value
     truth = _tinted(ramp_table, tint)
     light = InputLighting()
     photo = render_under(truth, light.scene(SIZE), light.image_exposure)
-    res = refine_brdf(ramp_table, photo, light, RefineOptions(clip_level=None, body_prior="network"))
+    res = refine_brdf(ramp_table, photo, light, RefineOptions(clip_level=None, body_prior="network",
+                                                              fit_floor=None))
     err = np.linalg.norm(res.table.values - truth.values) / np.linalg.norm(truth.values)
     assert err <= 0.01, f"relative table error {err:.4f}"
     assert res.after.psnr_db > 45.0
@@ -330,12 +332,14 @@ def test_an_added_angular_term_gives_a_near_lambertian_prior_the_photos_grazing_
     light = InputLighting()
     photo = render_under(truth, light.scene(SIZE), light.image_exposure)
     psnr = {}
-    for additive in (False, True):
-        res = refine_brdf(ramp_table_21, photo, light,
-                          RefineOptions(clip_level=None, additive=additive, body_prior="network"))
+    for additive in (False, True):   # with the smoothness of one strength per block (before s34)
+        res = refine_brdf(ramp_table_21, photo, light, RefineOptions(clip_level=None, additive=additive,
+                                                                     body_prior="network", smooth_weight="block"))
         psnr[additive] = res.after.psnr_db
     assert psnr[True] > 45.0, psnr
     assert psnr[True] > psnr[False] + 3.0, psnr
+    default = refine_brdf(ramp_table_21, photo, light, RefineOptions(clip_level=None, body_prior="network"))
+    assert default.after.psnr_db > 45.0
 
 
 def test_a_blurred_photo_is_fitted_with_its_blur_modelled(ramp_table):
@@ -467,3 +471,79 @@ def test_the_banded_blur_equals_scipys_gaussian_filter(shape, sigma):
     theirs = ndimage.gaussian_filter(img, sigma=(sigma, sigma, 0), mode="constant")
     assert np.allclose(ours, theirs, rtol=0, atol=1e-13)
     assert np.array_equal(gaussian_blur_stack(img, 0.0), img)
+
+
+# ------------------------------------------------------------------ the renderer's sampling error
+
+
+def _independent_photo(table: BRDFTable, seed: int = 7) -> np.ndarray:
+    """``table``'s photo under the canonical lighting, rendered with environment samples the
+    refinement's operator does not use (as every real photo is)."""
+    from dataclasses import replace
+
+    from specgen_addon.render import Scene
+
+    light = InputLighting()
+    scene = light.scene(SIZE)
+    other = Scene(scene.geometry, scene.lights, scene.environment, camera_dir=scene.camera_dir,
+                  sampling=replace(scene.sampling, seed=seed))
+    return render_under(table, other, light.image_exposure)
+
+
+def test_discrepancy_scale_finds_the_pull_that_leaves_the_target_residual():
+    from specgen_addon.refine.discrepancy import discrepancy_scale
+
+    def residual(s: float) -> float:        # grows from 0 (plain fit) to 1 (the prior itself)
+        return s / (1.0 + s)
+
+    assert discrepancy_scale(residual, 0.5) == pytest.approx(1.0, rel=0.06)
+    assert discrepancy_scale(residual, 0.9) == pytest.approx(9.0, rel=0.06)
+    assert discrepancy_scale(residual, 0.0) == 0.0                  # the plain fit already leaves it
+    assert discrepancy_scale(residual, 2.0) == float("inf")         # only the prior itself does
+
+
+def test_sampling_variance_is_half_the_difference_of_two_independent_renders():
+    from specgen_addon.refine.discrepancy import sampling_variance
+
+    rng = np.random.default_rng(3)
+    truth = rng.uniform(0.2, 0.8, size=(20000, 3))
+    a = truth + rng.normal(0.0, 0.02, truth.shape)
+    b = truth + rng.normal(0.0, 0.02, truth.shape)
+    assert sampling_variance(a, b) == pytest.approx(0.02 ** 2, rel=0.03)
+
+
+def test_with_a_fit_floor_the_fit_stops_at_the_renderers_sampling_error(ramp_table):
+    """With ``fit_floor`` the lobe's correction is held back once the residual reaches the operator's
+    own sampling error (measured from a second render with independent samples), while the body's
+    tint and the added Lambertian (brightness, colour) stay free; without it, a photo that shares
+    the operator's samples is fitted far more closely."""
+    basis = CorrectionBasis()
+    truth = _tinted(ramp_table, basis.spectral_hats(WL) @ np.array([0.6, 1.05, 1.4]))
+    light = InputLighting()
+    photo = render_under(truth, light.scene(SIZE), light.image_exposure)
+    floored = refine_brdf(ramp_table, photo, light, RefineOptions(clip_level=None, fit_floor=1.0))
+    plain = refine_brdf(ramp_table, photo, light, RefineOptions(clip_level=None))
+    assert plain.sampling_floor_db is None and floored.sampling_floor_db is not None
+    assert floored.prior_scale > 0.0
+    assert plain.after.psnr_db > floored.after.psnr_db + 10.0         # the lobe held back ...
+    assert floored.after.psnr_db > floored.before.psnr_db + 10.0      # ... brightness and colour still fitted
+
+
+def test_a_sharp_photo_that_shares_no_samples_is_not_fitted_as_a_blurred_one(ramp_table):
+    """Blurring the operator's renders averages its sampling noise away; that must not make a sharp
+    photo look blurred: with ``fit_floor`` (which measures that noise) the choice subtracts each
+    candidate's own noise variance and takes a smaller blur than without."""
+    basis = CorrectionBasis()
+    tint = basis.spectral_hats(WL) @ np.array([0.8, 1.0, 1.2])
+    truth = _tinted(ramp_table, tint)
+    photo = _independent_photo(truth)
+    res = refine_brdf(ramp_table, photo, InputLighting(), RefineOptions(clip_level=None, fit_floor=1.0))
+    plain = refine_brdf(ramp_table, photo, InputLighting(), RefineOptions(clip_level=None))
+    assert res.blur_px < plain.blur_px
+
+
+def test_refine_options_refuse_a_bad_fit_floor():
+    with pytest.raises(SpecGenError, match="fit_floor"):
+        RefineOptions(fit_floor=-1.0)
+    with pytest.raises(SpecGenError, match="floor_pull"):
+        RefineOptions(floor_pull="sideways")

@@ -40,6 +40,7 @@ from ..table import BRDFTable
 from .basis import CorrectionBasis
 from .blur import (BLUR_CANDIDATES_PX, blur_image, blur_rows, embed_rows, gather_rows,
                    gaussian_blur_stack, rows_inside)
+from .discrepancy import discrepancy_scale, sampling_variance, twin_scene
 from .body import BODY_PRIORS, has_separate_body, natural_body
 from .operator import PhotoOperator, render_grid
 from .report import Reproduction, photo_scale, reproduction
@@ -57,6 +58,10 @@ WARN_PSNR_DB = 30.0
 #: better-reproducing of the two corrections is kept (issue 10's target is 40 dB).
 RELAX_BELOW_DB = 42.0
 RELAXED_SMOOTH = 0.01
+#: The fit stops at this multiple of the renderer's own sampling-error variance (the discrepancy
+#: principle, :mod:`.discrepancy`). Off by default: on the thirty-fourth session's photos it lowered
+#: the fit of brightness and colour where the sampling error is large (docs/refinement.md).
+FIT_FLOOR: float | None = None
 #: Photo values at or above this fraction of the maximum 8-bit level count as clipped.
 CLIP_LEVEL = 0.995
 
@@ -74,13 +79,30 @@ class RefineOptions:
     tables that the multiplicative lobe correction cannot scale; ``clip_level`` marks saturated
     pixels of an 8/16-bit photo (values in [0, 1]): they are left out of the fit, and renders are
     clipped at 1 like the photo before they are scored (``None``: a linear EXR photo, nothing is
-    clipped).
+    clipped). ``fit_floor`` τ: the fit leaves at least τ × the renderer's own sampling-error variance
+    as its residual (measured per photo, :mod:`.discrepancy`), and keeps the network's table where that
+    already does; ``None`` fits as closely as the prior allows (the behaviour before the thirty-fourth
+    session). ``relax_below_db``: below this self-reproduction the smoothness is relaxed and the better
+    fit kept. ``smooth_weight``: ``"pair"`` weights each difference between neighbouring knots by
+    the data weight of the two knots it ties (at least the block's median), so that knots the photo
+    sees strongly move together (a sharp highlight's); ``"block"`` uses the block's median for all
+    (before the thirty-fourth session). ``floor_pull``: which pull the sampling floor strengthens
+    (``"block"``: the same within each block; ``"relative"``: in proportion to each coefficient's
+    data weight). ``prior_block`` adds a pull of that fraction of each block's median data weight.
+    ``prior_floor`` adds the same pull to every coefficient, as a fraction of the largest
+    data weight: combinations of coefficients the photo barely constrains stay with the network.
     """
 
     basis: CorrectionBasis = field(default_factory=CorrectionBasis)
     noise: float = 0.01
     prior: float = 1e-5
+    prior_floor: float = 1e-11
+    prior_block: float = 0.0
+    smooth_weight: str = "pair"
     smooth: float = 3.0
+    relax_below_db: float = RELAX_BELOW_DB
+    fit_floor: float | None = FIT_FLOOR
+    floor_pull: str = "block"
     body_prior: str = "otsu2018"
     additive: bool = True
     clip_level: float | None = CLIP_LEVEL
@@ -90,6 +112,10 @@ class RefineOptions:
     def __post_init__(self) -> None:
         if self.blur_px is not None and not (np.isfinite(self.blur_px) and 0.0 <= self.blur_px <= 4.0):
             raise SpecGenError(f"blur_px must be None or a number of pixels in [0, 4], got {self.blur_px!r}")
+        if self.floor_pull not in ("block", "relative"):
+            raise SpecGenError(f"floor_pull must be 'block' or 'relative', got {self.floor_pull!r}")
+        if self.fit_floor is not None and not (np.isfinite(self.fit_floor) and self.fit_floor >= 0):
+            raise SpecGenError(f"fit_floor must be None or a non-negative number, got {self.fit_floor!r}")
         if self.body_prior not in BODY_PRIORS:
             raise SpecGenError(f"unknown body prior {self.body_prior!r} (choose from {', '.join(BODY_PRIORS)})")
 
@@ -108,9 +134,16 @@ class RefineResult:
     rendered: np.ndarray | None = None       # (H, W, 3) refined render under the input lighting
     improved: bool = True
     blur_px: float = 0.0                     # the photo's blur the fit modelled (Gaussian σ, px)
+    sampling_floor_db: float | None = None   # the operator's own sampling error as a PSNR (dB)
+    prior_scale: float = 0.0                 # the discrepancy principle's factor on its pull
+    within_noise: bool = False               # the network's lobe met the photo to that error: kept
 
     def summary(self) -> str:
         blur = f" (photo blur σ {self.blur_px:g} px modelled)" if self.blur_px > 0 else ""
+        if self.within_noise and self.improved:
+            return (f"self-reproduction {self.before.text()} → {self.after.text()}{blur}: brightness and colour "
+                    f"fitted, the network's lobe kept (the rest is within the renderer's sampling error, "
+                    f"{self.sampling_floor_db:.1f} dB) in {self.seconds:.1f} s")
         return (f"self-reproduction {self.before.text()} → {self.after.text()}{blur} "
                 f"in {self.seconds:.1f} s")
 
@@ -191,114 +224,136 @@ def refine_brdf(table: BRDFTable, photo: np.ndarray, lighting=None, options: Ref
     if not np.any(b > 0):
         warnings.append("the photo is black: there is nothing to reproduce")
 
-    floor = diffuse_floor_of(table)
-    s_hats = basis.spectral_hats(wl)
-    a_lobe = op.lobe_design(table.values, floor, basis, progress=report(0.1, 0.6), cancel=cancel)
-    check_cancel()
-    a_lamb = op.lambert_design(np.full(wl.size, 1.0 / np.pi), s_hats)  # z: added Lambertian
-    n_lobe, nl = basis.n_lobe, s_hats.shape[1]
-    a_lobe = a_lobe.reshape(b.shape[0], 3, -1)
-    if options.additive:   # u: an added angular term h_a(θh) g_b(θd) s_l(λ), for near-Lambertian tables
-        a_add = op.added_design(basis, progress=report(0.6, 0.65), cancel=cancel)
-        a_lobe = np.concatenate([a_lobe, a_add.reshape(b.shape[0], 3, -1)], axis=2)
-    sigma, a_lobe_fit, a_lamb_fit = _photo_blur(op, a_lobe, a_lamb, op.lambert_design(floor, s_hats), b,
-                                                clipped, n_lobe, nl, level, basis, options, check_cancel)
-    blur = blur_rows(op.shape, op.pixel_ids, sigma)
-    keep = rows_inside(op.shape, op.pixel_ids, sigma, clipped)
-
-    def solve(body: np.ndarray, opts: RefineOptions = options) -> np.ndarray:
-        a_body = blur(op.lambert_design(body, s_hats))                # y: tint of the body
-        design = np.concatenate([a_lobe_fit, a_body, a_lamb_fit], axis=2)     # (P, 3, K)
-        return _solve_correction(design[keep], b[keep], n_lobe, nl, level, basis, opts)
-
-    n_all = a_lobe.shape[2]                                           # lobe x, then added u
-
-    def split(theta: np.ndarray) -> tuple[np.ndarray, np.ndarray | None, np.ndarray, np.ndarray]:
-        """θ → (lobe x, added u or None, body tint y, Lambertian z)."""
-        return (theta[:n_lobe], theta[n_lobe:n_all] if options.additive else None,
-                theta[n_all:n_all + nl], theta[n_all + nl:])
-
-    def corrected(theta: np.ndarray, body: np.ndarray) -> BRDFTable:
-        x, u, yb, zl = split(theta)
-        return apply_correction(table, floor, x, yb, zl, basis, body=body, added=u)
-
-    theta = solve(floor)
-    body = floor
-    if options.body_prior == "otsu2018" and has_separate_body(table.values, floor, wl):
-        _, _, yb, zl = split(theta)
-        natural = natural_body(floor * (s_hats @ yb) + (s_hats @ zl) / np.pi, wl)
-        if natural is not None:
-            body = natural
-            theta = solve(body)
-    check_cancel()
-    if progress is not None:
-        progress(0.65)
-
-    refined = corrected(theta, body)
-    if options.energy_check:
-        warnings.extend(_energy_warnings(table, refined))
-    check_cancel()
-
-    # the two checks are independent renders of one prepared scene: on two threads (numpy's
-    # lookups release the GIL), the same images as one after the other
+    # the network's table under the input's lighting, with the operator's samples and with
+    # independent ones: the first is the "before" check, the two together measure the operator's
+    # sampling error (:mod:`.discrepancy`); rendered on a side thread while the designs are built
     with ThreadPoolExecutor(max_workers=2) as pool:
         before_job = pool.submit(render_under, table, scene, exposure)
-        after_img = render_under(refined, scene, exposure)
-        before_img = before_job.result()
-    if progress is not None:
-        progress(0.9)
+        twin_job = (pool.submit(render_under, table, twin_scene(scene), exposure)
+                    if options.fit_floor is not None else None)
+        floor = diffuse_floor_of(table)
+        s_hats = basis.spectral_hats(wl)
+        a_lobe = op.lobe_design(table.values, floor, basis, progress=report(0.1, 0.6), cancel=cancel)
+        check_cancel()
+        a_lamb = op.lambert_design(np.full(wl.size, 1.0 / np.pi), s_hats)  # z: added Lambertian
+        n_lobe, nl = basis.n_lobe, s_hats.shape[1]
+        a_lobe = a_lobe.reshape(b.shape[0], 3, -1)
+        if options.additive:   # u: an added angular term h_a(θh) g_b(θd) s_l(λ), for near-Lambertian tables
+            a_add = op.added_design(basis, progress=report(0.6, 0.65), cancel=cancel)
+            a_lobe = np.concatenate([a_lobe, a_add.reshape(b.shape[0], 3, -1)], axis=2)
+        before_raw = before_job.result()
+        twin_raw = None if twin_job is None else twin_job.result()
+        sigma, a_lobe_fit, a_lamb_fit = _photo_blur(op, a_lobe, a_lamb, op.lambert_design(floor, s_hats), b,
+                                                    clipped, n_lobe, nl, level, basis, options, check_cancel,
+                                                    None if twin_raw is None else before_raw - twin_raw)
+        blur = blur_rows(op.shape, op.pixel_ids, sigma)
+        keep = rows_inside(op.shape, op.pixel_ids, sigma, clipped)
+        floor_residual = sampling_floor = None
+        if twin_raw is not None:        # the residual the true material would leave (discrepancy principle)
+            n2 = sampling_variance(op.observe(blur_image(before_raw - twin_raw, sigma))[keep], 0.0)
+            floor_residual = options.fit_floor * n2
+            sampling_floor = 10.0 * math.log10(level ** 2 / n2) if n2 > 0 else math.inf
+            check_cancel()
+        scales: list[float] = []
 
-    def clip(img: np.ndarray) -> np.ndarray:   # an 8/16-bit photo: the camera clipped at full scale
-        return img if options.clip_level is None else np.minimum(img, 1.0)
+        def solve(body: np.ndarray, opts: RefineOptions = options) -> np.ndarray:
+            a_body = blur(op.lambert_design(body, s_hats))                # y: tint of the body
+            design = np.concatenate([a_lobe_fit, a_body, a_lamb_fit], axis=2)     # (P, 3, K)
+            theta, scale = _solve_correction(design[keep], b[keep], n_lobe, nl, level, basis, opts, floor_residual)
+            scales.append(scale)
+            return theta
 
-    def as_photographed(img: np.ndarray) -> np.ndarray:   # blurred by the lens and the crop, then clipped
-        return clip(blur_image(img, sigma))
+        n_all = a_lobe.shape[2]                                           # lobe x, then added u
 
-    before_img, after_img = as_photographed(before_img), as_photographed(after_img)
-    m_before = reproduction(b, op.observe(before_img))
-    m_after = reproduction(b, op.observe(after_img))
-    if m_after.psnr_db < RELAX_BELOW_DB and options.smooth > RELAXED_SMOOTH:
-        # the smooth correction does not explain the photo: the photo wins, relax the smoothness
-        theta_r = solve(body, replace(options, smooth=RELAXED_SMOOTH))
-        relaxed = corrected(theta_r, body)
-        relaxed_img = as_photographed(render_under(relaxed, scene, exposure))
-        m_relaxed = reproduction(b, op.observe(relaxed_img))
-        if m_relaxed.psnr_db > m_after.psnr_db:
-            theta, refined, after_img, m_after = theta_r, relaxed, relaxed_img, m_relaxed
-    x, u, yb, zl = split(theta)
-    if progress is not None:
-        progress(0.98)
-    improved = m_after.psnr_db >= m_before.psnr_db
-    if not improved:
-        warnings.append(f"refinement did not improve on the network ({m_after.psnr_db:.1f} dB vs "
-                        f"{m_before.psnr_db:.1f} dB); the network's table is kept")
-        refined, after_img, m_after = table, before_img, m_before
-    if m_after.psnr_db < WARN_PSNR_DB:
-        warnings.append(f"the chosen lighting does not explain this photo: self-reproduction reaches only "
-                        f"{m_after.psnr_db:.1f} dB (check the input lighting, exposure and image)")
-    coeffs = {"lobe": x.reshape(basis.shape).tolist(), "body_tint": yb.tolist(),
-              "added": None if u is None else u.reshape(basis.shape).tolist(),
-              "lambert": zl.tolist(), "floor": floor.tolist(), "body": body.tolist(),
-              "body_prior": options.body_prior if body is not floor else "network"}
-    meta = dict(refined.metadata)
-    if improved:
-        meta.update({"refined": True, "refine_lighting": lighting.label,
-                     "refine_psnr_db": round(m_after.psnr_db, 3),
-                     "refine_delta_e2000": None if m_after.delta_e2000 is None else round(m_after.delta_e2000, 4)})
-        refined.metadata = meta
-    if progress is not None:
-        progress(1.0)
-    return RefineResult(refined, m_before, m_after, coeffs, time.perf_counter() - t0, clipped_fraction,
-                        warnings, after_img, improved, sigma)
+        def split(theta: np.ndarray) -> tuple[np.ndarray, np.ndarray | None, np.ndarray, np.ndarray]:
+            """θ → (lobe x, added u or None, body tint y, Lambertian z)."""
+            return (theta[:n_lobe], theta[n_lobe:n_all] if options.additive else None,
+                    theta[n_all:n_all + nl], theta[n_all + nl:])
+
+        def corrected(theta: np.ndarray, body: np.ndarray) -> BRDFTable:
+            x, u, yb, zl = split(theta)
+            return apply_correction(table, floor, x, yb, zl, basis, body=body, added=u)
+
+        theta = solve(floor)
+        body = floor
+        if options.body_prior == "otsu2018" and has_separate_body(table.values, floor, wl):
+            _, _, yb, zl = split(theta)
+            natural = natural_body(floor * (s_hats @ yb) + (s_hats @ zl) / np.pi, wl)
+            if natural is not None:
+                body = natural
+                theta = solve(body)
+        check_cancel()
+        if progress is not None:
+            progress(0.65)
+
+        within_noise = not np.isfinite(scales[-1])     # the network's lobe already meets the photo
+        refined = corrected(theta, body)
+        if options.energy_check:
+            warnings.extend(_energy_warnings(table, refined))
+        check_cancel()
+        after_raw = render_under(refined, scene, exposure)
+        if progress is not None:
+            progress(0.9)
+
+        def clip(img: np.ndarray) -> np.ndarray:   # an 8/16-bit photo: the camera clipped at full scale
+            return img if options.clip_level is None else np.minimum(img, 1.0)
+
+        def as_photographed(img: np.ndarray) -> np.ndarray:   # blurred by the lens and the crop, then clipped
+            return clip(blur_image(img, sigma))
+
+        before_img = as_photographed(before_raw)
+        after_img = as_photographed(after_raw)
+        m_before = reproduction(b, op.observe(before_img))
+        m_after = reproduction(b, op.observe(after_img))
+        if m_after.psnr_db < options.relax_below_db and options.smooth > RELAXED_SMOOTH:
+            # the smooth correction does not explain the photo: the photo wins, relax the smoothness
+            theta_r = solve(body, replace(options, smooth=RELAXED_SMOOTH))
+            relaxed = corrected(theta_r, body)
+            relaxed_img = as_photographed(render_under(relaxed, scene, exposure))
+            m_relaxed = reproduction(b, op.observe(relaxed_img))
+            if m_relaxed.psnr_db > m_after.psnr_db:
+                theta, refined, after_img, m_after = theta_r, relaxed, relaxed_img, m_relaxed
+        x, u, yb, zl = split(theta)
+        if progress is not None:
+            progress(0.98)
+        improved = m_after.psnr_db >= m_before.psnr_db
+        if not improved:
+            warnings.append(f"refinement did not improve on the network ({m_after.psnr_db:.1f} dB vs "
+                            f"{m_before.psnr_db:.1f} dB); the network's table is kept")
+            refined, after_img, m_after = table, before_img, m_before
+        if m_after.psnr_db < WARN_PSNR_DB:
+            warnings.append(f"the chosen lighting does not explain this photo: self-reproduction reaches only "
+                            f"{m_after.psnr_db:.1f} dB (check the input lighting, exposure and image)")
+        coeffs = {"lobe": x.reshape(basis.shape).tolist(), "body_tint": yb.tolist(),
+                  "added": None if u is None else u.reshape(basis.shape).tolist(),
+                  "lambert": zl.tolist(), "floor": floor.tolist(), "body": body.tolist(),
+                  "body_prior": options.body_prior if body is not floor else "network"}
+        meta = dict(refined.metadata)
+        if improved:
+            meta.update({"refined": True, "refine_lighting": lighting.label,
+                         "refine_psnr_db": round(m_after.psnr_db, 3),
+                         "refine_delta_e2000": None if m_after.delta_e2000 is None else round(m_after.delta_e2000, 4)})
+            refined.metadata = meta
+        if progress is not None:
+            progress(1.0)
+        return RefineResult(refined, m_before, m_after, coeffs, time.perf_counter() - t0, clipped_fraction,
+                            warnings, after_img, improved, sigma, sampling_floor,
+                            float(max(scales)), within_noise)
 
 
 def _photo_blur(op: PhotoOperator, a_lobe: np.ndarray, a_lamb: np.ndarray, a_body: np.ndarray,
                 b: np.ndarray, clipped: np.ndarray, n_lobe: int, nl: int, level: float,
-                basis: CorrectionBasis, options: RefineOptions, check_cancel: Callable[[], None]
-                ) -> tuple[float, np.ndarray, np.ndarray]:
+                basis: CorrectionBasis, options: RefineOptions, check_cancel: Callable[[], None],
+                twin_difference: np.ndarray | None = None) -> tuple[float, np.ndarray, np.ndarray]:
     """The photo's blur σ (px) and the lobe and Lambertian designs blurred by it: σ is
     ``options.blur_px``, or the candidate of :data:`.blur.BLUR_CANDIDATES_PX` whose first solve
-    leaves the smallest mean squared residual on the rows every candidate keeps."""
+    leaves the smallest mean squared residual on the rows every candidate keeps.
+
+    With ``twin_difference`` (H, W, 3: the network's table rendered with the operator's samples
+    minus with independent ones, :mod:`.discrepancy`) each candidate's residual is first reduced
+    by the operator's sampling-error variance after that blur: blurring averages the operator's
+    noise away, which must not count as explaining the photo (a sharp photo that shares no
+    samples with the operator would otherwise be fitted as a blurred one)."""
     if options.blur_px is not None:
         blur = blur_rows(op.shape, op.pixel_ids, float(options.blur_px))
         return float(options.blur_px), blur(a_lobe), blur(a_lamb)
@@ -318,8 +373,10 @@ def _photo_blur(op: PhotoOperator, a_lobe: np.ndarray, a_lamb: np.ndarray, a_bod
         rows = gather_rows(blurred, op.pixel_ids[order]).reshape(order.size, 3, -1)
         del blurred
         design = rows[:n_common]
-        theta = _solve_correction(design, b_common, n_lobe, nl, level, basis, options)
+        theta, _ = _solve_correction(design, b_common, n_lobe, nl, level, basis, options)
         residual = float(np.mean((design @ theta - b_common) ** 2))
+        if twin_difference is not None:
+            residual -= sampling_variance(op.observe(blur_image(twin_difference, sigma))[common], 0.0)
         if best is None or residual < best[0]:
             best = (residual, sigma, rows)
         check_cancel()
@@ -329,31 +386,92 @@ def _photo_blur(op: PhotoOperator, a_lobe: np.ndarray, a_lamb: np.ndarray, a_bod
     return sigma, in_order[:, :, :n_lobe_cols], in_order[:, :, n_lobe_cols + n_body:]
 
 
-def _solve_correction(design: np.ndarray, photo: np.ndarray, n_lobe: int, nl: int, level: float,
-                      basis: CorrectionBasis, options: RefineOptions) -> np.ndarray:
-    """θ = (lobe x, body tint y, Lambertian z) from the observed pixels' design (P, 3, K) and
-    photo (P, 3): the regularised non-negative least squares of the module docstring."""
+#: The discrepancy pull's largest factor: the lobe's coefficients are then the network's to ~10⁻⁶.
+_PULL_MAX = 1e14
+
+
+@dataclass
+class _NormalEquations:
+    """The data term ``‖A θ − y‖² / σ²`` and the regularisers of one design, built once, so that
+    the prior's strength can be searched without touching the design again."""
+
+    gram: np.ndarray          # AᵀA / σ²
+    rhs: np.ndarray           # Aᵀy / σ²
+    yy: float                 # yᵀy / σ²
+    n_obs: int
+    sigma2: float
+    ridge: np.ndarray         # the prior's per-coefficient pull
+    pull: np.ndarray          # the pull the discrepancy principle scales (added at ``scale`` × it)
+    smooth: np.ndarray        # the smoothness term's Gram matrix
+    theta0: np.ndarray
+
+    def solve(self, scale: float = 1.0) -> np.ndarray:
+        """θ with ``scale`` × :attr:`pull` added to the prior's pull (0: the plain fit)."""
+        ridge = self.ridge + scale * self.pull
+        gram = self.gram + self.smooth
+        gram[np.diag_indices_from(gram)] += ridge
+        return nonneg_ridge(gram, self.rhs + ridge * self.theta0)
+
+    def residual(self, theta: np.ndarray) -> float:
+        """Mean squared residual ``mean((A θ − y)²)`` in photo units."""
+        sq = float(theta @ self.gram @ theta - 2.0 * theta @ self.rhs + self.yy)
+        return max(sq, 0.0) * self.sigma2 / self.n_obs
+
+
+def _normal_equations(design: np.ndarray, photo: np.ndarray, n_lobe: int, nl: int, level: float,
+                      basis: CorrectionBasis, options: RefineOptions) -> _NormalEquations:
+    """The regularised least squares of the module docstring for the observed pixels' design
+    (P, 3, K) and photo (P, 3), coefficients θ = (lobe x, added u, body tint y, Lambertian z)."""
     n_add = design.shape[2] - n_lobe - 2 * nl                    # the added angular term (0 or n_lobe)
     theta0 = np.concatenate([np.ones(n_lobe), np.zeros(n_add), np.ones(nl), np.zeros(nl)])
     a = design.reshape(-1, theta0.size)
     y = photo.reshape(-1)
-    sigma = options.noise * level
-    gram = a.T @ a / sigma ** 2
-    rhs = a.T @ y / sigma ** 2
+    sigma2 = (options.noise * level) ** 2
+    gram = a.T @ a / sigma2
+    rhs = a.T @ y / sigma2
     # prior: each coefficient pulled to θ0 in proportion to its own data weight (plus a floor, so
     # coefficients the photo cannot see stay exactly at the network's value)
     diag = np.diag(gram).copy()
-    ridge = options.prior * (diag + 1e-6 * max(diag.max(), 1.0))
-    gram[np.diag_indices_from(gram)] += ridge
-    rhs += ridge * theta0
+    ridge = options.prior * diag + options.prior_floor * max(diag.max(), 1.0)
     # smoothness between neighbouring θh and θd knots of the lobe correction
     # (and of the added term), each scaled by its own block's median data weight
-    smooth = _smoothness(basis)
+    smooth_rows = _smoothness(basis)
+    smooth = np.zeros_like(gram)
     blocks = [slice(0, n_lobe)] + ([slice(n_lobe, n_lobe + n_add)] if n_add else [])
     for block in blocks:
-        scale = options.smooth * max(float(np.median(diag[block])), 1e-12)
-        gram[block, block] += scale * smooth.T @ smooth
-    return nonneg_ridge(gram, rhs)
+        if options.smooth_weight == "pair":   # each difference at least as strong as the data of the knots it ties
+            d = np.maximum(diag[block], 1e-12)
+            lo, hi = np.argmax(smooth_rows < 0, axis=1), np.argmax(smooth_rows > 0, axis=1)
+            w = options.smooth * np.maximum(np.sqrt(d[lo] * d[hi]), float(np.median(d)))
+            smooth[block, block] += smooth_rows.T @ (w[:, None] * smooth_rows)
+        else:
+            scale = options.smooth * max(float(np.median(diag[block])), 1e-12)
+            smooth[block, block] += scale * smooth_rows.T @ smooth_rows
+    block_median = np.empty_like(diag)            # each coefficient's block's typical data weight
+    for block in blocks + [slice(n_lobe + n_add, n_lobe + n_add + nl), slice(n_lobe + n_add + nl, None)]:
+        block_median[block] = max(float(np.median(diag[block])), 1e-12)
+    ridge = ridge + options.prior_block * block_median
+    # the pull the discrepancy principle strengthens: in proportion to each coefficient's data weight,
+    # or the same within each block (the least-seen coefficients give way first)
+    pull = options.prior * diag if options.floor_pull == "relative" else 1e-8 * block_median
+    pull[n_lobe + n_add:] = 0.0     # the body's tint and the added Lambertian (brightness, colour) stay free
+    return _NormalEquations(gram, rhs, float(y @ y) / sigma2, y.size, sigma2, ridge, pull, smooth, theta0)
+
+
+def _solve_correction(design: np.ndarray, photo: np.ndarray, n_lobe: int, nl: int, level: float,
+                      basis: CorrectionBasis, options: RefineOptions,
+                      floor_residual: float | None = None) -> tuple[np.ndarray, float]:
+    """θ and the factor on the prior's pull that it was solved with.
+
+    Without ``floor_residual`` the factor is 0. With it (the photo's expected misfit, mean squared,
+    :mod:`.discrepancy`), the pull on the lobe's and the added term's coefficients is strengthened
+    until the fit leaves at least that residual; the factor is ``inf`` where the network's lobe, with
+    only the body's tint and the added Lambertian fitted (brightness and colour), already does."""
+    eq = _normal_equations(design, photo, n_lobe, nl, level, basis, options)
+    if floor_residual is None:
+        return eq.solve(0.0), 0.0
+    scale = discrepancy_scale(lambda s: eq.residual(eq.solve(s)), floor_residual, hi=_PULL_MAX)
+    return eq.solve(min(scale, _PULL_MAX)), scale
 
 
 def apply_correction(table: BRDFTable, floor: np.ndarray, x: np.ndarray, body_tint: np.ndarray,
