@@ -542,8 +542,8 @@ def test_a_sharp_photo_that_shares_no_samples_is_not_fitted_as_a_blurred_one(ram
     assert res.blur_px < plain.blur_px
 
 
-def test_refine_options_refuse_a_bad_fit_floor():
+def test_refine_options_refuse_a_bad_fit_floor_or_smoothness_weighting():
     with pytest.raises(SpecGenError, match="fit_floor"):
         RefineOptions(fit_floor=-1.0)
-    with pytest.raises(SpecGenError, match="floor_pull"):
-        RefineOptions(floor_pull="sideways")
+    with pytest.raises(SpecGenError, match="smooth_weight"):
+        RefineOptions(smooth_weight="sideways")

@@ -86,10 +86,7 @@ class RefineOptions:
     fit kept. ``smooth_weight``: ``"pair"`` weights each difference between neighbouring knots by
     the data weight of the two knots it ties (at least the block's median), so that knots the photo
     sees strongly move together (a sharp highlight's); ``"block"`` uses the block's median for all
-    (before the thirty-fourth session). ``floor_pull``: which pull the sampling floor strengthens
-    (``"block"``: the same within each block; ``"relative"``: in proportion to each coefficient's
-    data weight). ``prior_block`` adds a pull of that fraction of each block's median data weight.
-    ``prior_floor`` adds the same pull to every coefficient, as a fraction of the largest
+    (before the thirty-fourth session). ``prior_floor`` adds the same pull to every coefficient, as a fraction of the largest
     data weight: combinations of coefficients the photo barely constrains stay with the network.
     """
 
@@ -97,12 +94,10 @@ class RefineOptions:
     noise: float = 0.01
     prior: float = 1e-5
     prior_floor: float = 1e-11
-    prior_block: float = 0.0
     smooth_weight: str = "pair"
     smooth: float = 3.0
     relax_below_db: float = RELAX_BELOW_DB
     fit_floor: float | None = FIT_FLOOR
-    floor_pull: str = "block"
     body_prior: str = "otsu2018"
     additive: bool = True
     clip_level: float | None = CLIP_LEVEL
@@ -112,8 +107,8 @@ class RefineOptions:
     def __post_init__(self) -> None:
         if self.blur_px is not None and not (np.isfinite(self.blur_px) and 0.0 <= self.blur_px <= 4.0):
             raise SpecGenError(f"blur_px must be None or a number of pixels in [0, 4], got {self.blur_px!r}")
-        if self.floor_pull not in ("block", "relative"):
-            raise SpecGenError(f"floor_pull must be 'block' or 'relative', got {self.floor_pull!r}")
+        if self.smooth_weight not in ("pair", "block"):
+            raise SpecGenError(f"smooth_weight must be 'pair' or 'block', got {self.smooth_weight!r}")
         if self.fit_floor is not None and not (np.isfinite(self.fit_floor) and self.fit_floor >= 0):
             raise SpecGenError(f"fit_floor must be None or a non-negative number, got {self.fit_floor!r}")
         if self.body_prior not in BODY_PRIORS:
@@ -405,7 +400,7 @@ class _NormalEquations:
     smooth: np.ndarray        # the smoothness term's Gram matrix
     theta0: np.ndarray
 
-    def solve(self, scale: float = 1.0) -> np.ndarray:
+    def solve(self, scale: float = 0.0) -> np.ndarray:
         """θ with ``scale`` × :attr:`pull` added to the prior's pull (0: the plain fit)."""
         ridge = self.ridge + scale * self.pull
         gram = self.gram + self.smooth
@@ -433,28 +428,23 @@ def _normal_equations(design: np.ndarray, photo: np.ndarray, n_lobe: int, nl: in
     # coefficients the photo cannot see stay exactly at the network's value)
     diag = np.diag(gram).copy()
     ridge = options.prior * diag + options.prior_floor * max(diag.max(), 1.0)
-    # smoothness between neighbouring θh and θd knots of the lobe correction
-    # (and of the added term), each scaled by its own block's median data weight
+    # smoothness between neighbouring θh and θd knots of the lobe correction (and of the added
+    # term), scaled by its own block's median data weight, or per difference by the data weight of
+    # the two knots it ties ("pair", at least that median); and the pull the discrepancy principle
+    # strengthens: the same within each of these blocks (the least-seen coefficients give way
+    # first), none on the body's tint and the added Lambertian (brightness, colour stay free)
     smooth_rows = _smoothness(basis)
+    lo, hi = np.argmax(smooth_rows < 0, axis=1), np.argmax(smooth_rows > 0, axis=1)
     smooth = np.zeros_like(gram)
+    pull = np.zeros_like(diag)
     blocks = [slice(0, n_lobe)] + ([slice(n_lobe, n_lobe + n_add)] if n_add else [])
     for block in blocks:
-        if options.smooth_weight == "pair":   # each difference at least as strong as the data of the knots it ties
-            d = np.maximum(diag[block], 1e-12)
-            lo, hi = np.argmax(smooth_rows < 0, axis=1), np.argmax(smooth_rows > 0, axis=1)
-            w = options.smooth * np.maximum(np.sqrt(d[lo] * d[hi]), float(np.median(d)))
-            smooth[block, block] += smooth_rows.T @ (w[:, None] * smooth_rows)
-        else:
-            scale = options.smooth * max(float(np.median(diag[block])), 1e-12)
-            smooth[block, block] += scale * smooth_rows.T @ smooth_rows
-    block_median = np.empty_like(diag)            # each coefficient's block's typical data weight
-    for block in blocks + [slice(n_lobe + n_add, n_lobe + n_add + nl), slice(n_lobe + n_add + nl, None)]:
-        block_median[block] = max(float(np.median(diag[block])), 1e-12)
-    ridge = ridge + options.prior_block * block_median
-    # the pull the discrepancy principle strengthens: in proportion to each coefficient's data weight,
-    # or the same within each block (the least-seen coefficients give way first)
-    pull = options.prior * diag if options.floor_pull == "relative" else 1e-8 * block_median
-    pull[n_lobe + n_add:] = 0.0     # the body's tint and the added Lambertian (brightness, colour) stay free
+        d = np.maximum(diag[block], 1e-12)
+        median = float(np.median(d))
+        w = np.sqrt(d[lo] * d[hi]) if options.smooth_weight == "pair" else np.zeros(lo.size)
+        w = options.smooth * np.maximum(w, median)
+        smooth[block, block] += smooth_rows.T @ (w[:, None] * smooth_rows)
+        pull[block] = 1e-8 * median
     return _NormalEquations(gram, rhs, float(y @ y) / sigma2, y.size, sigma2, ridge, pull, smooth, theta0)
 
 
