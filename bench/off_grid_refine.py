@@ -20,7 +20,6 @@ from __future__ import annotations
 import argparse
 import json
 import sys
-from dataclasses import replace
 from pathlib import Path
 
 import numpy as np
@@ -90,13 +89,14 @@ def main(argv: list[str] | None = None) -> int:
 
 def independent_photo(material, sampling=None) -> np.ndarray:
     """The canonical photo of ``material`` rendered with other environment samples than the
-    refinement's operator (:func:`specgen_addon.input_image.input_sampling`): ``sampling``, by default
-    seed 1 and twice the input renders' directions."""
+    refinement's operator: ``sampling``, by default
+    :func:`specgen_addon.input_image.independent_sampling` (seed 1, twice the input renders'
+    directions)."""
     from specgen_addon import input_image, lighting
     from specgen_addon.render import Scene, sphere_geometry
 
     if sampling is None:
-        sampling = replace(input_image.input_sampling().scaled(2.0), seed=1)
+        return input_image.render_independent_input(material)
     env = lighting.load_environment(input_image.CANONICAL_ENV)
     scene = Scene(sphere_geometry(input_image.CANONICAL_SIZE), [input_image._key_light()], env,
                   sampling=sampling)

@@ -60,7 +60,7 @@ def main() -> int:
     t0 = time.perf_counter()
     for m in mats:
         photo = input_image.render_input(m).astype(np.float64)
-        table = tables.generate_from_sphere(m, None, h.wl)
+        table = tables.generate_from_photo(input_image.render_input(m), None, h.wl)
         row = {"material": m.name, "kind": m.kind, "source": protocol.spectrum_source(m)}
         candidates = {"network alone": table}
         for label, (prior, smooth, additive) in settings.items():

@@ -79,7 +79,7 @@ def main() -> int:
     t0 = time.perf_counter()
     for m in mats:
         photo = input_image.render_input(m).astype(np.float64)
-        table = tables.generate_from_sphere(m, args.weights, h.wl)
+        table = tables.generate_from_photo(input_image.render_input(m), args.weights, h.wl)
         row = {"material": m.name, "family": material_family(m), "kind": m.kind}
         candidates = {"network alone": (table, None)}
         for label, knots in knot_sets.items():

@@ -7,6 +7,8 @@ from pathlib import Path
 
 
 def add_parser(subparsers: argparse._SubParsersAction) -> argparse.ArgumentParser:
+    from .evaluation.tables import INPUT_PHOTOS
+
     p = subparsers.add_parser(
         "paper-tables", help="reproduce the paper's evaluation tables, plots and real-data check",
         description="Evaluate SpecGen against photo-only baselines (an analytic BRDF fitted to the same "
@@ -41,6 +43,10 @@ def add_parser(subparsers: argparse._SubParsersAction) -> argparse.ArgumentParse
                         "photo, uplifted, vs SpecGen) and write a report of that part alone")
     p.add_argument("--weights", type=Path, default=None, help="SpecGen weights (default: the shipped ones)")
     p.add_argument("--resolution", type=int, default=None, help="render size in pixels (default 128)")
+    p.add_argument("--input-photo", choices=INPUT_PHOTOS, default=INPUT_PHOTOS[0],
+                   help="the sphere photo SpecGen and the photo fits see: 'independent' (default) is "
+                        "rendered with other environment samples than the refinement and the fit use, "
+                        "as a real photo; 'canonical' shares them, a best case (an inverse crime)")
     p.add_argument("--fresh", action="store_true",
                    help="discard cached renders and scores and start over (trained ablation arms are "
                         "kept: they are deterministic and keyed by their exact configuration)")
@@ -115,5 +121,6 @@ def run(args: argparse.Namespace) -> int:
                      budget_minutes=args.budget_minutes, ablation_steps=args.ablation_steps,
                      ablation=not args.no_ablation, weights=args.weights, resolution=args.resolution,
                      fresh=args.fresh, progress=not args.quiet, prepare=args.prepare,
-                     report_only=args.report_only, photo_only=args.photo_only)
+                     report_only=args.report_only, photo_only=args.photo_only,
+                     input_photo=args.input_photo)
     return 0

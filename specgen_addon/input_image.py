@@ -32,7 +32,7 @@ from __future__ import annotations
 
 import functools
 import warnings
-from dataclasses import dataclass
+from dataclasses import dataclass, replace
 from pathlib import Path
 from typing import Callable
 
@@ -57,6 +57,26 @@ def input_sampling():
     from .render import EnvSampling
 
     return EnvSampling().scaled(0.5)
+
+
+#: Seed and direction factor of an *independent* photo (:func:`independent_sampling`).
+INDEPENDENT_SEED = 1
+INDEPENDENT_SCALE = 2.0
+
+
+def independent_sampling():
+    """Environment sampling that shares no directions with :func:`input_sampling` (seed 1, twice the
+    directions). A real photograph is lit by the whole map, not by the refinement operator's
+    samples; a photo rendered with these stands in for one, so a fit to it cannot be exact by
+    construction (no "inverse crime")."""
+    return replace(input_sampling().scaled(INDEPENDENT_SCALE), seed=INDEPENDENT_SEED)
+
+
+def with_independent_sampling(scene):
+    """``scene`` (a prepared renderer scene) with :func:`independent_sampling` instead of its own."""
+    from .render import Scene
+
+    return Scene(scene.geometry, scene.lights, scene.environment, sampling=independent_sampling())
 
 
 def _key_light():
@@ -99,6 +119,14 @@ def render_input(brdf, size: int = CANONICAL_SIZE,
                  progress: Callable[[float], None] | None = None) -> np.ndarray:
     """Canonical input image of ``brdf``: linear sRGB (size, size, 3) float32 (module docstring)."""
     return _render(brdf, CANONICAL_ENV, 0.0, EXPOSURE, size, progress)
+
+
+def render_independent_input(brdf, size: int = CANONICAL_SIZE,
+                             progress: Callable[[float], None] | None = None) -> np.ndarray:
+    """The canonical input image of ``brdf`` rendered with :func:`independent_sampling`: the same
+    lighting, framing and exposure as :func:`render_input`, none of its environment samples."""
+    scene = with_independent_sampling(_scene(CANONICAL_ENV, 0.0, int(size)))
+    return photo_in_scene(brdf, scene, EXPOSURE, progress)
 
 
 def training_variant(variant: int) -> tuple[str, float, float]:

@@ -258,3 +258,35 @@ def test_recorded_arms_round_trip(tmp_path):
     assert loaded == {"joint-aff/seed0": arm}
     assert (loaded_settings.steps, loaded_settings.seeds, loaded_settings.budget_note) == (500, (0, 1), "(note)")
     assert ablation.load_arms(tmp_path / "missing.json") == (None, {})
+
+
+def test_paper_tables_settings_refuse_an_unknown_input_photo_and_key_the_cache_by_it():
+    from specgen_addon.errors import SpecGenError
+    from specgen_addon.evaluation import tables
+
+    with pytest.raises(SpecGenError, match="input photo"):
+        tables.Settings(input_photo="raw")
+    kinds = {tables.Settings(input_photo=k).describe()["input_photo"] for k in tables.INPUT_PHOTOS}
+    assert kinds == set(tables.INPUT_PHOTOS)
+    assert tables.Settings().input_photo == "independent"  # the realistic photo is the default
+
+
+@pytest.mark.skipif(__import__("importlib").util.find_spec("bpy") is None,
+                    reason="the canonical lighting is an HDRI of the bpy wheel")
+def test_harness_gives_every_method_the_photo_its_settings_name(tmp_path):
+    """The network, its refinement and the photo fits all read Harness.input_photo: the canonical
+    render for 'canonical', the independently sampled one (also under a map) for 'independent'."""
+    from specgen_addon import input_image
+    from specgen_addon.evaluation import protocol, tables
+    from specgen_addon.render.analytic import GGXReflector
+
+    mat = GGXReflector(alpha=0.1, f0=0.5, kd=0.3)
+    mat.name = "probe"
+    canon = tables.Harness(tables.Settings(input_photo="canonical"), tmp_path / "a", log=lambda s: None)
+    indep = tables.Harness(tables.Settings(), tmp_path / "b", log=lambda s: None)
+    np.testing.assert_array_equal(canon.input_photo(mat), input_image.render_input(mat))
+    np.testing.assert_array_equal(indep.input_photo(mat), input_image.render_independent_input(mat))
+    env = indep.envs.unseen[0]
+    np.testing.assert_array_equal(indep.input_photo(mat, env),
+                                  protocol.input_under_environment(mat, env, independent=True))
+    assert not np.array_equal(indep.input_photo(mat, env), canon.input_photo(mat, env))

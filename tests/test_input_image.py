@@ -198,3 +198,23 @@ def test_render_input_cli_writes_both_files(tmp_path):
     assert (tmp_path / "s.png").is_file() and (tmp_path / "s.exr").is_file()
     assert main(["render-input", "mat0002", "-o", str(tmp_path / "s.exr"), "--quiet"]) == 2
     assert main(["render-input", "no_such_material", "-o", str(tmp_path / "t.png"), "--quiet"]) == 2
+
+
+@needs_bpy
+def test_independent_photo_shares_the_lighting_but_not_the_samples():
+    """The stand-in for a real photograph (no inverse crime): the canonical scene, exposure and
+    framing, other environment samples. A Lambertian sphere's mean matches the canonical render's
+    (both estimate the same irradiance); a sharp highlight's pixels differ by sampling noise."""
+    size = 48
+    matte = Lambertian(albedo=0.6)
+    canonical = input_image.render_input(matte, size)
+    independent = input_image.render_independent_input(matte, size)
+    assert independent.shape == canonical.shape == (size, size, 3)
+    np.testing.assert_allclose(independent.mean((0, 1)), canonical.mean((0, 1)), rtol=0.01)
+
+    shiny = GGXReflector(alpha=0.05, f0=0.9, kd=0.1)
+    diff = np.abs(input_image.render_independent_input(shiny, size) - input_image.render_input(shiny, size))
+    assert diff.max() > 0.05 * input_image.render_input(shiny, size).max()
+    sampling = input_image.independent_sampling()
+    assert sampling.seed != input_image.input_sampling().seed
+    assert sampling.total >= input_image.input_sampling().total

@@ -100,14 +100,18 @@ def input_lighting_under(env: str):
     return InputLighting(env, key_light=True)
 
 
-def input_under_environment(brdf, env: str) -> np.ndarray:
+def input_under_environment(brdf, env: str, independent: bool = False) -> np.ndarray:
     """The sphere input image of ``brdf`` photographed under environment map ``env`` instead of the
     canonical one: same geometry, key light, exposure and sampling as
-    :func:`specgen_addon.input_image.render_input` (linear sRGB, float32)."""
+    :func:`specgen_addon.input_image.render_input` (linear sRGB, float32); with ``independent``
+    rendered with :func:`specgen_addon.input_image.independent_sampling` instead, as a photograph
+    shares no samples with the refinement's operator."""
     from .. import input_image
 
     light = input_lighting_under(env)
     scene = light.scene(input_image.CANONICAL_SIZE)
+    if independent:
+        scene = input_image.with_independent_sampling(scene)
     return input_image.photo_in_scene(brdf, scene, light.image_exposure)  # RGB-only files through eval_rgb
 
 

@@ -1,6 +1,6 @@
 """The photo-only protocol's part of the report (issue 10, item 3).
 
-Every method gets what a real user has: the one input photo (the canonical sphere image) and its
+Every method gets what a real user has: the one input photo (:meth:`.tables.Harness.input_photo`) and its
 known lighting. SpecGen generates its BRDF from it; each photo-only baseline fits an analytic RGB
 BRDF to it (:mod:`.photo_fit`) and uplifts the fitted colours with one colour-science method. All
 are rendered in the evaluation scenes by the same renderer and scored against the ground truth.
@@ -95,7 +95,7 @@ def section(h: "tables.Harness", mats: Sequence[Any], specgen_arm: str, add: Cal
     heading("## (f) Photo-only protocol: every method sees only the input photo")
     add("")
     add("The fair counterpart of tables (a) and (e) (issue 10, item 3): a baseline gets what a real user "
-        "has, the same single sphere photo SpecGen gets (the canonical input image) and its known "
+        "has, the same single sphere photo SpecGen gets (see *Protocol*) and its known "
         "lighting. It fits an analytic RGB BRDF to the photo (`specgen_addon/evaluation/photo_fit.py`: "
         "diffuse colour, specular F0 colour, GGX roughness, white Schlick grazing term, clear coat "
         "with its own roughness; per roughness pair the colours are a non-negative least-squares "

@@ -77,18 +77,23 @@ def compose(h: tables.Harness, mats: Sequence[Any], specgen_arm: str, weights: P
         f"`{h.envs.unseen[0]}` and `{h.envs.unseen[1]}` (held out).")
     add(f"- **Shapes**: the analytic sphere; for shape transfer, {geom_label}, {h.s.resolution}² "
         "(no shadowing or interreflection in either render, so the comparison isolates the BRDF).")
-    add("- **SpecGen**: the material's canonical sphere input image (`specgen_addon.input_image`) → "
+    add(f"- **SpecGen**: {tables.input_photo_phrase(h.s.input_photo)} → "
         f"`generate_brdf` with weights `{_rel(weights, out.parent)}` (SHA-1 `{specgen_arm.split('@')[-1]}…`) "
         f"→ 90×90×180×{len(h.wl)} "
         "table → rendered in the scene.")
     add("- **Photo-only baselines** (table (f), the fair protocol): an analytic RGB BRDF fitted to the same "
         "input photo SpecGen gets, its colours uplifted by " + ", ".join(baselines.LABELS[b] for b in BASELINE_ORDER)
         + ", rendered like SpecGen's BRDF (details in section (f)).")
-    add("- **Refined figures are a best case** (an \"inverse crime\"): the canonical input photo is rendered "
-        "with the same environment samples that the refinement's operator and the photo fit use, so their "
-        "fits to it can be exact. On photos rendered with other samples, refinement gained −1.8 to +0.1 dB "
-        "over the network alone on six held-out materials, not the +4.6 dB it gains on the canonical "
-        "photo (docs/refinement.md, `bench/independent_photo_refine.py`).")
+    if h.s.input_photo == "canonical":
+        add("- **Refined figures are a best case** (an \"inverse crime\"): the canonical input photo is rendered "
+            "with the same environment samples that the refinement's operator and the photo fit use, so their "
+            "fits to it can be exact. `paper-tables --input-photo independent` (the default) scores them on "
+            "a photo rendered with other samples.")
+    else:
+        add("- **No inverse crime**: the photo that SpecGen, its refinement and the photo fits see shares "
+            "no environment samples with the refinement's operator or the photo fit, so no fit to it can "
+            "be exact by construction; its sampling noise is part of what each method must cope with. "
+            "`--input-photo canonical` gives the earlier best case (the operator's own samples).")
     add("- **Oracle baselines** (tables (a), (b), (e); the analogue of the paper's MST++/HD-Net): they are "
         "given the answer in RGB, the linear-sRGB render of the *same* scene "
         "(the ground-truth spectral image through the CIE 1931 CMFs) uplifted pixel by pixel with colour-science: "
@@ -213,7 +218,7 @@ def compose(h: tables.Harness, mats: Sequence[Any], specgen_arm: str, weights: P
         add("")
         role = tables.ROLES_ABLATION[0]
         add(f"Scored on the sphere under {_lighting(roles[role])} (as the paper's Tables 3–4), from the "
-            "canonical input; the arms' networks are queried directly at the render's directions "
+            "input photo; the arms' networks are queried directly at the render's directions "
             "(`specgen_addon/evaluation/network_brdf.py`: the same function and decoding as the "
             "generated table, without its grid interpolation).")
         add("")
@@ -271,7 +276,7 @@ def compose(h: tables.Harness, mats: Sequence[Any], specgen_arm: str, weights: P
     if not real:
         add(f"Not run {real_note}.")
     else:
-        add("Each real RGL RGB file (`../shared/data/rgl`): its canonical sphere input is rendered, SpecGen "
+        add("Each real RGL RGB file (`../shared/data/rgl`): its sphere photo is rendered as the test materials' are, SpecGen "
             "generates a spectral BRDF, that BRDF is projected back to RGB (the spectrum of each entry "
             "seen under D65 → linear sRGB) and rendered; the reference is the render of the measured RGB "
             "BRDF in the same scene (RGB renders, PSNR/SSIM over the three channels).")

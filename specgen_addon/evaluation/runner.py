@@ -83,7 +83,7 @@ def run_paper_tables(out: Path, img_dir: Path | None = None, smoke: bool = False
                      ablation_steps: int | None = None, ablation: bool = True,
                      weights: Path | None = None, resolution: int | None = None, fresh: bool = False,
                      progress: bool = True, prepare: bool = False, report_only: bool = False,
-                     photo_only: bool = False) -> Path:
+                     photo_only: bool = False, input_photo: str = "independent") -> Path:
     """Run the whole evaluation and write the markdown report ``out`` (returns its path).
 
     ``prepare`` computes only what does not need the shipped weights (ground-truth renders,
@@ -92,6 +92,7 @@ def run_paper_tables(out: Path, img_dir: Path | None = None, smoke: bool = False
     recorded there by the last full run), e.g. after editing the discussion file.
     ``photo_only`` runs only the photo-only protocol (table (f): the photo fits, their uplifted
     renders and SpecGen in the same scenes) and writes a report of that part alone.
+    ``input_photo`` is the sphere photo SpecGen and the photo fits see (:data:`.tables.INPUT_PHOTOS`).
     """
     t_start = time.perf_counter()
     out = Path(out)
@@ -109,7 +110,7 @@ def run_paper_tables(out: Path, img_dir: Path | None = None, smoke: bool = False
         raise SpecGenError(f"{weights_path}: SpecGen weights not found (train them or pass --weights)")
     settings = tables.Settings(resolution=conf["resolution"], n_materials=n_mat or 0, material_names=names,
                                env_sampling_scale=conf["env_sampling_scale"], lut_size=conf["lut_size"],
-                               band_count=conf["band_count"], smoke=smoke)
+                               band_count=conf["band_count"], smoke=smoke, input_photo=input_photo)
     root = out.parent / ".cache" / "paper-tables"
     cache = root / f"{'smoke' if smoke else 'full'}-{_key(settings.describe())}"
     if report_only and (fresh or not (cache.is_dir() and any(p.name != "settings.json" for p in cache.iterdir()))):

@@ -18,6 +18,7 @@ from typing import Any, Callable, Sequence
 import numpy as np
 
 from ..render import EnvSampling, RenderResult, Scene
+from ..errors import SpecGenError
 from . import baselines, protocol
 from .cache import read_json, write_json
 
@@ -32,8 +33,9 @@ SELF_ROLE = "self_reproduction"
 #: Bumped whenever the refinement's defaults change, so cached refined cells are not reused:
 #: 2 = Otsu 2018 body, smoothness 3 and the added angular term (fifth session); 3 = the photo's
 #: blur modelled (fourteenth session: most exactly framed photos choose σ = 0, some do not, e.g.
-#: mat0003 under ``city`` and ``interior`` choose 0.35 px, so cached refined cells changed).
-REFINE_VERSION = "v3"
+#: mat0003 under ``city`` and ``interior`` choose 0.35 px, so cached refined cells changed);
+#: 4 = the pair-weighted smoothness (thirty-fourth session, ``RefineOptions.smooth_weight``).
+REFINE_VERSION = "v4"
 
 
 def refined_arm(specgen_arm: str) -> str:
@@ -64,6 +66,25 @@ def photo_arm(method: str) -> str:
     return PHOTO_PREFIX + method
 
 
+#: What the sphere photo of SpecGen and the photo-only baselines is (:attr:`Settings.input_photo`):
+#: ``independent`` (the default): rendered with other environment samples than the refinement's
+#: operator and the photo fit, as a real photograph is (:func:`specgen_addon.input_image.independent_sampling`);
+#: ``canonical``: the input render itself, which shares them, so a fit to it can be exact (an
+#: "inverse crime", a best case kept for comparison with earlier reports).
+INPUT_PHOTOS = ("independent", "canonical")
+
+
+def input_photo_phrase(kind: str) -> str:
+    """How the report names the sphere photo of :attr:`Settings.input_photo` ``kind``."""
+    if kind == "independent":
+        return ("the material's sphere photo under the canonical lighting, rendered with other "
+                "environment samples (seed 1, twice the directions) than the refinement's operator "
+                "and the photo fit use, as a real photograph shares none "
+                "(`specgen_addon.input_image.render_independent_input`)")
+    return ("the material's canonical sphere input image (`specgen_addon.input_image.render_input`), "
+            "rendered with the same environment samples the refinement's operator and the photo fit use")
+
+
 #: Role whose images are kept for the figures.
 FIGURE_ROLE = "env_unseen1"
 
@@ -86,6 +107,11 @@ class Settings:
     lut_size: int | None = None  # face-table size of tabulated baselines (None: their default)
     band_count: int = len(protocol.WAVELENGTHS_NM)  # fewer bands only for the smoke run
     smoke: bool = False
+    input_photo: str = "independent"  # one of INPUT_PHOTOS
+
+    def __post_init__(self) -> None:
+        if self.input_photo not in INPUT_PHOTOS:
+            raise SpecGenError(f"input photo {self.input_photo!r} is not one of {', '.join(INPUT_PHOTOS)}")
 
     @property
     def wavelengths_nm(self) -> np.ndarray:
@@ -112,6 +138,7 @@ class Settings:
                 "photo_baselines": list(self.photo_baselines),
                 "lut_size": self.lut_size,
                 "env_samples_per_pixel": self.sampling().total,
+                "input_photo": self.input_photo,
                 "wavelengths_nm": [float(w) for w in self.wavelengths_nm]}
 
 
@@ -136,6 +163,7 @@ class Harness:
         self._geom: dict[str, tuple[Any, str]] = {}
         self._scene: dict[str, Scene] = {}
         self.wl = settings.wavelengths_nm
+        self._photos: dict[tuple[str, str | None], np.ndarray] = {}
 
     # -- bookkeeping -------------------------------------------------------------------------
     def cell_path(self, arm: str, material: str, role: str) -> Path:
@@ -214,29 +242,28 @@ class Harness:
             return
         t0 = time.perf_counter()
         if direct:
-            from .. import input_image
             from .network_brdf import NetworkBRDF
 
-            table = NetworkBRDF(weights, input_image.render_input(material))
+            table = NetworkBRDF(weights, self.input_photo(material))
         elif input_env is None:
-            table = generate_from_sphere(material, weights, self.wl)
+            photo = self.input_photo(material)
+            table = generate_from_photo(photo, weights, self.wl)
             if refine:
-                from .. import input_image
                 from ..refine import RefineOptions, refine_brdf
 
-                table = refine_brdf(table, input_image.render_input(material),
+                table = refine_brdf(table, photo,
                                     options=RefineOptions(clip_level=None)).table
         elif lighting_given:
             from ..input_lighting import InputLighting
             from ..pipeline import generate
 
-            table = generate(protocol.input_under_environment(material, input_env),
+            table = generate(self.input_photo(material, input_env),
                              lighting=InputLighting(input_env, key_light=True), refine=True,
                              weights=weights, wavelengths_nm=self.wl).table
         else:
             from .. import infer
 
-            table = infer.generate_brdf(protocol.input_under_environment(material, input_env),
+            table = infer.generate_brdf(self.input_photo(material, input_env),
                                         weights=weights, wavelengths_nm=self.wl)
         t_gen = time.perf_counter() - t0
         for role in todo:
@@ -252,11 +279,28 @@ class Harness:
             self.run_self_reproduction(arm, material, table)
 
     # -- photo-only protocol and self-reproduction ------------------------------------------------
-    def input_photo(self, material: Any) -> np.ndarray:
-        """The material's canonical sphere input image (what SpecGen and the photo fits see)."""
+    def input_photo(self, material: Any, env: str | None = None) -> np.ndarray:
+        """The material's sphere photo that SpecGen and the photo fits see: under the canonical
+        lighting, or with ``env`` under that map and the key light (table (b)); rendered with
+        independent samples or the input renders' own (:data:`INPUT_PHOTOS`). Kept per material."""
         from .. import input_image
 
-        return input_image.render_input(material)
+        name = getattr(material, "name", None)
+        key = (name, env)
+        if name is None or key not in self._photos:
+            independent = self.s.input_photo == "independent"
+            if env is not None:
+                photo = protocol.input_under_environment(material, env, independent=independent)
+            elif independent:
+                photo = input_image.render_independent_input(material)
+            else:
+                photo = input_image.render_input(material)
+            if name is None:
+                return photo
+            if len(self._photos) >= 16:
+                self._photos.clear()
+            self._photos[key] = photo
+        return self._photos[key]
 
     def run_self_reproduction(self, arm: str, material: Any, brdf: Any) -> dict:
         """Cell :data:`SELF_ROLE` of ``arm``: ``brdf`` (spectral) rendered under the canonical input
@@ -347,7 +391,7 @@ class Harness:
         measured = load_brdf(path)
         t0 = time.perf_counter()
         # Projected back to RGB: each entry's spectrum seen under D65 → linear sRGB.
-        rgb_table = generate_from_sphere(measured, weights, self.wl).to_rgb("D65")
+        rgb_table = generate_from_photo(self.input_photo(measured), weights, self.wl).to_rgb("D65")
         t_gen = time.perf_counter() - t0
         for role in todo:
             t1 = time.perf_counter()
@@ -406,12 +450,11 @@ class Harness:
 
 # -- model-side helpers ---------------------------------------------------------------------------
 
-def generate_from_sphere(brdf: Any, weights: Path | None, wavelengths_nm: np.ndarray):
-    """SpecGen's spectral BRDF table generated from ``brdf``'s canonical sphere input image."""
-    from .. import infer, input_image
+def generate_from_photo(photo: np.ndarray, weights: Path | None, wavelengths_nm: np.ndarray):
+    """SpecGen's spectral BRDF table generated from a sphere photo (linear sRGB, H×W×3)."""
+    from .. import infer
 
-    image = input_image.render_input(brdf)
-    return infer.generate_brdf(image, weights=weights, wavelengths_nm=wavelengths_nm)
+    return infer.generate_brdf(photo, weights=weights, wavelengths_nm=wavelengths_nm)
 
 
 def clear_cache(cache_dir: Path) -> None:
