@@ -503,13 +503,15 @@ def test_discrepancy_scale_finds_the_pull_that_leaves_the_target_residual():
 
 
 def test_sampling_variance_is_half_the_difference_of_two_independent_renders():
-    from specgen_addon.refine.discrepancy import sampling_variance
+    from specgen_addon.refine.discrepancy import difference_variance, sampling_variance
 
     rng = np.random.default_rng(3)
     truth = rng.uniform(0.2, 0.8, size=(20000, 3))
     a = truth + rng.normal(0.0, 0.02, truth.shape)
     b = truth + rng.normal(0.0, 0.02, truth.shape)
     assert sampling_variance(a, b) == pytest.approx(0.02 ** 2, rel=0.03)
+    assert difference_variance(a - b) == sampling_variance(a, b)
+    assert difference_variance(np.zeros((0, 3))) == 0.0
 
 
 def test_with_a_fit_floor_the_fit_stops_at_the_renderers_sampling_error(ramp_table):

@@ -40,7 +40,7 @@ from ..table import BRDFTable
 from .basis import CorrectionBasis
 from .blur import (BLUR_CANDIDATES_PX, blur_image, blur_rows, embed_rows, gather_rows,
                    gaussian_blur_stack, rows_inside)
-from .discrepancy import discrepancy_scale, sampling_variance, twin_scene
+from .discrepancy import difference_variance, discrepancy_scale, twin_scene
 from .body import BODY_PRIORS, has_separate_body, natural_body
 from .operator import PhotoOperator, render_grid
 from .report import Reproduction, photo_scale, reproduction
@@ -245,7 +245,7 @@ def refine_brdf(table: BRDFTable, photo: np.ndarray, lighting=None, options: Ref
         keep = rows_inside(op.shape, op.pixel_ids, sigma, clipped)
         floor_residual = sampling_floor = None
         if twin_raw is not None:        # the residual the true material would leave (discrepancy principle)
-            n2 = sampling_variance(op.observe(blur_image(before_raw - twin_raw, sigma))[keep], 0.0)
+            n2 = difference_variance(op.observe(blur_image(before_raw - twin_raw, sigma))[keep])
             floor_residual = options.fit_floor * n2
             sampling_floor = 10.0 * math.log10(level ** 2 / n2) if n2 > 0 else math.inf
             check_cancel()
@@ -371,7 +371,7 @@ def _photo_blur(op: PhotoOperator, a_lobe: np.ndarray, a_lamb: np.ndarray, a_bod
         theta, _ = _solve_correction(design, b_common, n_lobe, nl, level, basis, options)
         residual = float(np.mean((design @ theta - b_common) ** 2))
         if twin_difference is not None:
-            residual -= sampling_variance(op.observe(blur_image(twin_difference, sigma))[common], 0.0)
+            residual -= difference_variance(op.observe(blur_image(twin_difference, sigma))[common])
         if best is None or residual < best[0]:
             best = (residual, sigma, rows)
         check_cancel()

@@ -42,7 +42,13 @@ def twin_scene(scene):
 def sampling_variance(rows_a: np.ndarray, rows_b: np.ndarray) -> float:
     """Per-render sampling-error variance ``mean((a − b)²) / 2`` of two renders of one table with
     independent samples (observed-pixel rows, photo units)."""
-    d = np.asarray(rows_a, np.float64) - np.asarray(rows_b, np.float64)
+    return difference_variance(np.asarray(rows_a, np.float64) - np.asarray(rows_b, np.float64))
+
+
+def difference_variance(difference: np.ndarray) -> float:
+    """:func:`sampling_variance` from the difference ``a − b`` of the two renders (rows or an image,
+    e.g. after both were blurred alike): ``mean(d²) / 2``, 0 for no pixels."""
+    d = np.asarray(difference, np.float64)
     return float(np.mean(d * d) / 2.0) if d.size else 0.0
 
 
