@@ -424,7 +424,7 @@ def test_the_added_terms_design_is_the_photo_of_each_hat_as_a_brdf():
     basis = CorrectionBasis()
     design = op.added_design(basis)                                  # (P, 3, Na, Nb, L)
     h, g, s = basis.theta_h_hats(), basis.theta_d_hats(), basis.spectral_hats(WL)
-    for a, b, l in ((1, 0, 0), (5, 2, 1), (12, 5, 2)):
+    for a, b, l in ((1, 0, 0), (5, 2, 1), (len(basis.theta_h_knots) - 1, 5, 2)):
         values = np.broadcast_to(h[:, a, None, None, None] * g[None, :, b, None, None]
                                  * s[None, None, None, :, l], (90, 90, 180, WL.size))
         photo = _photo_by_samples(op, values)
@@ -549,3 +549,22 @@ def test_refine_options_refuse_a_bad_fit_floor_or_smoothness_weighting():
         RefineOptions(fit_floor=-1.0)
     with pytest.raises(SpecGenError, match="smooth_weight"):
         RefineOptions(smooth_weight="sideways")
+
+
+def test_the_relaxed_fit_is_kept_only_for_the_required_gain(ramp_table):
+    """Below ``relax_below_db`` the smoothness is relaxed; the relaxed fit replaces the smooth one only
+    if it reproduces the photo at least ``relax_min_gain_db`` better, else the smooth fit stays."""
+    light = InputLighting()
+    other = BRDFTable(np.roll(ramp_table.values, 30, axis=0) * 2.0, WL)
+    photo = render_under(other, light.scene(SIZE), light.image_exposure)
+    smooth = refine_brdf(ramp_table, photo, light, RefineOptions(clip_level=None, relax_below_db=0.0))
+    assert smooth.relaxed_gain_db is None and not smooth.relaxed
+    free = refine_brdf(ramp_table, photo, light, RefineOptions(clip_level=None))
+    assert free.relaxed_gain_db is not None and free.relaxed_gain_db > 0 and free.relaxed
+    assert free.after.psnr_db == pytest.approx(smooth.after.psnr_db + free.relaxed_gain_db, abs=1e-9)
+    strict = refine_brdf(ramp_table, photo, light,
+                         RefineOptions(clip_level=None, relax_min_gain_db=free.relaxed_gain_db + 0.5))
+    assert not strict.relaxed and strict.relaxed_gain_db == pytest.approx(free.relaxed_gain_db)
+    assert strict.after.psnr_db == pytest.approx(smooth.after.psnr_db)
+    with pytest.raises(SpecGenError, match="relax_min_gain_db"):
+        RefineOptions(relax_min_gain_db=-1.0)

@@ -34,8 +34,9 @@ SELF_ROLE = "self_reproduction"
 #: 2 = Otsu 2018 body, smoothness 3 and the added angular term (fifth session); 3 = the photo's
 #: blur modelled (fourteenth session: most exactly framed photos choose σ = 0, some do not, e.g.
 #: mat0003 under ``city`` and ``interior`` choose 0.35 px, so cached refined cells changed);
-#: 4 = the pair-weighted smoothness (thirty-fourth session, ``RefineOptions.smooth_weight``).
-REFINE_VERSION = "v4"
+#: 4 = the pair-weighted smoothness (thirty-fourth session, ``RefineOptions.smooth_weight``);
+#: 5 = no θh knots inside one pixel of the highlight (thirty-fifth session, ``basis.THETA_H_KNOTS``).
+REFINE_VERSION = "v5"
 
 
 def refined_arm(specgen_arm: str) -> str:

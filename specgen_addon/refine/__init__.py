@@ -58,6 +58,10 @@ WARN_PSNR_DB = 30.0
 #: better-reproducing of the two corrections is kept (issue 10's target is 40 dB).
 RELAX_BELOW_DB = 42.0
 RELAXED_SMOOTH = 0.01
+#: The relaxed fit replaces the smooth one only if it reproduces the photo at least this much better
+#: (dB): a small gain is as likely the operator's sampling error or the photo's resampling fitted as
+#: the material (docs/refinement.md, thirty-fifth session).
+RELAX_MIN_GAIN_DB = 0.0
 #: The fit stops at this multiple of the renderer's own sampling-error variance (the discrepancy
 #: principle, :mod:`.discrepancy`). Off by default: on the thirty-fourth session's photos it lowered
 #: the fit of brightness and colour where the sampling error is large (docs/refinement.md).
@@ -83,7 +87,7 @@ class RefineOptions:
     as its residual (measured per photo, :mod:`.discrepancy`), and keeps the network's table where that
     already does; ``None`` fits as closely as the prior allows (the behaviour before the thirty-fourth
     session). ``relax_below_db``: below this self-reproduction the smoothness is relaxed and the better
-    fit kept. ``smooth_weight``: ``"pair"`` weights each difference between neighbouring knots by
+    fit kept, if it reproduces the photo at least ``relax_min_gain_db`` better. ``smooth_weight``: ``"pair"`` weights each difference between neighbouring knots by
     the data weight of the two knots it ties (at least the block's median), so that knots the photo
     sees strongly move together (a sharp highlight's); ``"block"`` uses the block's median for all
     (before the thirty-fourth session). ``prior_floor`` adds the same pull to every coefficient, as a fraction of the largest
@@ -97,6 +101,7 @@ class RefineOptions:
     smooth_weight: str = "pair"
     smooth: float = 3.0
     relax_below_db: float = RELAX_BELOW_DB
+    relax_min_gain_db: float = RELAX_MIN_GAIN_DB
     fit_floor: float | None = FIT_FLOOR
     body_prior: str = "otsu2018"
     additive: bool = True
@@ -107,6 +112,8 @@ class RefineOptions:
     def __post_init__(self) -> None:
         if self.blur_px is not None and not (np.isfinite(self.blur_px) and 0.0 <= self.blur_px <= 4.0):
             raise SpecGenError(f"blur_px must be None or a number of pixels in [0, 4], got {self.blur_px!r}")
+        if not (np.isfinite(self.relax_min_gain_db) and self.relax_min_gain_db >= 0):
+            raise SpecGenError(f"relax_min_gain_db must be a non-negative number of dB, got {self.relax_min_gain_db!r}")
         if self.smooth_weight not in ("pair", "block"):
             raise SpecGenError(f"smooth_weight must be 'pair' or 'block', got {self.smooth_weight!r}")
         if self.fit_floor is not None and not (np.isfinite(self.fit_floor) and self.fit_floor >= 0):
@@ -132,6 +139,8 @@ class RefineResult:
     sampling_floor_db: float | None = None   # the operator's own sampling error as a PSNR (dB)
     prior_scale: float = 0.0                 # the discrepancy principle's factor on its pull
     within_noise: bool = False               # the network's lobe met the photo to that error: kept
+    relaxed_gain_db: float | None = None     # self-reproduction gain of the relaxed fit, where one was tried
+    relaxed: bool = False                    # the relaxed fit was kept
 
     def summary(self) -> str:
         blur = f" (photo blur σ {self.blur_px:g} px modelled)" if self.blur_px > 0 else ""
@@ -300,14 +309,17 @@ def refine_brdf(table: BRDFTable, photo: np.ndarray, lighting=None, options: Ref
         after_img = as_photographed(after_raw)
         m_before = reproduction(b, op.observe(before_img))
         m_after = reproduction(b, op.observe(after_img))
+        relaxed_gain, relaxed_kept = None, False
         if m_after.psnr_db < options.relax_below_db and options.smooth > RELAXED_SMOOTH:
             # the smooth correction does not explain the photo: the photo wins, relax the smoothness
             theta_r = solve(body, replace(options, smooth=RELAXED_SMOOTH))
             relaxed = corrected(theta_r, body)
             relaxed_img = as_photographed(render_under(relaxed, scene, exposure))
             m_relaxed = reproduction(b, op.observe(relaxed_img))
-            if m_relaxed.psnr_db > m_after.psnr_db:
+            relaxed_gain = m_relaxed.psnr_db - m_after.psnr_db
+            if relaxed_gain > 0 and relaxed_gain >= options.relax_min_gain_db:
                 theta, refined, after_img, m_after = theta_r, relaxed, relaxed_img, m_relaxed
+                relaxed_kept = True
         x, u, yb, zl = split(theta)
         if progress is not None:
             progress(0.98)
@@ -333,7 +345,7 @@ def refine_brdf(table: BRDFTable, photo: np.ndarray, lighting=None, options: Ref
             progress(1.0)
         return RefineResult(refined, m_before, m_after, coeffs, time.perf_counter() - t0, clipped_fraction,
                             warnings, after_img, improved, sigma, sampling_floor,
-                            float(max(scales)), within_noise)
+                            float(max(scales)), within_noise, relaxed_gain, relaxed_kept and improved)
 
 
 def _photo_blur(op: PhotoOperator, a_lobe: np.ndarray, a_lamb: np.ndarray, a_body: np.ndarray,
