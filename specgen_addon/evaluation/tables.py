@@ -17,8 +17,8 @@ from typing import Any, Callable, Sequence
 
 import numpy as np
 
-from ..render import EnvSampling, RenderResult, Scene
 from ..errors import SpecGenError
+from ..render import EnvSampling, RenderResult, Scene
 from . import baselines, protocol
 from .cache import read_json, write_json
 
