@@ -92,14 +92,12 @@ def independent_photo(material, sampling=None) -> np.ndarray:
     refinement's operator: ``sampling``, by default
     :func:`specgen_addon.input_image.independent_sampling` (seed 1, twice the input renders'
     directions)."""
-    from specgen_addon import input_image, lighting
-    from specgen_addon.render import Scene, sphere_geometry
+    from specgen_addon import input_image
+    from specgen_addon.input_lighting import InputLighting
 
     if sampling is None:
         return input_image.render_independent_input(material)
-    env = lighting.load_environment(input_image.CANONICAL_ENV)
-    scene = Scene(sphere_geometry(input_image.CANONICAL_SIZE), [input_image._key_light()], env,
-                  sampling=sampling)
+    scene = InputLighting().scene().with_sampling(sampling)
     return input_image.photo_in_scene(material, scene, input_image.EXPOSURE)
 
 

@@ -74,9 +74,7 @@ def independent_sampling():
 
 def with_independent_sampling(scene):
     """``scene`` (a prepared renderer scene) with :func:`independent_sampling` instead of its own."""
-    from .render import Scene
-
-    return Scene(scene.geometry, scene.lights, scene.environment, sampling=independent_sampling())
+    return scene.with_sampling(independent_sampling())
 
 
 def _key_light():

@@ -481,12 +481,9 @@ def _independent_photo(table: BRDFTable, seed: int = 7) -> np.ndarray:
     refinement's operator does not use (as every real photo is)."""
     from dataclasses import replace
 
-    from specgen_addon.render import Scene
-
     light = InputLighting()
     scene = light.scene(SIZE)
-    other = Scene(scene.geometry, scene.lights, scene.environment, camera_dir=scene.camera_dir,
-                  sampling=replace(scene.sampling, seed=seed))
+    other = scene.with_sampling(replace(scene.sampling, seed=seed))
     return render_under(table, other, light.image_exposure)
 
 

@@ -29,12 +29,9 @@ _TWINS: "weakref.WeakKeyDictionary" = weakref.WeakKeyDictionary()
 def twin_scene(scene):
     """The same scene (geometry, lights, environment, camera) with independent environment
     samples (the sampling seed + 1), prepared once per scene."""
-    from ..render import Scene
-
     twin = _TWINS.get(scene)
     if twin is None:
-        twin = Scene(scene.geometry, scene.lights, scene.environment, camera_dir=scene.camera_dir,
-                     sampling=replace(scene.sampling, seed=scene.sampling.seed + 1))
+        twin = scene.with_sampling(replace(scene.sampling, seed=scene.sampling.seed + 1))
         _TWINS[scene] = twin
     return twin
 

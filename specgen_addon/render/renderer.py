@@ -98,6 +98,12 @@ class Scene:
         self.camera_dir = d / norm
         self._blocks: list[_Block] | None = None
 
+    def with_sampling(self, sampling: EnvSampling) -> "Scene":
+        """The same geometry, lights, environment and camera with other environment samples (a new,
+        unprepared scene): e.g. a photo that shares none of the refinement operator's samples."""
+        return Scene(self.geometry, self.lights, self.environment, camera_dir=self.camera_dir,
+                     sampling=sampling)
+
     def _prepare(self, progress: ProgressFn | None = None) -> list[_Block]:
         if self._blocks is not None:
             return self._blocks
