@@ -9,8 +9,12 @@ for the thin films, the thin-film family's fit to the photo (``infer --model thi
   peak (θh = 0, θd = 10°; luminance normalised to Y = 0.5 so only chromaticity counts) as ΔE2000
   between truth and prediction.
 
-Each prediction comes from the material's canonical input image
-(:func:`specgen_addon.input_image.render_input`), as `evaluate` does.
+Each prediction comes from the material's sphere under the canonical lighting, by default rendered
+with other environment samples than the refinement's operator
+(:func:`specgen_addon.input_image.render_independent_input`), as a real photo shares none;
+``--input-photo canonical`` gives it the canonical input render itself
+(:func:`specgen_addon.input_image.render_input`, the best case for the refinement and the fit:
+an inverse crime), as the checks did before the thirty-sixth session.
 
 Usage: ``.venv/bin/python bench/family_checks.py [--weights W.pt] [--figure docs/img/thin_film_hue.png]``
 """
@@ -67,16 +71,21 @@ def main() -> None:
     p.add_argument("--weights", type=Path, default=None)
     p.add_argument("--figure", type=Path, default=None)
     p.add_argument("--json", type=Path, default=None)
+    p.add_argument("--input-photo", choices=("independent", "canonical"), default="independent",
+                   help="the photo every method sees: rendered with other samples than the refinement's "
+                        "operator (default), or the canonical input render itself (an inverse crime)")
     args = p.parse_args()
     print(f"machine: {describe_machine()}")
-    print(f"weights: {args.weights or 'shipped'}")
-    out: dict = {"weights": str(args.weights or "shipped")}
+    print(f"weights: {args.weights or 'shipped'}; input photo: {args.input_photo}")
+    out: dict = {"weights": str(args.weights or "shipped"), "input_photo": args.input_photo}
+    render_photo = (input_image.render_independent_input if args.input_photo == "independent"
+                    else input_image.render_input)
     from specgen_addon.refine import RefineOptions, refine_brdf
 
     from specgen_addon.fit.thin_film import fit_thin_film
 
     def predict(m, fit: bool = False):
-        image = input_image.render_input(m)
+        image = render_photo(m)
         table = generate_brdf(image, weights=args.weights, wavelengths_nm=WL)
         out = (table, refine_brdf(table, image, options=RefineOptions(clip_level=None)).table)
         if fit:

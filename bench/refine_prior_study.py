@@ -44,6 +44,14 @@ SETTINGS: dict[str, dict] = {
     # thirty-fifth session; before it they also had 0.04° and 0.2°, inside one pixel of the highlight
     "knots before s35": {"theta_h_knots": (0, 2, 4, 7, 10, 14, 19, 25, 32, 41, 51, 65, 89)},
     "knots from 1.1°": {"theta_h_knots": (0, 10, 14, 19, 25, 32, 41, 51, 65, 89)},
+    # the relaxed fit only where it predicts held-out pixels better: shipped since the thirty-sixth
+    # session; "before s36" tried it wherever the smooth fit reproduced the photo below 42 dB
+    "relax by holdout": {"relax_holdout": True},
+    "before s36": {"relax_holdout": False},
+    # the lobe's correction only where it predicts held-out pixels better than the network's lobe
+    "lobe by holdout": {"lobe_holdout": True},
+    # the relaxed fit loosens the θh smoothness only (thirty-sixth session, not adopted)
+    "relax θh only": {"relax_axes": "theta_h", "relax_holdout": False},
 }
 PHOTOS = ("canonical", "independent", "shifted")
 
@@ -109,6 +117,8 @@ def main(argv: list[str] | None = None) -> int:
                               "self_de": res.after.delta_e2000, "self_network_db": res.before.psnr_db,
                               "improved": res.improved, "blur_px": res.blur_px,
                               "relaxed_gain_db": res.relaxed_gain_db, "relaxed": res.relaxed,
+                              "relaxed_holdout_db": res.relaxed_holdout_db,
+                              "lobe_holdout_db": res.lobe_holdout_db, "lobe_kept": res.lobe_kept,
                               "seconds": time.perf_counter() - t0}
             rows.append(row)
             print(f"{mat.name:8} {fam:11} {kind:11} network {row['network']:6.2f} | "

@@ -35,8 +35,10 @@ SELF_ROLE = "self_reproduction"
 #: blur modelled (fourteenth session: most exactly framed photos choose σ = 0, some do not, e.g.
 #: mat0003 under ``city`` and ``interior`` choose 0.35 px, so cached refined cells changed);
 #: 4 = the pair-weighted smoothness (thirty-fourth session, ``RefineOptions.smooth_weight``);
-#: 5 = no θh knots inside one pixel of the highlight (thirty-fifth session, ``basis.THETA_H_KNOTS``).
-REFINE_VERSION = "v5"
+#: 5 = no θh knots inside one pixel of the highlight (thirty-fifth session, ``basis.THETA_H_KNOTS``);
+#: 6 = the relaxed fit only where it predicts held-out pixels better (thirty-sixth session,
+#: ``RefineOptions.relax_holdout``).
+REFINE_VERSION = "v6"
 
 
 def refined_arm(specgen_arm: str) -> str:
