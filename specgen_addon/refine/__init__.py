@@ -72,10 +72,10 @@ RELAX_HOLDOUT = True
 #: sharp in θh; along θd, Fresnel and masking change slowly, and a fit free there amplified a
 #: highlight 8× at a θd that only the dim environment lights: docs/refinement.md).
 RELAX_AXES = "both"
+RELAX_AXES_CHOICES = ("both", "theta_h")
 #: The lobe's correction is kept only if it predicts held-out pixels better than the network's own
 #: lobe (with the body's tint and the added Lambertian fitted either way, :mod:`.holdout`).
 LOBE_HOLDOUT = False
-RELAX_AXES_CHOICES = ("both", "theta_h")
 #: The fit stops at this multiple of the renderer's own sampling-error variance (the discrepancy
 #: principle, :mod:`.discrepancy`). Off by default: on the thirty-fourth session's photos it lowered
 #: the fit of brightness and colour where the sampling error is large (docs/refinement.md).
