@@ -148,6 +148,11 @@ class RefineOptions:
         if self.body_prior not in BODY_PRIORS:
             raise SpecGenError(f"unknown body prior {self.body_prior!r} (choose from {', '.join(BODY_PRIORS)})")
 
+    @property
+    def theta_d_smooth(self) -> float:
+        """The smoothness between neighbouring θd knots: ``smooth_theta_d``, or ``smooth`` where unset."""
+        return self.smooth if self.smooth_theta_d is None else self.smooth_theta_d
+
 
 @dataclass
 class RefineResult:
@@ -300,9 +305,10 @@ def refine_brdf(table: BRDFTable, photo: np.ndarray, lighting=None, options: Ref
             a_body = blur(op.lambert_design(body, s_hats))                # y: tint of the body
             return np.concatenate([a_lobe_fit, a_body, a_lamb_fit], axis=2)[keep]  # (P, 3, K)
 
-        def solve(body: np.ndarray, opts: RefineOptions = options) -> np.ndarray:
-            theta, scale = _solve_correction(design_for(body), b[keep], n_lobe, nl, level, basis, opts,
-                                             floor_residual)
+        photo_rows = b[keep]
+
+        def solve(design: np.ndarray, opts: RefineOptions = options) -> np.ndarray:
+            theta, scale = _solve_correction(design, photo_rows, n_lobe, nl, level, basis, opts, floor_residual)
             scales.append(scale)
             return theta
 
@@ -312,9 +318,8 @@ def refine_brdf(table: BRDFTable, photo: np.ndarray, lighting=None, options: Ref
                 return lambda d, y: _normal_equations(d, y, n_lobe, nl, level, basis, opts).solve(_PULL_MAX)
             return lambda d, y: _solve_correction(d, y, n_lobe, nl, level, basis, opts, floor_residual)[0]
 
-        def holdout_db(body: np.ndarray, candidate, reference) -> float:
+        def holdout_db(design: np.ndarray, candidate, reference) -> float:
             """How much better (dB) the fit ``candidate`` predicts held-out pixels than ``reference``."""
-            design, photo_rows = design_for(body), b[keep]
             folds = block_folds(op.shape, op.pixel_ids[keep])
             ref_err = holdout_error(design, photo_rows, folds, reference)
             cand_err = holdout_error(design, photo_rows, folds, candidate)
@@ -333,14 +338,16 @@ def refine_brdf(table: BRDFTable, photo: np.ndarray, lighting=None, options: Ref
             x, u, yb, zl = split(theta)
             return apply_correction(table, floor, x, yb, zl, basis, body=body, added=u)
 
-        theta = solve(floor)
         body = floor
+        design = design_for(body)
+        theta = solve(design)
         if options.body_prior == "otsu2018" and has_separate_body(table.values, floor, wl):
             _, _, yb, zl = split(theta)
             natural = natural_body(floor * (s_hats @ yb) + (s_hats @ zl) / np.pi, wl)
             if natural is not None:
                 body = natural
-                theta = solve(body)
+                design = design_for(body)
+                theta = solve(design)
         check_cancel()
         if progress is not None:
             progress(0.65)
@@ -350,10 +357,9 @@ def refine_brdf(table: BRDFTable, photo: np.ndarray, lighting=None, options: Ref
         if options.lobe_holdout and not within_noise:
             # does the lobe's correction predict pixels it was not fitted to better than the
             # network's own lobe (brightness and colour fitted either way)?
-            lobe_holdout = holdout_db(body, fit_rows(options), fit_rows(options, lobe_kept=True))
+            lobe_holdout = holdout_db(design, fit_rows(options), fit_rows(options, lobe_kept=True))
             if lobe_holdout <= 0:
-                theta = _normal_equations(design_for(body), b[keep], n_lobe, nl, level, basis,
-                                          options).solve(_PULL_MAX)
+                theta = fit_rows(options, lobe_kept=True)(design, photo_rows)
             check_cancel()
         lobe_kept = lobe_holdout is not None and lobe_holdout <= 0
         refined = corrected(theta, body)
@@ -376,18 +382,16 @@ def refine_brdf(table: BRDFTable, photo: np.ndarray, lighting=None, options: Ref
         m_after = reproduction(b, op.observe(after_img))
         relaxed_gain, relaxed_kept, relaxed_holdout = None, False, None
         relaxed_opts = replace(options, smooth=RELAXED_SMOOTH,
-                               smooth_theta_d=(RELAXED_SMOOTH if options.relax_axes == "both" else
-                                               options.smooth if options.smooth_theta_d is None
-                                               else options.smooth_theta_d))
+                               smooth_theta_d=RELAXED_SMOOTH if options.relax_axes == "both" else options.theta_d_smooth)
         try_relax = m_after.psnr_db < options.relax_below_db and options.smooth > RELAXED_SMOOTH and not lobe_kept
         if try_relax and options.relax_holdout:
-            relaxed_holdout = holdout_db(body, fit_rows(relaxed_opts), fit_rows(options))
+            relaxed_holdout = holdout_db(design, fit_rows(relaxed_opts), fit_rows(options))
             check_cancel()
         if (try_relax
                 and (relaxed_holdout is None or relaxed_holdout > 0)):
             # the smooth correction does not explain the photo (and, with the hold-out check, the
             # relaxed one predicts pixels it was not fitted to better): relax the smoothness
-            theta_r = solve(body, relaxed_opts)
+            theta_r = solve(design, relaxed_opts)
             relaxed = corrected(theta_r, body)
             relaxed_img = as_photographed(render_under(relaxed, scene, exposure))
             m_relaxed = reproduction(b, op.observe(relaxed_img))
@@ -522,8 +526,7 @@ def _normal_equations(design: np.ndarray, photo: np.ndarray, n_lobe: int, nl: in
     # strengthens: the same within each of these blocks (the least-seen coefficients give way
     # first), none on the body's tint and the added Lambertian (brightness, colour stay free)
     smooth_rows, axis = _smoothness(basis)
-    strength = np.where(axis == 0, options.smooth,
-                        options.smooth if options.smooth_theta_d is None else options.smooth_theta_d)
+    strength = np.where(axis == 0, options.smooth, options.theta_d_smooth)
     lo, hi = np.argmax(smooth_rows < 0, axis=1), np.argmax(smooth_rows > 0, axis=1)
     smooth = np.zeros_like(gram)
     pull = np.zeros_like(diag)
