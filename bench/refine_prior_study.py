@@ -52,6 +52,13 @@ SETTINGS: dict[str, dict] = {
     "lobe by holdout": {"lobe_holdout": True},
     # the relaxed fit loosens the θh smoothness only (thirty-sixth session, not adopted)
     "relax θh only": {"relax_axes": "theta_h", "relax_holdout": False},
+    # the body: a convex mix of Otsu 2018's and the network's colour-matched spectra (thirty-seventh
+    # session), the number being the network's share
+    "body blend 1/2": {"body_prior": "blend", "body_blend": 0.5},
+    "body blend 1/4": {"body_prior": "blend", "body_blend": 0.25},
+    # Otsu 2018's body where the eye sees, the network's in the tails (visibility below 0.3 / 0.1)
+    "body tails 0.3": {"body_prior": "tails", "body_visibility": 0.3},
+    "body tails 0.1": {"body_prior": "tails", "body_visibility": 0.1},
 }
 PHOTOS = ("canonical", "independent", "shifted")
 

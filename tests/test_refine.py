@@ -275,17 +275,21 @@ def ramp_table_21() -> BRDFTable:
     return BRDFTable.tabulate(fn, wl)
 
 
+def _ochre_body_photo(table: BRDFTable):
+    """An ochre Otsu-basis reflectance (Λ,), the canonical lighting, and the photo of ``table``
+    with that body."""
+    from specgen_addon.spectral_recovery import otsu2018_reflectance
+
+    rho = otsu2018_reflectance(np.array([0.25, 0.20, 0.08]), table.wavelengths)
+    light = InputLighting()
+    return rho, light, render_under(_with_body(table, rho / np.pi), light.scene(SIZE), light.image_exposure)
+
+
 def test_a_natural_body_spectrum_is_recovered_from_a_grey_prior(ramp_table_21):
     """The network predicts a grey body; the photo shows an Otsu-basis reflectance. The default
     body prior recovers that spectrum (its shape, not only its colour); the network body prior
     keeps a tinted grey that has the colour but not the shape."""
-    from specgen_addon.spectral_recovery import otsu2018_reflectance
-
-    wl = ramp_table_21.wavelengths
-    rho = otsu2018_reflectance(np.array([0.25, 0.20, 0.08]), wl)        # an ochre
-    truth = _with_body(ramp_table_21, rho / np.pi)
-    light = InputLighting()
-    photo = render_under(truth, light.scene(SIZE), light.image_exposure)
+    rho, light, photo = _ochre_body_photo(ramp_table_21)
     errs = {}
     for prior in ("otsu2018", "network"):
         res = refine_brdf(ramp_table_21, photo, light, RefineOptions(clip_level=None, body_prior=prior))
@@ -313,9 +317,60 @@ def test_a_metal_keeps_the_network_body_spectrum():
     assert has_separate_body(values * 0 + floor.astype(np.float32), floor, wl)   # no lobe at all
 
 
+def test_a_blended_body_lies_between_the_natural_and_the_network_body(ramp_table_21):
+    """The blend prior mixes the Otsu 2018 body with the network's colour-fitted one: its body
+    error lies between theirs, and the photo's colour is still met."""
+    rho, light, photo = _ochre_body_photo(ramp_table_21)
+    errs = {}
+    for prior, share in (("otsu2018", 0.5), ("blend", 0.5), ("network", 0.5), ("blend", 0.0)):
+        res = refine_brdf(ramp_table_21, photo, light,
+                          RefineOptions(clip_level=None, body_prior=prior, body_blend=share))
+        got = diffuse_floor_of(res.table) * np.pi
+        errs[prior, share] = float(np.sqrt(np.mean((got - rho) ** 2)) / rho.mean())
+        assert res.after.psnr_db > 40.0, res.summary()
+    assert errs["otsu2018", 0.5] < errs["blend", 0.5] < errs["network", 0.5], errs
+    assert errs["blend", 0.0] == pytest.approx(errs["otsu2018", 0.5], rel=1e-6), errs
+
+
+def test_the_body_tails_the_eye_barely_sees_are_left_to_the_network():
+    """Visibility is 1 at each colour-matching function's peak and falls toward 0 in the far violet
+    and far red; the tails prior mixes the network's body in only there."""
+    from specgen_addon.refine.body import blind_share, visibility
+
+    assert visibility(np.array([442.0, 556.0, 599.0])) == pytest.approx(1.0, abs=0.01)
+    wl = np.linspace(380.0, 780.0, 21)
+    share = blind_share(wl, 0.3)
+    assert np.all(share[(wl >= 420) & (wl <= 640)] == 0.0)
+    assert np.all(share[wl >= 700] > 0.95) and share[0] > 0.95
+    assert np.all(blind_share(wl, 0.1) <= share)
+    with pytest.raises(SpecGenError, match="visibility threshold"):
+        blind_share(wl, 0.0)
+
+
+def test_the_tails_prior_keeps_the_natural_body_where_the_eye_sees(ramp_table_21):
+    from specgen_addon.refine.body import blind_share
+
+    wl = ramp_table_21.wavelengths
+    rho, light, photo = _ochre_body_photo(ramp_table_21)
+    bodies = {}
+    for prior in ("otsu2018", "tails", "network"):
+        res = refine_brdf(ramp_table_21, photo, light, RefineOptions(clip_level=None, body_prior=prior))
+        bodies[prior] = np.asarray(res.coefficients["body"])
+        assert res.after.psnr_db > 40.0, res.summary()
+    seen, blind = blind_share(wl, 0.3) == 0.0, blind_share(wl, 0.3) > 0.99
+    # the body before its tint: Otsu 2018's where the eye sees, the network's (colour-fitted) where blind
+    ratio = bodies["tails"][seen] / bodies["otsu2018"][seen]
+    assert np.allclose(ratio, ratio[0], rtol=0.05), ratio
+    assert not np.allclose(bodies["tails"][blind], bodies["otsu2018"][blind], rtol=0.05)
+
+
 def test_unknown_body_prior_is_refused():
     with pytest.raises(SpecGenError, match="unknown body prior"):
         RefineOptions(body_prior="smits")
+    with pytest.raises(SpecGenError, match="body_blend"):
+        RefineOptions(body_prior="blend", body_blend=1.5)
+    with pytest.raises(SpecGenError, match="body_visibility"):
+        RefineOptions(body_prior="tails", body_visibility=0.0)
 
 
 def test_an_added_angular_term_gives_a_near_lambertian_prior_the_photos_grazing_sheen(ramp_table_21):

@@ -42,7 +42,7 @@ from .blur import (BLUR_CANDIDATES_PX, blur_image, blur_rows, embed_rows, gather
                    gaussian_blur_stack, rows_inside)
 from .discrepancy import difference_variance, discrepancy_scale, twin_scene
 from .holdout import block_folds, holdout_error
-from .body import BODY_PRIORS, has_separate_body, natural_body
+from .body import BODY_PRIORS, blended_body, blind_share, has_separate_body, natural_body
 from .operator import PhotoOperator, render_grid
 from .report import Reproduction, photo_scale, reproduction
 from .solve import difference_operator, nonneg_ridge
@@ -93,7 +93,9 @@ class RefineOptions:
     knots (3: chosen on the validation split, docs/refinement.md), ``smooth_theta_d`` that between θd
     knots where it differs (``None``: ``smooth``); ``body_prior`` the spectral
     shape of the diffuse body: ``"otsu2018"`` (a natural reflectance of the photo's body colour,
-    :mod:`.body`) or ``"network"`` (the network's own body spectrum, tinted); ``additive`` adds
+    :mod:`.body`), ``"network"`` (the network's own body spectrum, tinted) or ``"blend"`` (the two
+    mixed, ``body_blend`` being the network's share) or ``"tails"`` (Otsu 2018's where the eye sees,
+    the network's where its :func:`.body.visibility` is below ``body_visibility``); ``additive`` adds
     the angular term ``u`` (:func:`apply_correction`), which gives a shape to near-Lambertian
     tables that the multiplicative lobe correction cannot scale; ``clip_level`` marks saturated
     pixels of an 8/16-bit photo (values in [0, 1]): they are left out of the fit, and renders are
@@ -127,6 +129,8 @@ class RefineOptions:
     lobe_holdout: bool = LOBE_HOLDOUT
     fit_floor: float | None = FIT_FLOOR
     body_prior: str = "otsu2018"
+    body_blend: float = 0.5
+    body_visibility: float = 0.3
     additive: bool = True
     clip_level: float | None = CLIP_LEVEL
     energy_check: bool = True
@@ -145,6 +149,10 @@ class RefineOptions:
             raise SpecGenError(f"smooth_weight must be 'pair' or 'block', got {self.smooth_weight!r}")
         if self.fit_floor is not None and not (np.isfinite(self.fit_floor) and self.fit_floor >= 0):
             raise SpecGenError(f"fit_floor must be None or a non-negative number, got {self.fit_floor!r}")
+        if not (np.isfinite(self.body_blend) and 0.0 <= self.body_blend <= 1.0):
+            raise SpecGenError(f"body_blend must be a share in [0, 1], got {self.body_blend!r}")
+        if not (np.isfinite(self.body_visibility) and 0.0 < self.body_visibility <= 1.0):
+            raise SpecGenError(f"body_visibility must be in (0, 1], got {self.body_visibility!r}")
         if self.body_prior not in BODY_PRIORS:
             raise SpecGenError(f"unknown body prior {self.body_prior!r} (choose from {', '.join(BODY_PRIORS)})")
 
@@ -341,11 +349,14 @@ def refine_brdf(table: BRDFTable, photo: np.ndarray, lighting=None, options: Ref
         body = floor
         design = design_for(body)
         theta = solve(design)
-        if options.body_prior == "otsu2018" and has_separate_body(table.values, floor, wl):
+        if options.body_prior != "network" and has_separate_body(table.values, floor, wl):
             _, _, yb, zl = split(theta)
-            natural = natural_body(floor * (s_hats @ yb) + (s_hats @ zl) / np.pi, wl)
+            fitted = floor * (s_hats @ yb) + (s_hats @ zl) / np.pi     # the network's body, colour fitted
+            natural = natural_body(fitted, wl)
             if natural is not None:
-                body = natural
+                share = {"otsu2018": 0.0, "blend": options.body_blend,
+                         "tails": blind_share(wl, options.body_visibility)}[options.body_prior]
+                body = blended_body(natural, fitted, share)
                 design = design_for(body)
                 theta = solve(design)
         check_cancel()

@@ -11,6 +11,10 @@ That holds for a diffuse body under an interface (plastics, paints, coated mater
 no separate body: its near-Lambertian part is the tail of the same Fresnel-coloured reflection as
 its lobe, and the network's own metal spectra are the better prior. :func:`has_separate_body`
 tells the two apart from the network's table.
+
+Two mixes of the priors are options, not defaults (:func:`blended_body`, :func:`blind_share`): on
+fresh validation photos both lost to Otsu 2018's body alone (docs/refinement.md, "Thirty-seventh
+session").
 """
 
 from __future__ import annotations
@@ -18,10 +22,13 @@ from __future__ import annotations
 import numpy as np
 
 from ..errors import SpecGenError
+from .. import spectra
 from ..spectral_recovery import otsu2018_reflectance, xyz_of_reflectance
 
-#: Body priors of :class:`~specgen_addon.refine.RefineOptions`: Otsu 2018 (default) or the network's.
-BODY_PRIORS = ("otsu2018", "network")
+#: Body priors of :class:`~specgen_addon.refine.RefineOptions`: Otsu 2018 (default), the network's, or
+#: a convex blend of the two (:func:`blended_body`), or Otsu 2018's where the eye sees and the network's in
+#: the spectral tails it barely sees (:func:`blind_share`).
+BODY_PRIORS = ("otsu2018", "network", "blend", "tails")
 #: θh rows (MERL index, < 3°) and θd columns (< 40°) where the lobe's colour is read.
 _PEAK_THETA_H, _PEAK_THETA_D = 12, 40
 #: Lobe/body spectral-shape distance (std of the log ratio over 420–680 nm) below which the lobe
@@ -56,3 +63,33 @@ def natural_body(body: np.ndarray, wavelengths_nm: np.ndarray) -> np.ndarray | N
         return otsu2018_reflectance(xyz, wavelengths_nm) / np.pi
     except SpecGenError:
         return None
+
+
+def blended_body(natural: np.ndarray, network: np.ndarray, network_share) -> np.ndarray:
+    """``(1 − w)·natural + w·network`` (sr⁻¹): two bodies of the photo's colour, mixed (``w`` a
+    number, or one per band).
+
+    Both match the photo's body colour, and colour is linear in the spectrum, so any convex mix
+    matches it too; its spectral squared error is at most the same mix of the two errors. A hedge
+    where either prior can be a metamer of the material's body (docs/refinement.md).
+    """
+    if not np.all((np.asarray(network_share) >= 0.0) & (np.asarray(network_share) <= 1.0)):
+        raise SpecGenError(f"the network's share of the body must be in [0, 1], got {network_share!r}")
+    return (1.0 - network_share) * np.asarray(natural, np.float64) + network_share * np.asarray(network, np.float64)
+
+
+def visibility(wavelengths_nm: np.ndarray) -> np.ndarray:
+    """How well a colour measurement sees each band: the largest of the CIE 1931 x̄, ȳ, z̄ there,
+    each divided by its own peak (1 at a peak, → 0 in the far violet and far red), (Λ,)."""
+    w = np.asarray(wavelengths_nm, np.float64)
+    peaks = spectra.cmfs(np.arange(360.0, 831.0)).max(axis=0)
+    return (spectra.cmfs(w) / peaks).max(axis=1)
+
+
+def blind_share(wavelengths_nm: np.ndarray, threshold: float) -> np.ndarray:
+    """Per band, the share of the body left to the network's prior: ``clip(1 − v/threshold, 0, 1)``
+    with ``v`` the :func:`visibility`. A photo fixes the body's colour, which says almost nothing
+    about bands the eye barely sees (≲ 410 nm, ≳ 680 nm), where Otsu 2018's basis extrapolates."""
+    if not 0.0 < threshold <= 1.0:
+        raise SpecGenError(f"the visibility threshold must be in (0, 1], got {threshold!r}")
+    return np.clip(1.0 - visibility(wavelengths_nm) / threshold, 0.0, 1.0)
