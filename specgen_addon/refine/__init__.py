@@ -93,7 +93,7 @@ class RefineOptions:
     knots (3: chosen on the validation split, docs/refinement.md), ``smooth_theta_d`` that between θd
     knots where it differs (``None``: ``smooth``); ``body_prior`` the spectral
     shape of the diffuse body: ``"otsu2018"`` (a natural reflectance of the photo's body colour,
-    :mod:`.body`), ``"network"`` (the network's own body spectrum, tinted) or ``"blend"`` (the two
+    :mod:`.body`), ``"network"`` (the network's own body spectrum, tinted), ``"blend"`` (the two
     mixed, ``body_blend`` being the network's share) or ``"tails"`` (Otsu 2018's where the eye sees,
     the network's where its :func:`.body.visibility` is below ``body_visibility``); ``additive`` adds
     the angular term ``u`` (:func:`apply_correction`), which gives a shape to near-Lambertian
