@@ -354,9 +354,12 @@ def refine_brdf(table: BRDFTable, photo: np.ndarray, lighting=None, options: Ref
             fitted = floor * (s_hats @ yb) + (s_hats @ zl) / np.pi     # the network's body, colour fitted
             natural = natural_body(fitted, wl)
             if natural is not None:
-                share = {"otsu2018": 0.0, "blend": options.body_blend,
-                         "tails": blind_share(wl, options.body_visibility)}[options.body_prior]
-                body = blended_body(natural, fitted, share)
+                if options.body_prior == "otsu2018":
+                    body = natural
+                else:
+                    share = (options.body_blend if options.body_prior == "blend"
+                             else blind_share(wl, options.body_visibility))
+                    body = blended_body(natural, fitted, share)
                 design = design_for(body)
                 theta = solve(design)
         check_cancel()
@@ -398,8 +401,7 @@ def refine_brdf(table: BRDFTable, photo: np.ndarray, lighting=None, options: Ref
         if try_relax and options.relax_holdout:
             relaxed_holdout = holdout_db(design, fit_rows(relaxed_opts), fit_rows(options))
             check_cancel()
-        if (try_relax
-                and (relaxed_holdout is None or relaxed_holdout > 0)):
+        if try_relax and (relaxed_holdout is None or relaxed_holdout > 0):
             # the smooth correction does not explain the photo (and, with the hold-out check, the
             # relaxed one predicts pixels it was not fitted to better): relax the smoothness
             theta_r = solve(design, relaxed_opts)
