@@ -57,12 +57,9 @@ def main(argv: list[str] | None = None) -> int:
     weights = {"default": DEFAULT_WEIGHTS, "resampled": RESAMPLED_WEIGHTS}
     geo = sphere_geometry(a.resolution)
     light = InputLighting()
-    rows, seen = [], {}
-    for mat in mixed_split_materials(a.per_family + a.skip, None, a.split):
+    rows = []
+    for mat in mixed_split_materials(a.per_family, None, a.split, skip=a.skip):
         fam = material_family(mat)
-        seen[fam] = seen.get(fam, 0) + 1
-        if seen[fam] <= a.skip:
-            continue
         gt = render_spectral(mat, geo, wavelengths_nm=WAVELENGTHS_NM, lights=DISTANT_LIGHTS).spectral
         independent = independent_photo(mat)
         for kind, image in (("independent", independent), ("shifted", displaced_input(independent, 0.5))):

@@ -90,13 +90,8 @@ def main(argv: list[str] | None = None) -> int:
 
     geo = sphere_geometry(a.resolution)
     rows = []
-    mats = mixed_split_materials(a.per_family + a.skip, None, a.split)
-    seen: dict[str, int] = {}
-    for mat in mats:
+    for mat in mixed_split_materials(a.per_family, None, a.split, skip=a.skip):
         fam = material_family(mat)
-        seen[fam] = seen.get(fam, 0) + 1
-        if seen[fam] <= a.skip:
-            continue
         gt = render_spectral(mat, geo, wavelengths_nm=WAVELENGTHS_NM, lights=DISTANT_LIGHTS).spectral
 
         def score(table) -> float:

@@ -26,6 +26,13 @@ def test_val_materials_share_no_material_with_the_test_materials():
     assert not {m.name for m in val} & {m.name for m in mixed_test_materials(2, ["thin_film"])}
 
 
+def test_skipping_materials_gives_the_next_ones_of_each_family():
+    first_three = mixed_split_materials(3, ["sheen", "thin_film"], "test")
+    fresh = mixed_split_materials(1, ["sheen", "thin_film"], "test", skip=2)
+    by_family = {f: [m.name for m in first_three if material_family(m) == f] for f in ("sheen", "thin_film")}
+    assert sorted(m.name for m in fresh) == sorted(names[2] for names in by_family.values())
+
+
 def test_unknown_split_is_refused_before_the_corpus_is_drawn():
     with pytest.raises(SpecGenError, match="unknown split 'holdout'"):
         mixed_split_materials(1, None, "holdout")

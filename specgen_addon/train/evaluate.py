@@ -112,9 +112,11 @@ def mixed_test_materials(per_family: int, families: list[str] | None = None) -> 
     return mixed_split_materials(per_family, families, "test")
 
 
-def mixed_split_materials(per_family: int, families: list[str] | None = None, split: str = "test") -> list:
-    """The first ``per_family`` materials of ``split`` (train, val or test) of each family of the
-    mixed corpus, in corpus order (settings are chosen on ``val``, figures reported on ``test``)."""
+def mixed_split_materials(per_family: int, families: list[str] | None = None, split: str = "test",
+                          skip: int = 0) -> list:
+    """``per_family`` materials of ``split`` (train, val or test) of each family of the mixed corpus,
+    after its first ``skip`` (fresh materials for a new study), in corpus order (settings are chosen on
+    ``val``, figures reported on ``test``)."""
     from ..corpus.generate import generate_mixed_corpus, material_family
     from ..corpus.families import FAMILY_NAMES
     from ..corpus.spectra_sources import SPLITS
@@ -126,8 +128,9 @@ def mixed_split_materials(per_family: int, families: list[str] | None = None, sp
     out, count = [], {f: 0 for f in wanted}
     for m in generate_mixed_corpus(MIXED_CORPUS_SIZE, MIXED_CORPUS_SEED):
         f = material_family(m)
-        if m.split == split and f in count and count[f] < per_family:
-            out.append(m)
+        if m.split == split and f in count and count[f] < skip + per_family:
+            if count[f] >= skip:
+                out.append(m)
             count[f] += 1
     return out
 
