@@ -4,7 +4,8 @@
 the same computation (:mod:`specgen_addon.model.fast`): ``"torch"`` and ``"onnx"`` (onnxruntime,
 for a stock Blender without torch); torch runs the AFF head as a weighted gather
 (:mod:`specgen_addon.model.gather`, same output to float rounding, about half the memory passes),
-three stretches of it as numba loops where numba is installed.
+three stretches of it as numba loops where numba is installed. Both compute only the nodes a
+lookup above the horizon can touch (:mod:`specgen_addon.lookup_reach`, 78.5 % of the grid).
 The grid is filled in blocks of θh × θd rows so memory stays bounded (a few tens of MB besides the
 output), two blocks at a time on two worker threads.
 """
@@ -21,7 +22,7 @@ import numpy as np
 
 from .errors import Cancelled, ImageInputError, SpecGenError, WeightsError
 from .spectra import DEFAULT_WAVELENGTHS_NM
-from .table import GRID_SHAPE, N_THETA_D, N_THETA_H, BRDFTable, mu_law_decode_inplace
+from .table import GRID_SHAPE, N_PHI_D, N_THETA_D, N_THETA_H, BRDFTable, mu_law_decode_inplace
 
 if TYPE_CHECKING:
     from .input_image import SphereCrop
@@ -137,11 +138,18 @@ class _TorchBackend:
 
         return GatherGridHead(self.model, tables, nd)
 
-    def run_block(self, prepared, i: int, j: int, nd: int):
+    def run_block(self, prepared, i: int, j: int, nd: int, decode_mu: float | None = None) -> np.ndarray:
+        """r' ``(1, nd, 180, Λ)`` for θh row ``i`` and θd rows ``j … j+nd`` (``f_r`` with
+        ``decode_mu``); entries beyond the lookup's reach may be left unspecified."""
         if not isinstance(prepared, tuple):
-            return prepared.block(i, j)
+            return prepared.block(i, j, decode_mu)
         with self.torch.no_grad():
-            return self.head(*table_block(prepared, i, j, nd))
+            r = self.head(*table_block(prepared, i, j, nd)).numpy()
+        if decode_mu is not None:
+            from .model.gather import decode_inplace
+
+            decode_inplace(r, decode_mu)
+        return r
 
 
 class _OnnxBackend:
@@ -176,6 +184,10 @@ class _OnnxBackend:
         #: "low_rank" (the current export), "channels_first" (earlier exports) or "plain" (Hadamard)
         self.head_layout = HEAD_LAYOUTS[names]
         self._inputs = names
+        #: whether the head takes a run of φd nodes (exports since the thirty-eighth session) or
+        #: all 180 (earlier ones): then only the lookup's reach is computed
+        self.phi_d_runs = self.head_layout == "low_rank" and not isinstance(
+            self.head.get_inputs()[names.index("f2")].shape[3], int)
         meta = self.tables.get_modelmeta().custom_metadata_map
         try:
             from .model import Config
@@ -190,8 +202,24 @@ class _OnnxBackend:
     def prepare(self, tables, nd: int):
         return _ARRANGE[self.head_layout](tables)
 
-    def run_block(self, prepared, i: int, j: int, nd: int) -> np.ndarray:
-        return self.run_head(_CUT[self.head_layout](prepared, i, j, nd))
+    def run_block(self, prepared, i: int, j: int, nd: int, decode_mu: float | None = None) -> np.ndarray:
+        """As :meth:`_TorchBackend.run_block`; a head that takes a run of φd nodes computes only
+        the run that holds the block's reach (:func:`specgen_addon.lookup_reach.phi_d_reach`)."""
+        if not self.phi_d_runs:
+            r = np.ascontiguousarray(self.run_head(_CUT[self.head_layout](prepared, i, j, nd)))
+            run = r
+        else:
+            from .lookup_reach import phi_d_reach
+
+            lo, hi = (a[i, j:j + nd] for a in phi_d_reach())
+            phi_d = slice(int(lo.min()), int(hi.max()) + 1)
+            part = self.run_head(low_rank_block(prepared, i, j, nd, phi_d))
+            r = np.empty(part.shape[:2] + (N_PHI_D,) + part.shape[3:], dtype=np.float32)
+            run = r[:, :, phi_d]
+            run[...] = part
+        if decode_mu is not None:
+            mu_law_decode_inplace(run, decode_mu)
+        return r
 
     def run_head(self, blocks) -> np.ndarray:
         r = self.head.run(None, {n: np.ascontiguousarray(b) for n, b in zip(self._inputs, blocks)})[0]
@@ -256,9 +284,11 @@ def low_rank_tables(tables) -> LowRankTables:
         f6=np.ascontiguousarray(t6[..., :c].transpose(1, 2, 0)[:, :, None, :]))
 
 
-def low_rank_block(arranged: LowRankTables, i: int, j: int, nd: int) -> tuple[np.ndarray, ...]:
-    """The low-rank head's inputs (:data:`LOW_RANK_INPUTS`) for θh row ``i`` and θd rows
-    ``j … j+nd``."""
+def low_rank_block(arranged: LowRankTables, i: int, j: int, nd: int,
+                   phi_d: slice = slice(None)) -> tuple[np.ndarray, ...]:
+    """The low-rank head's inputs (:data:`LOW_RANK_INPUTS`) for θh row ``i``, θd rows
+    ``j … j+nd`` and the φd nodes ``phi_d`` (all by default; a run needs a head exported with a
+    free φd axis)."""
     nd = min(nd, arranged.f1.shape[1] - j)
     f1, f4, f5 = arranged.f1[i, j:j + nd], arranged.f4[i], arranged.f5[j:j + nd]   # (nd, C), (Λ, C), (nd, Λ, C)
     n_l, c = f4.shape
@@ -266,9 +296,9 @@ def low_rank_block(arranged: LowRankTables, i: int, j: int, nd: int) -> tuple[np
     low[:, :, :nd] = f1.T[None]
     low[:, :, nd] = f4
     low[:, :, nd + 1:] = f5.transpose(1, 2, 0)
-    stats = channels_first_block(arranged.stats, i, j, nd)
-    return (*stats, low, arranged.f2[i][None, :, None, :], arranged.f3[None, :, j:j + nd], arranged.f6,
-            np.eye(nd, dtype=np.float32))
+    stats = tuple(a[..., phi_d] if a.shape[-1] > 1 else a for a in channels_first_block(arranged.stats, i, j, nd))
+    return (*stats, low, arranged.f2[i][None, :, None, phi_d], arranged.f3[None, :, j:j + nd, phi_d],
+            arranged.f6[..., phi_d], np.eye(nd, dtype=np.float32))
 
 
 def channels_first_block(arranged, i: int, j: int, nd: int) -> tuple[np.ndarray, ...]:
@@ -365,9 +395,17 @@ def evaluate_grid(be, tables, n_lambda: int, progress: ProgressFn | None = None,
                   decode_mu: float | None = None) -> np.ndarray:
     """r' (μ-law) on the full grid ``(90, 90, 180, Λ)``, block by block on ``workers`` threads;
     with ``decode_mu``, ``f_r`` (sr⁻¹) instead, each block decoded on its worker
-    (:func:`specgen_addon.table.mu_law_decode_inplace`)."""
+    (:func:`specgen_addon.table.mu_law_decode_inplace`).
+
+    Only the nodes an above-horizon lookup can touch are the network's
+    (:func:`specgen_addon.lookup_reach.phi_d_reach`, 78.5 % of the grid; the torch gather head
+    computes no others); every other φd node takes the value of the nearest reached node of its
+    row, so no lookup, render or fit sees a difference."""
+    from .lookup_reach import extend_beyond_reach, phi_d_reach
+
     nd = BLOCK_THETA_D["torch" if isinstance(be, _TorchBackend) else "onnx"]
     prepared = be.prepare(tables, nd)
+    lo, hi = phi_d_reach()
     out = np.empty(GRID_SHAPE + (n_lambda,), dtype=np.float32)
     blocks = [(i, j) for i in range(N_THETA_H) for j in range(0, N_THETA_D, nd)]
     done = [0]
@@ -378,10 +416,8 @@ def evaluate_grid(be, tables, n_lambda: int, progress: ProgressFn | None = None,
         if stop.is_set():
             return
         i, j = ij
-        r = be.run_block(prepared, i, j, nd)
-        out[i:i + 1, j:j + nd] = np.asarray(r)
-        if decode_mu is not None:
-            mu_law_decode_inplace(out[i:i + 1, j:j + nd], decode_mu)
+        out[i:i + 1, j:j + nd] = be.run_block(prepared, i, j, nd, decode_mu)
+        extend_beyond_reach(out[i, j:j + nd], lo[i, j:j + nd], hi[i, j:j + nd])
         with lock:
             done[0] += 1
 

@@ -10,6 +10,7 @@ from specgen_addon import infer
 from specgen_addon.errors import Cancelled, ImageInputError, SpecGenError, WeightsError
 from specgen_addon.model import Config, SpecGen, save_weights
 from specgen_addon.model.fast import GridHead, GridTables, lambda_coords
+from specgen_addon.lookup_reach import phi_d_reach
 from specgen_addon.table import grid_angles
 
 SMALL = dict(image_size=32, encoder_channels=(8, 16), latent_dim=32, decoder_seed_hw=(4, 4),
@@ -49,7 +50,14 @@ def test_fast_grid_equals_naive_per_query_evaluation(tmp_path, fusion, knots):
     assert rp.shape == (90, 90, 180, 3)
 
     th, td, pd = grid_angles()
-    idx = np.random.default_rng(1).integers(0, [90, 90, 180, 3], size=(2000, 4))
+    lo, hi = phi_d_reach()
+    idx = np.random.default_rng(1).integers(0, [90, 90, 180, 3], size=(4000, 4))
+    reached = (idx[:, 2] >= lo[idx[:, 0], idx[:, 1]]) & (idx[:, 2] <= hi[idx[:, 0], idx[:, 1]])
+    beyond, idx = idx[~reached], idx[reached]                 # no lookup reads the nodes beyond
+    assert len(idx) > 2000 and len(beyond) > 500
+    edge = np.clip(beyond[:, 2], lo[beyond[:, 0], beyond[:, 1]], hi[beyond[:, 0], beyond[:, 1]])
+    assert np.array_equal(rp[beyond[:, 0], beyond[:, 1], beyond[:, 2], beyond[:, 3]],
+                          rp[beyond[:, 0], beyond[:, 1], edge, beyond[:, 3]])
     q = lambda a: torch.tensor(a, dtype=torch.float32)[None]  # noqa: E731
     with torch.no_grad():
         planes = model.eval().planes(torch.from_numpy(x))
@@ -103,10 +111,11 @@ def test_gather_head_equals_the_exportable_head(tmp_path, gather_path):
         blocks = (tables[0][i:i + 1, j:j + nd], tables[1][i:i + 1], tables[2][j:j + nd],
                   tables[3][i:i + 1], tables[4][j:j + nd], tables[5])
         with torch.no_grad():
-            a = head(*blocks)
+            a = head(*blocks).numpy()
         b = gather.block(i, j)
         assert b.shape == a.shape == (1, nd, 180, 3)
-        assert torch.allclose(a, b, atol=1e-5)
+        reached = _reached(i, j, nd)
+        assert np.allclose(a[reached], b[reached], atol=1e-5)
 
 
 def test_gather_head_drops_units_that_are_dead_everywhere_and_gives_the_same_values(tmp_path, gather_path):
@@ -121,7 +130,33 @@ def test_gather_head_drops_units_that_are_dead_everywhere_and_gives_the_same_val
     blocks = (tables[0][7:8, 20:30], tables[1][7:8], tables[2][20:30], tables[3][7:8], tables[4][20:30],
               tables[5])
     with torch.no_grad():
-        assert torch.allclose(GridHead(model)(*blocks), gather.block(7, 20), atol=1e-5)
+        want = GridHead(model)(*blocks).numpy()
+    reached = _reached(7, 20, 10)
+    assert np.allclose(want[reached], gather.block(7, 20)[reached], atol=1e-5)
+
+
+def _reached(i: int, j: int, nd: int) -> np.ndarray:
+    """(1, nd, 180, Λ) mask of the nodes a lookup can touch in θh row i, θd rows j … j + nd."""
+    lo, hi = (a[i, j:j + nd, None] for a in phi_d_reach())
+    p = np.arange(180)
+    return np.broadcast_to(((p >= lo) & (p <= hi))[None, :, :, None], (1, nd, 180, BANDS.size))
+
+
+def test_gather_head_computes_only_the_lookups_reach_and_decodes_it(tmp_path, gather_path):
+    from specgen_addon.model.gather import GatherGridHead
+    from specgen_addon.table import mu_law_decode
+
+    _, model = small_weights(tmp_path)
+    with torch.no_grad():
+        tables = GridTables(model)(torch.rand(1, 3, 32, 32), lambda_coords(model, BANDS))
+    gather = GatherGridHead(model, tables, 10)
+    lo, hi = gather.reach(89, 80)
+    assert np.array_equal(lo, phi_d_reach()[0][89, 80:90]) and np.all(hi - lo < 40)
+    rp, fr = gather.block(89, 80), gather.block(89, 80, decode_mu=model.cfg.mu)
+    reached = _reached(89, 80, 10)
+    assert reached.mean() < 0.25                                  # grazing rows: most of φd is never read
+    np.testing.assert_allclose(fr[reached], mu_law_decode(np.clip(rp[reached], 0, None), model.cfg.mu),
+                               rtol=1e-6, atol=1e-9)
 
 
 def test_numba_logit_loop_equals_bucketize_and_the_segment_rows(tmp_path):
@@ -141,10 +176,12 @@ def test_numba_logit_loop_equals_bucketize_and_the_segment_rows(tmp_path):
              for shape in ((90, 90), (90, 180), (90, 180), (90, 3), (90, 3), (180, 3))]
     s1, s2, s3, s4, s5, s6 = stats
     i, j, nd, bias = 4, 85, 5, np.float32(0.25)
-    out = np.empty((nd * 180 * 3, 6), np.float32)
-    kernels.shifted_logits(i, j, nd, *stats, bias, kinks.numpy(), pq.numpy(), out)
-    d, p, lam = (a.reshape(-1) for a in np.meshgrid(np.arange(j, j + nd), np.arange(180), np.arange(3),
-                                                      indexing="ij"))
+    lo, hi = np.array([0, 3, 50, 90, 0]), np.array([179, 170, 130, 90, 10])     # each row's φd run
+    out = np.empty((int((hi - lo + 1).sum()) * 3, 6), np.float32)
+    kernels.shifted_logits(i, j, nd, lo, hi, *stats, bias, kinks.numpy(), pq.numpy(), out)
+    d, p, lam = (np.concatenate(a) for a in zip(*(
+        (np.full(3 * (b - a + 1), j + r), np.repeat(np.arange(a, b + 1), 3), np.tile(np.arange(3), b - a + 1))
+        for r, (a, b) in enumerate(zip(lo, hi)))))
     s = torch.from_numpy(((s1[i, d] + s2[i, p] + s3[d, p] + bias) + s4[i, lam] + s5[d, lam] + s6[p, lam])
                          .astype(np.float32))
     seg = pq[torch.bucketize(s, kinks)]
@@ -159,24 +196,33 @@ def test_numba_gather_and_output_loops_equal_embedding_bag_and_the_last_layer():
     if kernels is None:
         pytest.skip("numba is not installed (requirements.txt lists it), or SPECGEN_KERNELS=torch")
     rng = np.random.default_rng(5)
-    rows = rng.normal(size=(500, 11)).astype(np.float32)
+    # a small grid: 5 θd rows, 7 φd nodes, 3 bands; the row table t3 | t5 | t6 | t1[i] | t2[i] | t4[i]
+    n_d, n_phi, n_l, j, nd = 5, 7, 3, 2, 3
+    offsets = np.cumsum([0, n_d * n_phi, n_d * n_l, n_phi * n_l, n_d, n_phi])      # o3, o5, o6, o1, o2, o4
+    o3, o5, o6, o1, o2, o4 = offsets
+    rows = rng.normal(size=(o4 + n_l, 11)).astype(np.float32)
     rows[:, -1] = 1.0                                               # the trailing column: Σ e
-    indices = rng.integers(0, 500, size=(257, 6)).astype(np.int32)
-    e = rng.uniform(0.0, 1.0, size=(257, 6)).astype(np.float32)
-    h, t = np.empty((257, 11), np.float32), np.empty(257, np.float32)
-    kernels.gather_relu(indices, rows, e, h, t)
+    lo, hi = np.array([0, 2, 3]), np.array([6, 4, 3])               # each θd row's φd run
+    indices = np.array([[o1 + d, o2 + p, o3 + d * n_phi + p, o4 + lam, o5 + d * n_l + lam, o6 + p * n_l + lam]
+                        for r in range(nd) for d in [j + r] for p in range(lo[r], hi[r] + 1)
+                        for lam in range(n_l)], dtype=np.int64)
+    n = len(indices)
+    e = rng.uniform(0.0, 1.0, size=(n, 6)).astype(np.float32)
+    h, t = np.empty((n, 11), np.float32), np.empty(n, np.float32)
+    order = np.array([o1, o2, o3, o4, o5, o6], dtype=np.int64)
+    kernels.gather_relu(j, nd, lo, hi, n_phi, n_l, order, rows, e, h, t)
     want = torch.nn.functional.embedding_bag(torch.from_numpy(indices), torch.from_numpy(rows),
                                              per_sample_weights=torch.from_numpy(e), mode="sum").relu()
     assert np.allclose(h, want.numpy(), atol=1e-5)
     assert np.array_equal(t, h[:, -1])
-    g = rng.normal(size=(257, 9)).astype(np.float32)
+    g = rng.normal(size=(n, 9)).astype(np.float32)
     w3, b3 = rng.normal(size=9).astype(np.float32), np.float32(-0.5)
-    r = np.empty(257, np.float32)
+    r = np.empty(n, np.float32)
     kernels.mlp_output(g, t, w3, b3, r)
     assert np.allclose(r, np.maximum(g, 0.0) @ w3 / t + b3, rtol=1e-5, atol=1e-5)
     # a NaN (an overflow upstream) survives both ReLUs, as it does torch's, so limits.bad_values sees it
     rows[indices[3, 2], 4], g[7, 5] = np.nan, np.nan
-    kernels.gather_relu(indices, rows, e, h, t)
+    kernels.gather_relu(j, nd, lo, hi, n_phi, n_l, order, rows, e, h, t)
     want = torch.nn.functional.embedding_bag(torch.from_numpy(indices), torch.from_numpy(rows),
                                              per_sample_weights=torch.from_numpy(e), mode="sum").relu()
     assert np.array_equal(np.isnan(h), np.isnan(want.numpy())) and np.isnan(h[3, 4])
@@ -199,9 +245,10 @@ kernels = importlib.import_module(PACKAGE + ".model.gather_kernels").load()
 f = np.float32
 stats = [np.zeros(shape, f) for shape in ((90, 90), (90, 180), (90, 180), (90, 2), (90, 2), (180, 2))]
 e = np.empty((180 * 2, 6), f)
-kernels.shifted_logits(0, 0, 1, *stats, f(0), np.zeros(1, f), np.zeros((2, 12), f), e)
+lo, hi = np.zeros(1, np.int64), np.full(1, 179, np.int64)
+kernels.shifted_logits(0, 0, 1, lo, hi, *stats, f(0), np.zeros(1, f), np.zeros((2, 12), f), e)
 h, t = np.empty((360, 3), f), np.empty(360, f)
-kernels.gather_relu(np.zeros((360, 6), np.int32), np.ones((1, 3), f), np.exp(e), h, t)
+kernels.gather_relu(0, 1, lo, hi, 180, 2, np.zeros(6, np.int64), np.ones((2000, 3), f), np.exp(e), h, t)
 r = np.empty(360, f)
 kernels.mlp_output(np.ones((360, 4), f), t, np.ones(4, f), f(0), r)
 assert np.allclose(r, 4.0 / 6.0), r[:3]

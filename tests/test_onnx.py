@@ -105,6 +105,35 @@ def test_a_channels_first_head_exported_by_an_earlier_version_still_runs(exporte
     assert np.abs(ra - rb).max() < 1e-5
 
 
+def test_a_low_rank_head_with_all_180_phi_d_nodes_fixed_still_runs(exported, tmp_path):
+    """Heads exported before the φd runs take exactly 180 φd nodes: the backend gives them all 180
+    and the table is the same as with the head that computes only the lookup's reach."""
+    import onnx
+
+    from specgen_addon.input_image import render_input
+    from specgen_standins import RampMaterial
+
+    weights, (_, head) = exported
+    old, old_head = _copy_without_head(exported, tmp_path)
+    graph = onnx.load(str(head))
+    fixed = 0
+    for value in list(graph.graph.input) + list(graph.graph.output):
+        for dim in value.type.tensor_type.shape.dim:
+            if dim.dim_param == "np":
+                dim.dim_value = 180                               # clears the symbolic name
+                fixed += 1
+    assert fixed == 7                                             # s2 s3 s6 f2 f3 f6 and r
+    onnx.save(graph, str(old_head))
+    assert not infer.get_backend(old, "onnx").phi_d_runs
+    assert infer.get_backend(weights, "onnx").phi_d_runs
+    image = render_input(RampMaterial(alpha=0.08), size=64)
+    bands = np.array([420.0, 560.0, 660.0])
+    a = infer.generate_brdf(image, weights=old, wavelengths_nm=bands, backend="onnx")
+    b = infer.generate_brdf(image, weights=weights, wavelengths_nm=bands, backend="onnx")
+    ra, rb = (np.log1p(255 * x.values) / np.log1p(255) for x in (a, b))
+    assert np.abs(ra - rb).max() < 1e-5
+
+
 def test_a_graph_that_is_no_specgen_head_is_refused_by_name(exported, tmp_path):
     import onnx
     from onnx import TensorProto, helper

@@ -7,8 +7,10 @@ Two graphs, beside the ``.pt`` weights (see :func:`specgen_addon.infer.onnx_path
 * ``<stem>.head.onnx``: a block of table rows -> r' (:class:`~specgen_addon.model.fast.GridHead`,
   exported as :class:`~specgen_addon.model.fast.GridHeadLowRank`, which onnxruntime runs ~2.5×
   faster than the plain head; graphs exported earlier in the channels-first arrangement of
-  :class:`~specgen_addon.model.fast.GridHeadChannelsFirst` still run), with dynamic block sizes
-  and band count.
+  :class:`~specgen_addon.model.fast.GridHeadChannelsFirst` still run), with dynamic block sizes,
+  band count and run of φd nodes (since the thirty-eighth session: the backend computes only the
+  φd nodes a lookup can touch, :mod:`specgen_addon.lookup_reach`; heads exported earlier take all
+  180 and still run).
 
 The model config travels in the graphs' metadata (``specgen_config``), so the onnx backend does
 not need the ``.pt`` file's pickle.
@@ -107,12 +109,14 @@ def export_onnx(weights: str | Path | None = None, out_stem: str | Path | None =
     nd = 5
     if aff:  # the low-rank head's inputs, cut from the once-arranged tables
         arranged = low_rank_tables([x.numpy() for x in t])
-        blocks = tuple(torch.from_numpy(np.ascontiguousarray(b)) for b in low_rank_block(arranged, 0, 0, nd))
+        run = slice(30, 151)   # a run of φd nodes, not all 180: no size of the sample may become a constant
+        blocks = tuple(torch.from_numpy(np.ascontiguousarray(b)) for b in low_rank_block(arranged, 0, 0, nd, run))
         names = LOW_RANK_INPUTS
-        # which axes vary with the block's θd rows (nd) or the band count (nl)
-        dyn_head = {"s1": {2: "nd"}, "s2": {}, "s3": {2: "nd"}, "s4": {0: "nl"}, "s5": {0: "nl", 2: "nd"},
-                    "s6": {0: "nl"}, "low": {0: "nl", 2: "k"}, "f2": {}, "f3": {2: "nd"}, "f6": {0: "nl"},
-                    "eye": {0: "nd", 1: "nd"}, "r": {0: "nl", 2: "nd"}}
+        # which axes vary with the block's θd rows (nd), its run of φd nodes (np) or the band count (nl)
+        dyn_head = {"s1": {2: "nd"}, "s2": {3: "np"}, "s3": {2: "nd", 3: "np"}, "s4": {0: "nl"},
+                    "s5": {0: "nl", 2: "nd"}, "s6": {0: "nl", 3: "np"}, "low": {0: "nl", 2: "k"},
+                    "f2": {3: "np"}, "f3": {2: "nd", 3: "np"}, "f6": {0: "nl", 3: "np"},
+                    "eye": {0: "nd", 1: "nd"}, "r": {0: "nl", 2: "nd", 3: "np"}}
     else:
         blocks = (t[0][:1, :nd], t[1][:1], t[2][:nd], t[3][:1], t[4][:nd], t[5])
         names = ("t1", "t2", "t3", "t4", "t5", "t6")

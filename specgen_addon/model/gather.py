@@ -24,8 +24,11 @@ exact rewrites remove the remaining passes or shrink them:
   its column of the row table and its row of ``[W2 | b2]`` are dropped (7 of 32 for ``run19`` on
   ``examples/sphere.png``).
 * **θh rows at the end of the row table.** Rows that depend on θh (t1, t2, t4) sit after the
-  fixed rows (t3, t5, t6) in a per-thread buffer, so a block's gather indices depend only on its
-  θd rows and are built once per grid.
+  fixed rows (t3, t5, t6) in a per-thread buffer, so a point's six row indices are fixed sums of
+  its (θd, φd, λ) indices (built once per grid for the torch ops, computed inside the numba loop).
+* **only the lookup's reach.** About a fifth of the grid lies so far below the horizon that no
+  lookup touches it (:mod:`specgen_addon.lookup_reach`): each block computes, in every θd row, only
+  the run of φd nodes that can be read, and leaves the rest to the caller.
 
 With numba installed (the command line's requirements), the logits, the gather with its ReLU and
 the output layer run as three compiled loops (:mod:`specgen_addon.model.gather_kernels`), about
@@ -36,6 +39,7 @@ Same output as :class:`~specgen_addon.model.fast.GridHead` to float rounding (te
 
 from __future__ import annotations
 
+import math
 import threading
 from itertools import pairwise
 
@@ -43,6 +47,7 @@ import numpy as np
 import torch
 import torch.nn.functional as F
 
+from ..lookup_reach import phi_d_reach
 from ..table import N_PHI_D, N_THETA_D
 
 
@@ -91,6 +96,13 @@ def shifted_logit_segments(fusion) -> tuple[torch.Tensor, torch.Tensor]:
     return torch.tensor(kinks, dtype=torch.float32), torch.stack(rows).float().contiguous()
 
 
+def decode_inplace(rp: np.ndarray, mu: float) -> None:
+    """:func:`specgen_addon.table.mu_law_decode_inplace` (clip at 0, inverse μ-law) on torch's
+    vectorised ``expm1``: about 3× numpy's, the same values to float rounding."""
+    x = torch.from_numpy(rp)
+    x.clamp_(min=0.0).mul_(math.log1p(mu)).expm1_().div_(mu)
+
+
 class GatherGridHead:
     """r' on the full grid for one image's six tables (AFF only), block by block, thread-safe.
 
@@ -127,17 +139,12 @@ class GatherGridHead:
             self.w2_t = self.w2_t[keep].contiguous()
         n_l = t4.shape[1]
         self.n_lambda, self.nd = n_l, n_theta_d
+        self.lo, self.hi = (np.array(a, dtype=np.int64) for a in phi_d_reach())
         o3, o5 = 0, N_THETA_D * N_PHI_D                                  # fixed rows: t3 | t5 | t6
         o6 = o5 + N_THETA_D * n_l
         o1 = self.fixed.shape[0]                                          # then t1[i] | t2[i] | t4[i]
         o2, o4 = o1 + N_THETA_D, o1 + N_THETA_D + N_PHI_D
-        self.indices = {}
-        for j in range(0, N_THETA_D, n_theta_d):
-            nd = min(n_theta_d, N_THETA_D - j)
-            d, p, lam = torch.meshgrid(torch.arange(j, j + nd), torch.arange(N_PHI_D), torch.arange(n_l),
-                                       indexing="ij")
-            self.indices[j] = torch.stack([o1 + d, o2 + p, o3 + d * N_PHI_D + p, o4 + lam, o5 + d * n_l + lam,
-                                           o6 + p * n_l + lam], -1).reshape(-1, 6).int().contiguous()
+        self.offsets = np.array([o1, o2, o3, o4, o5, o6], dtype=np.int64)
         self._local = threading.local()
         from . import gather_kernels
 
@@ -147,6 +154,14 @@ class GatherGridHead:
             self._bias_np = np.float32(float(self.bias))
             self._kinks_np, self._pq_np = self.kinks.numpy(), self.pq.numpy()
             self._w3_np, self._b3_np = self.w3.numpy(), np.float32(self.b3)
+            return                                       # the loops compute the rows' indices
+        self.indices = {}                                # torch ops: each block's (P, 6) row indices
+        for j in range(0, N_THETA_D, n_theta_d):
+            nd = min(n_theta_d, N_THETA_D - j)
+            d, p, lam = torch.meshgrid(torch.arange(j, j + nd), torch.arange(N_PHI_D), torch.arange(n_l),
+                                       indexing="ij")
+            self.indices[j] = torch.stack([o1 + d, o2 + p, o3 + d * N_PHI_D + p, o4 + lam, o5 + d * n_l + lam,
+                                           o6 + p * n_l + lam], -1).reshape(-1, 6).int().contiguous()
 
     def _row_table(self, i: int) -> torch.Tensor:
         """This thread's row table with θh row ``i``'s rows at its end."""
@@ -160,37 +175,66 @@ class GatherGridHead:
             local.i = i
         return local.rows
 
-    @torch.no_grad()
-    def block(self, i: int, j: int) -> torch.Tensor:
-        if self.kernels is not None:
-            return self._block_kernels(i, j)
+    def reach(self, i: int, j: int) -> tuple[np.ndarray, np.ndarray]:
+        """The φd nodes ``lo[r] … hi[r]`` a lookup can touch in θh row ``i``, θd rows ``j + r``
+        (:func:`specgen_addon.lookup_reach.phi_d_reach`); only these are computed."""
         nd = min(self.nd, N_THETA_D - j)
+        return self.lo[i, j:j + nd], self.hi[i, j:j + nd]
+
+    @torch.no_grad()
+    def block(self, i: int, j: int, decode_mu: float | None = None) -> np.ndarray:
+        """r' ``(1, nd, 180, Λ)`` for θh row ``i``, θd rows ``j … j + nd`` (``f_r`` in sr⁻¹ with
+        ``decode_mu``), at the φd nodes of :meth:`reach`; the other φd nodes of each row are left
+        unspecified (no lookup reads them: :func:`specgen_addon.lookup_reach.extend_beyond_reach`
+        fills them)."""
+        if self.kernels is not None:
+            r = self._block_kernels(i, j)
+        else:
+            r = self._block_torch(i, j)
+        if decode_mu is not None:
+            decode_inplace(r, decode_mu)
+        lo, hi = self.reach(i, j)
+        out = np.empty((1, lo.size, N_PHI_D, self.n_lambda), dtype=np.float32)
+        start = 0
+        for row, (a, b) in enumerate(zip(lo.tolist(), hi.tolist())):
+            stop = start + (b + 1 - a) * self.n_lambda
+            out[0, row, a:b + 1] = r[start:stop].reshape(-1, self.n_lambda)
+            start = stop
+        return out
+
+    def _block_torch(self, i: int, j: int) -> np.ndarray:
+        """r' at the reached points of a block (in (θd, φd, λ) order) on torch ops alone."""
+        nd = min(self.nd, N_THETA_D - j)
+        lo, hi = (torch.from_numpy(a) for a in self.reach(i, j))
+        phi = torch.arange(N_PHI_D)
+        reached = ((phi >= lo[:, None]) & (phi <= hi[:, None]))[:, :, None].expand(-1, -1, self.n_lambda)
+        reached = reached.reshape(-1)
         s1, s2, s3, s4, s5, s6 = self.stat
         s_dp = s3[j:j + nd] + s2[i][None, :] + s1[i, j:j + nd][:, None]          # (nd, φd)
         s_dl = s5[j:j + nd] + (s4[i] + self.bias)[None, :]                         # (nd, Λ)
-        s = (s_dp[:, :, None] + s_dl[:, None, :] + s6[None]).reshape(-1)
+        s = (s_dp[:, :, None] + s_dl[:, None, :] + s6[None]).reshape(-1)[reached]
         pq = self.pq.index_select(0, torch.bucketize(s, self.kinks))
         e = torch.addcmul(pq[:, 6:], pq[:, :6], s[:, None]).exp_()              # (P, 6), ≤ 1
-        h = F.embedding_bag(self.indices[j], self._row_table(i), per_sample_weights=e, mode="sum")
+        h = F.embedding_bag(self.indices[j][reached], self._row_table(i), per_sample_weights=e, mode="sum")
         h.relu_()                                                                # [t·h_pre, t]
         g = torch.mm(h, self.w2_t).relu_()                                       # t · ReLU(W2 h + b2)
-        r = torch.mv(g, self.w3).div_(h[:, -1]).add_(self.b3)
-        return r.reshape(1, nd, N_PHI_D, self.n_lambda)
+        return torch.mv(g, self.w3).div_(h[:, -1]).add_(self.b3).numpy()
 
-    @torch.no_grad()
-    def _block_kernels(self, i: int, j: int) -> torch.Tensor:
-        """:meth:`block` with the logits, the gather and the output layer as numba loops
+    def _block_kernels(self, i: int, j: int) -> np.ndarray:
+        """:meth:`_block_torch` with the logits, the gather and the output layer as numba loops
         (:mod:`specgen_addon.model.gather_kernels`); ``exp`` and the matrix product in torch."""
         nd = min(self.nd, N_THETA_D - j)
-        n_points = nd * N_PHI_D * self.n_lambda
+        lo, hi = self.reach(i, j)
+        n_points = int((hi - lo + 1).sum()) * self.n_lambda
         e = np.empty((n_points, 6), dtype=np.float32)
-        self.kernels.shifted_logits(i, j, nd, *self._stat_np, self._bias_np, self._kinks_np, self._pq_np, e)
+        self.kernels.shifted_logits(i, j, nd, lo, hi, *self._stat_np, self._bias_np, self._kinks_np,
+                                    self._pq_np, e)
         torch.from_numpy(e).exp_()
         rows = self._row_table(i)
         h = np.empty((n_points, rows.shape[1]), dtype=np.float32)
         t = np.empty(n_points, dtype=np.float32)
-        self.kernels.gather_relu(self.indices[j].numpy(), rows.numpy(), e, h, t)  # [t·h_pre, t], ReLU
+        self.kernels.gather_relu(j, nd, lo, hi, N_PHI_D, self.n_lambda, self.offsets, rows.numpy(), e, h, t)
         g = torch.mm(torch.from_numpy(h), self.w2_t)                             # t · (W2 h + b2)
         r = np.empty(n_points, dtype=np.float32)
         self.kernels.mlp_output(g.numpy(), t, self._w3_np, self._b3_np, r)
-        return torch.from_numpy(r).reshape(1, nd, N_PHI_D, self.n_lambda)
+        return r
