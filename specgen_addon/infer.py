@@ -30,9 +30,11 @@ if TYPE_CHECKING:
 BACKENDS = ("torch", "onnx")
 #: θd rows per block: 10 × 180 × Λ points (~38 k at 21 bands) for torch's gather head (5–30 rows
 #: time the same; fewer pay per-op overhead: 1 row is ~2× slower); the ONNX head, whose passes over
-#: 32 × points temporaries dominate, runs best at 2 rows (7.6 k points: ~1 MB temporaries, one
-#: core's L2; 1, 3 and 5 rows ~10 % slower, 10 rows ~35 %; docs/blender.md).
-BLOCK_THETA_D = {"torch": 10, "onnx": 2}
+#: 32 × points temporaries dominate, ran best at 2 rows over all 180 φd nodes (7.6 k points: ~1 MB
+#: temporaries, one core's L2) and at 4 rows since it runs only the lookup's reach (2 rows ~8 %
+#: slower, 1 row ~25 %, 3, 5 and 6 rows within noise of 4 or slower; docs/blender.md). ``"onnx 180"``:
+#: a head exported before the φd runs.
+BLOCK_THETA_D = {"torch": 10, "onnx": 4, "onnx 180": 2}
 
 ProgressFn = Callable[[float], None]
 CancelFn = Callable[[], bool]
@@ -403,7 +405,7 @@ def evaluate_grid(be, tables, n_lambda: int, progress: ProgressFn | None = None,
     row, so no lookup, render or fit sees a difference."""
     from .lookup_reach import extend_beyond_reach, phi_d_reach
 
-    nd = BLOCK_THETA_D["torch" if isinstance(be, _TorchBackend) else "onnx"]
+    nd = BLOCK_THETA_D["torch" if isinstance(be, _TorchBackend) else "onnx" if be.phi_d_runs else "onnx 180"]
     prepared = be.prepare(tables, nd)
     lo, hi = phi_d_reach()
     out = np.empty(GRID_SHAPE + (n_lambda,), dtype=np.float32)
