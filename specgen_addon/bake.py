@@ -38,6 +38,7 @@ from __future__ import annotations
 
 import functools
 import os
+from concurrent.futures import ThreadPoolExecutor
 from dataclasses import dataclass, field
 from pathlib import Path
 from typing import TYPE_CHECKING, Callable
@@ -278,18 +279,20 @@ def bake_atlas(table, path: str | os.PathLike, wavelengths_nm: np.ndarray | None
         raise SpecGenError(f"max_coeffs must be a whole number ≥ 1, got {max_coeffs!r}")
     check_output_dir(Path(path).parent, create=False)   # a file in the way: refused before the work
     wl = np.asarray(table.wavelengths if wavelengths_nm is None else wavelengths_nm, dtype=np.float64)
-    values = table.values
-    if wavelengths_nm is not None:
-        weights = table.wavelength_weights(wl).astype(np.float32)       # (C, Λ)
-        values = np.tensordot(values, weights, axes=([3], [0]))
-    values = resample_phi_d(np.maximum(values, 0.0), n_phi_d).astype(np.float32)  # (90, 90, P, Λ)
-    basis, rel = spectral_basis(values, tolerance, max_coeffs, reachable=reachable_entries(n_phi_d))
-    if progress is not None:
-        progress(0.2)
-    slots, offsets = shifted_coefficients(values @ basis.T.astype(np.float32))  # (90, 90, P, K)
-    tiles_x, tiles_y = atlas_layout(n_phi_d)
-    info = AtlasInfo(Path(path), wl, basis, offsets, n_phi_d, tiles_x, tiles_y, rel,
-                     fit_closures(table, None if wavelengths_nm is None else wl))
+    # the closure fit only reads the table: it runs on a second thread beside the basis
+    with ThreadPoolExecutor(max_workers=1) as pool:
+        closures = pool.submit(fit_closures, table, None if wavelengths_nm is None else wl)
+        values = table.values
+        if wavelengths_nm is not None:
+            weights = table.wavelength_weights(wl).astype(np.float32)       # (C, Λ)
+            values = np.tensordot(values, weights, axes=([3], [0]))
+        values = resample_phi_d(np.maximum(values, 0.0), n_phi_d).astype(np.float32)  # (90, 90, P, Λ)
+        basis, rel = spectral_basis(values, tolerance, max_coeffs, reachable=reachable_entries(n_phi_d))
+        if progress is not None:
+            progress(0.2)
+        slots, offsets = shifted_coefficients(values @ basis.T.astype(np.float32))  # (90, 90, P, K)
+        tiles_x, tiles_y = atlas_layout(n_phi_d)
+        info = AtlasInfo(Path(path), wl, basis, offsets, n_phi_d, tiles_x, tiles_y, rel, closures.result())
     check_output_dir(info.path.parent, create=True)
     shape = (tiles_y * N_THETA_D, tiles_x * N_THETA_H)
     for g, target in enumerate(info.group_paths):
