@@ -48,9 +48,10 @@ def gather_relu(j, nd, lo, hi, n_phi, n_l, offsets, rows, e, out, t):
     """``out[n] = ReLU(Σ_k e[n, k] · rows[index_k])``: the six-row weighted gather
     (``embedding_bag`` with per-sample weights) and the first layer's ReLU, one pass, over the
     points of :func:`shifted_logits` in its order. The six rows of point (θd row d, φd node p,
-    band l) are ``offsets + (d, p, d·n_phi + p, l, d·n_l + l, p·n_l + l)``: the row table's
-    blocks t1[i] | t2[i] | t3 | t4[i] | t5 | t6. ``t[n]`` is a copy of the last column (the
-    softmax's ``Σ e``), contiguous for :func:`mlp_output`."""
+    band l) are ``offsets + (d, p, d·n_phi + p, l, d·n_l + l, p·n_l + l)``, ``offsets[k]``
+    being where table ``t(k+1)``'s rows start in ``rows`` (t1[i], t2[i], t3, t4[i], t5, t6).
+    ``t[n]`` is a copy of the last column (the softmax's ``Σ e``), contiguous for
+    :func:`mlp_output`."""
     zero = np.float32(0.0)
     last = rows.shape[1] - 1
     o1, o2, o3, o4, o5, o6 = offsets[0], offsets[1], offsets[2], offsets[3], offsets[4], offsets[5]
