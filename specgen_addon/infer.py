@@ -21,6 +21,7 @@ from typing import TYPE_CHECKING, Callable
 import numpy as np
 
 from .errors import Cancelled, ImageInputError, SpecGenError, WeightsError
+from .lookup_reach import extend_beyond_reach, phi_d_reach
 from .spectra import DEFAULT_WAVELENGTHS_NM
 from .table import GRID_SHAPE, N_PHI_D, N_THETA_D, N_THETA_H, BRDFTable, mu_law_decode_inplace
 
@@ -211,8 +212,6 @@ class _OnnxBackend:
             r = np.ascontiguousarray(self.run_head(_CUT[self.head_layout](prepared, i, j, nd)))
             run = r
         else:
-            from .lookup_reach import phi_d_reach
-
             lo, hi = (a[i, j:j + nd] for a in phi_d_reach())
             phi_d = slice(int(lo.min()), int(hi.max()) + 1)
             part = self.run_head(low_rank_block(prepared, i, j, nd, phi_d))
@@ -403,8 +402,6 @@ def evaluate_grid(be, tables, n_lambda: int, progress: ProgressFn | None = None,
     (:func:`specgen_addon.lookup_reach.phi_d_reach`, 78.5 % of the grid; the torch gather head
     computes no others); every other φd node takes the value of the nearest reached node of its
     row, so no lookup, render or fit sees a difference."""
-    from .lookup_reach import extend_beyond_reach, phi_d_reach
-
     nd = BLOCK_THETA_D["torch" if isinstance(be, _TorchBackend) else "onnx" if be.phi_d_runs else "onnx 180"]
     prepared = be.prepare(tables, nd)
     lo, hi = phi_d_reach()

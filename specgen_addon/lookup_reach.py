@@ -39,8 +39,7 @@ def phi_d_reach() -> tuple[np.ndarray, np.ndarray]:
     # the most favourable cell with node (i, j) as a corner starts at node max(i − 1, 0)
     cot_h = _cot(th[np.maximum(np.arange(N_THETA_H) - 1, 0)])
     cot_d = _cot(td[np.maximum(np.arange(N_THETA_D) - 1, 0)])
-    with np.errstate(invalid="ignore"):                      # ∞ · 0 only at θ = 0: reached
-        reach = np.nan_to_num(cot_h[:, None] * cot_d[None, :], nan=np.inf)    # (90, 90)
+    reach = cot_h[:, None] * cot_d[None, :]                  # (90, 90); ∞ at θ = 0, never 0 · ∞
     # node p is a corner of the cells over [p − 1, p + 1] (periodic): min |cos φd| over that span
     p = np.arange(N_PHI_D, dtype=np.float64)
     nearest = np.clip(N_PHI_D / 2, p - 1.0, p + 1.0)        # the span's point closest to φd = 90°
