@@ -46,6 +46,10 @@ def add_parser(sub: argparse._SubParsersAction) -> argparse.ArgumentParser:
                    help="wavelength range in nm (default 380 780)")
     p.add_argument("--rgb", action="store_true", help="also write OUTPUT_rgb.npz (RGB projection, D65)")
     add_refine_arguments(p)
+    p.add_argument("--latent-fit", action="store_true",
+                   help="before refinement, fit the network's own latent to the photo and decode the "
+                        "table again (torch backend; about 15 s more; off by default: on held-out photos "
+                        "it did not beat refinement alone, docs/refinement.md)")
     p.add_argument("--overwrite", action="store_true", help="replace existing outputs")
     p.add_argument("--quiet", action="store_true", help="no progress bar")
     p.set_defaults(func=run_infer)
@@ -244,13 +248,16 @@ def run_infer(args: argparse.Namespace) -> int:
     t0 = time.perf_counter()
     with progress_bar("infer", enabled=not args.quiet) as update:
         generated = generate(args.image, lighting, refine=args.refine, weights=args.weights,
-                             wavelengths_nm=wl, backend=args.backend, progress=update, model=args.model)
+                             wavelengths_nm=wl, backend=args.backend, progress=update, model=args.model,
+                             latent_fit=args.latent_fit)
     table = generated.table
     dt = time.perf_counter() - t0
     table.save(out, overwrite=args.overwrite)
     print(f"{out}: spectral BRDF {table.values.shape} ({wl[0]:g}–{wl[-1]:g} nm) in {dt:.1f} s")
     if "input_sphere" in table.metadata:  # which network: the sphere was copied, or resampled from a photo
         print(f"network: {table.metadata['weights']} (sphere {table.metadata['input_sphere']})")
+    if generated.latent_fit is not None:
+        print(generated.latent_fit.summary())
     print_refinement(generated)
     if generated.film_fit is not None:
         print(film_fit_summary(generated.film_fit, lighting.label))

@@ -7,11 +7,13 @@
    table (:func:`specgen_addon.infer.generate_brdf`): unless weights are given, the shipped network
    for a sphere copied from a canonical frame, or the one for a sphere resampled from a photo
    (:func:`specgen_addon.model.shipped_weights`);
-3. unless switched off, the table is refined against the photo under that lighting
+3. optionally (``latent_fit``, torch only), the network's latent is fitted to the photo under that
+   lighting and the table decoded again from it (:func:`specgen_addon.latent_fit.fit_latent`);
+4. unless switched off, the table is refined against the photo under that lighting
    (:func:`specgen_addon.refine.refine_brdf`). Without refinement the network's table is returned
    untouched.
 
-With ``model="thin-film"`` steps 2–3 are replaced by the thin-film family's fit to the photo
+With ``model="thin-film"`` steps 2–4 are replaced by the thin-film family's fit to the photo
 (:func:`specgen_addon.fit.thin_film.fit_thin_film`): for interference films (soap, oil, anodised
 metal) whose angle-dependent colour the network's prior does not place.
 """
@@ -32,7 +34,7 @@ if TYPE_CHECKING:
 ProgressFn = Callable[[float], None]
 CancelFn = Callable[[], bool]
 
-#: Share of the progress bar taken by the network when refinement follows.
+#: Share of the progress bar taken by the network when refinement (and no latent fit) follows.
 NETWORK_SHARE = 0.45
 #: What generates the table: the network (then refinement), or the thin-film family's fit.
 MODELS = ("network", "thin-film")
@@ -44,6 +46,7 @@ class Generated:
 
     table: BRDFTable
     refinement: object | None = None   # specgen_addon.refine.RefineResult
+    latent_fit: object | None = None   # specgen_addon.latent_fit.LatentFitResult (latent_fit=True)
     film_fit: object | None = None     # specgen_addon.fit.thin_film.ThinFilmFit (model="thin-film")
 
     @property
@@ -70,11 +73,12 @@ def load_photo_crop(image) -> tuple[SphereCrop, bool]:
 
 def generate(image, lighting=None, refine: bool = True, weights=None, wavelengths_nm=None,
              backend: str = "torch", progress: ProgressFn | None = None,
-             cancel: CancelFn | None = None, model: str = "network") -> Generated:
+             cancel: CancelFn | None = None, model: str = "network", latent_fit: bool = False) -> Generated:
     """Generate (and by default refine) the spectral BRDF of the sphere in ``image``.
 
     ``lighting`` is an :class:`~specgen_addon.input_lighting.InputLighting` (default: canonical).
     ``model`` is one of :data:`MODELS` (``"thin-film"`` ignores ``refine``, ``weights``, ``backend``).
+    ``latent_fit`` fits the network's latent to the photo before any refinement (torch backend only).
     ``progress(fraction)`` and ``cancel()`` are passed down; cancelling raises
     :class:`~specgen_addon.errors.Cancelled` and returns nothing.
     """
@@ -85,6 +89,11 @@ def generate(image, lighting=None, refine: bool = True, weights=None, wavelength
 
     if model not in MODELS:
         raise SpecGenError(f"unknown model {model!r}; choose one of {', '.join(MODELS)}")
+    if latent_fit and model != "network":
+        raise SpecGenError(f"the latent fit is the network's; it does not apply to model {model!r}")
+    if latent_fit and backend != "torch":
+        raise SpecGenError("the latent fit needs the torch backend (gradients through the network); "
+                           "use --backend torch or leave the latent fit off")
     lighting = lighting or InputLighting()
     crop, linear = load_photo_crop(image)
     photo = crop.image.astype(np.float64)
@@ -104,16 +113,29 @@ def generate(image, lighting=None, refine: bool = True, weights=None, wavelength
         table = fit.table(wl, progress=sub(0.8, 1.0), cancel=cancel)
         table.metadata = {**table.metadata, "input_image": src, "input_lighting": lighting.label}
         return Generated(table, film_fit=fit)
-    share = NETWORK_SHARE if refine else 1.0
+    from .refine import CLIP_LEVEL
+
+    clip_level = None if linear else CLIP_LEVEL
+    # progress: the network, then the latent fit (about 4× the network's time), then refinement
+    ends = np.cumsum([NETWORK_SHARE, 4.0 * NETWORK_SHARE if latent_fit else 0.0,
+                      1.0 - NETWORK_SHARE if refine else 0.0])
+    ends = ends / ends[-1]
     # the photo's crop, not cut again: how the photo was cut chooses the shipped network
     network_input = SphereCrop(photo * lighting.network_gain(), crop.copied)
     table = generate_brdf(network_input, weights=weights, wavelengths_nm=wavelengths_nm,
-                          backend=backend, progress=sub(0.0, share), cancel=cancel)
+                          backend=backend, progress=sub(0.0, ends[0]), cancel=cancel)
+    fitted = None
+    if latent_fit:
+        from .latent_fit import fit_latent
+
+        fitted = fit_latent(network_input, photo, lighting, weights, wavelengths_nm, clip_level=clip_level,
+                            network_table=table, progress=sub(ends[0], ends[1]), cancel=cancel)
+        table = fitted.table
     table.metadata = {**table.metadata, "input_image": src, "input_lighting": lighting.label}
     if not refine:
-        return Generated(table)
-    from .refine import CLIP_LEVEL, RefineOptions, refine_brdf
+        return Generated(table, latent_fit=fitted)
+    from .refine import RefineOptions, refine_brdf
 
-    options = RefineOptions(clip_level=None if linear else CLIP_LEVEL)
-    result = refine_brdf(table, photo, lighting, options, progress=sub(share, 1.0), cancel=cancel)
-    return Generated(result.table, result)
+    options = RefineOptions(clip_level=clip_level)
+    result = refine_brdf(table, photo, lighting, options, progress=sub(ends[1], 1.0), cancel=cancel)
+    return Generated(result.table, result, latent_fit=fitted)

@@ -284,12 +284,9 @@ def fit_thin_film(photo: np.ndarray, lighting=None, clip_level: float | None = 0
     """
     from ..input_lighting import InputLighting
     from ..refine import render_under
+    from ..refine.report import checked_photo
 
-    photo = np.asarray(photo, dtype=np.float64)
-    if photo.ndim != 3 or photo.shape[2] != 3 or photo.shape[0] != photo.shape[1]:
-        raise SpecGenError(f"photo must be a square S×S×3 sphere crop, got {photo.shape}")
-    if not np.all(np.isfinite(photo)):
-        raise SpecGenError("photo holds NaN or Inf values")
+    photo = checked_photo(photo)
     lighting = lighting or InputLighting()
 
     def step(fraction: float) -> None:

@@ -75,10 +75,31 @@ class GridTables(nn.Module):
         return out
 
     def forward(self, image: torch.Tensor, u_lambda: torch.Tensor) -> tuple[torch.Tensor, ...]:
-        planes = self.derived_planes(self.model.planes(image))
+        return self.tables_of(self.model.planes(image), u_lambda)
+
+    def tables_of(self, planes: dict[str, torch.Tensor], u_lambda: torch.Tensor) -> tuple[torch.Tensor, ...]:
+        """The six tables of given planes (differentiable: the latent fit decodes its own planes)."""
+        planes = self.derived_planes(planes)
         u = {"theta_h": self.u_theta_h, "theta_d": self.u_theta_d, "phi_d": self.u_phi_d,
              "lambda": u_lambda}
         return tuple(_resample(planes[n], u[PLANE_AXES[n][0]], u[PLANE_AXES[n][1]]) for n in PLANE_NAMES)
+
+
+def head_at_nodes(model: SpecGen, tables, i: torch.Tensor, j: torch.Tensor, k: torch.Tensor) -> torch.Tensor:
+    """r' ``(U, Λ)`` at U grid nodes (θh index ``i``, θd index ``j``, φd index ``k``) and every band
+    of the AFF tables: :class:`GridHead` for a list of nodes instead of a block (differentiable)."""
+    t1, t2, t3, t4, t5, t6 = tables
+    a1, a2, a3 = t1[i, j], t2[i, k], t3[j, k]                    # (U, C+1)
+    a4, a5, a6 = t4[i], t5[j], t6[k]                             # (U, Λ, C+1)
+    fusion, mapping = model.fusion, model.mapping
+    _, bias = fusion.gap_functionals()
+    s = (a1[:, -1:] + a2[:, -1:] + a3[:, -1:]) + a4[..., -1] + a5[..., -1] + a6[..., -1] + bias
+    w = fusion.weights_from_statistic(s)                         # (U, Λ, 6)
+    h = (mapping.fc1.bias + w[..., 0:1] * a1[:, None, :-1] + w[..., 1:2] * a2[:, None, :-1]
+         + w[..., 2:3] * a3[:, None, :-1] + w[..., 3:4] * a4[..., :-1] + w[..., 4:5] * a5[..., :-1]
+         + w[..., 5:6] * a6[..., :-1])
+    h = torch.relu(mapping.fc2(torch.relu(h)))
+    return mapping.fc3(h)[..., 0]
 
 
 class GridHead(nn.Module):

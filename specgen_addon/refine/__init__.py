@@ -44,7 +44,7 @@ from .discrepancy import difference_variance, discrepancy_scale, twin_scene
 from .holdout import block_folds, holdout_error
 from .body import BODY_PRIORS, blended_body, blind_share, has_separate_body, natural_body
 from .operator import PhotoOperator, render_grid
-from .report import Reproduction, photo_scale, reproduction
+from .report import Reproduction, checked_photo, photo_scale, reproduction
 from .solve import difference_operator, nonneg_ridge
 
 __all__ = ["RefineOptions", "RefineResult", "refine_brdf", "render_under", "CorrectionBasis",
@@ -246,11 +246,7 @@ def refine_brdf(table: BRDFTable, photo: np.ndarray, lighting=None, options: Ref
         raise SpecGenError("refinement needs a spectral BRDFTable (the network's output), "
                            f"got {type(table).__name__ if not isinstance(table, BRDFTable) else 'an RGB table'}")
     lighting = lighting or InputLighting()
-    photo = np.asarray(photo, dtype=np.float64)
-    if photo.ndim != 3 or photo.shape[2] != 3 or photo.shape[0] != photo.shape[1]:
-        raise SpecGenError(f"photo must be a square S×S×3 sphere crop, got {photo.shape}")
-    if not np.all(np.isfinite(photo)):
-        raise SpecGenError("photo holds NaN or Inf values")
+    photo = checked_photo(photo)
 
     def report(lo: float, hi: float) -> ProgressFn | None:
         return None if progress is None else (lambda f: progress(lo + (hi - lo) * min(max(f, 0.0), 1.0)))

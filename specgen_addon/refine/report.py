@@ -31,6 +31,17 @@ class Reproduction:
         return f"{self.psnr_db:.1f} dB{de}"
 
 
+def checked_photo(photo) -> np.ndarray:
+    """The photo a fit reproduces as float64 (S, S, 3), refused with one sentence unless it is a
+    square linear RGB sphere crop of finite values (refinement, latent fit, thin-film fit)."""
+    photo = np.asarray(photo, dtype=np.float64)
+    if photo.ndim != 3 or photo.shape[2] != 3 or photo.shape[0] != photo.shape[1]:
+        raise SpecGenError(f"photo must be a square S×S×3 sphere crop, got {photo.shape}")
+    if not np.all(np.isfinite(photo)):
+        raise SpecGenError("photo holds NaN or Inf values")
+    return photo
+
+
 def photo_scale(photo_rows: np.ndarray) -> float:
     """The normalising level: :func:`specgen_addon.metrics.normalisation_scale` of the photo's
     observed pixels (its 99.9th percentile), or 1 for a black photo (nothing to normalise)."""
