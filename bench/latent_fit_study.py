@@ -10,7 +10,9 @@ table is then scored against the truth under the protocol's distant lights (spec
 * ``network``: the network alone;
 * ``refined``: the shipped refinement of the network's table (:func:`specgen_addon.refine.refine_brdf`);
 * ``fit``: the network's latent fitted to the photo (:func:`specgen_addon.latent_fit.fit_latent`);
-* ``fit+ref``: the shipped refinement of the fitted table.
+* ``fit+ref``: the shipped refinement of the fitted table;
+* with ``--also-holdout``, ``fit ho`` and ``fit ho+ref``: the same with
+  ``LatentFitOptions(holdout=True)`` (fitted to one half of the sphere's blocks, judged by the other).
 
 Settings are chosen on ``--split val``; figures are reported on ``test``.
 
@@ -29,7 +31,7 @@ import numpy as np
 sys.path.insert(0, str(Path(__file__).resolve().parents[1]))
 
 PHOTOS = ("independent", "shifted")
-COLUMNS = ("network", "refined", "fit", "fit+ref")
+COLUMNS = ("network", "refined", "fit", "fit+ref", "fit ho", "fit ho+ref")
 
 
 def main(argv: list[str] | None = None) -> int:
@@ -40,6 +42,7 @@ def main(argv: list[str] | None = None) -> int:
     ap.add_argument("--photos", nargs="+", default=list(PHOTOS), choices=PHOTOS, help="photos (default both)")
     ap.add_argument("--resolution", type=int, default=128, help="truth render size in pixels (default 128)")
     ap.add_argument("--no-refine", action="store_true", help="score the network and the fit only")
+    ap.add_argument("--also-holdout", action="store_true", help="also the fit with holdout=True")
     ap.add_argument("--json", type=Path, default=None, help="write the rows as JSON")
     a = ap.parse_args(argv)
     if not 1 <= a.per_family <= 20 or a.skip < 0 or not 16 <= a.resolution <= 1024:
@@ -50,7 +53,7 @@ def main(argv: list[str] | None = None) -> int:
     from specgen_addon.corpus.generate import material_family
     from specgen_addon.evaluation.protocol import DISTANT_LIGHTS, WAVELENGTHS_NM
     from specgen_addon.infer import generate_brdf, sphere_crop
-    from specgen_addon.latent_fit import fit_latent
+    from specgen_addon.latent_fit import LatentFitOptions, fit_latent
     from specgen_addon.refine import RefineOptions, refine_brdf
     from specgen_addon.render import render_spectral, sphere_geometry
     from specgen_addon.train.evaluate import displaced_input, mixed_split_materials
@@ -71,24 +74,29 @@ def main(argv: list[str] | None = None) -> int:
             crop = sphere_crop(image)
             photo = crop.image.astype(np.float64)            # an array: linear, nothing clipped
             network = generate_brdf(crop, wavelengths_nm=wl)
-            fit = fit_latent(crop, photo, None, None, wl, network_table=network)
-            row = {"material": mat.name, "family": material_family(mat), "photo": kind,
-                   "network": score(network), "fit": score(fit.table),
-                   "fit_self_db": [fit.before_db, fit.after_db], "fit_improved": fit.improved,
-                   "fit_blur_px": fit.blur_px, "fit_seconds": fit.seconds}
+            row = {"material": mat.name, "family": material_family(mat), "photo": kind, "network": score(network)}
             if not a.no_refine:
                 row["refined"] = score(refine_brdf(network, photo, None, RefineOptions(clip_level=None)).table)
-                row["fit+ref"] = score(refine_brdf(fit.table, photo, None, RefineOptions(clip_level=None)).table)
+            for label, options in [("fit", LatentFitOptions())] + (
+                    [("fit ho", LatentFitOptions(holdout=True))] if a.also_holdout else []):
+                fit = fit_latent(crop, photo, None, None, wl, options, network_table=network)
+                row.update({label: score(fit.table), f"{label}_self_db": [fit.before_db, fit.after_db],
+                            f"{label}_held_out_db": fit.held_out_db, f"{label}_improved": fit.improved,
+                            f"{label}_blur_px": fit.blur_px, f"{label}_seconds": fit.seconds})
+                if not a.no_refine:
+                    row[f"{label}+ref"] = score(refine_brdf(fit.table, photo, None,
+                                                            RefineOptions(clip_level=None)).table)
             rows.append(row)
             print(f"{mat.name:8} {row['family']:11} {kind:11} "
                   + " | ".join(f"{c} {row[c]:6.2f}" for c in COLUMNS if c in row)
-                  + f" | fit self {fit.before_db:.1f} → {fit.after_db:.1f} dB, {fit.seconds:.0f} s", flush=True)
+                  + f" | fit self {row['fit_self_db'][0]:.1f} → {row['fit_self_db'][1]:.1f} dB, "
+                  f"{row['fit_seconds']:.0f} s", flush=True)
             if a.json:
                 a.json.write_text(json.dumps(rows, indent=1))
     cols = [c for c in COLUMNS if c in rows[0]]
     print(f"mean ({len(rows)} photos): " + " | ".join(f"{c} {np.mean([r[c] for r in rows]):.2f}" for c in cols))
     if "refined" in cols:
-        for c in ("fit", "fit+ref"):
+        for c in cols[2:]:
             d = np.array([r[c] - r["refined"] for r in rows])
             print(f"{c} against refined: mean {d.mean():+.2f} dB, worst {d.min():+.2f}, "
                   f"photos below by more than 1 dB: {int((d < -1).sum())}")

@@ -28,7 +28,10 @@ Each exact render is also the fit's check, since the photo is the measurement: t
 exact photo reproduces the photo best (RGB PSNR over the sphere, as the refinement reports it) is
 kept, and when a refresh finds the photo reproduced worse than at the best latent so far, the fit
 returns there with half the step size. The encoder's latent is the first candidate, so the fit
-never returns a table that reproduces the photo worse than the network's.
+never returns a table that reproduces the photo worse than the network's. With ``holdout`` the fit
+sees only one half of a checkerboard of 8-pixel blocks (:mod:`specgen_addon.refine.holdout`) and
+the other half does the judging, so a latent that fits the photo's noise is not kept for a gain
+the held-out pixels do not share.
 
 A resampled sphere (every camera photo) is blurred by the crop; as in the refinement
 (:mod:`specgen_addon.refine.blur`) the exact render is blurred by a Gaussian whose σ is the
@@ -71,6 +74,7 @@ class LatentFitOptions:
     fit_wavelengths_nm: tuple[float, ...] = (380.0, 460.0, 540.0, 620.0, 700.0, 780.0)
     eps_fraction: float = 0.05         # ε of the log loss, a fraction of the photo's level
     seed: int = 0                      # the pixel batches and the environment draw
+    holdout: bool = False              # fit one half of the sphere's 8-px blocks, choose by the other
 
     def __post_init__(self) -> None:
         ints = {"steps": (1, 10_000), "batch_pixels": (16, 1_000_000), "env_samples": (1, 1024),
@@ -79,6 +83,8 @@ class LatentFitOptions:
             v = getattr(self, name)
             if isinstance(v, bool) or not isinstance(v, (int, np.integer)) or not lo <= v <= hi:
                 raise SpecGenError(f"latent fit: {name} must be an integer in [{lo}, {hi}], got {v!r}")
+        if not isinstance(self.holdout, bool):
+            raise SpecGenError(f"latent fit: holdout must be true or false, got {self.holdout!r}")
         for name in ("lr", "eps_fraction"):
             v = getattr(self, name)
             if not (isinstance(v, (int, float)) and np.isfinite(v) and 0 < v <= 1):
@@ -99,11 +105,14 @@ class LatentFitResult:
     blur_px: float = 0.0               # the photo's blur (Gaussian σ, px) the fit modelled
     improved: bool = True              # False: no latent reproduced the photo better; the network's table is kept
     best_step: int = 0                 # the step whose latent is returned (0: the encoder's)
+    held_out_db: tuple[float, float] | None = None   # with ``holdout``: the judged half, before and after
 
     def summary(self) -> str:
         blur = f" (photo blur σ {self.blur_px:g} px modelled)" if self.blur_px > 0 else ""
         kept = "" if self.improved else " (no better: the network's table kept)"
-        return (f"latent fit: self-reproduction {self.before_db:.2f} → {self.after_db:.2f} dB{blur} "
+        held = ("" if self.held_out_db is None
+                else f" (held-out half {self.held_out_db[0]:.2f} → {self.held_out_db[1]:.2f} dB)")
+        return (f"latent fit: self-reproduction {self.before_db:.2f} → {self.after_db:.2f} dB{held}{blur} "
                 f"in {self.seconds:.1f} s{kept}")
 
 
@@ -249,6 +258,7 @@ def fit_latent(image, photo: np.ndarray, lighting=None, weights=None, wavelength
     from .input_lighting import InputLighting
     from .refine import diffuse_floor_of, render_under
     from .refine.blur import blur_image, rows_inside
+    from .refine.holdout import block_folds
     from .refine.operator import PhotoOperator
     from .refine.report import checked_photo, photo_scale, rgb_psnr
     from .spectra import DEFAULT_WAVELENGTHS_NM
@@ -343,15 +353,22 @@ def fit_latent(image, photo: np.ndarray, lighting=None, weights=None, wavelength
                 rows, floor, table = exact(zr, cr, network_table if step == 0 else None)
                 if seen is None:
                     seen = rows_inside(op.shape, op.pixel_ids, sigma[0], clipped)
-                    usable = np.flatnonzero(seen)
-                    if usable.size < 16:
+                    judge = seen.copy()
+                    if options.holdout:     # fit one half of a checkerboard of blocks, judge by the other
+                        fold = block_folds(op.shape, op.pixel_ids)
+                        judge &= fold == 1
+                        usable = np.flatnonzero(seen & (fold == 0))
+                    else:
+                        usable = np.flatnonzero(seen)
+                    if usable.size < 16 or np.count_nonzero(judge) < 16:
                         raise SpecGenError("latent fit: fewer than 16 unclipped pixels inside the sphere")
-                score = rgb_psnr(b[seen], rows[seen], level)
+                score = rgb_psnr(b[judge], rows[judge], level)
+                whole = rgb_psnr(b[seen], rows[seen], level)
                 if best is None:
-                    before = score
+                    before, judged_before = whole, score
                 if best is None or score > best["db"]:
-                    best = {"db": score, "z": zr.clone(), "colour": cr.clone(), "table": table, "floor": floor,
-                            "step": step, "defect": None}
+                    best = {"db": score, "whole": whole, "z": zr.clone(), "colour": cr.clone(), "table": table,
+                            "floor": floor, "step": step, "defect": None}
                 elif step < options.steps:
                     with torch.no_grad():
                         z.copy_(best["z"])
@@ -379,7 +396,7 @@ def fit_latent(image, photo: np.ndarray, lighting=None, weights=None, wavelength
             report(done[0])
     finally:
         torch.set_num_threads(threads)
-    table, after, improved = best["table"], best["db"], best["step"] > 0
+    table, after, improved = best["table"], best["whole"], best["step"] > 0
     table.metadata = {**table.metadata, "source": "specgen", "backend": "torch", "weights": str(weights),
                       "input_sphere": "copied" if crop.copied else "resampled",
                       "description": "SpecGen prediction, latent fitted to the photo" if improved
@@ -388,7 +405,7 @@ def fit_latent(image, photo: np.ndarray, lighting=None, weights=None, wavelength
                                     f"{before:.2f} -> {after:.2f} dB" + ("" if improved else ", network's table kept")}
     report(1.0)
     return LatentFitResult(table, float(before), float(after), time.perf_counter() - t_start, sigma[0], improved,
-                           best["step"])
+                           best["step"], (float(judged_before), float(best["db"])) if options.holdout else None)
 
 
 def _photo_blur(op, image: np.ndarray, photo_rows: np.ndarray, clipped: np.ndarray, level: float) -> float:

@@ -112,6 +112,15 @@ def test_the_fit_recovers_a_photo_the_decoder_can_make(small, made_photo):
     assert np.all(np.isfinite(res.table.values)) and res.table.values.min() >= 0
 
 
+def test_the_held_out_half_judges_the_fit(small, made_photo):
+    path, image = small
+    options = LatentFitOptions(**{**FAST, "steps": 60, "refresh_every": 20, "holdout": True})
+    res = fit_latent(SphereCrop(image, True), made_photo, InputLighting(), path, BANDS, options)
+    assert res.improved and res.held_out_db is not None
+    assert res.held_out_db[1] > res.held_out_db[0] + 6.0, res.summary()
+    assert "held-out half" in res.summary()
+
+
 def test_the_same_seed_gives_the_same_table(small, made_photo):
     path, image = small
     runs = [fit_latent(SphereCrop(image, True), made_photo, None, path, BANDS, LatentFitOptions(**FAST))
@@ -165,7 +174,7 @@ def test_cancel_stops_the_fit(small):
 @pytest.mark.parametrize("bad", [dict(steps=0), dict(steps=2.5), dict(lr=0.0), dict(lr=float("nan")),
                                  dict(batch_pixels=4), dict(env_samples=0), dict(refresh_every=True),
                                  dict(eps_fraction=2.0), dict(fit_wavelengths_nm=(500.0,)),
-                                 dict(fit_wavelengths_nm=(600.0, 500.0)), dict(seed=-1)])
+                                 dict(fit_wavelengths_nm=(600.0, 500.0)), dict(seed=-1), dict(holdout="yes")])
 def test_bad_settings_are_refused(bad):
     with pytest.raises(SpecGenError, match="latent fit"):
         LatentFitOptions(**bad)
