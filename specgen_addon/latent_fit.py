@@ -137,9 +137,7 @@ class OperatorSamples:
         self.radiance = np.concatenate(rad)[order]                        # (S, Λr)
         is_env = np.concatenate(env)[order]
         self.start = np.searchsorted(self.pixel, np.arange(op.n_pixels + 1))
-        self.n_env = np.add.reduceat(is_env.astype(np.int64), self.start[:-1]) if pix.size else \
-            np.zeros(op.n_pixels, np.int64)
-        self.n_env[self.start[:-1] == self.start[1:]] = 0               # reduceat's empty runs
+        self.n_env = np.bincount(self.pixel[is_env], minlength=op.n_pixels).astype(np.int64)
         self.env_start = self.start[1:] - self.n_env
 
     def draw(self, env_samples: int, rng: np.random.Generator) -> tuple[np.ndarray, np.ndarray, np.ndarray]:

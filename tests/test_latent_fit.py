@@ -203,3 +203,20 @@ def test_the_cli_refuses_the_fit_with_onnx_in_one_sentence(tmp_path):
     assert res.returncode != 0 and not out.exists()
     assert "torch backend" in res.stderr and "Traceback" not in res.stderr
     assert len(res.stderr.strip().splitlines()) == 1
+
+
+def test_the_draw_takes_every_light_sample_and_map_samples_of_the_same_pixel():
+    lighting = InputLighting()
+    op = PhotoOperator(lighting.scene(SIZE), BANDS, lighting.image_exposure)
+    samples = OperatorSamples(op)
+    light_total = sum(g.pixel.size for g in op.groups if g.radiance_basis.shape[0] == 1)
+    idx, pixel, weight = samples.draw(4, np.random.default_rng(0))
+    assert np.array_equal(samples.pixel[idx], pixel)                 # each sample belongs to its pixel
+    light_idx = idx[:light_total]                                     # the draw lists the lights first
+    assert np.unique(light_idx).size == light_total and np.all(weight[:light_total] == 1.0)
+    lights = np.concatenate([np.arange(samples.start[p], samples.env_start[p]) for p in range(op.n_pixels)])
+    assert np.array_equal(np.sort(light_idx), lights)               # every light sample, once
+    env = idx[light_total:]
+    assert np.all(env >= samples.env_start[pixel[light_total:]])     # drawn from the pixel's map run
+    np.testing.assert_allclose(np.bincount(pixel[light_total:], weight[light_total:], op.n_pixels),
+                               samples.n_env)                        # they stand for all of them
