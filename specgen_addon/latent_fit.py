@@ -56,6 +56,7 @@ from typing import Callable
 import numpy as np
 
 from .errors import Cancelled, SpecGenError
+from .spectra import interpolation_matrix
 from .table import N_PHI_D, N_THETA_D, N_THETA_H, BRDFTable
 
 ProgressFn = Callable[[float], None]
@@ -116,6 +117,11 @@ class LatentFitResult:
                 f"in {self.seconds:.1f} s{kept}")
 
 
+def _runs(starts: np.ndarray, counts: np.ndarray) -> np.ndarray:
+    """Indices ``starts[0] … starts[0]+counts[0]−1, starts[1] …`` of consecutive runs, concatenated."""
+    return np.repeat(starts - np.cumsum(np.r_[0, counts[:-1]]), counts) + np.arange(counts.sum())
+
+
 class OperatorSamples:
     """Every sample of a :class:`~specgen_addon.refine.operator.PhotoOperator`, sorted by pixel:
     its lookup's lower grid corner and offsets, and its radiance on the integration grid."""
@@ -145,7 +151,7 @@ class OperatorSamples:
         (sample index, pixel, weight = the pixel's environment samples / ``env_samples``)."""
         P = self.op.n_pixels
         n_light = self.env_start - self.start[:-1]
-        idx_l = np.repeat(self.start[:-1] - np.cumsum(np.r_[0, n_light[:-1]]), n_light) + np.arange(n_light.sum())
+        idx_l = _runs(self.start[:-1], n_light)
         pix_l = np.repeat(np.arange(P), n_light)
         has = self.n_env > 0
         u = rng.random((P, env_samples))
@@ -178,10 +184,8 @@ class CheapRender:
         self.lambert = op.lambert.astype(np.float32)                         # (P, Λr)
         self.to_rgb = (op.exposure * op.to_rgb).astype(np.float32)           # (3, Λr)
         self.floor_interp = op.interp.astype(np.float32)                     # (Λ table, Λr)
-        wl = np.asarray(fit_wavelengths_nm, dtype=np.float64)
-        eye = np.eye(wl.size)
-        self.fit_interp = np.stack([np.interp(op.render_wavelengths_nm, wl, eye[c])
-                                    for c in range(wl.size)]).astype(np.float32)   # (Λfit, Λr)
+        self.fit_interp = interpolation_matrix(fit_wavelengths_nm,
+                                               op.render_wavelengths_nm).astype(np.float32)   # (Λfit, Λr)
 
     def rows(self, model, tables, pixels: np.ndarray, floor: np.ndarray):
         """Linear sRGB rows ``(len(pixels), 3)`` of the network's ``tables`` (at the fit's bands)
@@ -191,7 +195,7 @@ class CheapRender:
         torch = self.torch
         lo, hi = self.start[pixels], self.start[pixels + 1]
         counts = hi - lo
-        sel = np.repeat(lo - np.cumsum(np.r_[0, counts[:-1]]), counts) + np.arange(counts.sum())
+        sel = _runs(lo, counts)
         local = torch.from_numpy(np.repeat(np.arange(pixels.size), counts))
         uniq, inv = np.unique(self.node[sel], return_inverse=True)
         i = torch.from_numpy(uniq // (N_THETA_D * N_PHI_D))
@@ -212,16 +216,15 @@ def decode_table(backend, z, colour, wavelengths_nm: np.ndarray, cancel: CancelF
     """The full table ``f_r`` (90, 90, 180, Λ) of a latent and colour, as :func:`generate_brdf`
     decodes the encoder's (the torch backend's fast grid path)."""
     from .infer import evaluate_grid
+    from .model.fast import lambda_coords
 
     torch = backend.torch
-    cfg = backend.cfg
     wl = np.asarray(wavelengths_nm, dtype=np.float64)
-    u = torch.from_numpy((2.0 * (wl - cfg.lambda_min_nm) / (cfg.lambda_max_nm - cfg.lambda_min_nm) - 1.0)
-                         .astype(np.float32))
+    u = lambda_coords(backend.model, wl)
     with torch.no_grad():
         tables = tuple(t.contiguous() for t in
                        backend.tables.tables_of(backend.model.generator(z, colour), u))
-    return evaluate_grid(backend, tables, wl.size, cancel=cancel, decode_mu=cfg.mu)
+    return evaluate_grid(backend, tables, wl.size, cancel=cancel, decode_mu=backend.cfg.mu)
 
 
 def fit_latent(image, photo: np.ndarray, lighting=None, weights=None, wavelengths_nm=None,
@@ -254,6 +257,7 @@ def fit_latent(image, photo: np.ndarray, lighting=None, weights=None, wavelength
 
     from .infer import get_backend, resample_square, sphere_crop
     from .input_lighting import InputLighting
+    from .model.fast import lambda_coords
     from .refine import diffuse_floor_of, render_under
     from .refine.blur import blur_image, rows_inside
     from .refine.holdout import block_folds
@@ -311,8 +315,7 @@ def fit_latent(image, photo: np.ndarray, lighting=None, weights=None, wavelength
         z = z0.clone().requires_grad_(True)
         colour = c0.clone().requires_grad_(True)
         opt = torch.optim.Adam([z, colour], lr=options.lr)
-        u_fit = torch.from_numpy((2.0 * (fit_wl - be.cfg.lambda_min_nm)
-                                  / (be.cfg.lambda_max_nm - be.cfg.lambda_min_nm) - 1.0).astype(np.float32))
+        u_fit = lambda_coords(model, fit_wl)
         rng = np.random.default_rng([options.seed, 2])
         n_refresh = -(-options.steps // options.refresh_every) + 1     # and the last step's
         decode_share = 0.6 / n_refresh            # progress: decodes 60 %, steps 40 %

@@ -50,6 +50,14 @@ def wavelength_grid(start_nm: float = DEFAULT_RANGE_NM[0], end_nm: float = DEFAU
 DEFAULT_WAVELENGTHS_NM = wavelength_grid()
 
 
+def interpolation_matrix(from_nm: np.ndarray, to_nm: np.ndarray) -> np.ndarray:
+    """(len(from_nm), len(to_nm)) matrix ``M`` with ``values @ M`` = spectra sampled at ``from_nm``
+    interpolated linearly in λ onto ``to_nm`` (held constant beyond the ends, as ``np.interp``)."""
+    src = np.asarray(from_nm, dtype=np.float64)
+    eye = np.eye(src.size)
+    return np.stack([np.interp(np.asarray(to_nm, dtype=np.float64), src, eye[c]) for c in range(src.size)])
+
+
 def band_widths(wavelengths_nm: np.ndarray) -> np.ndarray:
     """Trapezoid-free band widths Δλ (nm) of a sorted grid: half the distance to each neighbour."""
     w = np.asarray(wavelengths_nm, dtype=np.float64)

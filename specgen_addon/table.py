@@ -17,6 +17,7 @@ from typing import Callable, Sequence
 
 import numpy as np
 
+from . import spectra
 from .errors import BRDFFormatError, Cancelled, SpecGenError
 from .io_utils import atomic_write
 from .rusinkiewicz import fold_phi_d, half_diff_from_io
@@ -179,8 +180,7 @@ class BRDFTable:
         if np.any(w < lo - 1e-6) or np.any(w > hi + 1e-6):
             raise SpecGenError(f"wavelengths {w.min():g}–{w.max():g} nm fall outside the table's "
                                f"{lo:g}–{hi:g} nm")
-        eye = np.eye(self.n_channels)
-        return np.stack([np.interp(w, self.wavelengths, eye[c]) for c in range(self.n_channels)])
+        return spectra.interpolation_matrix(self.wavelengths, w)
 
     # ------------------------------------------------------------------ construction
     @classmethod

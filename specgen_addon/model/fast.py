@@ -85,23 +85,6 @@ class GridTables(nn.Module):
         return tuple(_resample(planes[n], u[PLANE_AXES[n][0]], u[PLANE_AXES[n][1]]) for n in PLANE_NAMES)
 
 
-def head_at_nodes(model: SpecGen, tables, i: torch.Tensor, j: torch.Tensor, k: torch.Tensor) -> torch.Tensor:
-    """r' ``(U, Λ)`` at U grid nodes (θh index ``i``, θd index ``j``, φd index ``k``) and every band
-    of the AFF tables: :class:`GridHead` for a list of nodes instead of a block (differentiable)."""
-    t1, t2, t3, t4, t5, t6 = tables
-    a1, a2, a3 = t1[i, j], t2[i, k], t3[j, k]                    # (U, C+1)
-    a4, a5, a6 = t4[i], t5[j], t6[k]                             # (U, Λ, C+1)
-    fusion, mapping = model.fusion, model.mapping
-    _, bias = fusion.gap_functionals()
-    s = (a1[:, -1:] + a2[:, -1:] + a3[:, -1:]) + a4[..., -1] + a5[..., -1] + a6[..., -1] + bias
-    w = fusion.weights_from_statistic(s)                         # (U, Λ, 6)
-    h = (mapping.fc1.bias + w[..., 0:1] * a1[:, None, :-1] + w[..., 1:2] * a2[:, None, :-1]
-         + w[..., 2:3] * a3[:, None, :-1] + w[..., 3:4] * a4[..., :-1] + w[..., 4:5] * a5[..., :-1]
-         + w[..., 5:6] * a6[..., :-1])
-    h = torch.relu(mapping.fc2(torch.relu(h)))
-    return mapping.fc3(h)[..., 0]
-
-
 class GridHead(nn.Module):
     """Rows of the six tables -> r' ``(nh, nd, 180, Λ)`` (μ-law space).
 
@@ -118,20 +101,35 @@ class GridHead(nn.Module):
         # Broadcast each table to (nh, nd, np, nl, ch).
         b = (t1[:, :, None, None], t2[:, None, :, None], t3[None, :, :, None],
              t4[:, None, None, :], t5[None, :, None, :], t6[None, None, :, :])
-        mapping = self.model.mapping
         if not self.aff:
             f = b[0] * b[1] * b[2] * b[3] * b[4] * b[5]
-            return mapping(f)
-        _, bias = self.model.fusion.gap_functionals()
-        s = (b[0][..., -1] + b[1][..., -1] + b[2][..., -1] + b[3][..., -1] + b[4][..., -1]
-             + b[5][..., -1] + bias)
-        w = self.model.fusion.weights_from_statistic(s)         # (nh, nd, np, nl, 6)
-        h = mapping.fc1.bias + w[..., 0:1] * b[0][..., :-1]
-        for k in range(1, 6):
-            h = h + w[..., k:k + 1] * b[k][..., :-1]
-        h = torch.relu(h)
-        h = torch.relu(mapping.fc2(h))
-        return mapping.fc3(h)[..., 0]
+            return self.model.mapping(f)
+        return aff_head(self.model, b)                           # (nh, nd, np, nl)
+
+
+def aff_head(model: SpecGen, rows) -> torch.Tensor:
+    """r' from the six AFF table rows ``[W1·f_k, m_k·f_k]`` (``(…, C+1)`` each, broadcastable):
+    the statistic ``s = Σ_k m_k·f_k + b``, the branch weights, ``h1 = b1 + Σ_k w_k W1·f_k``, and
+    layers 2–3 (the per-point remainder of :class:`GridHead`)."""
+    mapping = model.mapping
+    _, bias = model.fusion.gap_functionals()
+    s = rows[0][..., -1] + rows[1][..., -1] + rows[2][..., -1] + rows[3][..., -1] + rows[4][..., -1] \
+        + rows[5][..., -1] + bias
+    w = model.fusion.weights_from_statistic(s)                   # (…, 6)
+    h = mapping.fc1.bias + w[..., 0:1] * rows[0][..., :-1]
+    for k in range(1, 6):
+        h = h + w[..., k:k + 1] * rows[k][..., :-1]
+    h = torch.relu(h)
+    h = torch.relu(mapping.fc2(h))
+    return mapping.fc3(h)[..., 0]
+
+
+def head_at_nodes(model: SpecGen, tables, i: torch.Tensor, j: torch.Tensor, k: torch.Tensor) -> torch.Tensor:
+    """r' ``(U, Λ)`` at U grid nodes (θh index ``i``, θd index ``j``, φd index ``k``) and every band
+    of the AFF tables: :class:`GridHead` for a list of nodes instead of a block (differentiable)."""
+    t1, t2, t3, t4, t5, t6 = tables
+    return aff_head(model, (t1[i, j][:, None], t2[i, k][:, None], t3[j, k][:, None],   # (U, 1, C+1)
+                            t4[i], t5[j], t6[k]))                                      # (U, Λ, C+1)
 
 
 class GridHeadChannelsFirst(GridHead):

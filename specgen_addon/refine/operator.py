@@ -111,8 +111,7 @@ class PhotoOperator:
         #: (Λr,) wavelengths (nm) light and camera are integrated on; ``interp`` (Λ, Λr) maps table
         #: spectra onto them (linear in λ, as :meth:`BRDFTable.eval` interpolates)
         self.render_wavelengths_nm = wl
-        eye = np.eye(self.wavelengths_nm.size)
-        self.interp = np.stack([np.interp(wl, self.wavelengths_nm, eye[c]) for c in range(eye.shape[0])])
+        self.interp = spectra.interpolation_matrix(self.wavelengths_nm, wl)
         self.exposure = float(exposure)
         self.shape = scene.geometry.shape
         blocks = scene._prepare()
