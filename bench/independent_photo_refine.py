@@ -37,15 +37,14 @@ def main(argv: list[str] | None = None) -> int:
             or (a.operator_scale is not None and not 0.25 <= a.operator_scale <= 8):
         ap.error("--per-family ≥ 1, seeds ≥ 0 and scales in [0.25, 8]")
 
-    from off_grid_refine import independent_photo
-    from specgen_addon import input_image, metrics
-    from specgen_addon.evaluation.protocol import DISTANT_LIGHTS, WAVELENGTHS_NM
+    from off_grid_refine import independent_photo, truth_scorer
+    from specgen_addon import input_image
+    from specgen_addon.evaluation.protocol import WAVELENGTHS_NM
     from specgen_addon.infer import generate_brdf
     from specgen_addon.refine import RefineOptions, refine_brdf
-    from specgen_addon.render import EnvSampling, render_spectral, sphere_geometry
+    from specgen_addon.render import EnvSampling
     from specgen_addon.train.evaluate import mixed_test_materials
 
-    geo = sphere_geometry(64)
     photo_sampling = replace(EnvSampling().scaled(a.photo_scale), seed=a.photo_seed)
     arms = [("refined", None)]
     if a.operator_scale is not None:
@@ -53,11 +52,7 @@ def main(argv: list[str] | None = None) -> int:
     shipped_sampling = input_image.input_sampling
     scores: dict[str, list[float]] = {}
     for mat in mixed_test_materials(a.per_family):
-        gt = render_spectral(mat, geo, wavelengths_nm=WAVELENGTHS_NM, lights=DISTANT_LIGHTS).spectral
-
-        def score(table) -> float:
-            pred = render_spectral(table, geo, wavelengths_nm=WAVELENGTHS_NM, lights=DISTANT_LIGHTS).spectral
-            return float(metrics.spectral_metrics(gt, pred, geo.mask).psnr_mean)
+        score = truth_scorer(mat, 64)
 
         photo = independent_photo(mat, photo_sampling).astype(np.float64)
         table = generate_brdf(photo, wavelengths_nm=WAVELENGTHS_NM)

@@ -12,7 +12,9 @@ table is then scored against the truth under the protocol's distant lights (spec
 * ``fit``: the network's latent fitted to the photo (:func:`specgen_addon.latent_fit.fit_latent`);
 * ``fit+ref``: the shipped refinement of the fitted table;
 * with ``--also-holdout``, ``fit ho`` and ``fit ho+ref``: the same with
-  ``LatentFitOptions(holdout=True)`` (fitted to one half of the sphere's blocks, judged by the other).
+  ``LatentFitOptions(holdout=True)`` (fitted to one half of the sphere's blocks, judged by the other);
+* with ``--also-keep-peak``, ``fit kp`` and ``fit kp+ref``: the same with
+  ``LatentFitOptions(keep_peak=True)`` (θh finer than the photo's pixel left to the network).
 
 Settings are chosen on ``--split val``; figures are reported on ``test``.
 
@@ -31,7 +33,7 @@ import numpy as np
 sys.path.insert(0, str(Path(__file__).resolve().parents[1]))
 
 PHOTOS = ("independent", "shifted")
-COLUMNS = ("network", "refined", "fit", "fit+ref", "fit ho", "fit ho+ref")
+COLUMNS = ("network", "refined", "fit", "fit+ref", "fit ho", "fit ho+ref", "fit kp", "fit kp+ref")
 
 
 def main(argv: list[str] | None = None) -> int:
@@ -43,30 +45,24 @@ def main(argv: list[str] | None = None) -> int:
     ap.add_argument("--resolution", type=int, default=128, help="truth render size in pixels (default 128)")
     ap.add_argument("--no-refine", action="store_true", help="score the network and the fit only")
     ap.add_argument("--also-holdout", action="store_true", help="also the fit with holdout=True")
+    ap.add_argument("--also-keep-peak", action="store_true", help="also the fit with keep_peak=True")
     ap.add_argument("--json", type=Path, default=None, help="write the rows as JSON")
     a = ap.parse_args(argv)
     if not 1 <= a.per_family <= 20 or a.skip < 0 or not 16 <= a.resolution <= 1024:
         ap.error("--per-family must be in 1..20, --skip ≥ 0 and --resolution in 16..1024")
 
-    from off_grid_refine import independent_photo
-    from specgen_addon import metrics
+    from off_grid_refine import independent_photo, truth_scorer
     from specgen_addon.corpus.generate import material_family
-    from specgen_addon.evaluation.protocol import DISTANT_LIGHTS, WAVELENGTHS_NM
+    from specgen_addon.evaluation.protocol import WAVELENGTHS_NM
     from specgen_addon.infer import generate_brdf, sphere_crop
     from specgen_addon.latent_fit import LatentFitOptions, fit_latent
     from specgen_addon.refine import RefineOptions, refine_brdf
-    from specgen_addon.render import render_spectral, sphere_geometry
     from specgen_addon.train.evaluate import displaced_input, mixed_split_materials
 
-    geo = sphere_geometry(a.resolution)
     wl = np.asarray(WAVELENGTHS_NM, np.float64)
     rows = []
     for mat in mixed_split_materials(a.per_family, None, a.split, skip=a.skip):
-        gt = render_spectral(mat, geo, wavelengths_nm=WAVELENGTHS_NM, lights=DISTANT_LIGHTS).spectral
-
-        def score(table) -> float:
-            pred = render_spectral(table, geo, wavelengths_nm=WAVELENGTHS_NM, lights=DISTANT_LIGHTS).spectral
-            return float(metrics.spectral_metrics(gt, pred, geo.mask).psnr_mean)
+        score = truth_scorer(mat, a.resolution)
 
         independent = independent_photo(mat)
         for kind in a.photos:
@@ -78,7 +74,8 @@ def main(argv: list[str] | None = None) -> int:
             if not a.no_refine:
                 row["refined"] = score(refine_brdf(network, photo, None, RefineOptions(clip_level=None)).table)
             for label, options in [("fit", LatentFitOptions())] + (
-                    [("fit ho", LatentFitOptions(holdout=True))] if a.also_holdout else []):
+                    [("fit ho", LatentFitOptions(holdout=True))] if a.also_holdout else []) + (
+                    [("fit kp", LatentFitOptions(keep_peak=True))] if a.also_keep_peak else []):
                 fit = fit_latent(crop, photo, None, None, wl, options, network_table=network)
                 row.update({label: score(fit.table), f"{label}_self_db": [fit.before_db, fit.after_db],
                             f"{label}_held_out_db": fit.held_out_db, f"{label}_improved": fit.improved,

@@ -101,5 +101,23 @@ def independent_photo(material, sampling=None) -> np.ndarray:
     return input_image.photo_in_scene(material, scene, input_image.EXPOSURE)
 
 
+def truth_scorer(material, resolution: int = 64):
+    """The protocol's score of a predicted table against ``material``: spectral PSNR (dB, mean
+    over the 20 bands) over a ``resolution``² sphere under the distant lights, the truth rendered
+    once. Returns ``score(table) -> float``."""
+    from specgen_addon import metrics
+    from specgen_addon.evaluation.protocol import DISTANT_LIGHTS, WAVELENGTHS_NM
+    from specgen_addon.render import render_spectral, sphere_geometry
+
+    geo = sphere_geometry(resolution)
+    gt = render_spectral(material, geo, wavelengths_nm=WAVELENGTHS_NM, lights=DISTANT_LIGHTS).spectral
+
+    def score(table) -> float:
+        pred = render_spectral(table, geo, wavelengths_nm=WAVELENGTHS_NM, lights=DISTANT_LIGHTS).spectral
+        return float(metrics.spectral_metrics(gt, pred, geo.mask).psnr_mean)
+
+    return score
+
+
 if __name__ == "__main__":
     raise SystemExit(main())

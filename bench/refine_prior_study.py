@@ -79,24 +79,18 @@ def main(argv: list[str] | None = None) -> int:
     if not 1 <= a.per_family <= 20 or a.skip < 0:
         ap.error("--per-family must be in 1..20 and --skip ≥ 0")
 
-    from off_grid_refine import independent_photo
-    from specgen_addon import input_image, metrics
+    from off_grid_refine import independent_photo, truth_scorer
+    from specgen_addon import input_image
     from specgen_addon.corpus.generate import material_family
-    from specgen_addon.evaluation.protocol import DISTANT_LIGHTS, WAVELENGTHS_NM
+    from specgen_addon.evaluation.protocol import WAVELENGTHS_NM
     from specgen_addon.pipeline import generate, load_photo_crop
     from specgen_addon.refine import CLIP_LEVEL, CorrectionBasis, RefineOptions, refine_brdf
-    from specgen_addon.render import render_spectral, sphere_geometry
     from specgen_addon.train.evaluate import displaced_input, mixed_split_materials
 
-    geo = sphere_geometry(a.resolution)
     rows = []
     for mat in mixed_split_materials(a.per_family, None, a.split, skip=a.skip):
         fam = material_family(mat)
-        gt = render_spectral(mat, geo, wavelengths_nm=WAVELENGTHS_NM, lights=DISTANT_LIGHTS).spectral
-
-        def score(table) -> float:
-            pred = render_spectral(table, geo, wavelengths_nm=WAVELENGTHS_NM, lights=DISTANT_LIGHTS).spectral
-            return float(metrics.spectral_metrics(gt, pred, geo.mask).psnr_mean)
+        score = truth_scorer(mat, a.resolution)
 
         canonical = input_image.render_input(mat)
         independent = independent_photo(mat)

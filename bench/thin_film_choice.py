@@ -34,14 +34,13 @@ def main(argv: list[str] | None = None) -> int:
     if a.per_family < 1:
         ap.error("--per-family must be ≥ 1")
 
-    from off_grid_refine import independent_photo
-    from specgen_addon import input_image, metrics
-    from specgen_addon.evaluation.protocol import DISTANT_LIGHTS, WAVELENGTHS_NM
+    from off_grid_refine import independent_photo, truth_scorer
+    from specgen_addon import input_image
+    from specgen_addon.evaluation.protocol import WAVELENGTHS_NM
     from specgen_addon.pipeline import generate
-    from specgen_addon.render import EnvSampling, render_spectral, sphere_geometry
+    from specgen_addon.render import EnvSampling
     from specgen_addon.train.evaluate import mixed_test_materials
 
-    geo = sphere_geometry(64)
     sampling = replace(EnvSampling().scaled(2.0), seed=1)
     right = 0
     rows = mixed_test_materials(a.per_family)
@@ -50,11 +49,7 @@ def main(argv: list[str] | None = None) -> int:
         t0 = time.perf_counter()
         photo = (input_image.render_input(mat) if a.photo == "canonical"
                  else independent_photo(mat, sampling)).astype(np.float64)
-        gt = render_spectral(mat, geo, wavelengths_nm=WAVELENGTHS_NM, lights=DISTANT_LIGHTS).spectral
-
-        def score(table) -> float:
-            pred = render_spectral(table, geo, wavelengths_nm=WAVELENGTHS_NM, lights=DISTANT_LIGHTS).spectral
-            return float(metrics.spectral_metrics(gt, pred, geo.mask).psnr_mean)
+        score = truth_scorer(mat, 64)
 
         net = generate(photo, wavelengths_nm=WAVELENGTHS_NM)
         film = generate(photo, wavelengths_nm=WAVELENGTHS_NM, model="thin-film")

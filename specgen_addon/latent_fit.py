@@ -38,6 +38,12 @@ A resampled sphere (every camera photo) is blurred by the crop; as in the refine
 candidate that makes the network's own render reproduce the photo best (σ = 0 for a sphere copied
 pixel for pixel), and pixels whose blurred neighbourhood leaves the sphere are not fitted.
 
+With ``keep_peak`` the specular peak finer than the photo's pixel is left to the network: the θh
+nodes below :func:`unresolved_theta_h_nodes` (the angle the normal turns across one pixel at the
+sphere's centre) keep the encoder's values in every render and in the returned table, so the fit
+moves only what the photo resolves. Without it the fit can reshape a sub-pixel peak to suit a
+pixel's integral (docs/refinement.md, "Thirty-ninth session").
+
 The loss is the squared difference of ``log(ε + rgb)``, ε a fraction of the photo's level
 (:func:`specgen_addon.refine.report.photo_scale`), so the body and the highlight both count;
 pixels clipped in an 8/16-bit photo are left out. ``z`` is kept ≥ 0 (the encoder's last ReLU).
@@ -57,7 +63,7 @@ import numpy as np
 
 from .errors import Cancelled, SpecGenError
 from .spectra import interpolation_matrix
-from .table import N_PHI_D, N_THETA_D, N_THETA_H, BRDFTable
+from .table import N_PHI_D, N_THETA_D, N_THETA_H, BRDFTable, theta_h_index
 
 ProgressFn = Callable[[float], None]
 CancelFn = Callable[[], bool]
@@ -76,6 +82,7 @@ class LatentFitOptions:
     eps_fraction: float = 0.05         # ε of the log loss, a fraction of the photo's level
     seed: int = 0                      # the pixel batches and the environment draw
     holdout: bool = False              # fit one half of the sphere's 8-px blocks, choose by the other
+    keep_peak: bool = False            # θh nodes finer than the photo's pixel stay the network's
 
     def __post_init__(self) -> None:
         ints = {"steps": (1, 10_000), "batch_pixels": (16, 1_000_000), "env_samples": (1, 1024),
@@ -84,8 +91,9 @@ class LatentFitOptions:
             v = getattr(self, name)
             if isinstance(v, bool) or not isinstance(v, (int, np.integer)) or not lo <= v <= hi:
                 raise SpecGenError(f"latent fit: {name} must be an integer in [{lo}, {hi}], got {v!r}")
-        if not isinstance(self.holdout, bool):
-            raise SpecGenError(f"latent fit: holdout must be true or false, got {self.holdout!r}")
+        for name in ("holdout", "keep_peak"):
+            if not isinstance(getattr(self, name), bool):
+                raise SpecGenError(f"latent fit: {name} must be true or false, got {getattr(self, name)!r}")
         for name in ("lr", "eps_fraction"):
             v = getattr(self, name)
             if not (isinstance(v, (int, float)) and np.isfinite(v) and 0 < v <= 1):
@@ -115,6 +123,14 @@ class LatentFitResult:
                 else f" (held-out half {self.held_out_db[0]:.2f} → {self.held_out_db[1]:.2f} dB)")
         return (f"latent fit: self-reproduction {self.before_db:.2f} → {self.after_db:.2f} dB{held}{blur} "
                 f"in {self.seconds:.1f} s{kept}")
+
+
+def unresolved_theta_h_nodes(photo_size_px: int) -> int:
+    """How many θh grid nodes lie below the photo's angular resolution: θh < 1/R rad, R = the
+    sphere's radius in pixels (``photo_size_px`` / 2), the turn of the normal across one pixel at
+    the sphere's centre. (For a 128-pixel crop: θh < 0.90°, nodes 0–8.)"""
+    theta_res = 2.0 / float(photo_size_px)
+    return int(np.ceil(theta_h_index(np.asarray(theta_res))))
 
 
 def _runs(starts: np.ndarray, counts: np.ndarray) -> np.ndarray:
@@ -187,9 +203,11 @@ class CheapRender:
         self.fit_interp = interpolation_matrix(fit_wavelengths_nm,
                                                op.render_wavelengths_nm).astype(np.float32)   # (Λfit, Λr)
 
-    def rows(self, model, tables, pixels: np.ndarray, floor: np.ndarray):
+    def rows(self, model, tables, pixels: np.ndarray, floor: np.ndarray, kept=None):
         """Linear sRGB rows ``(len(pixels), 3)`` of the network's ``tables`` (at the fit's bands)
-        under the operator; ``floor`` (Λ table,) is the control variate the exact render uses."""
+        under the operator; ``floor`` (Λ table,) is the control variate the exact render uses.
+        ``kept = (n, tables0)``: the θh nodes below ``n`` take their values from ``tables0``,
+        without gradient (``keep_peak``)."""
         from .model.fast import head_at_nodes
 
         torch = self.torch
@@ -203,6 +221,13 @@ class CheapRender:
         k = torch.from_numpy(uniq % N_PHI_D)
         mu = model.cfg.mu
         r = head_at_nodes(model, tables, i, j, k)                                  # (U, Λfit) μ-law
+        if kept is not None and kept[0] > 0:
+            low = i < kept[0]
+            if bool(low.any()):
+                with torch.no_grad():
+                    r0 = head_at_nodes(model, kept[1], i[low], j[low], k[low])
+                r = r.clone()
+                r[low] = r0
         f = torch.expm1(torch.clamp(r, min=0) * float(np.log1p(mu))) / mu          # sr⁻¹
         f = f[torch.from_numpy(inv.ravel())] @ torch.from_numpy(self.fit_interp)   # (n, Λr)
         floor_r = torch.from_numpy(np.asarray(floor, np.float32) @ self.floor_interp)
@@ -322,12 +347,24 @@ def fit_latent(image, photo: np.ndarray, lighting=None, weights=None, wavelength
         done = [0.0]
 
         sigma = [None]
+        n_kept = unresolved_theta_h_nodes(photo.shape[0]) if options.keep_peak else 0
+        kept = None
+        if n_kept:
+            with torch.no_grad():
+                kept = (n_kept, tuple(t.detach() for t in be.tables.tables_of(model.generator(z0, c0), u_fit)))
+        network_values = [None]
 
         def exact(zz, cc, table: BRDFTable | None = None) -> tuple[np.ndarray, np.ndarray, BRDFTable]:
             """Decoded table, its control-variate floor and its exact photo rows at (zz, cc),
-            blurred as the photo is (σ chosen on the first call)."""
+            blurred as the photo is (σ chosen on the first call); with ``keep_peak`` the θh nodes
+            below the photo's resolution are the network's (the first call's table)."""
             if table is None:
-                table = BRDFTable(decode_table(be, zz, cc, wl, cancel=cancel), wl)
+                values = decode_table(be, zz, cc, wl, cancel=cancel)
+                if n_kept and network_values[0] is not None:
+                    values[:n_kept] = network_values[0][:n_kept]
+                table = BRDFTable(values, wl)
+            if network_values[0] is None:
+                network_values[0] = table.values
             torch.set_num_threads(threads)
             image_ = render_under(table, scene, exposure)
             if sigma[0] is None:
@@ -341,7 +378,7 @@ def fit_latent(image, photo: np.ndarray, lighting=None, weights=None, wavelength
             with torch.no_grad():
                 tables = be.tables.tables_of(model.generator(zz, cc), u_fit)
                 return np.concatenate([cheap.rows(model, tables, np.arange(s, min(s + 2048, op.n_pixels)),
-                                                  floor).numpy() for s in range(0, op.n_pixels, 2048)])
+                                                  floor, kept).numpy() for s in range(0, op.n_pixels, 2048)])
 
         seen = usable = best = None
         lr = options.lr
@@ -386,7 +423,7 @@ def fit_latent(image, photo: np.ndarray, lighting=None, weights=None, wavelength
             pixels = np.sort(rng.choice(usable, size=min(options.batch_pixels, usable.size), replace=False))
             torch.set_num_threads(1)     # the gathers' gradients sum in a fixed order: bit-repeatable
             tables = be.tables.tables_of(model.generator(z, colour), u_fit)
-            rgb = cheap.rows(model, tables, pixels, floor) + defect[pixels]
+            rgb = cheap.rows(model, tables, pixels, floor, kept) + defect[pixels]
             loss = ((torch.log(eps + torch.clamp(rgb, min=0.0)) - torch.log(eps + target[pixels])) ** 2).mean()
             opt.zero_grad()
             loss.backward()
@@ -403,7 +440,8 @@ def fit_latent(image, photo: np.ndarray, lighting=None, weights=None, wavelength
                       "description": "SpecGen prediction, latent fitted to the photo" if improved
                       else "SpecGen prediction (the latent fit did not reproduce the photo better)",
                       "latent_fit": f"best at step {best['step']} of {options.steps}, self-reproduction "
-                                    f"{before:.2f} -> {after:.2f} dB" + ("" if improved else ", network's table kept")}
+                                    f"{before:.2f} -> {after:.2f} dB" + ("" if improved else ", network's table kept")
+                                    + (f", θh nodes below {n_kept} the network's" if n_kept else "")}
     report(1.0)
     return LatentFitResult(table, float(before), float(after), time.perf_counter() - t_start, sigma[0], improved,
                            best["step"], (float(judged_before), float(best["db"])) if options.holdout else None)

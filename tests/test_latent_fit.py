@@ -12,14 +12,14 @@ from specgen_addon.errors import Cancelled, SpecGenError
 from specgen_addon.input_image import SphereCrop
 from specgen_addon.input_lighting import InputLighting
 from specgen_addon.latent_fit import (CheapRender, LatentFitOptions, OperatorSamples, decode_table,
-                                      fit_latent)
+                                      fit_latent, unresolved_theta_h_nodes)
 from specgen_addon.model import Config, SpecGen, save_weights
 from specgen_addon.model.fast import head_at_nodes, lambda_coords
 from specgen_addon.lookup_reach import phi_d_reach
 from specgen_addon.refine import diffuse_floor_of, render_under
 from specgen_addon.refine.operator import PhotoOperator
 from specgen_addon.refine.report import rgb_psnr
-from specgen_addon.table import BRDFTable
+from specgen_addon.table import BRDFTable, grid_angles
 
 SMALL = dict(image_size=32, encoder_channels=(8, 16), latent_dim=32, decoder_seed_hw=(4, 4),
              decoder_channels=(16, 8), head_channels=8, res_theta_h=8, res_theta_d=8, res_phi_d=12,
@@ -121,6 +121,29 @@ def test_the_held_out_half_judges_the_fit(small, made_photo):
     assert "held-out half" in res.summary()
 
 
+def test_the_unresolved_peak_is_what_one_pixel_of_the_sphere_does_not_resolve():
+    theta_h = grid_angles()[0]
+    for size in (32, 128, 512):
+        n = unresolved_theta_h_nodes(size)
+        resolution = 2.0 / size                        # rad: the normal's turn over one pixel
+        assert theta_h[n - 1] < resolution <= theta_h[n]
+    assert unresolved_theta_h_nodes(128) == 9          # θh < 0.90°
+
+
+def test_keep_peak_fits_the_body_and_returns_the_networks_peak(small, made_photo):
+    path, image = small
+    be = infer.get_backend(path, "torch")
+    z, c = _encoded(be, image)
+    network = decode_table(be, z, c, BANDS)
+    options = LatentFitOptions(**{**FAST, "steps": 60, "refresh_every": 20, "keep_peak": True})
+    res = fit_latent(SphereCrop(image, True), made_photo, InputLighting(), path, BANDS, options)
+    n = unresolved_theta_h_nodes(SIZE)
+    assert res.improved and res.after_db > res.before_db + 3.0, res.summary()
+    assert np.array_equal(res.table.values[:n], network[:n])
+    assert not np.allclose(res.table.values[n:], network[n:], rtol=1e-3)
+    assert f"below {n}" in res.table.metadata["latent_fit"]
+
+
 def test_the_same_seed_gives_the_same_table(small, made_photo):
     path, image = small
     runs = [fit_latent(SphereCrop(image, True), made_photo, None, path, BANDS, LatentFitOptions(**FAST))
@@ -174,7 +197,8 @@ def test_cancel_stops_the_fit(small):
 @pytest.mark.parametrize("bad", [dict(steps=0), dict(steps=2.5), dict(lr=0.0), dict(lr=float("nan")),
                                  dict(batch_pixels=4), dict(env_samples=0), dict(refresh_every=True),
                                  dict(eps_fraction=2.0), dict(fit_wavelengths_nm=(500.0,)),
-                                 dict(fit_wavelengths_nm=(600.0, 500.0)), dict(seed=-1), dict(holdout="yes")])
+                                 dict(fit_wavelengths_nm=(600.0, 500.0)), dict(seed=-1), dict(holdout="yes"),
+                                 dict(keep_peak=1)])
 def test_bad_settings_are_refused(bad):
     with pytest.raises(SpecGenError, match="latent fit"):
         LatentFitOptions(**bad)
