@@ -375,7 +375,7 @@ def generate_brdf(image, weights=None, wavelengths_nm=None, backend: str = "torc
         raise SpecGenError(f"wavelengths {wl[0]:g}–{wl[-1]:g} nm fall outside the model's "
                            f"{cfg.lambda_min_nm:g}–{cfg.lambda_max_nm:g} nm")
     x = resample_square(crop.image, cfg.image_size)[None].astype(np.float32)
-    u_lambda = (2.0 * (wl - cfg.lambda_min_nm) / (cfg.lambda_max_nm - cfg.lambda_min_nm) - 1.0).astype(np.float32)
+    u_lambda = cfg.lambda_coordinates(wl)
     tables = be.make_tables(x, u_lambda)
     values = evaluate_grid(be, tables, wl.size, progress=progress, cancel=cancel, decode_mu=cfg.mu)
     from .limits import bad_values

@@ -11,6 +11,8 @@ import dataclasses
 from dataclasses import dataclass
 from typing import Any
 
+import numpy as np
+
 from ..errors import SpecGenError
 
 FUSIONS = ("aff", "hadamard")
@@ -111,6 +113,12 @@ class Config:
             raise SpecGenError("image_size must be divisible by detail_factor × 2**len(boost_channels)")
         if not (isinstance(self.boost_width, int) and not isinstance(self.boost_width, bool) and self.boost_width >= 1):
             raise SpecGenError(f"boost_width must be a positive integer, got {self.boost_width!r}")
+
+    def lambda_coordinates(self, wavelengths_nm) -> np.ndarray:
+        """The spectral planes' λ coordinate of wavelengths (nm): [lambda_min_nm, lambda_max_nm]
+        → [−1, 1], as ``grid_sample`` reads it (float32; numpy only, so the onnx path needs no torch)."""
+        wl = np.asarray(wavelengths_nm, dtype=np.float64)
+        return (2.0 * (wl - self.lambda_min_nm) / (self.lambda_max_nm - self.lambda_min_nm) - 1.0).astype(np.float32)
 
     @property
     def plane_shapes(self) -> dict[str, tuple[int, int]]:

@@ -34,10 +34,8 @@ def merl_axis_coords() -> dict[str, torch.Tensor]:
 
 
 def lambda_coords(model: SpecGen, wavelengths_nm) -> torch.Tensor:
-    """Normalised λ plane coordinates of wavelengths in nm."""
-    cfg = model.cfg
-    w = torch.as_tensor(wavelengths_nm, dtype=torch.float32)
-    return 2.0 * (w - cfg.lambda_min_nm) / (cfg.lambda_max_nm - cfg.lambda_min_nm) - 1.0
+    """Normalised λ plane coordinates of wavelengths in nm (:meth:`Config.lambda_coordinates`)."""
+    return torch.from_numpy(model.cfg.lambda_coordinates(wavelengths_nm))
 
 
 def _resample(plane: torch.Tensor, u_rows: torch.Tensor, u_cols: torch.Tensor) -> torch.Tensor:
