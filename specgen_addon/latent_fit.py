@@ -42,7 +42,9 @@ With ``keep_peak`` the specular peak finer than the photo's pixel is left to the
 nodes below :func:`unresolved_theta_h_nodes` (the angle the normal turns across one pixel at the
 sphere's centre) keep the encoder's values in every render and in the returned table, so the fit
 moves only what the photo resolves. Without it the fit can reshape a sub-pixel peak to suit a
-pixel's integral (docs/refinement.md, "Thirty-ninth session").
+pixel's integral (docs/refinement.md, "Thirty-ninth session"); with it, a coat whose peak the
+network has wrong cannot be corrected, and on fresh validation photos it lost 0.6 dB against the
+fit without it, so it is off (docs/refinement.md, "Fortieth session").
 
 The loss is the squared difference of ``log(ε + rgb)``, ε a fraction of the photo's level
 (:func:`specgen_addon.refine.report.photo_scale`), so the body and the highlight both count;
