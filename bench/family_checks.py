@@ -81,7 +81,13 @@ def main() -> None:
     p.add_argument("--input-photo", choices=("independent", "canonical"), default="independent",
                    help="the photo every method sees: rendered with other samples than the refinement's "
                         "operator (default), or the canonical input render itself (an inverse crime)")
+    p.add_argument("--films", type=int, default=2, help="held-out thin-film test materials (default 2; 0: none)")
+    p.add_argument("--coats", type=int, default=3, help="held-out tinted-coat test materials (default 3; 0: none)")
     args = p.parse_args()
+    if not (0 <= args.films <= 200 and 0 <= args.coats <= 200) or args.films + args.coats == 0:
+        p.error("--films and --coats must be in 0..200, not both 0")
+    if args.figure and args.films == 0:
+        p.error("--figure draws the thin films: give --films ≥ 1")
     print(f"machine: {describe_machine()}")
     print(f"weights: {args.weights or 'shipped'}; input photo: {args.input_photo}")
     out: dict = {"weights": str(args.weights or "shipped"), "input_photo": args.input_photo}
@@ -103,8 +109,8 @@ def main() -> None:
             out = out + (film,)
         return out
 
-    films = mixed_test_materials(2, ["thin_film"])
-    coats = mixed_test_materials(3, ["tinted_coat"])
+    films = mixed_test_materials(args.films, ["thin_film"]) if args.films else []
+    coats = mixed_test_materials(args.coats, ["tinted_coat"]) if args.coats else []
     curves = []
     # hue angle, unwrapped along θd (a film sweeping through red shows as a continuous curve)
     hue = lambda lab: np.degrees(np.unwrap(np.arctan2(lab[:, 2], lab[:, 1])))  # noqa: E731
@@ -147,6 +153,13 @@ def main() -> None:
             row[f"dE2000_{tag}"] = de
             row[f"dE2000_{tag}_over_theta_h"] = [float(d) for d in near]
         out.setdefault("tinted_coat", []).append(row)
+    if coats:
+        for tag in ("network", "refined"):
+            de = np.array([r[f"dE2000_{tag}"] for r in out["tinted_coat"]])
+            at1 = np.array([r[f"dE2000_{tag}_over_theta_h"][PEAK_THETA_H_DEG.index(1.0)] for r in out["tinted_coat"]])
+            print(f"tinted coats, {tag}: peak ΔE2000 ≤ 3 on {int((de <= 3).sum())} of {de.size} "
+                  f"(median {np.median(de):.1f}, worst {de.max():.1f}); at θh = 1°: ≤ 3 on "
+                  f"{int((at1 <= 3).sum())} of {at1.size} (median {np.median(at1):.1f})")
     if args.json:
         args.json.write_text(json.dumps(out, indent=1))
     if args.figure:
