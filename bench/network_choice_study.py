@@ -39,10 +39,9 @@ def main(argv: list[str] | None = None) -> int:
     if not 1 <= a.per_family <= 20 or a.skip < 0 or not 16 <= a.resolution <= 512:
         ap.error("--per-family must be in 1..20, --skip ≥ 0 and --resolution in 16..512")
 
-    from off_grid_refine import independent_photo
-    from specgen_addon import metrics
+    from off_grid_refine import independent_photo, truth_scorer
     from specgen_addon.corpus.generate import material_family
-    from specgen_addon.evaluation.protocol import DISTANT_LIGHTS, WAVELENGTHS_NM
+    from specgen_addon.evaluation.protocol import WAVELENGTHS_NM
     from specgen_addon.infer import generate_brdf
     from specgen_addon.input_image import SphereCrop
     from specgen_addon.input_lighting import InputLighting
@@ -51,16 +50,14 @@ def main(argv: list[str] | None = None) -> int:
     from specgen_addon.refine import render_under
     from specgen_addon.refine.operator import PhotoOperator
     from specgen_addon.refine.report import reproduction
-    from specgen_addon.render import render_spectral, sphere_geometry
     from specgen_addon.train.evaluate import displaced_input, mixed_split_materials
 
     weights = {"default": DEFAULT_WEIGHTS, "resampled": RESAMPLED_WEIGHTS}
-    geo = sphere_geometry(a.resolution)
     light = InputLighting()
     rows = []
     for mat in mixed_split_materials(a.per_family, None, a.split, skip=a.skip):
         fam = material_family(mat)
-        gt = render_spectral(mat, geo, wavelengths_nm=WAVELENGTHS_NM, lights=DISTANT_LIGHTS).spectral
+        score = truth_scorer(mat, a.resolution)
         independent = independent_photo(mat)
         for kind, image in (("independent", independent), ("shifted", displaced_input(independent, 0.5))):
             crop, linear = load_photo_crop(image)
@@ -73,10 +70,9 @@ def main(argv: list[str] | None = None) -> int:
                 t0 = time.perf_counter()
                 table = generate_brdf(SphereCrop(photo * light.network_gain(), crop.copied),
                                       weights=weights[label], wavelengths_nm=WAVELENGTHS_NM)
-                pred = render_spectral(table, geo, wavelengths_nm=WAVELENGTHS_NM, lights=DISTANT_LIGHTS).spectral
                 img = render_under(table, scene, light.image_exposure)
                 rep = reproduction(observed, op.observe(img if linear else np.minimum(img, 1.0)))
-                row[label] = {"truth_db": float(metrics.spectral_metrics(gt, pred, geo.mask).psnr_mean),
+                row[label] = {"truth_db": score(table),
                               "self_db": rep.psnr_db, "self_de": rep.delta_e2000,
                               "seconds": time.perf_counter() - t0}
             rows.append(row)

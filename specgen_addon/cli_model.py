@@ -48,8 +48,8 @@ def add_parser(sub: argparse._SubParsersAction) -> argparse.ArgumentParser:
     add_refine_arguments(p)
     p.add_argument("--latent-fit", action="store_true",
                    help="before refinement, fit the network's own latent to the photo and decode the "
-                        "table again (torch backend; about 15 s more; off by default: on held-out photos "
-                        "it did not beat refinement alone, docs/refinement.md)")
+                        "table again (torch backend; about 25 s more on two cores; off by default: on "
+                        "held-out photos it did not beat refinement alone, docs/refinement.md)")
     p.add_argument("--overwrite", action="store_true", help="replace existing outputs")
     p.add_argument("--quiet", action="store_true", help="no progress bar")
     p.set_defaults(func=run_infer)
