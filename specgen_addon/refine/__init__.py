@@ -113,6 +113,9 @@ class RefineOptions:
     sees strongly move together (a sharp highlight's); ``"block"`` uses the block's median for all
     (before the thirty-fourth session). ``prior_floor`` adds the same pull to every coefficient, as a fraction of the largest
     data weight: combinations of coefficients the photo barely constrains stay with the network.
+    ``score_holdout``: also report how well the kept setting, fitted to one half of the sphere's
+    pixels, predicts the other (:attr:`RefineResult.holdout_db`, two more solves): a score of the
+    starting table as a prior that, unlike self-reproduction, does not grow with the fit's freedom.
     """
 
     basis: CorrectionBasis = field(default_factory=CorrectionBasis)
@@ -135,6 +138,7 @@ class RefineOptions:
     clip_level: float | None = CLIP_LEVEL
     energy_check: bool = True
     blur_px: float | None = None
+    score_holdout: bool = False
 
     def __post_init__(self) -> None:
         if self.blur_px is not None and not (np.isfinite(self.blur_px) and 0.0 <= self.blur_px <= 4.0):
@@ -184,6 +188,8 @@ class RefineResult:
     relaxed_holdout_db: float | None = None  # held-out pixels: relaxed fit's gain over the smooth one (dB)
     lobe_holdout_db: float | None = None     # held-out pixels: the lobe's correction's gain over the network's lobe (dB)
     lobe_kept: bool = False                  # the network's lobe was kept (brightness and colour fitted)
+    holdout_db: float | None = None          # score_holdout: held-out pixels predicted by the kept setting
+                                             # fitted to the others, as a PSNR (dB, the photo's level)
 
     def summary(self) -> str:
         blur = f" (photo blur σ {self.blur_px:g} px modelled)" if self.blur_px > 0 else ""
@@ -408,6 +414,12 @@ def refine_brdf(table: BRDFTable, photo: np.ndarray, lighting=None, options: Ref
             if relaxed_gain > 0 and relaxed_gain >= options.relax_min_gain_db:
                 theta, refined, after_img, m_after = theta_r, relaxed, relaxed_img, m_relaxed
                 relaxed_kept = True
+        heldout = None
+        if options.score_holdout:   # the kept setting, fitted to one half of the pixels, on the other
+            err = holdout_error(design, photo_rows, block_folds(op.shape, op.pixel_ids[keep]),
+                                fit_rows(relaxed_opts if relaxed_kept else options, lobe_kept))
+            heldout = 10.0 * math.log10(level ** 2 / err) if 0 < err < math.inf else None
+            check_cancel()
         x, u, yb, zl = split(theta)
         if progress is not None:
             progress(0.98)
@@ -434,7 +446,7 @@ def refine_brdf(table: BRDFTable, photo: np.ndarray, lighting=None, options: Ref
         return RefineResult(refined, m_before, m_after, coeffs, time.perf_counter() - t0, clipped_fraction,
                             warnings, after_img, improved, sigma, sampling_floor,
                             float(max(scales)), within_noise, relaxed_gain, relaxed_kept and improved,
-                            relaxed_holdout, lobe_holdout, lobe_kept and improved)
+                            relaxed_holdout, lobe_holdout, lobe_kept and improved, heldout)
 
 
 def _photo_blur(op: PhotoOperator, a_lobe: np.ndarray, a_lamb: np.ndarray, a_body: np.ndarray,
