@@ -15,7 +15,8 @@
 
 With ``model="thin-film"`` steps 2–4 are replaced by the thin-film family's fit to the photo
 (:func:`specgen_addon.fit.thin_film.fit_thin_film`): for interference films (soap, oil, anodised
-metal) whose angle-dependent colour the network's prior does not place.
+metal) whose angle-dependent colour the network's prior does not place. Where the crop resampled the
+sphere, the fit models the photo's blur as the refinement does.
 """
 
 from __future__ import annotations
@@ -105,11 +106,14 @@ def generate(image, lighting=None, refine: bool = True, weights=None, wavelength
     if model == "thin-film":
         from .fit.thin_film import fit_thin_film
         from .refine import CLIP_LEVEL
+        from .refine.blur import BLUR_CANDIDATES_PX
         from .spectra import DEFAULT_WAVELENGTHS_NM
 
         wl = DEFAULT_WAVELENGTHS_NM if wavelengths_nm is None else np.asarray(wavelengths_nm, np.float64)
+        # a resampled crop spreads the highlight: the fit models that blur (docs/thin_film_fit.md)
         fit = fit_thin_film(photo, lighting, clip_level=None if linear else CLIP_LEVEL,
-                            progress=sub(0.0, 0.8), cancel=cancel)
+                            progress=sub(0.0, 0.8), cancel=cancel,
+                            blur_px=(0.0,) if crop.copied else BLUR_CANDIDATES_PX)
         table = fit.table(wl, progress=sub(0.8, 1.0), cancel=cancel)
         table.metadata = {**table.metadata, "input_image": src, "input_lighting": lighting.label}
         return Generated(table, film_fit=fit)

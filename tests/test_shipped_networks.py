@@ -99,3 +99,26 @@ def test_infer_says_which_network_served_a_photo(canonical, tmp_path, capsys):
     out = tmp_path / "t.npz"
     assert cli_main(["infer", str(path), "-o", str(out), "--bands", "2", "--no-refine", "--quiet"]) == 0
     assert f"network: {RESAMPLED_WEIGHTS} (sphere resampled)" in capsys.readouterr().out
+
+
+def test_the_thin_film_fit_models_the_blur_of_a_resampled_sphere_only(canonical, monkeypatch):
+    """``model="thin-film"``: a copied sphere is fitted without a blur model (its pixels are the
+    frame's), a resampled one with the refinement's blur candidates (docs/thin_film_fit.md)."""
+    from specgen_addon import pipeline
+    from specgen_addon.fit import thin_film
+    from specgen_addon.refine.blur import BLUR_CANDIDATES_PX
+
+    seen = []
+
+    class Stop(Exception):
+        pass
+
+    def fake_fit(photo, lighting=None, clip_level=None, progress=None, cancel=None, blur_px=(0.0,)):
+        seen.append(tuple(blur_px))
+        raise Stop
+
+    monkeypatch.setattr(thin_film, "fit_thin_film", fake_fit)
+    for image in (canonical, displaced_input(canonical, 0.5)):
+        with pytest.raises(Stop):
+            pipeline.generate(image, model="thin-film")
+    assert seen == [(0.0,), tuple(BLUR_CANDIDATES_PX)]

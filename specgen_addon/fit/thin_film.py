@@ -32,7 +32,7 @@ from __future__ import annotations
 import functools
 from concurrent.futures import ThreadPoolExecutor
 from dataclasses import dataclass, field
-from typing import Callable
+from typing import Callable, Sequence
 
 import numpy as np
 
@@ -44,6 +44,7 @@ from ..corpus.microfacet import specular_geometry
 from ..errors import Cancelled, SpecGenError
 from ..refine import WARN_PSNR_DB
 from ..refine.basis import CorrectionBasis, hat_matrix
+from ..refine.blur import blur_image, blur_rows, rows_inside
 from ..refine.body import natural_body
 from ..refine.operator import PhotoOperator
 from ..refine.report import Reproduction, reproduction
@@ -84,6 +85,7 @@ class ThinFilmFit:
     reproduction: Reproduction
     alpha_residuals: dict[float, float]
     warnings: list[str] = field(default_factory=list)
+    blur_px: float = 0.0     # the photo's blur the fit modelled (Gaussian σ, pixels of the crop)
 
     def _with_body(self, lobe: np.ndarray, cos_i: np.ndarray, cos_o: np.ndarray, w: np.ndarray) -> np.ndarray:
         """The lobe's values (N, Λ) plus the body ``ρ(λ)/π`` where both directions are above the horizon."""
@@ -107,7 +109,8 @@ class ThinFilmFit:
         """The fitted BRDF on the MERL grid as a spectral table (sr⁻¹)."""
         w = np.asarray(wavelengths_nm, dtype=np.float64)
         meta = {"source": "specgen thin-film fit", "material": self.material.to_dict(),
-                "description": self.material.kind, "fit_psnr_db": round(self.reproduction.psnr_db, 3)}
+                "description": self.material.kind, "fit_psnr_db": round(self.reproduction.psnr_db, 3),
+                "fit_blur_px": self.blur_px}
         return BRDFTable.tabulate(lambda th, td, pd: self.eval_hd(th, td, pd, w), w, metadata=meta,
                                   progress=progress, cancel=cancel)
 
@@ -141,6 +144,18 @@ def theta_d_response(op: PhotoOperator, geometry: np.ndarray, pixels: np.ndarray
     table, so ``K`` reproduces the renderer's image of the tabulated film. ``pixels`` selects the
     operator's observed pixels; λ runs over ``op.render_wavelengths_nm``.
     """
+    return spectral_to_rgb(op, theta_d_radiance(op, geometry, pixels))
+
+
+def spectral_to_rgb(op: PhotoOperator, radiance: np.ndarray) -> np.ndarray:
+    """(P, J, Λr) spectral responses → (P, 3, J, Λr) linear-sRGB photo responses (the operator's
+    exposure and colour matching)."""
+    return op.exposure * np.einsum("cw,pjw->pcjw", op.to_rgb, radiance, optimize=True)
+
+
+def theta_d_radiance(op: PhotoOperator, geometry: np.ndarray, pixels: np.ndarray) -> np.ndarray:
+    """The spectral part of :func:`theta_d_response`: (P, J, Λr) radiance per unit ``R(θd_j, λ)``,
+    before the exposure and the colour matching (a third of its size: what the blur is applied to)."""
     n_sel = pixels.size
     compact = np.full(op.n_pixels, -1, dtype=np.int64)
     compact[pixels] = np.arange(n_sel)
@@ -171,8 +186,24 @@ def theta_d_response(op: PhotoOperator, geometry: np.ndarray, pixels: np.ndarray
             cells = ((idx - lo)[:, None] * nw + np.arange(nw)).ravel()
             acc[lo:hi] += np.bincount(cells, weights=(w_sum[:, None] * radiance).ravel(),
                                       minlength=(hi - lo) * nw).reshape(hi - lo, nw)
-    acc = acc.reshape(n_sel, N_THETA_D, nw)
-    return op.exposure * np.einsum("cw,pjw->pcjw", op.to_rgb, acc, optimize=True)
+    return acc.reshape(n_sel, N_THETA_D, nw)
+
+
+#: θd nodes blurred at a time by :func:`_lobe_rows` (bounds its image stack to ~30 MB at 128²).
+_BLUR_NODES = 10
+
+
+def _lobe_rows(op: PhotoOperator, geometry: np.ndarray, rows: np.ndarray, sigma_px: float) -> np.ndarray:
+    """:func:`theta_d_response` at the observed pixels ``rows`` of the photo blurred by ``sigma_px``
+    (every observed pixel's response is blurred, unobserved ones counting as 0), (P, 3, J, Λr)."""
+    if sigma_px <= 0:
+        return theta_d_response(op, geometry, rows)
+    radiance = theta_d_radiance(op, geometry, np.arange(op.n_pixels))                 # (N, J, Λr)
+    blur = blur_rows(op.shape, op.pixel_ids, sigma_px)
+    out = np.empty((rows.size,) + radiance.shape[1:])
+    for j in range(0, radiance.shape[1], _BLUR_NODES):
+        out[:, j:j + _BLUR_NODES] = blur(np.ascontiguousarray(radiance[:, j:j + _BLUR_NODES]))[rows]
+    return spectral_to_rgb(op, out)
 
 
 def body_basis(wavelengths_nm: np.ndarray) -> np.ndarray:
@@ -274,13 +305,18 @@ class _ReducedDesign:
 
 
 def fit_thin_film(photo: np.ndarray, lighting=None, clip_level: float | None = 0.995,
-                  progress: ProgressFn | None = None, cancel: CancelFn | None = None) -> ThinFilmFit:
+                  progress: ProgressFn | None = None, cancel: CancelFn | None = None,
+                  blur_px: Sequence[float] = (0.0,)) -> ThinFilmFit:
     """Fit the thin-film family (module docstring) to a sphere ``photo`` taken under ``lighting``.
 
     ``photo``: linear sRGB (S, S, 3) on the canonical sphere crop, as the refinement takes it;
     ``lighting``: :class:`~specgen_addon.input_lighting.InputLighting` (default canonical); pixels
-    at or above ``clip_level`` (an 8-bit photo's full scale) are left out. Raises
-    :class:`SpecGenError` on a malformed photo and :class:`Cancelled` when ``cancel()`` is true.
+    at or above ``clip_level`` (an 8-bit photo's full scale) are left out. ``blur_px``: the photo's
+    blur widths (Gaussian σ, pixels of the crop) to choose among, with the roughness, by the stage-1
+    residual, the fit modelling ``photo ≈ G_σ ∗ render`` as the refinement does
+    (:mod:`specgen_addon.refine.blur`): a resampled photo's highlight is spread over pixels, and
+    fitted as sharp it reads as a rougher lobe. ``(0,)`` models no blur. Raises
+    :class:`SpecGenError` on a malformed photo or blur and :class:`Cancelled` when ``cancel()`` is true.
     """
     from ..input_lighting import InputLighting
     from ..refine import render_under
@@ -288,6 +324,9 @@ def fit_thin_film(photo: np.ndarray, lighting=None, clip_level: float | None = 0
 
     photo = checked_photo(photo)
     lighting = lighting or InputLighting()
+    sigmas = tuple(float(x) for x in np.atleast_1d(np.asarray(blur_px, dtype=np.float64)))
+    if not sigmas or not all(np.isfinite(x) and 0.0 <= x <= 4.0 for x in sigmas):
+        raise SpecGenError(f"blur_px must list blur widths in [0, 4] pixels, got {blur_px!r}")
 
     def step(fraction: float) -> None:
         if cancel is not None and cancel():
@@ -300,12 +339,28 @@ def fit_thin_film(photo: np.ndarray, lighting=None, clip_level: float | None = 0
     op = PhotoOperator(scene, fit_wl, lighting.image_exposure, cancel=cancel)
     wl = op.render_wavelengths_nm
     pixels = fit_pixels(op)
-    b_rows = op.observe(photo)[pixels]                                    # (P, 3)
-    keep = np.ones(b_rows.shape[0], bool) if clip_level is None else ~np.any(b_rows >= clip_level, axis=1)
+    observed = op.observe(photo)
+    clipped = (np.zeros(op.n_pixels, bool) if clip_level is None
+               else np.any(observed >= clip_level, axis=1))
+    blurred = max(sigmas) > 0
+    # rows fitted: the even subset, less clipped pixels and (with a blur) pixels whose blurred
+    # neighbourhood reaches the unobserved rim or a clipped pixel, for the widest σ (one row set
+    # for every σ, so that their residuals compare)
+    keep = ~clipped[pixels]
+    if blurred:
+        keep &= rows_inside(op.shape, op.pixel_ids, max(sigmas), clipped)[pixels]
     if not np.any(keep):
         raise SpecGenError("every pixel of the photo is clipped: there is nothing to fit")
-    b = b_rows[keep].reshape(-1)
-    body = body_response(op, pixels)[keep].reshape(-1, 3)                        # (M, 3)
+    b = observed[pixels][keep].reshape(-1)
+    rows = pixels[keep]
+
+    def blurred_rows(responses: np.ndarray, sigma: float) -> np.ndarray:
+        """Responses of every observed pixel (N, ...) → the fitted rows of their image blurred by σ."""
+        return blur_rows(op.shape, op.pixel_ids, sigma)(responses)[rows]
+
+    body_all = body_response(op, np.arange(op.n_pixels)) if blurred else None
+    bodies = {sg: (blurred_rows(body_all, sg) if blurred else body_response(op, rows)).reshape(-1, 3)
+              for sg in sigmas}                                                    # (M, 3) per σ
     step(0.05)
 
     # Stage 1: roughness, with a free smooth reflectance R(θd, λ) and a free body; the best grid
@@ -314,22 +369,35 @@ def fit_thin_film(photo: np.ndarray, lighting=None, clip_level: float | None = 0
     free_basis = np.einsum("ja,wl->jwal", hat_matrix(td_nodes, FREE_THETA_D_KNOTS),
                            hat_matrix(wl, SPECTRAL_KNOTS_NM)).reshape(N_THETA_D * wl.size, -1)
     scale = max(float(np.mean(b * b)), 1e-20)
+    n_free = free_basis.shape[1]
+    # the colour matching folded into the free basis: (J·Λr, 3·M), one product per roughness
+    rgb_free_basis = op.exposure * np.concatenate(
+        [np.tile(op.to_rgb[c], N_THETA_D)[:, None] * free_basis for c in range(3)], axis=1)
 
-    def free_fit(alpha: float) -> tuple[float, np.ndarray]:
-        k = theta_d_response(op, lobe_geometry(alpha), pixels)[keep].reshape(-1, N_THETA_D * wl.size)
-        design = np.concatenate([k @ free_basis, body], axis=1)
+    def free_designs(alpha: float) -> dict[float, np.ndarray]:
+        """Stage 1's design per σ: the lobe's photo in the free basis of R(θd, λ), then the body."""
+        if not blurred:
+            k = theta_d_response(op, lobe_geometry(alpha), rows).reshape(-1, N_THETA_D * wl.size)
+            return {0.0: np.concatenate([k @ free_basis, bodies[0.0]], axis=1)}
+        radiance = theta_d_radiance(op, lobe_geometry(alpha), np.arange(op.n_pixels))
+        k_free = (radiance.reshape(op.n_pixels, -1) @ rgb_free_basis).reshape(op.n_pixels, 3, n_free)
+        return {sg: np.concatenate([blurred_rows(k_free, sg).reshape(-1, n_free), bodies[sg]], axis=1)
+                for sg in sigmas}
+
+    def residual(design: np.ndarray) -> float:
         gram = design.T @ design + 1e-6 * scale * design.shape[0] * np.eye(design.shape[1])
         theta = nonneg_ridge(gram, design.T @ b)
-        return float(np.sum((design @ theta - b) ** 2)), k
+        return float(np.sum((design @ theta - b) ** 2))
 
-    alpha_res: dict[float, float] = {}
-    k_best, res_best, best_alpha = None, np.inf, float(ALPHA_GRID[0])
+    # residuals per (σ, α); the best σ is then kept for the parabola in α
+    res_grid: dict[tuple[float, float], float] = {}
     for n, alpha in enumerate(ALPHA_GRID):
-        res, k = free_fit(float(alpha))
-        alpha_res[float(alpha)] = res
-        if res < res_best:
-            k_best, res_best, best_alpha = k, res, float(alpha)
+        for sg, design in free_designs(float(alpha)).items():
+            res_grid[(sg, float(alpha))] = residual(design)
         step(0.05 + 0.4 * (n + 1) / ALPHA_GRID.size)
+    sigma, best_alpha = min(res_grid, key=res_grid.get)
+    res_best = res_grid[(sigma, best_alpha)]
+    alpha_res: dict[float, float] = {a: r for (sg, a), r in res_grid.items() if sg == sigma}
     i = int(np.flatnonzero(ALPHA_GRID == best_alpha)[0])
     if 0 < i < ALPHA_GRID.size - 1:
         x = np.log(ALPHA_GRID[i - 1:i + 2])
@@ -337,10 +405,12 @@ def fit_thin_film(photo: np.ndarray, lighting=None, clip_level: float | None = 0
         c2, c1, _ = np.polyfit(x, y, 2)
         if c2 > 0:
             vertex = float(np.exp(np.clip(-c1 / (2 * c2), x[0], x[2])))
-            res, k = free_fit(vertex)
+            res = residual(free_designs(vertex)[sigma])
             alpha_res[vertex] = res
             if res < res_best:
-                k_best, res_best, best_alpha = k, res, vertex
+                res_best, best_alpha = res, vertex
+    body = bodies[sigma]
+    k_best = _lobe_rows(op, lobe_geometry(best_alpha), rows, sigma).reshape(-1, N_THETA_D * wl.size)
     step(0.5)
 
     # Stage 2: the Airy model on a grid of (substrate, η_f, optical thickness η_f·d); the photo
@@ -392,9 +462,9 @@ def fit_thin_film(photo: np.ndarray, lighting=None, clip_level: float | None = 0
         reflectance = np.clip(natural * np.pi, 0.0, 1.0)
     step(0.92)
     fit = ThinFilmFit(film, wl.copy(), reflectance,
-                      Reproduction(float("nan"), None), alpha_res)
-    rendered = render_under(fit.table(fit_wl), scene, lighting.image_exposure)
-    fit.reproduction = reproduction(op.observe(photo), op.observe(rendered))
+                      Reproduction(float("nan"), None), alpha_res, blur_px=sigma)
+    rendered = blur_image(render_under(fit.table(fit_wl), scene, lighting.image_exposure), sigma)
+    fit.reproduction = reproduction(observed, op.observe(rendered))
     if fit.reproduction.psnr_db < WARN_PSNR_DB:
         fit.warnings.append(f"the thin-film model does not explain this photo: self-reproduction reaches only "
                             f"{fit.reproduction.psnr_db:.1f} dB (is the material a film? the network model "
