@@ -23,7 +23,8 @@ per basis spectrum. The fit runs in three stages:
    d 0–1500 nm), ``ρ`` solved in closed form, in the design's reduced singular basis;
 3. a finer local grid around the best candidate, and a non-negative body.
 
-Everything is numpy (it runs inside a stock Blender); a 128² photo takes about 30 s on two cores.
+Everything is numpy (it runs inside a stock Blender); a 128² photo takes about 20–30 s on two cores,
+twice that where the photo's blur is modelled (``blur_px``: a crop resampled from a camera photo).
 Angles are radians, wavelengths nm, BRDF values sr⁻¹.
 """
 
