@@ -8,7 +8,9 @@ photo this scores, against the truth under the protocol's distant lights (spectr
 ``evaluate --families``):
 
 * ``network``: the network alone; ``shipped``: the network refined (the pipeline's default);
-* ``film``: the thin-film fit (``--model thin-film``); ``film refined``: that table refined;
+* ``film``: the thin-film fit as ``--model thin-film`` runs it (since the forty-first session with the
+  photo's blur modelled where the crop resampled the sphere; the session's own study ran before that);
+  ``film refined``: that table refined;
 * two choices between ``shipped`` and ``film refined``, made from the photo alone: ``by self``
   (the higher self-reproduction) and ``by held-out`` (the higher :attr:`RefineResult.holdout_db`:
   each refinement fitted to one half of the sphere's pixel blocks predicts the other).
@@ -95,6 +97,7 @@ def main(argv: list[str] | None = None) -> int:
     from specgen_addon.fit.thin_film import fit_thin_film
     from specgen_addon.pipeline import generate, load_photo_crop
     from specgen_addon.refine import CLIP_LEVEL, RefineOptions, refine_brdf
+    from specgen_addon.refine.blur import BLUR_CANDIDATES_PX
     from specgen_addon.train.evaluate import displaced_input, mixed_split_materials
 
     unknown = sorted(set(a.families or ()) - set(FAMILY_NAMES))
@@ -114,7 +117,8 @@ def main(argv: list[str] | None = None) -> int:
             opts = RefineOptions(clip_level=clip, score_holdout=True)
             net = generate(images[kind], refine=False, wavelengths_nm=WAVELENGTHS_NM).table
             shipped = refine_brdf(net, photo, None, opts)
-            fit = fit_thin_film(photo, None, clip_level=clip)
+            fit = fit_thin_film(photo, None, clip_level=clip,      # as the pipeline's --model thin-film
+                                blur_px=(0.0,) if crop.copied else BLUR_CANDIDATES_PX)
             film = fit.table(WAVELENGTHS_NM)
             film_refined = refine_brdf(film, photo, None, opts)
             row = {"material": mat.name, "family": fam, "photo": kind,
