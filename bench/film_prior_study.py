@@ -103,8 +103,11 @@ def main(argv: list[str] | None = None) -> int:
     unknown = sorted(set(a.families or ()) - set(FAMILY_NAMES))
     if unknown:
         ap.error(f"unknown families {', '.join(unknown)} (choose from {', '.join(FAMILY_NAMES)})")
+    materials = mixed_split_materials(a.per_family, a.families, a.split, skip=a.skip)
+    if not materials:
+        ap.error(f"the {a.split} split has no materials of these families left after --skip {a.skip}")
     rows = []
-    for mat in mixed_split_materials(a.per_family, a.families, a.split, skip=a.skip):
+    for mat in materials:
         fam = material_family(mat)
         score = truth_scorer(mat, a.resolution)
         independent = independent_photo(mat)

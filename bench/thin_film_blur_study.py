@@ -24,6 +24,9 @@ import numpy as np
 sys.path.insert(0, str(Path(__file__).resolve().parents[1]))
 
 PHOTOS = ("independent", "shifted")
+#: σ grids (pixels): none, the refinement's candidates, and a finer one
+GRIDS = {"none": (0.0,), "refinement": (0.0, 0.35, 0.5, 0.7, 1.0, 1.4),
+         "fine": (0.0, 0.35, 0.5, 0.6, 0.7, 0.8, 0.9, 1.0, 1.2, 1.4)}
 
 
 def main(argv: list[str] | None = None) -> int:
@@ -33,6 +36,10 @@ def main(argv: list[str] | None = None) -> int:
     ap.add_argument("--skip", type=int, default=0, help="skip the first K thin films of the split")
     ap.add_argument("--resolution", type=int, default=128, help="truth render size in pixels (default 128)")
     ap.add_argument("--json", type=Path, default=None, help="write the rows as JSON")
+    ap.add_argument("--photos", nargs="+", default=list(PHOTOS), choices=PHOTOS, help="photos (default both)")
+    ap.add_argument("--compare", nargs=2, default=["none", "refinement"], choices=list(GRIDS),
+                    metavar="GRID", help=f"the two σ grids compared, from {', '.join(GRIDS)} "
+                                         "(default: none refinement)")
     a = ap.parse_args(argv)
     if not 1 <= a.per_family <= 50 or a.skip < 0:
         ap.error("--per-family must be in 1..50 and --skip ≥ 0")
@@ -44,13 +51,20 @@ def main(argv: list[str] | None = None) -> int:
     from specgen_addon.refine.blur import BLUR_CANDIDATES_PX
     from specgen_addon.train.evaluate import displaced_input, mixed_split_materials
 
-    variants = {"no blur": (0.0,), "blur": BLUR_CANDIDATES_PX}
+    assert GRIDS["refinement"] == tuple(BLUR_CANDIDATES_PX)
+    first, second = a.compare
+    variants = {"no blur" if first == "none" else first: GRIDS[first],
+                "blur" if second == "refinement" else second: GRIDS[second]}
+    base, new = list(variants)
+    materials = mixed_split_materials(a.per_family, ["thin_film"], a.split, skip=a.skip)
+    if not materials:
+        ap.error(f"the {a.split} split has no thin films left after --skip {a.skip}")
     rows = []
-    for mat in mixed_split_materials(a.per_family, ["thin_film"], a.split, skip=a.skip):
+    for mat in materials:
         score = truth_scorer(mat, a.resolution)
         independent = independent_photo(mat)
         images = {"independent": independent, "shifted": displaced_input(independent, 0.5)}
-        for kind in PHOTOS:
+        for kind in a.photos:
             crop, linear = load_photo_crop(images[kind])
             photo = crop.image.astype(np.float64)
             row = {"material": mat.name, "photo": kind, "copied": bool(crop.copied), "alpha_true": mat.alpha}
@@ -67,12 +81,12 @@ def main(argv: list[str] | None = None) -> int:
                 f"α {row[lab]['alpha']:.4f}, {row[lab]['seconds']:.0f} s)" for lab in variants), flush=True)
             if a.json:
                 a.json.write_text(json.dumps(rows, indent=1))
-    for kind in PHOTOS:
+    for kind in a.photos:
         sel = [r for r in rows if r["photo"] == kind]
-        d = np.array([r["blur"]["truth_db"] - r["no blur"]["truth_db"] for r in sel])
+        d = np.array([r[new]["truth_db"] - r[base]["truth_db"] for r in sel])
         if d.size:
-            print(f"{kind} ({d.size}): no blur {np.mean([r['no blur']['truth_db'] for r in sel]):.2f}, blur "
-                  f"{np.mean([r['blur']['truth_db'] for r in sel]):.2f} dB; blur − no blur {d.mean():+.2f} dB, "
+            print(f"{kind} ({d.size}): {base} {np.mean([r[base]['truth_db'] for r in sel]):.2f}, {new} "
+                  f"{np.mean([r[new]['truth_db'] for r in sel]):.2f} dB; {new} − {base} {d.mean():+.2f} dB, "
                   f"worst {d.min():+.2f}, {int(np.sum(d < -1.0))} photos more than 1 dB below")
     return 0
 
