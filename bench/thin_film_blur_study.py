@@ -24,9 +24,10 @@ import numpy as np
 sys.path.insert(0, str(Path(__file__).resolve().parents[1]))
 
 PHOTOS = ("independent", "shifted")
-#: σ grids (pixels): none, the refinement's candidates, and a finer one
-GRIDS = {"none": (0.0,), "refinement": (0.0, 0.35, 0.5, 0.7, 1.0, 1.4),
-         "fine": (0.0, 0.35, 0.5, 0.6, 0.7, 0.8, 0.9, 1.0, 1.2, 1.4)}
+#: σ grids compared: none, the refinement's candidates (``BLUR_CANDIDATES_PX``), and :data:`FINE_GRID_PX`
+GRIDS = ("none", "refinement", "fine")
+#: the finer σ grid of the forty-first session's rule 4 (pixels)
+FINE_GRID_PX = (0.0, 0.35, 0.5, 0.6, 0.7, 0.8, 0.9, 1.0, 1.2, 1.4)
 
 
 def main(argv: list[str] | None = None) -> int:
@@ -51,10 +52,10 @@ def main(argv: list[str] | None = None) -> int:
     from specgen_addon.refine.blur import BLUR_CANDIDATES_PX
     from specgen_addon.train.evaluate import displaced_input, mixed_split_materials
 
-    assert GRIDS["refinement"] == tuple(BLUR_CANDIDATES_PX)
+    grids = {"none": (0.0,), "refinement": tuple(BLUR_CANDIDATES_PX), "fine": FINE_GRID_PX}
     first, second = a.compare
-    variants = {"no blur" if first == "none" else first: GRIDS[first],
-                "blur" if second == "refinement" else second: GRIDS[second]}
+    variants = {"no blur" if first == "none" else first: grids[first],
+                "blur" if second == "refinement" else second: grids[second]}
     base, new = list(variants)
     materials = mixed_split_materials(a.per_family, ["thin_film"], a.split, skip=a.skip)
     if not materials:

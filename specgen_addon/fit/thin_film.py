@@ -352,8 +352,8 @@ def fit_thin_film(photo: np.ndarray, lighting=None, clip_level: float | None = 0
         keep &= rows_inside(op.shape, op.pixel_ids, max(sigmas), clipped)[pixels]
     if not np.any(keep):
         raise SpecGenError("every pixel of the photo is clipped: there is nothing to fit")
-    b = observed[pixels][keep].reshape(-1)
     rows = pixels[keep]
+    b = observed[rows].reshape(-1)
 
     def blurred_rows(responses: np.ndarray, sigma: float) -> np.ndarray:
         """Responses of every observed pixel (N, ...) → the fitted rows of their image blurred by σ."""
@@ -375,15 +375,16 @@ def fit_thin_film(photo: np.ndarray, lighting=None, clip_level: float | None = 0
     rgb_free_basis = op.exposure * np.concatenate(
         [np.tile(op.to_rgb[c], N_THETA_D)[:, None] * free_basis for c in range(3)], axis=1)
 
-    def free_designs(alpha: float) -> dict[float, np.ndarray]:
-        """Stage 1's design per σ: the lobe's photo in the free basis of R(θd, λ), then the body."""
+    def free_designs(alpha: float, widths: tuple[float, ...] = sigmas) -> dict[float, np.ndarray]:
+        """Stage 1's design per σ of ``widths``: the lobe's photo in the free basis of R(θd, λ), then
+        the body."""
         if not blurred:
             k = theta_d_response(op, lobe_geometry(alpha), rows).reshape(-1, N_THETA_D * wl.size)
             return {0.0: np.concatenate([k @ free_basis, bodies[0.0]], axis=1)}
         radiance = theta_d_radiance(op, lobe_geometry(alpha), np.arange(op.n_pixels))
         k_free = (radiance.reshape(op.n_pixels, -1) @ rgb_free_basis).reshape(op.n_pixels, 3, n_free)
         return {sg: np.concatenate([blurred_rows(k_free, sg).reshape(-1, n_free), bodies[sg]], axis=1)
-                for sg in sigmas}
+                for sg in widths}
 
     def residual(design: np.ndarray) -> float:
         gram = design.T @ design + 1e-6 * scale * design.shape[0] * np.eye(design.shape[1])
@@ -406,7 +407,7 @@ def fit_thin_film(photo: np.ndarray, lighting=None, clip_level: float | None = 0
         c2, c1, _ = np.polyfit(x, y, 2)
         if c2 > 0:
             vertex = float(np.exp(np.clip(-c1 / (2 * c2), x[0], x[2])))
-            res = residual(free_designs(vertex)[sigma])
+            res = residual(free_designs(vertex, (sigma,))[sigma])
             alpha_res[vertex] = res
             if res < res_best:
                 res_best, best_alpha = res, vertex
