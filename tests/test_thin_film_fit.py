@@ -188,6 +188,11 @@ def test_a_blurred_photo_is_fitted_with_its_blur_and_not_as_a_rougher_lobe():
     assert blurred.blur_px == 1.0
     assert abs(np.log(blurred.material.alpha / truth.alpha)) < np.log(1.12)
     assert blurred.reproduction.psnr_db > sharp.reproduction.psnr_db + 3.0
+    # the wording the CLI line and the panel summary share
+    assert sharp.blur_note() == "" and blurred.blur_note() == "photo blur σ 1 px modelled"
+    from specgen_addon.cli_model import film_fit_summary
+    assert "photo blur σ 1 px modelled" in film_fit_summary(blurred, "the canonical studio")
+    assert "blur" not in film_fit_summary(sharp, "the canonical studio")
 
 
 @pytest.mark.parametrize("bad", [(), (-0.5,), (np.nan,), (0.0, 9.0)])

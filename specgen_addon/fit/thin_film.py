@@ -88,6 +88,11 @@ class ThinFilmFit:
     warnings: list[str] = field(default_factory=list)
     blur_px: float = 0.0     # the photo's blur the fit modelled (Gaussian σ, pixels of the crop)
 
+    def blur_note(self) -> str:
+        """"photo blur σ … px modelled", or "" for a sharp photo: the wording the CLI and the
+        panel share."""
+        return f"photo blur σ {self.blur_px:g} px modelled" if self.blur_px > 0 else ""
+
     def _with_body(self, lobe: np.ndarray, cos_i: np.ndarray, cos_o: np.ndarray, w: np.ndarray) -> np.ndarray:
         """The lobe's values (N, Λ) plus the body ``ρ(λ)/π`` where both directions are above the horizon."""
         above = (np.ravel(cos_i) > 0) & (np.ravel(cos_o) > 0)
