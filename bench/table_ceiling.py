@@ -10,7 +10,7 @@ default) and 128² renders (docs/results.md table (g)). The network alone is sco
 (canonical input, the shipped weights).
 
 Usage: ``.venv/bin/python bench/table_ceiling.py [--per-family 3] [--families lobes sheen]
-[--resolutions 64 128] [--json out.json]``
+[--resolutions 64 128] [--supersample 4] [--no-network] [--json out.json]``
 """
 
 from __future__ import annotations
@@ -45,13 +45,28 @@ def main() -> int:
     ap.add_argument("--resolutions", type=int, nargs="+", default=[64, 128])
     ap.add_argument("--weights", type=Path, default=None, help="weights (.pt); default: shipped")
     ap.add_argument("--json", type=Path, default=None)
+    ap.add_argument("--supersample", type=int, default=1,
+                    help="render N×N samples per pixel and average them, as a camera's pixel or Cycles "
+                         "integrates its area (default 1: one sample at the pixel centre, evaluate's protocol)")
+    ap.add_argument("--no-network", action="store_true",
+                    help="score the materials' own tables only (the network's figures come from evaluate)")
     args = ap.parse_args()
     if args.per_family < 1 or any(not 16 <= r <= 512 for r in args.resolutions):
         ap.error("--per-family must be ≥ 1 and every resolution 16–512")
+    if not 1 <= args.supersample <= 8:
+        ap.error("--supersample must be 1–8")
     if args.weights is not None and not args.weights.is_file():
         ap.error(f"{args.weights}: weights file not found")
 
-    geos = {r: sphere_geometry(r) for r in args.resolutions}
+    n = args.supersample
+    geos = {r: sphere_geometry(r * n) for r in args.resolutions}
+    masks = {r: sphere_geometry(r).mask for r in args.resolutions}
+
+    def render(brdf, r: int) -> np.ndarray:
+        """The sphere under the protocol's lights at r², each pixel the mean of its n×n samples."""
+        img = render_spectral(brdf, geos[r], lights=DISTANT_LIGHTS, wavelengths_nm=WAVELENGTHS_NM).spectral
+        return img.reshape(r, n, r, n, -1).mean(axis=(1, 3)) if n > 1 else img
+
     rows = []
     t0 = time.perf_counter()
     for mat in mixed_test_materials(args.per_family, args.families):
@@ -60,28 +75,32 @@ def main() -> int:
             return mat.eval(wi, wo, WAVELENGTHS_NM)
 
         own = BRDFTable.tabulate(true_f, WAVELENGTHS_NM)
-        net = generate_brdf(input_image.render_input(mat), weights=args.weights, wavelengths_nm=WAVELENGTHS_NM)
+        tables = [("table", own)]
+        if not args.no_network:
+            tables.append(("network", generate_brdf(input_image.render_input(mat), weights=args.weights,
+                                                    wavelengths_nm=WAVELENGTHS_NM)))
         row = {"material": mat.name, "family": material_family(mat)}
-        for r, geo in geos.items():
-            gt = render_spectral(mat, geo, lights=DISTANT_LIGHTS, wavelengths_nm=WAVELENGTHS_NM).spectral
-            for label, table in (("table", own), ("network", net)):
-                pred = render_spectral(table, geo, lights=DISTANT_LIGHTS, wavelengths_nm=WAVELENGTHS_NM).spectral
-                row[f"{label}_{r}"] = float(metrics.spectral_metrics(gt, pred, geo.mask).psnr_mean)
+        for r in args.resolutions:
+            gt = render(mat, r)
+            for label, table in tables:
+                row[f"{label}_{r}"] = float(metrics.spectral_metrics(gt, render(table, r), masks[r]).psnr_mean)
         rows.append(row)
         print(f"{mat.name} {row['family']:<12} " + "  ".join(
-            f"{r}²: own table {row[f'table_{r}']:.2f} dB, network {row[f'network_{r}']:.2f} dB"
-            for r in args.resolutions), flush=True)
+            f"{r}²: " + ", ".join(f"{'own table' if label == 'table' else label} {row[f'{label}_{r}']:.2f} dB"
+                                  for label, _ in tables) for r in args.resolutions), flush=True)
 
-    print(f"\n{describe_machine()}; {len(rows)} test materials, {time.perf_counter() - t0:.0f} s")
-    header = " | ".join(f"own table {r}² | network {r}²" for r in args.resolutions)
+    print(f"\n{describe_machine()}; {len(rows)} test materials, {n}×{n} samples per pixel, "
+          f"{time.perf_counter() - t0:.0f} s")
+    labels = ["table"] if args.no_network else ["table", "network"]
+    header = " | ".join(f"{'own table' if label == 'table' else label} {r}²"
+                        for r in args.resolutions for label in labels)
     print(f"| family | n | {header} |")
-    print("| --- | ---: |" + " ---: |" * (2 * len(args.resolutions)))
+    print("| --- | ---: |" + " ---: |" * (len(labels) * len(args.resolutions)))
     summary = {}
     for fam in [*dict.fromkeys(r["family"] for r in rows), "mean"]:
         sel = rows if fam == "mean" else [r for r in rows if r["family"] == fam]
         summary[fam] = {k: float(np.mean([r[k] for r in sel])) for k in sel[0] if k not in ("material", "family")}
-        cells = " | ".join(f"{summary[fam][f'table_{r}']:.2f} | {summary[fam][f'network_{r}']:.2f}"
-                           for r in args.resolutions)
+        cells = " | ".join(f"{summary[fam][f'{label}_{r}']:.2f}" for r in args.resolutions for label in labels)
         print(f"| {fam} | {len(sel)} | {cells} |")
     if args.json is not None:
         args.json.write_text(json.dumps({"materials": rows, "families": summary}, indent=1))
