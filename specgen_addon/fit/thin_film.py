@@ -89,8 +89,8 @@ class ThinFilmFit:
     blur_px: float = 0.0     # the photo's blur the fit modelled (Gaussian σ, pixels of the crop)
 
     def blur_note(self) -> str:
-        """"photo blur σ … px modelled", or "" for a sharp photo: the wording the CLI and the
-        panel share."""
+        """The modelled blur in words ("photo blur σ 1 px modelled"), or "" for a sharp photo; the
+        CLI line and the panel summary both use it."""
         return f"photo blur σ {self.blur_px:g} px modelled" if self.blur_px > 0 else ""
 
     def _with_body(self, lobe: np.ndarray, cos_i: np.ndarray, cos_o: np.ndarray, w: np.ndarray) -> np.ndarray:
