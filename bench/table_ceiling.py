@@ -67,6 +67,8 @@ def main() -> int:
         img = render_spectral(brdf, geos[r], lights=DISTANT_LIGHTS, wavelengths_nm=WAVELENGTHS_NM).spectral
         return img.reshape(r, n, r, n, -1).mean(axis=(1, 3)) if n > 1 else img
 
+    labels = ["table"] if args.no_network else ["table", "network"]
+    names = {"table": "own table", "network": "network"}
     rows = []
     t0 = time.perf_counter()
     for mat in mixed_test_materials(args.per_family, args.families):
@@ -75,25 +77,23 @@ def main() -> int:
             return mat.eval(wi, wo, WAVELENGTHS_NM)
 
         own = BRDFTable.tabulate(true_f, WAVELENGTHS_NM)
-        tables = [("table", own)]
-        if not args.no_network:
-            tables.append(("network", generate_brdf(input_image.render_input(mat), weights=args.weights,
-                                                    wavelengths_nm=WAVELENGTHS_NM)))
+        tables = {"table": own}
+        if "network" in labels:
+            tables["network"] = generate_brdf(input_image.render_input(mat), weights=args.weights,
+                                              wavelengths_nm=WAVELENGTHS_NM)
         row = {"material": mat.name, "family": material_family(mat)}
         for r in args.resolutions:
             gt = render(mat, r)
-            for label, table in tables:
+            for label, table in tables.items():
                 row[f"{label}_{r}"] = float(metrics.spectral_metrics(gt, render(table, r), masks[r]).psnr_mean)
         rows.append(row)
         print(f"{mat.name} {row['family']:<12} " + "  ".join(
-            f"{r}²: " + ", ".join(f"{'own table' if label == 'table' else label} {row[f'{label}_{r}']:.2f} dB"
-                                  for label, _ in tables) for r in args.resolutions), flush=True)
+            f"{r}²: " + ", ".join(f"{names[label]} {row[f'{label}_{r}']:.2f} dB" for label in labels)
+            for r in args.resolutions), flush=True)
 
     print(f"\n{describe_machine()}; {len(rows)} test materials, {n}×{n} samples per pixel, "
           f"{time.perf_counter() - t0:.0f} s")
-    labels = ["table"] if args.no_network else ["table", "network"]
-    header = " | ".join(f"{'own table' if label == 'table' else label} {r}²"
-                        for r in args.resolutions for label in labels)
+    header = " | ".join(f"{names[label]} {r}²" for r in args.resolutions for label in labels)
     print(f"| family | n | {header} |")
     print("| --- | ---: |" + " ---: |" * (len(labels) * len(args.resolutions)))
     summary = {}

@@ -143,7 +143,8 @@ class SPECGEN_OT_generate_brdf(_Modal, bpy.types.Operator):
             f"Photo match: {ref.after.text()}, network's lobe kept (within the renderer's sampling error)"
             if ref.within_noise and ref.improved else f"Photo match: {ref.after.text()} (network {ref.before.text()})")
         if fit is not None:
-            blur = f", {fit.blur_note()}" if fit.blur_note() else ""
+            note = fit.blur_note()
+            blur = f", {note}" if note else ""
             s.refine_summary = f"Thin-film fit, photo match: {fit.reproduction.text()}{blur}"
         s.refine_residual = -1.0 if ref is None else ref.after.psnr_db
         for warning in ([] if ref is None else ref.warnings) + ([] if fit is None else fit.warnings):

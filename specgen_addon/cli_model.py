@@ -148,7 +148,8 @@ def input_lighting_from_args(args: argparse.Namespace):
 def film_fit_summary(fit, lighting_label: str) -> str:
     """One line on a thin-film fit: the film found and its self-reproduction."""
     m = fit.material
-    blur = f"; {fit.blur_note()}" if fit.blur_note() else ""
+    note = fit.blur_note()
+    blur = f"; {note}" if note else ""
     return (f"thin-film fit: {m.kind}, η_f {m.film_eta:g}, d {m.thickness_nm:g} nm, α {m.alpha:.4g}{blur}; "
             f"self-reproduction under {lighting_label}: {fit.reproduction.text()}")
 
