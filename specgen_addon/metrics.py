@@ -138,6 +138,33 @@ def brightness_fitted_psnr(gt: np.ndarray, pred: np.ndarray, mask: np.ndarray | 
     return mean_psnr(gt, k * pred, mask), k
 
 
+def colour_fitted_psnr(gt: np.ndarray, pred: np.ndarray, wavelengths_nm: np.ndarray,
+                       mask: np.ndarray | None = None) -> tuple[float, np.ndarray]:
+    """(mean PSNR dB, gain per band) of ``g(λ) · pred`` against ``gt``, ``g`` the least-squares
+    smooth spectral gain ``g(λ) = Σ_l c_l s_l(λ)`` over Mallett & Yuksel's (2019) three sRGB basis
+    reflectances ``s_l`` (wavelengths in nm; held constant beyond 380–780 nm).
+
+    An *oracle* diagnostic like :func:`brightness_fitted_psnr`, one step further: the part of an
+    error that one overall colour and brightness explain (a white balance of the whole BRDF), as
+    opposed to its angular shape. Same normalisation as :func:`spectral_metrics`.
+    """
+    from .colour_tables import tables
+
+    gt, pred, mask = _checked(gt, pred, mask)
+    w = np.asarray(wavelengths_nm, dtype=np.float64).reshape(-1)
+    if w.size != gt.shape[-1]:
+        raise SpecGenError(f"{w.size} wavelengths for {gt.shape[-1]} bands")
+    t = tables()
+    basis = np.stack([np.interp(w, t["mallett2019_wavelengths_nm"], t["mallett2019_values"][:, c])
+                      for c in range(3)], axis=1)                                  # (Λ, 3)
+    g, p = (gt, pred) if mask is None else (gt[mask], pred[mask])
+    g, p = g.reshape(-1, w.size), p.reshape(-1, w.size)
+    design = (p[:, :, None] * basis[None]).reshape(-1, 3)                           # (pixels·Λ, 3)
+    coef, *_ = np.linalg.lstsq(design, g.reshape(-1), rcond=None)
+    gain = basis @ coef
+    return mean_psnr(gt, pred * gain, mask), gain
+
+
 def mean_psnr(gt: np.ndarray, pred: np.ndarray, mask: np.ndarray | None = None) -> float:
     """Mean over bands of PSNR (dB) with :func:`spectral_metrics`' normalisation, without SSIM."""
     gt, pred, mask = _checked(gt, pred, mask)

@@ -51,6 +51,10 @@ def test_family_rows_average_to_the_family_means(shared_dir):
     # the least-squares brightness minimises the summed error; the band-averaged dB may move a hair
     assert rows[0]["psnr_brightness_fitted_distant"] >= rows[0]["psnr_distant"] - 0.5
     assert "brightness fitted" in format_family_results(res)
+    # a smooth spectral gain includes the one brightness factor, so it fits at least as well (a hair
+    # of band averaging aside)
+    assert rows[0]["psnr_colour_fitted_distant"] >= rows[0]["psnr_brightness_fitted_distant"] - 0.5
+    assert "colour (a smooth spectral gain) fitted" in format_family_results(res)
     # every fidelity row comes with its self-reproduction against the input photo
     assert np.isfinite(rows[0]["self_psnr"]) and rows[0]["self_de"] >= 0.0
     assert res["families"]["sheen"]["self_psnr"] == pytest.approx(rows[0]["self_psnr"])

@@ -87,3 +87,26 @@ def test_brightness_fit_removes_an_exposure_error_and_nothing_else():
     assert k == pytest.approx(1.0, abs=0.02)
     assert psnr_fit == pytest.approx(mean_psnr(gt, noisy), abs=0.2)
     assert mean_psnr(gt, noisy) == pytest.approx(metrics.spectral_metrics(gt, noisy).psnr_mean)
+
+
+def test_colour_fit_removes_a_smooth_white_balance_error_and_not_a_shape_error():
+    from specgen_addon.colour_tables import tables
+    from specgen_addon.metrics import brightness_fitted_psnr, colour_fitted_psnr, mean_psnr
+
+    rng = np.random.default_rng(4)
+    w = np.linspace(400.0, 780.0, 20)
+    gt = rng.random((16, 16, 20)) + 0.1
+    t = tables()
+    red = np.interp(w, t["mallett2019_wavelengths_nm"], t["mallett2019_values"][:, 0])
+    tint = 0.5 + red          # the basis sums to 1 (white), so this gain lies inside its span
+    psnr_fit, gain = colour_fitted_psnr(gt, gt / tint, w)  # a prediction with a smooth cyan cast
+    assert psnr_fit > 100 and np.allclose(gain, tint, atol=1e-6)
+    # one brightness factor cannot remove a cast; the colour fit can
+    assert brightness_fitted_psnr(gt, gt / tint)[0] < 40
+    # a shape error (noise) is not a colour: the fit leaves it, gain ≈ 1
+    noisy = gt + rng.normal(0, 0.05, gt.shape)
+    psnr_fit, gain = colour_fitted_psnr(gt, noisy, w)
+    assert np.allclose(gain, 1.0, atol=0.02)
+    assert psnr_fit == pytest.approx(mean_psnr(gt, noisy), abs=0.2)
+    with pytest.raises(SpecGenError, match="wavelengths"):
+        colour_fitted_psnr(gt, noisy, w[:5])

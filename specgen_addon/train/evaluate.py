@@ -242,6 +242,8 @@ def evaluate_families(weights: str | Path | None = None, per_family: int = 4, en
             # oracle diagnostic: how much of the error one brightness factor explains
             row[f"psnr_brightness_fitted_{label}"], row[f"brightness_{label}"] = \
                 metrics.brightness_fitted_psnr(gt, pred, geo.mask)
+            # and how much one overall colour (a smooth spectral gain) explains
+            row[f"psnr_colour_fitted_{label}"] = metrics.colour_fitted_psnr(gt, pred, WAVELENGTHS_NM, geo.mask)[0]
         rows.append(row)
         if progress is not None:
             progress((i + 1) / total)
@@ -270,7 +272,8 @@ def evaluate_families(weights: str | Path | None = None, per_family: int = 4, en
                           **_reproduction_means(sel)}
     synth = [r for r in rows if r["kind"] != "measured"]
     means = {f"{k}_{lab}": float(np.mean([r[f"{k}_{lab}"] for r in synth]))
-             for lab in labels for k in ("psnr", "ssim", "psnr_brightness_fitted")} if synth else {}
+             for lab in labels for k in ("psnr", "ssim", "psnr_brightness_fitted", "psnr_colour_fitted")
+             if synth and all(f"{k}_{lab}" in r for r in synth)}
     means |= _reproduction_means(synth)
     return {"materials": rows, "families": by_family, "means": means, "scenes": labels,
             "per_family": per_family, "resolution": resolution, "input": input_env or "canonical",
@@ -318,10 +321,11 @@ def format_family_results(res: dict[str, Any]) -> str:
     lead = [] if res.get("input", "canonical") == "canonical" else \
         [f"input: the sphere under {res['input']!r}, the network not told"]
     means = res.get("means", {})
-    fitted = [f"{lab} {means[f'psnr_brightness_fitted_{lab}']:.2f} dB" for lab in res["scenes"]
-              if f"psnr_brightness_fitted_{lab}" in means]
-    tail = [f"with each prediction's brightness fitted to the truth (oracle diagnostic): {', '.join(fitted)}"] \
-        if fitted else []
+    tail = []
+    for what, key in (("brightness", "psnr_brightness_fitted"), ("colour (a smooth spectral gain)", "psnr_colour_fitted")):
+        fitted = [f"{lab} {means[f'{key}_{lab}']:.2f} dB" for lab in res["scenes"] if f"{key}_{lab}" in means]
+        if fitted:
+            tail.append(f"with each prediction's {what} fitted to the truth (oracle diagnostic): {', '.join(fitted)}")
     widths = [max(len(r[c]) for r in [header, *rows]) for c in range(len(header))]
     return "\n".join(lead + ["  ".join(cell.ljust(w) if c == 0 else cell.rjust(w) for c, (cell, w) in
                                         enumerate(zip(r, widths))) for r in [header, *rows]] + tail)
