@@ -43,9 +43,9 @@ def _xyz_matrix() -> np.ndarray:
 def reflectance_twin(reflectance: Reflectance) -> Reflectance:
     """The Otsu 2018 reflectance of ``reflectance``'s CIE XYZ (D65), on the corpus grid.
 
-    Otsu 2018 clips its spectrum to [0, 1], which shifts a saturated colour by a few per cent; the
-    nearest spectrum in [0, 1] with the exact colour is then found by alternating projections
-    (onto the colour's affine set of spectra, then onto the box), so the twin keeps the colour.
+    Otsu 2018 clips its spectrum to [0, 1], which shifts a saturated colour by a few per cent; from
+    there, alternating projections (onto the spectra of exactly that colour, then onto [0, 1]) find
+    a spectrum in [0, 1] of the exact colour close to Otsu's, so the twin keeps the colour.
     """
     m = _xyz_matrix()
     xyz = np.asarray(reflectance.values, np.float64) @ m
@@ -58,7 +58,7 @@ def reflectance_twin(reflectance: Reflectance) -> Reflectance:
     return Reflectance(f"twin of {reflectance.source}", tuple(round(float(v), 6) for v in values))
 
 
-def colour_twin(material):
+def colour_twin(material: object) -> object:
     """``material`` (any corpus family, frozen dataclasses) with every reflectance replaced by its twin."""
     if isinstance(material, Reflectance):
         return reflectance_twin(material)
