@@ -68,8 +68,9 @@ def main() -> int:
     rows = []
     t0 = time.perf_counter()
     for mat in mixed_split_materials(args.per_family, args.families, "test", skip=args.skip):
-        photo = input_image.render_input(mat).astype(np.float64).reshape(-1, 3)[seen]
-        table = generate_brdf(input_image.render_input(mat), wavelengths_nm=wl)
+        image = input_image.render_input(mat)
+        photo = image.astype(np.float64).reshape(-1, 3)[seen]
+        table = generate_brdf(image, wavelengths_nm=wl)
         parts = [dataclasses.replace(table, values=table.values * basis[:, l]) for l in range(3)]
         design = np.stack([(scene.render_spectral(p, wl).rgb * lighting.image_exposure).reshape(-1, 3)[seen]
                            for p in parts], axis=-1).reshape(-1, 3)
