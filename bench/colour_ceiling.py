@@ -23,6 +23,7 @@ from pathlib import Path
 
 import numpy as np
 from machine import describe_machine  # bench/machine.py
+from rows import family_groups  # bench/rows.py
 
 REPO = Path(__file__).resolve().parents[1]
 sys.path.insert(0, str(REPO))
@@ -92,8 +93,7 @@ def main() -> int:
           + (" network | network above its twin |" if paired else ""))
     print("| --- | ---: | ---: | ---: |" + (" ---: | ---: |" if paired else ""))
     summary = {}
-    for fam in [*dict.fromkeys(r["family"] for r in rows), "all"]:
-        sel = rows if fam == "all" else [r for r in rows if r["family"] == fam]
+    for fam, sel in family_groups(rows):
         twin = np.array([r["twin"] for r in sel])
         s = {"n": len(sel), "twin_mean": float(twin.mean()), "twin_median": float(np.median(twin)),
              "twin_under_38": int((twin < 38.0).sum())}

@@ -15,7 +15,6 @@ Usage: ``.venv/bin/python bench/photo_colour_fit.py [--per-family 3] [--skip 0] 
 from __future__ import annotations
 
 import argparse
-import dataclasses
 import json
 import sys
 import time
@@ -23,22 +22,15 @@ from pathlib import Path
 
 import numpy as np
 from machine import describe_machine  # bench/machine.py
+from rows import family_groups  # bench/rows.py
 
 REPO = Path(__file__).resolve().parents[1]
 sys.path.insert(0, str(REPO))
 
 
-def mallett_basis(wavelengths_nm: np.ndarray) -> np.ndarray:
-    """(Λ, 3) Mallett & Yuksel (2019) basis reflectances at ``wavelengths_nm`` (nm)."""
-    from specgen_addon.colour_tables import tables
-
-    t = tables()
-    return np.stack([np.interp(wavelengths_nm, t["mallett2019_wavelengths_nm"], t["mallett2019_values"][:, c])
-                     for c in range(3)], axis=1)
-
-
 def main() -> int:
     from specgen_addon import input_image, metrics
+    from specgen_addon.colour_tables import mallett2019_basis
     from specgen_addon.corpus.families import FAMILY_NAMES
     from specgen_addon.corpus.generate import material_family
     from specgen_addon.evaluation.photo_fit import observed_pixels
@@ -46,6 +38,7 @@ def main() -> int:
     from specgen_addon.infer import generate_brdf
     from specgen_addon.input_lighting import parse_lighting
     from specgen_addon.render import render_spectral, sphere_geometry
+    from specgen_addon.spectra import spectral_to_linear_srgb
     from specgen_addon.train.evaluate import mixed_split_materials
 
     ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
@@ -60,7 +53,7 @@ def main() -> int:
         ap.error(f"{args.json.parent}: folder not found")
 
     wl = np.asarray(WAVELENGTHS_NM, np.float64)
-    basis = mallett_basis(wl)
+    basis = mallett2019_basis(wl)
     lighting = parse_lighting(None)                       # the canonical input lighting
     scene = lighting.scene(input_image.CANONICAL_SIZE)
     seen = observed_pixels(scene)
@@ -71,9 +64,11 @@ def main() -> int:
         image = input_image.render_input(mat)
         photo = image.astype(np.float64).reshape(-1, 3)[seen]
         table = generate_brdf(image, wavelengths_nm=wl)
-        parts = [dataclasses.replace(table, values=table.values * basis[:, l]) for l in range(3)]
-        design = np.stack([(scene.render_spectral(p, wl).rgb * lighting.image_exposure).reshape(-1, 3)[seen]
-                           for p in parts], axis=-1).reshape(-1, 3)
+        # a render is linear in the table band by band, so render(s_l · T) = s_l · render(T): one
+        # spectral render gives the photo of each basis gain
+        radiance = scene.render_spectral(table, wl).spectral * lighting.image_exposure
+        design = np.stack([spectral_to_linear_srgb(radiance * basis[:, l], wl).reshape(-1, 3)[seen]
+                           for l in range(3)], axis=-1).reshape(-1, 3)
         # relative errors, as the latent fit's log loss weighs them: the highlight and the body count
         # alike (ε = 5 % of the photo's level)
         weight = 1.0 / (photo.reshape(-1) + 0.05 * np.percentile(photo, 99.9))
@@ -94,8 +89,7 @@ def main() -> int:
     print("| family | n | network alone | colour fitted to the photo | colour fitted to the truth (oracle) | photo fit better than the network |")
     print("| --- | ---: | ---: | ---: | ---: | ---: |")
     summary = {}
-    for fam in [*dict.fromkeys(r["family"] for r in rows), "all"]:
-        sel = rows if fam == "all" else [r for r in rows if r["family"] == fam]
+    for fam, sel in family_groups(rows):
         s = {k: float(np.mean([r[k] for r in sel])) for k in ("network", "photo_gain", "oracle_gain")}
         s["n"], s["better"] = len(sel), sum(r["photo_gain"] > r["network"] for r in sel)
         summary[fam] = s

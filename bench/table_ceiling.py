@@ -23,6 +23,7 @@ from pathlib import Path
 
 import numpy as np
 from machine import describe_machine  # bench/machine.py
+from rows import family_groups  # bench/rows.py
 
 REPO = Path(__file__).resolve().parents[1]
 sys.path.insert(0, str(REPO))
@@ -97,8 +98,7 @@ def main() -> int:
     print(f"| family | n | {header} |")
     print("| --- | ---: |" + " ---: |" * (len(labels) * len(args.resolutions)))
     summary = {}
-    for fam in [*dict.fromkeys(r["family"] for r in rows), "mean"]:
-        sel = rows if fam == "mean" else [r for r in rows if r["family"] == fam]
+    for fam, sel in family_groups(rows, total="mean"):
         summary[fam] = {k: float(np.mean([r[k] for r in sel])) for k in sel[0] if k not in ("material", "family")}
         cells = " | ".join(f"{summary[fam][f'{label}_{r}']:.2f}" for r in args.resolutions for label in labels)
         print(f"| {fam} | {len(sel)} | {cells} |")

@@ -80,6 +80,15 @@ def tables() -> dict[str, np.ndarray]:
                            "(run scripts/make_colour_tables.py)") from exc
 
 
+def mallett2019_basis(wavelengths_nm: np.ndarray) -> np.ndarray:
+    """(Λ, 3) Mallett & Yuksel's (2019) basis reflectances, red, green, blue (the sRGB primaries'
+    uplifts; they sum to 1), at ``wavelengths_nm`` (nm); the nearest value is held outside 380–780 nm."""
+    t = tables()
+    w = np.asarray(wavelengths_nm, dtype=np.float64)
+    return np.stack([np.interp(w, t["mallett2019_wavelengths_nm"], t["mallett2019_values"][:, c])
+                     for c in range(3)], axis=1)
+
+
 def illuminant(name: str) -> tuple[np.ndarray, np.ndarray]:
     """(wavelengths nm, relative SPD) of the CIE illuminant ``name`` as colour-science tabulates it."""
     t = tables()

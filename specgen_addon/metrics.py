@@ -148,15 +148,13 @@ def colour_fitted_psnr(gt: np.ndarray, pred: np.ndarray, wavelengths_nm: np.ndar
     error that one overall colour and brightness explain (a white balance of the whole BRDF), as
     opposed to its angular shape. Same normalisation as :func:`spectral_metrics`.
     """
-    from .colour_tables import tables
+    from .colour_tables import mallett2019_basis
 
     gt, pred, mask = _checked(gt, pred, mask)
     w = np.asarray(wavelengths_nm, dtype=np.float64).reshape(-1)
     if w.size != gt.shape[-1]:
         raise SpecGenError(f"{w.size} wavelengths for {gt.shape[-1]} bands")
-    t = tables()
-    basis = np.stack([np.interp(w, t["mallett2019_wavelengths_nm"], t["mallett2019_values"][:, c])
-                      for c in range(3)], axis=1)                                  # (Λ, 3)
+    basis = mallett2019_basis(w)                                                    # (Λ, 3)
     g, p = (gt, pred) if mask is None else (gt[mask], pred[mask])
     g, p = g.reshape(-1, w.size), p.reshape(-1, w.size)
     design = (p[:, :, None] * basis[None]).reshape(-1, 3)                           # (pixels·Λ, 3)

@@ -104,12 +104,9 @@ class CorrectionBasis:
         Mallett basis in the order blue, green, red (like the hat knots), held beyond 380–780 nm."""
         if self.spectral == "hats":
             return hat_matrix(wavelengths_nm, self.wavelength_knots_nm)
-        from ..colour_tables import tables
+        from ..colour_tables import mallett2019_basis
 
-        t = tables()
-        w = np.asarray(wavelengths_nm, dtype=np.float64)
-        return np.stack([np.interp(w, t["mallett2019_wavelengths_nm"], t["mallett2019_values"][:, c])
-                         for c in (2, 1, 0)], axis=1)
+        return mallett2019_basis(wavelengths_nm)[:, ::-1]
 
     def lobe_factor(self, x: np.ndarray, wavelengths_nm: np.ndarray) -> np.ndarray:
         """Φ on the grid nodes, (90, 90, Λ), for lobe coefficients ``x`` (Na, Nb, L)."""

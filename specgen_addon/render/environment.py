@@ -51,14 +51,12 @@ def srgb_luminance_weights() -> np.ndarray:
 def _uplift_basis_cached(method: str, key: tuple[float, ...]) -> np.ndarray:
     w = np.asarray(key)
     if method == MALLETT2019:
-        from ..colour_tables import tables
+        from ..colour_tables import mallett2019_basis
 
-        t = tables()  # colour-science's basis, precomputed (specgen_addon.colour_tables)
-        # Outside the basis' 380–780 nm support the nearest value is held (a smooth continuation
-        # of the flat reflectance that white uplifts to).
-        b = np.stack([np.interp(w, t["mallett2019_wavelengths_nm"], t["mallett2019_values"][:, c])
-                      for c in range(3)])
-        return b * spectra.illuminant_spd("D65", w)[None, :]
+        # colour-science's basis, precomputed (specgen_addon.colour_tables). Outside its 380–780 nm
+        # support the nearest value is held (a smooth continuation of the flat reflectance that
+        # white uplifts to).
+        return mallett2019_basis(w).T * spectra.illuminant_spd("D65", w)[None, :]
     return srgb_luminance_weights()[:, None] * spectra.illuminant_spd(method, w)[None, :]
 
 
