@@ -92,6 +92,10 @@ def add_parser(sub: argparse._SubParsersAction) -> argparse.ArgumentParser:
     p.add_argument("--family", action="append", default=None, metavar="NAME",
                    help="with --families: score only this corpus family (classic, tinted_coat, car_paint, "
                         "thin_film, sheen, lobes; repeat for several); the real RGL files are then skipped")
+    p.add_argument("--family-split", choices=("test", "train", "val"), default="test",
+                   help="with --families: the corpus split to score (default test, the held-out one; "
+                        "train scores the same protocol on materials the network was trained on, and "
+                        "leaves out the real RGL files)")
     p.add_argument("--family-resolution", type=int, default=64,
                    help="sphere size (px) of the per-family renders (default 64)")
     p.add_argument("--quiet", action="store_true", help="no progress bar")
@@ -290,7 +294,9 @@ def run_evaluate(args: argparse.Namespace) -> int:
         with progress_bar("evaluate families", enabled=not args.quiet) as update:
             res["by_family"] = evaluate_families(weights=args.weights, per_family=args.families,
                                                  envs=not args.no_envs,
-                                                 rgl_dir=None if args.family else SHARED_RGL_DIR,
+                                                 rgl_dir=None if args.family or args.family_split != "test"
+                                                 else SHARED_RGL_DIR,
+                                                 split=args.family_split,
                                                  families=args.family,
                                                  resolution=args.family_resolution,
                                                  backend=args.backend, progress=update,

@@ -124,29 +124,77 @@ def spectral_metrics(gt: np.ndarray, pred: np.ndarray, mask: np.ndarray | None =
     return SpectralMetrics(ps, ss, float(np.mean(ps)), float(np.mean(ss)), scale)
 
 
+def _band_mse(g: np.ndarray, p: np.ndarray) -> np.ndarray:
+    """Mean squared error of each band (column) of (pixels, Λ) arrays."""
+    return np.mean((g - p) ** 2, axis=0)
+
+
+def _metric_fitted_coefficients(g: np.ndarray, p: np.ndarray, basis: np.ndarray, start_gain: float = 1.0,
+                                iterations: int = 30) -> np.ndarray:
+    """Coefficients ``c`` of the gain ``basis @ c`` (Λ,) that maximise the *mean band PSNR* of
+    ``g`` against ``p · gain`` (both (pixels, Λ), same normalisation), i.e. minimise
+    ``Σ_b log MSE_b``; the basis must span the constant gain 1.
+
+    Plain least squares over all bands weighs a bright band's error above a dark one's, while the
+    metric weighs every band alike, so a least-squares gain can score *below* the unfitted
+    prediction. This minimises the metric itself by majorise–minimise: since
+    ``log x ≤ log x₀ + x/x₀ − 1``, each weighted least-squares step with band weights
+    ``1 / MSE_b`` (at the current gain) cannot raise ``Σ_b log MSE_b``. It starts from the constant
+    gain ``start_gain`` (1: the unfitted prediction), so the result never scores below that start.
+    """
+    tiny = 1e-300
+    c = np.linalg.lstsq(basis, np.full(basis.shape[0], start_gain), rcond=None)[0]   # constant gain
+
+    def objective(coef: np.ndarray) -> float:
+        return float(np.sum(np.log(np.maximum(_band_mse(g, p * (basis @ coef)), tiny))))
+
+    # the weighted least-squares step needs only each band's Σ p² and Σ g p (normal equations)
+    spp, sgp = np.sum(p * p, axis=0), np.sum(g * p, axis=0)
+    best = objective(c)
+    for _ in range(iterations):
+        w = 1.0 / np.maximum(_band_mse(g, p * (basis @ c)), tiny)                    # (Λ,)
+        normal = basis.T @ ((w * spp)[:, None] * basis)
+        trial = np.linalg.lstsq(normal, basis.T @ (w * sgp), rcond=None)[0]
+        value = objective(trial)
+        if not value < best - 1e-12 * max(1.0, abs(best)):
+            break
+        c, best = trial, value
+    return c
+
+
+def _masked_pixels(gt: np.ndarray, pred: np.ndarray, mask: np.ndarray | None) -> tuple[np.ndarray, np.ndarray]:
+    """(pixels, Λ) views of the covered pixels, divided by the metric's normalisation scale."""
+    scale = normalisation_scale(gt, mask)
+    g, p = (gt, pred) if mask is None else (gt[mask], pred[mask])
+    return g.reshape(-1, gt.shape[-1]) / scale, p.reshape(-1, gt.shape[-1]) / scale
+
+
 def brightness_fitted_psnr(gt: np.ndarray, pred: np.ndarray, mask: np.ndarray | None = None) -> tuple[float, float]:
-    """(mean PSNR dB, scale k) of ``k · pred`` against ``gt``, k the least-squares brightness.
+    """(mean PSNR dB, scale k) of ``k · pred`` against ``gt``, k the brightness that maximises it.
 
     An *oracle* diagnostic (it sees the truth): the part of an error a single exposure factor
     explains, e.g. a photo whose brightness the network cannot know. Same normalisation as
-    :func:`spectral_metrics`.
+    :func:`spectral_metrics`; k is fitted to the mean band PSNR itself (not to the squared error
+    over all bands, which can score below ``pred``), so the result is never below ``pred``'s.
     """
     gt, pred, mask = _checked(gt, pred, mask)
-    g, p = (gt, pred) if mask is None else (gt[mask], pred[mask])
-    denom = float(np.sum(p * p))
-    k = float(np.sum(g * p) / denom) if denom > 0 else 1.0
+    g, p = _masked_pixels(gt, pred, mask)
+    k = float(_metric_fitted_coefficients(g, p, np.ones((gt.shape[-1], 1)))[0])
     return mean_psnr(gt, k * pred, mask), k
 
 
 def colour_fitted_psnr(gt: np.ndarray, pred: np.ndarray, wavelengths_nm: np.ndarray,
                        mask: np.ndarray | None = None) -> tuple[float, np.ndarray]:
-    """(mean PSNR dB, gain per band) of ``g(λ) · pred`` against ``gt``, ``g`` the least-squares
-    smooth spectral gain ``g(λ) = Σ_l c_l s_l(λ)`` over Mallett & Yuksel's (2019) three sRGB basis
-    reflectances ``s_l`` (wavelengths in nm; held constant beyond 380–780 nm).
+    """(mean PSNR dB, gain per band) of ``g(λ) · pred`` against ``gt``, ``g`` the smooth spectral
+    gain ``g(λ) = Σ_l c_l s_l(λ)`` over Mallett & Yuksel's (2019) three sRGB basis reflectances
+    ``s_l`` (wavelengths in nm; held constant beyond 380–780 nm) that maximises the mean band PSNR,
+    starting from :func:`brightness_fitted_psnr`'s factor.
 
     An *oracle* diagnostic like :func:`brightness_fitted_psnr`, one step further: the part of an
     error that one overall colour and brightness explain (a white balance of the whole BRDF), as
-    opposed to its angular shape. Same normalisation as :func:`spectral_metrics`.
+    opposed to its angular shape. Same normalisation as :func:`spectral_metrics`; never below the
+    brightness fit's score, itself never below ``pred``'s (the basis sums to 1, so every constant
+    gain is in its span).
     """
     from .colour_tables import mallett2019_basis
 
@@ -155,12 +203,12 @@ def colour_fitted_psnr(gt: np.ndarray, pred: np.ndarray, wavelengths_nm: np.ndar
     if w.size != gt.shape[-1]:
         raise SpecGenError(f"{w.size} wavelengths for {gt.shape[-1]} bands")
     basis = mallett2019_basis(w)                                                    # (Λ, 3)
-    g, p = (gt, pred) if mask is None else (gt[mask], pred[mask])
-    g, p = g.reshape(-1, w.size), p.reshape(-1, w.size)
-    design = (p[:, :, None] * basis[None]).reshape(-1, 3)                           # (pixels·Λ, 3)
-    coef, *_ = np.linalg.lstsq(design, g.reshape(-1), rcond=None)
-    gain = basis @ coef
-    return mean_psnr(gt, pred * gain, mask), gain
+    g, p = _masked_pixels(gt, pred, mask)
+    bright, k = brightness_fitted_psnr(gt, pred, mask)
+    gain = basis @ _metric_fitted_coefficients(g, p, basis, start_gain=k)
+    fitted = mean_psnr(gt, pred * gain, mask)
+    # the basis sums to 1 only to ~10⁻⁵: where the fit cannot improve, the constant gain is exact
+    return (fitted, gain) if fitted >= bright else (bright, np.full_like(gain, k))
 
 
 def mean_psnr(gt: np.ndarray, pred: np.ndarray, mask: np.ndarray | None = None) -> float:

@@ -110,3 +110,26 @@ def test_colour_fit_removes_a_smooth_white_balance_error_and_not_a_shape_error()
     assert psnr_fit == pytest.approx(mean_psnr(gt, noisy), abs=0.2)
     with pytest.raises(SpecGenError, match="wavelengths"):
         colour_fitted_psnr(gt, noisy, w[:5])
+
+
+def test_fitted_oracles_never_score_below_the_prediction_they_correct():
+    """Both oracles maximise the mean band PSNR itself, and the colour fit starts from the brightness
+    fit, so network ≤ brightness fitted ≤ colour fitted. A least-squares gain over all bands weighs a
+    bright band above a dark one and can score *below* the unfitted prediction (it does on some of
+    these draws); the fitted gain cannot."""
+    from specgen_addon.metrics import brightness_fitted_psnr, colour_fitted_psnr, mean_psnr
+
+    rng = np.random.default_rng(11)
+    w = np.linspace(400.0, 700.0, 6)
+    least_squares_lost = 0
+    for _ in range(12):
+        level = 10.0 ** rng.uniform(-2.5, 0.0, 6)                 # bands of very different level
+        gt = (rng.random((12, 12, 6)) + 0.2) * level
+        error = rng.normal(0.0, 0.02, 6) * level.max() * rng.random(6)
+        pred = gt * rng.uniform(0.8, 1.2, 6) + error + rng.normal(0.0, 1e-4, gt.shape)
+        plain = mean_psnr(gt, pred)
+        k_ls = float(np.sum(gt * pred) / np.sum(pred * pred))
+        least_squares_lost += mean_psnr(gt, k_ls * pred) < plain - 0.1
+        bright = brightness_fitted_psnr(gt, pred)[0]
+        assert plain - 1e-9 <= bright <= colour_fitted_psnr(gt, pred, w)[0] + 1e-9
+    assert least_squares_lost > 0          # the draws include the case the old fit got wrong

@@ -169,9 +169,14 @@ def evaluate_families(weights: str | Path | None = None, per_family: int = 4, en
                       resolution: int = RESOLUTION, families: list[str] | None = None,
                       progress: Callable[[float], None] | None = None,
                       input_env: str | None = None, input_shift_px: float = 0.0,
-                      input_antialias: bool = False, self_reproduction: bool = True) -> dict[str, Any]:
+                      input_antialias: bool = False, self_reproduction: bool = True,
+                      split: str = "test") -> dict[str, Any]:
     """PSNR/SSIM per family of the mixed test split, network alone (no refinement), each family
     with its self-reproduction (the photo is the measurement).
+
+    ``split``: ``"test"`` (held out: the figures the issue's targets are on), or ``"train"`` /
+    ``"val"`` for the same protocol on other materials, e.g. to tell how well the network fits the
+    materials it was trained on from how well it generalises.
 
     Scenes: the protocol's distant lights and, with ``envs``, the two held-out environment maps
     (:data:`specgen_addon.lighting.HELDOUT_ENVS`). The input is the canonical sphere, or with
@@ -199,7 +204,7 @@ def evaluate_families(weights: str | Path | None = None, per_family: int = 4, en
     scenes: list[tuple[str, dict]] = [("distant", {"lights": DISTANT_LIGHTS})]
     if envs:
         scenes += [(f"env-{e}", {"environment": lighting.load_environment(e)}) for e in lighting.HELDOUT_ENVS]
-    mats = mixed_test_materials(per_family, families)
+    mats = mixed_split_materials(per_family, families, split)
     rgl_files = sorted(Path(rgl_dir).glob("*.bsdf")) if rgl_dir is not None and Path(rgl_dir).is_dir() else []
     total = len(mats) + len(rgl_files)
     def input_of(brdf) -> np.ndarray:
@@ -276,7 +281,8 @@ def evaluate_families(weights: str | Path | None = None, per_family: int = 4, en
              if synth and all(f"{k}_{lab}" in r for r in synth)}
     means |= _reproduction_means(synth)
     return {"materials": rows, "families": by_family, "means": means, "scenes": labels,
-            "per_family": per_family, "resolution": resolution, "input": input_env or "canonical",
+            "per_family": per_family, "split": split, "resolution": resolution,
+            "input": input_env or "canonical",
             "input_shift_px": input_shift_px, "input_antialias": input_antialias,
             "weights": str(weights) if weights else "default: the shipped pair, chosen by each sphere's cut",
             "backend": backend, "corpus": {"size": MIXED_CORPUS_SIZE, "seed": MIXED_CORPUS_SEED},
@@ -320,6 +326,8 @@ def format_family_results(res: dict[str, Any]) -> str:
     header, rows = family_rows(res)
     lead = [] if res.get("input", "canonical") == "canonical" else \
         [f"input: the sphere under {res['input']!r}, the network not told"]
+    if res.get("split", "test") != "test":
+        lead.append(f"materials of the {res['split']!r} split, not the held-out test split")
     means = res.get("means", {})
     tail = []
     for what, key in (("brightness", "psnr_brightness_fitted"), ("colour (a smooth spectral gain)", "psnr_colour_fitted")):
