@@ -84,3 +84,26 @@ def test_a_twin_of_a_non_material_is_the_value_itself():
     assert colour_twin(None) is None
     gold = Conductor("Au")
     assert colour_twin(gold) is gold          # metals are kept: the module's stated optimism
+
+
+def test_replace_reflectances_replaces_every_reflectance_and_keeps_every_other_parameter():
+    from specgen_addon.corpus.colour_twin import replace_reflectances
+
+    grey = Reflectance("grey", tuple(0.5 for _ in REFLECTANCE_GRID_NM))
+    for mat in generate_mixed_corpus(40, 1):
+        seen: list[str] = []
+
+        def to_grey(r: Reflectance) -> Reflectance:
+            seen.append(r.source)
+            return grey
+
+        new = replace_reflectances(mat, to_grey)
+        originals = [f for f in dataclasses.fields(mat) if isinstance(getattr(mat, f.name), Reflectance)]
+        assert len(seen) >= len(originals)                   # nested ones (a coat's) count too
+        assert (new is mat) == (not seen)                    # nothing to replace: the same object
+        for f in dataclasses.fields(mat):
+            old = getattr(mat, f.name)
+            if isinstance(old, Reflectance):
+                assert getattr(new, f.name) is grey
+            elif not dataclasses.is_dataclass(old):
+                assert getattr(new, f.name) == old          # roughness, films, metals' names, ...

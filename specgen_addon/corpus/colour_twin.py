@@ -17,6 +17,7 @@ from __future__ import annotations
 
 import dataclasses
 import functools
+from collections.abc import Callable
 
 import numpy as np
 
@@ -58,10 +59,11 @@ def reflectance_twin(reflectance: Reflectance) -> Reflectance:
     return Reflectance(f"twin of {reflectance.source}", tuple(round(float(v), 6) for v in values))
 
 
-def colour_twin(material: object) -> object:
-    """``material`` (any corpus family, frozen dataclasses) with every reflectance replaced by its twin."""
+def replace_reflectances(material: object, replace: Callable[[Reflectance], Reflectance]) -> object:
+    """``material`` (any corpus family, frozen dataclasses) with every reflectance ``ρ`` replaced by
+    ``replace(ρ)``, in field order; every other parameter (metals included) kept."""
     if isinstance(material, Reflectance):
-        return reflectance_twin(material)
+        return replace(material)
     if not dataclasses.is_dataclass(material) or isinstance(material, type):
         return material
     changes = {}
@@ -69,7 +71,12 @@ def colour_twin(material: object) -> object:
         if not field.init:
             continue
         value = getattr(material, field.name)
-        twin = colour_twin(value)
-        if twin is not value:
-            changes[field.name] = twin
+        new = replace_reflectances(value, replace)
+        if new is not value:
+            changes[field.name] = new
     return dataclasses.replace(material, **changes) if changes else material
+
+
+def colour_twin(material: object) -> object:
+    """``material`` (any corpus family, frozen dataclasses) with every reflectance replaced by its twin."""
+    return replace_reflectances(material, reflectance_twin)
