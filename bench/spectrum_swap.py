@@ -82,9 +82,7 @@ def main() -> int:
     baseline = {r["material"]: r["psnr_distant"] for path in args.baseline
                 for r in json.loads(path.read_text())["by_family"]["materials"]}
 
-    pool = [s for group in measured_groups(args.pool) for s in group]
-    group_of = [g for g, group in enumerate(measured_groups(args.pool)) for _ in group]
-    n_groups = max(group_of) + 1
+    groups = measured_groups(args.pool)
     wl = np.asarray(WAVELENGTHS_NM, np.float64)
     geo = sphere_geometry(128)
     rows = []
@@ -93,9 +91,8 @@ def main() -> int:
         rng = np.random.default_rng([args.seed, i])
 
         def draw(_: Reflectance) -> Reflectance:
-            g = int(rng.integers(n_groups))                       # a source group, then one member
-            members = [s for s, k in zip(pool, group_of) if k == g]
-            s = members[int(rng.integers(len(members)))]
+            group = groups[int(rng.integers(len(groups)))]      # a source group, then one member
+            s = group[int(rng.integers(len(group)))]
             return Reflectance(f"swap: {s.id}", tuple(round(float(v), 6) for v in s.values))
 
         swapped = replace_reflectances(mat, draw)
@@ -114,7 +111,7 @@ def main() -> int:
         print(f"{mat.name} {row['family']:<12} {args.pool} spectra {row['swapped']:.2f} dB{orig}", flush=True)
 
     print(f"\n{describe_machine()}; {len(rows)} training materials with a reflectance, spectra from the "
-          f"{args.pool!r} pool ({len(pool)} spectra in {n_groups} groups), {time.perf_counter() - t0:.0f} s")
+          f"{args.pool!r} pool ({sum(map(len, groups))} spectra in {len(groups)} groups), {time.perf_counter() - t0:.0f} s")
     summary = summarise(rows, args.pool, other)
     if args.json is not None:
         args.json.write_text(json.dumps({"pool": args.pool, "seed": args.seed, "materials": rows,

@@ -169,6 +169,11 @@ def _masked_pixels(gt: np.ndarray, pred: np.ndarray, mask: np.ndarray | None) ->
     return g.reshape(-1, gt.shape[-1]) / scale, p.reshape(-1, gt.shape[-1]) / scale
 
 
+def _brightness_factor(g: np.ndarray, p: np.ndarray) -> float:
+    """The brightness k maximising the mean band PSNR of ``k · p`` against ``g`` ((pixels, Λ))."""
+    return float(_metric_fitted_coefficients(g, p, np.ones((g.shape[-1], 1)))[0])
+
+
 def brightness_fitted_psnr(gt: np.ndarray, pred: np.ndarray, mask: np.ndarray | None = None) -> tuple[float, float]:
     """(mean PSNR dB, scale k) of ``k · pred`` against ``gt``, k the brightness that maximises it.
 
@@ -178,8 +183,7 @@ def brightness_fitted_psnr(gt: np.ndarray, pred: np.ndarray, mask: np.ndarray | 
     over all bands, which can score below ``pred``), so the result is never below ``pred``'s.
     """
     gt, pred, mask = _checked(gt, pred, mask)
-    g, p = _masked_pixels(gt, pred, mask)
-    k = float(_metric_fitted_coefficients(g, p, np.ones((gt.shape[-1], 1)))[0])
+    k = _brightness_factor(*_masked_pixels(gt, pred, mask))
     return mean_psnr(gt, k * pred, mask), k
 
 
@@ -204,9 +208,9 @@ def colour_fitted_psnr(gt: np.ndarray, pred: np.ndarray, wavelengths_nm: np.ndar
         raise SpecGenError(f"{w.size} wavelengths for {gt.shape[-1]} bands")
     basis = mallett2019_basis(w)                                                    # (Λ, 3)
     g, p = _masked_pixels(gt, pred, mask)
-    bright, k = brightness_fitted_psnr(gt, pred, mask)
+    k = _brightness_factor(g, p)
     gain = basis @ _metric_fitted_coefficients(g, p, basis, start_gain=k)
-    fitted = mean_psnr(gt, pred * gain, mask)
+    fitted, bright = mean_psnr(gt, pred * gain, mask), mean_psnr(gt, k * pred, mask)
     # the basis sums to 1 only to ~10⁻⁵: where the fit cannot improve, the constant gain is exact
     return (fitted, gain) if fitted >= bright else (bright, np.full_like(gain, k))
 
