@@ -293,6 +293,9 @@ def test_lighting_mix_honours_the_configured_canonical_fraction():
     ({"fresh_encoder": True}, "need init_weights"),
     ({"fresh_encoder": "yes"}, "fresh_encoder must be true or false"),
     ({"recycle_mode": "gentle"}, "recycle_mode must be"),
+    ({"family_draw": {"velvet": 1.0}}, "unknown material family 'velvet'"),
+    ({"family_draw": {"sheen": -1.0}}, "family weights must be non-negative"),
+    ({"families": {"classic": 1.0}, "family_draw": {"sheen": 1.0}}, "family_draw names no family"),
 ])
 def test_bad_training_configs_are_refused_with_one_clear_error(tmp_path, bad, message):
     from specgen_addon.cli import main as cli_main
@@ -303,6 +306,25 @@ def test_bad_training_configs_are_refused_with_one_clear_error(tmp_path, bad, me
     path.write_text(json.dumps({"train": bad}))
     assert cli_main(["train", "--config", str(path), "--out", str(tmp_path / "run"), "--quiet"]) == 2
     assert not (tmp_path / "run").exists()
+
+
+def test_family_draw_weights_the_steps_by_family_and_leaves_the_corpus_as_it_is():
+    from specgen_addon.corpus.generate import generate_mixed_corpus, material_family
+    from specgen_addon.train.loop import _draw, family_draw_probabilities
+
+    corpus = [m for m in generate_mixed_corpus(80, seed=0) if m.split == "train"]
+    mats = [TrainingMaterial(m.name, m, True) for m in corpus]
+    fams = np.array([material_family(m) for m in corpus])
+    p = family_draw_probabilities(mats, {"sheen": 3.0, "classic": 1.0})
+    assert p[fams == "sheen"].sum() == pytest.approx(0.75) and p[fams == "classic"].sum() == pytest.approx(0.25)
+    assert np.ptp(p[fams == "sheen"]) == 0 and not p[(fams != "sheen") & (fams != "classic")].any()
+    mset = MaterialSet(mats, [np.zeros((1, 3, 2, 2), np.float32)] * len(mats), draw_p=p)
+    rng = np.random.default_rng(0)
+    drawn = [material_family(m.brdf) for _ in range(400) for m in _draw(rng, mset, 2, 1.0, 1)[0]]
+    assert set(drawn) == {"sheen", "classic"}
+    assert abs(drawn.count("sheen") / len(drawn) - 0.75) < 0.06
+    with pytest.raises(SpecGenError, match="weights no family of the training set"):
+        family_draw_probabilities([m for m, f in zip(mats, fams) if f == "classic"], {"sheen": 1.0})
 
 
 def test_train_command_refuses_bad_overrides_before_any_work(tmp_path, repo_dir):

@@ -85,6 +85,11 @@ class TrainConfig:
     threads: int = 2
     #: Family mix of the corpus (family → weight); None: the classic recipe only (issue 3).
     families: dict[str, float] | None = None
+    #: Chance of each family at every step's draw (family → weight; normalised): each material is
+    #: drawn with its family's weight shared among the family's materials, so the corpus (and with
+    #: it the test split) keeps the ``families`` mix while the steps see another. None: every
+    #: training material is equally likely (the earlier runs' draws, bit for bit).
+    family_draw: dict[str, float] | None = None
     #: "variants": cached renders under ``input_variants`` fixed lightings; "mix": lighting drawn
     #: per step from cached components (:mod:`.lighting_mix`).
     lighting: str = "variants"
@@ -176,6 +181,13 @@ class TrainConfig:
             from ..corpus.generate import check_mix
 
             check_mix(self.families)
+        if self.family_draw is not None:
+            from ..corpus.generate import check_mix
+
+            check_mix(self.family_draw)
+            if self.families is not None and not set(self.family_draw) & set(self.families):
+                raise SpecGenError("training config: family_draw names no family of the corpus mix "
+                                   f"({', '.join(sorted(self.families))})")
         if self.init_weights is not None and not Path(self.init_weights).is_file():
             raise SpecGenError(f"training config: init_weights {self.init_weights}: file not found")
         if self.recycle_dormant:
@@ -246,6 +258,8 @@ class MaterialSet:
 
     materials: list[TrainingMaterial]
     images: list[np.ndarray]
+    #: Chance of each material at a step's draw (None: uniform); :func:`family_draw_probabilities`.
+    draw_p: np.ndarray | None = None
 
     def __len__(self) -> int:
         return len(self.materials)
@@ -265,6 +279,24 @@ def lr_at(tcfg: TrainConfig, step: int) -> float:
     return tcfg.lr * tcfg.lr_decay ** (step // max(1, tcfg.lr_decay_every))
 
 
+def family_draw_probabilities(materials: Sequence[TrainingMaterial], weights: dict[str, float]) -> np.ndarray:
+    """Chance of each material at a step's draw: its family's share of ``weights`` (normalised)
+    split evenly among that family's materials; a family without a weight is never drawn.
+
+    SpecGenError when no material belongs to a weighted family.
+    """
+    from ..corpus.generate import check_mix, material_family
+
+    share = check_mix(weights)
+    families = [material_family(m.brdf) for m in materials]
+    counts = {f: families.count(f) for f in set(families)}
+    p = np.array([share.get(f, 0.0) / counts[f] for f in families], dtype=np.float64)
+    if p.sum() <= 0:
+        raise SpecGenError(f"training config: family_draw weights no family of the training set "
+                           f"({', '.join(sorted(counts))})")
+    return p / p.sum()
+
+
 def _draw(rng: np.random.Generator, mset: MaterialSet, k: int, canonical_fraction: float,
           n_variants: int, lighting: str = "variants") -> tuple[list[TrainingMaterial], list[np.ndarray]]:
     """``k`` materials and one input image each: the canonical lighting with probability
@@ -274,7 +306,11 @@ def _draw(rng: np.random.Generator, mset: MaterialSet, k: int, canonical_fractio
     Coloured environment maps shift the sphere's colour, which a single image cannot tell apart
     from the material's own; mostly canonical inputs keep the colour → spectrum mapping sharp.
     """
-    idx = rng.choice(len(mset), size=min(k, len(mset)), replace=False)
+    if mset.draw_p is None:
+        idx = rng.choice(len(mset), size=min(k, len(mset)), replace=False)
+    else:
+        k = min(k, int(np.count_nonzero(mset.draw_p)))
+        idx = rng.choice(len(mset), size=k, replace=False, p=mset.draw_p)
     mats, imgs = [], []
     for i in np.sort(idx):
         stack = mset.images[i]
@@ -406,6 +442,8 @@ def make_step_batches(tcfg: TrainConfig, mcfg: Config, spectral: MaterialSet, rg
         if len(mset) == 0 or k <= 0:
             out.append(None)
             continue
+        if tcfg.family_draw is not None and mset.draw_p is None:
+            mset.draw_p = family_draw_probabilities(mset.materials, tcfg.family_draw)
         mats, imgs = _draw(rng, mset, k, tcfg.canonical_fraction, tcfg.input_variants, tcfg.lighting)
         if tcfg.input_jitter_px > 0 or tcfg.input_scale_jitter > 0:
             # (no draws when off: earlier runs keep their data bit for bit)
