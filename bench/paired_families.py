@@ -8,6 +8,7 @@ standard error, how many materials the candidate is better on, and per-family me
 RGL files (kind "measured", scored in RGB) are left out of the pairing.
 
     python bench/paired_families.py BASELINE.json CANDIDATE.json [--scene distant]
+    python bench/paired_families.py A.json C.json --also-baseline B.json --also-candidate D.json   # halves
 """
 
 from __future__ import annotations
@@ -47,9 +48,18 @@ def main(argv: list[str] | None = None) -> int:
     ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     ap.add_argument("baseline", type=Path)
     ap.add_argument("candidate", type=Path)
+    ap.add_argument("--also-baseline", type=Path, action="append", default=[],
+                    help="more baseline results (e.g. the other half of a whole-split run); repeatable")
+    ap.add_argument("--also-candidate", type=Path, action="append", default=[],
+                    help="more candidate results; repeatable")
     ap.add_argument("--scene", default="distant", help="which PSNR column to pair (default: distant)")
     args = ap.parse_args(argv)
-    base, cand = synthetic_scores(args.baseline, args.scene), synthetic_scores(args.candidate, args.scene)
+    base: dict[tuple[str, str], float] = {}
+    cand: dict[tuple[str, str], float] = {}
+    for path in [args.baseline, *args.also_baseline]:
+        base.update(synthetic_scores(path, args.scene))
+    for path in [args.candidate, *args.also_candidate]:
+        cand.update(synthetic_scores(path, args.scene))
     s = paired(base, cand)
     print(f"{s['n']} materials, {args.scene} PSNR: baseline {s['baseline']:.2f} dB, candidate {s['candidate']:.2f} dB")
     print(f"paired difference {s['diff']:+.3f} ± {s['se']:.3f} dB ({s['ratio']:+.2f} standard errors), "

@@ -44,3 +44,18 @@ def test_files_without_rows_or_shared_materials_are_refused(tmp_path):
         paired_families.synthetic_scores(tmp_path / "empty.json", "distant")
     with pytest.raises(SystemExit, match="in common"):
         paired_families.paired({("a", "x"): 1.0, ("a", "y"): 2.0}, {("a", "z"): 1.0})
+
+
+def test_halves_of_a_whole_split_pair_like_one_file(tmp_path, capsys):
+    rng = np.random.default_rng(1)
+    base = {f"{'sc'[i % 2]}{i}": float(v) for i, v in enumerate(30 + 5 * rng.random(10))}
+    cand = {k: v + 0.1 * (i % 3) for i, (k, v) in enumerate(base.items())}
+    half = lambda d, lo, hi: dict(list(d.items())[lo:hi])  # noqa: E731
+    whole = [str(write(tmp_path / "b.json", base, 1.0)), str(write(tmp_path / "c.json", cand, 1.0))]
+    assert paired_families.main(whole) == 0
+    one = capsys.readouterr().out
+    halves = [str(write(tmp_path / "b1.json", half(base, 0, 4), 1.0)), str(write(tmp_path / "c1.json", half(cand, 0, 4), 1.0)),
+              "--also-baseline", str(write(tmp_path / "b2.json", half(base, 4, 10), 1.0)),
+              "--also-candidate", str(write(tmp_path / "c2.json", half(cand, 4, 10), 1.0))]
+    assert paired_families.main(halves) == 0
+    assert capsys.readouterr().out == one and "10 materials" in one
