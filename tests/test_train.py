@@ -308,7 +308,7 @@ def test_bad_training_configs_are_refused_with_one_clear_error(tmp_path, bad, me
     assert not (tmp_path / "run").exists()
 
 
-def test_family_draw_weights_the_steps_by_family_and_leaves_the_corpus_as_it_is():
+def test_family_draw_weights_the_steps_by_family_and_leaves_the_corpus_as_it_is(tmp_path):
     from specgen_addon.corpus.generate import generate_mixed_corpus, material_family
     from specgen_addon.train.loop import _draw, family_draw_probabilities
 
@@ -325,6 +325,11 @@ def test_family_draw_weights_the_steps_by_family_and_leaves_the_corpus_as_it_is(
     assert abs(drawn.count("sheen") / len(drawn) - 0.75) < 0.06
     with pytest.raises(SpecGenError, match="weights no family of the training set"):
         family_draw_probabilities([m for m, f in zip(mats, fams) if f == "classic"], {"sheen": 1.0})
+    spec, rgb, val = sets()                                      # stand-ins: all "classic"
+    with pytest.raises(SpecGenError, match="weights no family of the training set"):
+        train(Config(**SMALL), TrainConfig(**{**FAST, "family_draw": {"sheen": 1.0}}), spec, rgb, val,
+              tmp_path / "run", show_progress=False)
+    assert not (tmp_path / "run").exists()
 
 
 def test_train_command_refuses_bad_overrides_before_any_work(tmp_path, repo_dir):

@@ -15,6 +15,7 @@ count (on a GPU: to float rounding).
 
 from __future__ import annotations
 
+import collections
 import contextlib
 import csv
 import dataclasses
@@ -289,7 +290,7 @@ def family_draw_probabilities(materials: Sequence[TrainingMaterial], weights: di
 
     share = check_mix(weights)
     families = [material_family(m.brdf) for m in materials]
-    counts = {f: families.count(f) for f in set(families)}
+    counts = collections.Counter(families)
     p = np.array([share.get(f, 0.0) / counts[f] for f in families], dtype=np.float64)
     if p.sum() <= 0:
         raise SpecGenError(f"training config: family_draw weights no family of the training set "
@@ -442,8 +443,6 @@ def make_step_batches(tcfg: TrainConfig, mcfg: Config, spectral: MaterialSet, rg
         if len(mset) == 0 or k <= 0:
             out.append(None)
             continue
-        if tcfg.family_draw is not None and mset.draw_p is None:
-            mset.draw_p = family_draw_probabilities(mset.materials, tcfg.family_draw)
         mats, imgs = _draw(rng, mset, k, tcfg.canonical_fraction, tcfg.input_variants, tcfg.lighting)
         if tcfg.input_jitter_px > 0 or tcfg.input_scale_jitter > 0:
             # (no draws when off: earlier runs keep their data bit for bit)
@@ -483,6 +482,9 @@ def train(mcfg: Config, tcfg: TrainConfig, spectral: MaterialSet, rgb: MaterialS
     """
     if len(spectral) == 0 and len(rgb) == 0:
         raise SpecGenError("no training materials")
+    if tcfg.family_draw is not None:  # once, before any output and before data workers fork
+        spectral, rgb = (dataclasses.replace(m, draw_p=family_draw_probabilities(m.materials, tcfg.family_draw))
+                         if len(m) else m for m in (spectral, rgb))
     out = Path(out_dir)
     out.mkdir(parents=True, exist_ok=True)
     torch.set_num_threads(tcfg.threads)
