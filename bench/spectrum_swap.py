@@ -19,7 +19,7 @@ the paired difference to another pool's run of the same materials and seed; ``--
 the summary of finished runs without scoring anything again.
 
 Usage: ``.venv/bin/python bench/spectrum_swap.py --pool test [--per-family 30] [--families ...]
-[--seed 0] [--baseline A.json B.json] [--json out.json] [--pair-with other.json]``, or
+[--seed 0] [--baseline A.json B.json] [--json out.json] [--pair-with other.json] [--weights W.pt]``, or
 ``--from-json test.json --pair-with train.json``
 """
 
@@ -59,6 +59,8 @@ def main() -> int:
     ap.add_argument("--baseline", type=Path, nargs="+", default=[],
                     help="evaluate --family-split train --json files holding the unswapped scores")
     ap.add_argument("--json", type=Path, default=None)
+    ap.add_argument("--weights", type=Path, default=None,
+                    help="network weights to score (default: the shipped weights/specgen_default.pt)")
     ap.add_argument("--pair-with", type=Path, default=None, metavar="JSON",
                     help="another pool's --json of the same materials and seed: also print this − that, paired")
     ap.add_argument("--from-json", type=Path, default=None, metavar="JSON",
@@ -68,7 +70,7 @@ def main() -> int:
         ap.error("give --pool (score) or --from-json (summarise a finished run)")
     if args.per_family < 1 or args.seed < 0:
         ap.error("--per-family must be ≥ 1 and --seed ≥ 0")
-    for path in [*args.baseline, *(p for p in (args.pair_with, args.from_json) if p is not None)]:
+    for path in [*args.baseline, *(p for p in (args.pair_with, args.from_json, args.weights) if p is not None)]:
         if not path.is_file():
             ap.error(f"{path}: file not found")
     if args.json is not None and not args.json.parent.is_dir():
@@ -98,7 +100,7 @@ def main() -> int:
         swapped = replace_reflectances(mat, draw)
         if swapped is mat:
             continue                                              # no reflectance to swap (a metal)
-        table = generate_brdf(input_image.render_input(swapped), wavelengths_nm=wl)
+        table = generate_brdf(input_image.render_input(swapped), weights=args.weights, wavelengths_nm=wl)
         gt = render_spectral(swapped, geo, lights=DISTANT_LIGHTS, wavelengths_nm=wl).spectral
         pred = render_spectral(table, geo, lights=DISTANT_LIGHTS, wavelengths_nm=wl).spectral
         row = {"material": mat.name, "family": material_family(mat), "kind": mat.kind,
@@ -114,7 +116,7 @@ def main() -> int:
           f"{args.pool!r} pool ({sum(map(len, groups))} spectra in {len(groups)} groups), {time.perf_counter() - t0:.0f} s")
     summary = summarise(rows, args.pool, other)
     if args.json is not None:
-        args.json.write_text(json.dumps({"pool": args.pool, "seed": args.seed, "materials": rows,
+        args.json.write_text(json.dumps({"pool": args.pool, "seed": args.seed, "weights": str(args.weights or "shipped"), "materials": rows,
                                          "families": summary}, indent=1))
     return 0
 

@@ -58,7 +58,8 @@ SEEDS = (0, 1)
 #: before they existed keep their keys (a documented table's command then trains nothing). A field
 #: added later belongs here too: tests/test_ablation_study.py checks the recorded keys and fails until it is.
 KEY_NEUTRAL_AT_DEFAULT = {"m": ("encoder_negative_slope", "boost_channels", "boost_width"),
-                          "t": ("recycle_dormant", "recycle_mode", "fresh_encoder", "frozen", "family_draw")}
+                          "t": ("recycle_dormant", "recycle_mode", "fresh_encoder", "frozen", "family_draw",
+                                "recolour_p")}
 
 
 @dataclass

@@ -116,22 +116,43 @@ def _mixed_lighting_sets(mcfg: Config, tcfg: TrainConfig, cache_dir: Path, spect
     todo = cache.missing(everything)
     if todo:
         log(f"rendering {len(todo)} materials under {len(COMPONENTS)} lighting components into {cache_dir}")
-    bar = None
-    if progress and todo:
-        from tqdm import tqdm
-
-        bar = tqdm(total=len(todo), desc="input renders", unit="mat", mininterval=5.0)
-    cache.fill(everything, workers=tcfg.render_workers,
-               progress=(lambda f: bar.update(round(f * len(todo)) - bar.n)) if bar else None)
-    if bar is not None:
-        bar.close()
+    _fill_with_bar(cache.fill, everything, len(todo), tcfg.render_workers, "input renders", progress)
     images = {m.name: cache.load(m, mcfg.image_size) for m in everything}
 
     def imgs(mats: list[TrainingMaterial]) -> list[np.ndarray]:
         return [images[m.name.removesuffix("/rgb")] for m in mats]
 
-    return (MaterialSet(spectral, imgs(spectral)), MaterialSet(rgb, imgs(rgb)),
+    recolour = None
+    if tcfg.recolour_p > 0:
+        recolour = _recolour_source(tcfg, cache_dir, spectral, log, progress)  # measured files: no slot
+    return (MaterialSet(spectral, imgs(spectral), recolour=recolour), MaterialSet(rgb, imgs(rgb)),
             MaterialSet(valset, imgs(valset)))
+
+
+def _fill_with_bar(fill: Callable[..., None], mats: list[TrainingMaterial], n_todo: int, workers: int,
+                   desc: str, progress: bool) -> None:
+    """``fill(mats, workers=…, progress=…)`` with a tqdm bar over the ``n_todo`` missing renders."""
+    bar = None
+    if progress and n_todo:
+        from tqdm import tqdm
+
+        bar = tqdm(total=n_todo, desc=desc, unit="mat", mininterval=5.0)
+    fill(mats, workers=workers, progress=(lambda f: bar.update(round(f * n_todo) - bar.n)) if bar else None)
+    if bar is not None:
+        bar.close()
+
+
+def _recolour_source(tcfg: TrainConfig, cache_dir: Path, mats: list[TrainingMaterial],
+                     log: Callable[[str], None], progress: bool):
+    """Per-band canonical renders of the corpus's recolourable training materials (:mod:`.recolour`)."""
+    from .recolour import AffinePairCache
+
+    cache = AffinePairCache(cache_dir)
+    todo = cache.missing(mats)
+    if todo:
+        log(f"rendering the two per-band canonical inputs of {len(todo)} materials for recolouring into {cache_dir}")
+    _fill_with_bar(cache.fill, mats, len(todo), tcfg.render_workers, "recolour renders", progress)
+    return cache.source(mats, tcfg.recolour_p)
 
 
 __all__ = ["MaterialSet", "TrainConfig", "build_material_sets", "network_inputs", "render_input_variant"]

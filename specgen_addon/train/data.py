@@ -115,6 +115,24 @@ def make_batch(materials: Sequence[TrainingMaterial], images: Sequence[np.ndarra
                  valid=np.stack(vals))
 
 
+def render_all(make: Callable[[Any], None], todo: Sequence[Any], workers: int = 2,
+               progress: Callable[[float], None] | None = None, chunksize: int = 4) -> None:
+    """``make(item)`` for every item, on ``workers`` forked processes (in order when 1), reporting
+    the fraction done: the render caches' fill."""
+    if workers <= 1:
+        for i, item in enumerate(todo):
+            make(item)
+            if progress:
+                progress((i + 1) / len(todo))
+        return
+    import multiprocessing as mp
+
+    with mp.get_context("fork").Pool(workers) as pool:
+        for i, _ in enumerate(pool.imap_unordered(make, todo, chunksize=chunksize)):
+            if progress:
+                progress((i + 1) / len(todo))
+
+
 def find_brdf_files(dirs: Sequence[str | Path]) -> list[Path]:
     """MERL ``.binary`` and RGL ``.bsdf`` files in the given directories (sorted, non-recursive)."""
     files: list[Path] = []

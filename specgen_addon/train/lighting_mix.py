@@ -166,21 +166,11 @@ class ComponentCache:
 
     def fill(self, mats, workers: int = 2, progress=None) -> None:
         """Render what is missing, grouped by environment variant (prepared scenes are reused)."""
-        todo = sorted(self.missing(mats), key=lambda m: env_variant(m.name))
-        if not todo:
-            return
-        if workers <= 1:
-            for i, m in enumerate(todo):
-                self.make(m)
-                if progress:
-                    progress((i + 1) / len(todo))
-            return
-        import multiprocessing as mp
+        from .data import render_all
 
-        with mp.get_context("fork").Pool(workers) as pool:
-            for i, _ in enumerate(pool.imap_unordered(self.make, todo, chunksize=4)):
-                if progress:
-                    progress((i + 1) / len(todo))
+        todo = sorted(self.missing(mats), key=lambda m: env_variant(m.name))
+        if todo:
+            render_all(self.make, todo, workers, progress)
 
     def load(self, mat, image_size: int) -> np.ndarray:
         """The stack at network resolution ``(len(COMPONENTS), 3, S, S)`` float16."""

@@ -91,6 +91,12 @@ class TrainConfig:
     #: it the test split) keeps the ``families`` mix while the steps see another. None: every
     #: training material is equally likely (the earlier runs' draws, bit for bit).
     family_draw: dict[str, float] | None = None
+    #: Chance that a drawn spectral training material is recoloured for the step: its first
+    #: reflectance the BRDF is affine in is replaced by a random spectrum of the training materials'
+    #: own, and its canonical input recombined exactly from two cached per-band renders
+    #: (:mod:`.recolour`): new combinations of familiar parts at every step. Needs ``lighting="mix"``.
+    #: 0 (default): off, the earlier runs' draws bit for bit.
+    recolour_p: float = 0.0
     #: "variants": cached renders under ``input_variants`` fixed lightings; "mix": lighting drawn
     #: per step from cached components (:mod:`.lighting_mix`).
     lighting: str = "variants"
@@ -166,6 +172,13 @@ class TrainConfig:
             raise SpecGenError(f"training config: ema_decay must be a number in [0, 1), got {self.ema_decay!r}")
         if self.lr <= 0 or self.canonical_fraction > 1:
             raise SpecGenError("training config: lr must be > 0 and canonical_fraction ≤ 1")
+        for key in ("input_offgrid_fraction", "recolour_p"):
+            f = getattr(self, key)
+            if not isinstance(f, (int, float)) or isinstance(f, bool) or not 0.0 <= f <= 1.0:
+                raise SpecGenError(f"training config: {key} must be a number in [0, 1], got {f!r}")
+        if self.recolour_p > 0 and self.lighting != "mix":
+            raise SpecGenError("training config: recolour_p needs lighting \"mix\" (it recombines the "
+                               "canonical input from per-band renders)")
         f = self.input_offgrid_fraction
         if not isinstance(f, (int, float)) or isinstance(f, bool) or not 0.0 <= f <= 1.0:
             raise SpecGenError(f"training config: input_offgrid_fraction must be a number in [0, 1], got {f!r}")
@@ -261,6 +274,8 @@ class MaterialSet:
     images: list[np.ndarray]
     #: Chance of each material at a step's draw (None: uniform); :func:`family_draw_probabilities`.
     draw_p: np.ndarray | None = None
+    #: Recolouring of members at each draw (``recolour_p`` > 0; :class:`.recolour.RecolourSource`).
+    recolour: Any = None
 
     def __len__(self) -> int:
         return len(self.materials)
@@ -315,6 +330,12 @@ def _draw(rng: np.random.Generator, mset: MaterialSet, k: int, canonical_fractio
     mats, imgs = [], []
     for i in np.sort(idx):
         stack = mset.images[i]
+        if mset.recolour is not None:
+            drawn = mset.recolour.draw(rng, mset.materials[i], int(i), stack.shape[-1])
+            if drawn is not None:
+                mats.append(drawn[0])
+                imgs.append(drawn[1])
+                continue
         if lighting == "mix":
             from .lighting_mix import mix_lighting
 
@@ -537,6 +558,7 @@ def train(mcfg: Config, tcfg: TrainConfig, spectral: MaterialSet, rgb: MaterialS
         saved = {"ema_decay": 0.0, "linear_loss_weight": 0.0, "input_jitter_px": 0.0, "recycle_dormant": [],
                  "fresh_encoder": False, "frozen": [], "recycle_mode": "redo",
                  "input_scale_jitter": 0.0, "input_offgrid_fraction": 0.0, "input_finder_error_px": 0.07,
+                 "recolour_p": 0.0,
                  **ck["train_config"]}
         if ck["model_config"] != mcfg.to_dict() or saved != _tdict(tcfg, ignore_budget=True):
             raise SpecGenError(f"{ckpt_path}: checkpoint was made with a different configuration")
