@@ -145,3 +145,19 @@ def test_the_pair_cache_renders_once_and_loads_slots_pairs_and_pool(tmp_path):
     assert src.pairs[0].shape == (2, rc.BANDS_NM.size, 128, 128) and src.pairs[0].dtype == np.float16
     assert (src.pairs[1] is None) == (rc.affine_slot(mats[1].brdf) is None)
     assert len(src.pool) == len(rc.spectrum_pool(mats))
+
+
+def test_a_recoloured_copy_reuses_its_originals_lobe_quadrature():
+    from specgen_addon.corpus.families import lobes, thin_film
+
+    _, fam = _corpus()
+    wi, wo = rc._probe_points(8)
+    for m, cached in ((fam["lobes"][0], lobes._lobe_albedo), (fam["thin_film"][0], thin_film._albedo)):
+        slot = rc.affine_slot(m)
+        if slot is None:
+            continue
+        m.eval(wi, wo)
+        size = cached.cache_info().currsize
+        copy = rc.recoloured(TrainingMaterial(m.name, m, True), slot, np.full(REFLECTANCE_GRID_NM.size, 0.3)).brdf
+        copy.eval(wi, wo)
+        assert cached.cache_info().currsize == size

@@ -19,6 +19,7 @@ coupled with Kelemen & Szirmay-Kalos 2001 so the total albedo is ``E + ρ (1 −
 
 from __future__ import annotations
 
+import dataclasses
 import functools
 from dataclasses import dataclass
 from typing import ClassVar
@@ -114,9 +115,16 @@ def _fresnel(interface: Dielectric, w: tuple[float, ...]) -> np.ndarray:
     return np.ascontiguousarray(fresnel_dielectric(COS_NODES[:, None], interface.ior(np.asarray(w))).T)
 
 
-@functools.lru_cache(maxsize=4096)
 def lobe_albedo(m: Lobes) -> np.ndarray:
-    """Unscaled albedo ``E(μ, λ)`` (μ nodes × ALBEDO λ) of the specular (+ retro) lobes."""
+    """Unscaled albedo ``E(μ, λ)`` (μ nodes × ALBEDO λ) of the specular (+ retro) lobes.
+
+    Cached on the lobes alone (name and diffuse dropped): a recoloured copy of a material
+    (:mod:`specgen_addon.train.recolour`) reuses its original's quadrature."""
+    return _lobe_albedo(dataclasses.replace(m, name="", split="train", diffuse=None))
+
+
+@functools.lru_cache(maxsize=4096)
+def _lobe_albedo(m: Lobes) -> np.ndarray:
     e = directional_albedo(m._specular, halfvector_quadrature(m.alpha), ALBEDO_WAVELENGTHS_NM)
     if m.retro_weight > 0:
         e += directional_albedo(m._retro, hemisphere_quadrature(), ALBEDO_WAVELENGTHS_NM)

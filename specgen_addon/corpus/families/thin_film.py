@@ -21,6 +21,7 @@ the lobe's own directional albedo (integrated by quadrature), so the albedo stay
 
 from __future__ import annotations
 
+import dataclasses
 import functools
 from dataclasses import dataclass
 from typing import ClassVar
@@ -128,11 +129,13 @@ def _fresnel_table(m: ThinFilm, w: tuple[float, ...]) -> np.ndarray:
 @functools.lru_cache(maxsize=4096)
 def _coupling(m: ThinFilm, w: tuple[float, ...]) -> tuple[np.ndarray, np.ndarray]:
     """Kelemen coupling: lobe albedo curves (Λ, μ) and ``ρ / (π (1 − Ē))`` at ``w``."""
-    e = curves_at(_albedo(m), np.asarray(w))
+    e = curves_at(_albedo(dataclasses.replace(m, name="", split="train", diffuse=None)), np.asarray(w))
     return e, m.diffuse.at(np.asarray(w)) / (np.pi * (1.0 - cosine_weighted_mean(e)))
 
 
 @functools.lru_cache(maxsize=4096)
 def _albedo(m: ThinFilm) -> np.ndarray:
+    """The lobe's albedo curves; called with name and diffuse dropped (:func:`_coupling`), so a
+    recoloured copy reuses its original's quadrature."""
     return np.clip(directional_albedo(m._lobe, halfvector_quadrature(m.alpha), ALBEDO_WAVELENGTHS_NM),
                    0.0, 0.999)
