@@ -100,7 +100,9 @@ def test_colour_fit_removes_a_smooth_white_balance_error_and_not_a_shape_error()
     red = np.interp(w, t["mallett2019_wavelengths_nm"], t["mallett2019_values"][:, 0])
     tint = 0.5 + red          # the basis sums to 1 (white), so this gain lies inside its span
     psnr_fit, gain = colour_fitted_psnr(gt, gt / tint, w)  # a prediction with a smooth cyan cast
-    assert psnr_fit > 100 and np.allclose(gain, tint, atol=1e-6)
+    # an exact fit leaves every band's MSE near 0, so the 1/MSE-weighted normal equations are nearly
+    # singular and the last digits of the gain depend on the BLAS build (1e-5 on this 2-core EPYC)
+    assert psnr_fit > 100 and np.allclose(gain, tint, rtol=1e-4, atol=0)
     # one brightness factor cannot remove a cast; the colour fit can
     assert brightness_fitted_psnr(gt, gt / tint)[0] < 40
     # a shape error (noise) is not a colour: the fit leaves it, gain ≈ 1
