@@ -224,21 +224,8 @@ class InputImageCache:
              progress: Callable[[float], None] | None = None) -> None:
         """Render what is missing, variant-major (lighting scenes are reused), on ``workers`` processes."""
         todo = self.missing(mats, n_variants)
-        if not todo:
-            return
-        if workers <= 1:
-            for i, (m, v) in enumerate(todo):
-                self.make(m, v)
-                if progress:
-                    progress((i + 1) / len(todo))
-            return
-        import multiprocessing as mp
-
-        ctx = mp.get_context("fork")
-        with ctx.Pool(workers) as pool:
-            for i, _ in enumerate(pool.imap(self._make_task, todo, chunksize=1)):
-                if progress:
-                    progress((i + 1) / len(todo))
+        if todo:
+            render_all(self._make_task, todo, workers, progress, chunksize=1)
 
     def _make_task(self, task: tuple[TrainingMaterial, int]) -> None:
         self.make(*task)
