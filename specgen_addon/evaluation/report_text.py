@@ -289,14 +289,15 @@ def compose(h: tables.Harness, mats: Sequence[Any], specgen_arm: str, weights: P
 
     # (g) ----------------------------------------------------------------------------------------
     if families is not None:
+        n_fam = 1 if h.s.smoke else h.s.family_materials
         section("## (g) Per corpus family: the mixed test split, network alone")
         add("")
         add("Issue 11's families (`specgen_addon/corpus/families/`): the first materials of each family "
             "in the mixed corpus' test split (their spectra and metals never occur in training), canonical "
             "sphere input, network alone (no refinement), 20 bands; the real RGL files in RGB under the "
-            "distant lights. 128² renders: the same numbers as `python -m specgen_addon evaluate --families 3 --family-resolution 128 --no-refine` (its default of 64² renders moves a family's mean by up to 3.5 dB, mostly under the maps; docs/model.md quotes those). "
-            "A few materials per family are a small sample: one sharp lobe can move its row by several "
-            "decibels. docs/model.md scores the whole test split (582 materials) at 128², distant lights, "
+            f"distant lights. 128² renders: the same numbers as `python -m specgen_addon evaluate --families {n_fam} --family-resolution 128 --no-refine`. "
+            f"{n_fam} materials per family are a small sample: one sharp lobe can move a row by a "
+            "decibel or more. docs/model.md scores the whole test split (582 materials) at 128², distant lights, "
             "network alone (\"The fortieth session\"), and each material's own table, the grid's "
             "ceiling (\"The forty-second session\").")
         add("")

@@ -107,6 +107,7 @@ class Settings:
     photo_baselines: tuple[str, ...] = UPLIFT_METHODS  # uplifting methods of the photo-only arms
     env_sampling_scale: float = 1.0
     figure_materials: int = 2
+    family_materials: int = 10  # materials per corpus family in table (g); 3 left one sharp lobe deciding a row
     lut_size: int | None = None  # face-table size of tabulated baselines (None: their default)
     band_count: int = len(protocol.WAVELENGTHS_NM)  # fewer bands only for the smoke run
     smoke: bool = False
@@ -142,6 +143,7 @@ class Settings:
                 "lut_size": self.lut_size,
                 "env_samples_per_pixel": self.sampling().total,
                 "input_photo": self.input_photo,
+                "family_materials": self.family_materials,
                 "wavelengths_nm": [float(w) for w in self.wavelengths_nm]}
 
 
@@ -410,15 +412,16 @@ class Harness:
 
     def run_families(self, weights: Path | None, arm: str, rgl_dir: Path | None) -> dict[str, Any]:
         """Per-family scores of the mixed corpus' test split, network alone (issue 11), cached per
-        arm: :func:`specgen_addon.train.evaluate.evaluate_families` with 3 materials per family
-        and the held-out maps (1 material and distant lights only in the smoke run)."""
+        arm: :func:`specgen_addon.train.evaluate.evaluate_families` with
+        :attr:`Settings.family_materials` per family and the held-out maps (1 material and distant
+        lights only in the smoke run)."""
         path = self.cache / "families" / f"{arm}.json"
         done = read_json(path)
         if done is not None:
             return done
         from ..train.evaluate import evaluate_families
 
-        res = evaluate_families(weights=weights, per_family=1 if self.s.smoke else 3, envs=not self.s.smoke,
+        res = evaluate_families(weights=weights, per_family=1 if self.s.smoke else self.s.family_materials, envs=not self.s.smoke,
                                 rgl_dir=rgl_dir)
         write_json(path, res)
         return res
