@@ -108,10 +108,65 @@ def validate_section(cls, data: Any, where: str,
         _check_value(f"{where}.{key}", str(fields[key].type), value, bounds.get(key, default_bounds))
 
 
+#: The top-level key by which a config file names the file it extends.
+EXTENDS_KEY = "extends"
+#: How many files one chain of ``extends`` may hold (a guard, far above any real chain).
+MAX_EXTENDS_DEPTH = 16
+
+
 def read_config_dict(path: str | os.PathLike) -> dict:
-    """The raw config object of a JSON or TOML file; one clear error for a missing, unreadable or
-    unparsable file."""
-    path = Path(path)
+    """The config object of a JSON or TOML file, its bases merged in; one clear error for a missing,
+    unreadable or unparsable file.
+
+    A file may name a base, ``"extends": "continue_s50_recolour.json"`` (relative to its own folder),
+    so that a continuation states only what changes: its ``model`` and ``train`` keys override the
+    base's key by key, and an object value (``families``, ``family_draw``) replaces the base's whole
+    object, since those are distributions. A relative ``init_weights`` is made absolute against the
+    folder of the file that names it, so a base keeps meaning the same weights wherever it is used.
+    """
+    return _resolve_extends(Path(path), ())
+
+
+def _resolve_extends(path: Path, chain: tuple[Path, ...]) -> dict:
+    data = _read_config_file(path)
+    _absolute_init_weights(data, path.parent)
+    if EXTENDS_KEY not in data:
+        return data
+    base_name = data.pop(EXTENDS_KEY)
+    if not isinstance(base_name, str) or not base_name:
+        raise _type_error(f"{path}: {EXTENDS_KEY}", "the path of a base config file", base_name)
+    base = (path.parent / base_name).resolve()
+    here = (*chain, path.resolve())
+    if base in here:
+        names = " → ".join(p.name for p in (*here, base))
+        raise SpecGenError(f"{path}: {EXTENDS_KEY} {base_name} makes a cycle ({names})")
+    if len(here) >= MAX_EXTENDS_DEPTH:
+        raise SpecGenError(f"{path}: {EXTENDS_KEY} chain is longer than {MAX_EXTENDS_DEPTH} files")
+    if not base.is_file():
+        raise SpecGenError(f"{path}: {EXTENDS_KEY} {base_name}: config file not found")
+    return _merge_sections(_resolve_extends(base, here), data)
+
+
+def _merge_sections(base: dict, over: dict) -> dict:
+    """``base`` with ``over``'s sections laid on it key by key (values replace, objects too)."""
+    merged = {k: dict(v) if isinstance(v, dict) else v for k, v in base.items()}
+    for section, values in over.items():
+        if isinstance(values, dict) and isinstance(merged.get(section), dict):
+            merged[section].update(values)
+        else:
+            merged[section] = values
+    return merged
+
+
+def _absolute_init_weights(data: dict, folder: Path) -> None:
+    train = data.get("train")
+    init = train.get("init_weights") if isinstance(train, dict) else None
+    if isinstance(init, str) and init and not Path(init).is_absolute():
+        train["init_weights"] = str((folder / init).resolve())
+
+
+def _read_config_file(path: Path) -> dict:
+    """One config file's object as written (no bases)."""
     if path.is_dir():
         raise SpecGenError(f"{path}: is a folder, expected a config file (.json or .toml)")
     if not path.exists():

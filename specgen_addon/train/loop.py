@@ -20,7 +20,6 @@ import contextlib
 import csv
 import dataclasses
 import functools
-import json
 import math
 import time
 from dataclasses import dataclass, field
@@ -231,27 +230,16 @@ class TrainConfig:
 
 
 def load_config(path: str | Path) -> tuple[Config, TrainConfig]:
-    """Read ``{"model": {...}, "train": {...}}`` from a JSON or TOML file."""
-    path = Path(path)
-    if not path.is_file():
-        raise SpecGenError(f"{path}: config file not found")
-    try:
-        if path.suffix.lower() == ".toml":
-            import tomllib
+    """Read ``{"model": {...}, "train": {...}}`` from a JSON or TOML file, its ``extends`` bases
+    merged in and a relative ``init_weights`` taken against the folder of the file that names it
+    (:func:`~specgen_addon.config_schema.read_config_dict`)."""
+    from ..config_schema import read_config_dict
 
-            d = tomllib.loads(path.read_text())
-        else:
-            d = json.loads(path.read_text())
-    except (ValueError, UnicodeDecodeError) as exc:
-        raise SpecGenError(f"{path}: cannot parse config ({exc})") from None
+    d = read_config_dict(path)
     unknown = set(d) - {"model", "train"}
     if unknown:
         raise SpecGenError(f"{path}: unknown sections {sorted(unknown)} (expected model, train)")
     train_d = dict(d.get("train", {}))
-    init = train_d.get("init_weights")
-    if isinstance(init, str) and not Path(init).is_absolute():
-        # relative to the config file's directory (e.g. "../weights/specgen_default.pt")
-        train_d["init_weights"] = str((path.parent / init).resolve())
     mcfg, tcfg = Config.from_dict(d.get("model", {})), TrainConfig.from_dict(train_d)
     check_frozen(mcfg, tcfg)
     return mcfg, tcfg
