@@ -50,7 +50,7 @@ def main(argv: Sequence[str] | None = None) -> int:
         parser.print_help()
         return EXIT_USER_ERROR
     # a stopped training run keeps its last checkpoint (named in the message) for --resume
-    keep = [Path(args.out) / n for n in ("checkpoint.pt", "history.csv")] if args.command == "train" else []
+    keep = [Path(args.out) / n for n in ("checkpoint.pt", "history.csv")] if args.command == "train" and args.out else []
     return run_guarded(args.command, lambda: _run(args), folders_of(args), args.verbose, keep)
 
 

@@ -20,7 +20,10 @@ def add_parser(sub: argparse._SubParsersAction) -> argparse.ArgumentParser:
                                    "(docs/scale.md).")
     p.add_argument("--config", type=Path, default=None,
                    help="JSON/TOML with 'model' and 'train' sections (default: configs/default.json)")
-    p.add_argument("--out", type=Path, required=True, help="output directory")
+    p.add_argument("--out", type=Path, default=None, help="output directory (required unless --show-config)")
+    p.add_argument("--show-config", action="store_true",
+                   help="print the configuration the run would use (bases named by 'extends' merged, "
+                        "defaults filled in, command-line overrides applied) as JSON and exit")
     p.add_argument("--brdf-dir", type=Path, action="append", default=[],
                    help="extra directory of MERL .binary / RGL .bsdf files (repeatable)")
     p.add_argument("--steps", type=int, default=None, help="override the number of steps")
@@ -186,6 +189,9 @@ def run_train(args: argparse.Namespace) -> int:
     if args.brdf_dir:
         over["brdf_dirs"] = list(tcfg.brdf_dirs) + [str(d) for d in args.brdf_dir]
     tcfg = dataclasses.replace(tcfg, **over).validate()
+    if args.show_config:
+        print(json.dumps({"model": mcfg.to_dict(), "train": dataclasses.asdict(tcfg)}, indent=1))
+        return 0
     if tcfg.init_weights is not None and not args.resume:  # before the input renders, not after
         from .model.grow import can_grow
 

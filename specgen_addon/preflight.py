@@ -83,6 +83,11 @@ def _train(a) -> None:
     from .config_schema import read_config_dict
     from .train.distributed import train_device
 
+    if a.show_config:  # prints the resolved config and trains nothing: no device, folder or files
+        return
+    if a.out is None:
+        raise SpecGenError("train needs --out, the folder the run writes (or --show-config to only "
+                           "print the configuration)")
     train_device(over.get("device", read_config_dict(cfg).get("train", {}).get("device", "cpu")))  # a GPU?
     for d in a.brdf_dir:
         if not Path(d).is_dir():
@@ -253,7 +258,7 @@ def output_folders(args: argparse.Namespace) -> tuple[list[Path], list[Path]]:
     """(folders a command writes into wholesale, single output files) for :class:`OutputGuard`."""
     cmd = getattr(args, "command", "")
     if cmd in ("corpus", "train"):
-        return [Path(args.out)], []
+        return ([Path(args.out)] if args.out is not None else []), []
     files = []
     for name in ("out", "output", "json", "figure"):
         p = getattr(args, name, None)

@@ -96,11 +96,31 @@ def test_the_shipped_recolour_continuations_differ_from_their_base_only_in_seed_
     assert len(seeds) == len(chain)                             # every pass draws afresh
 
 
-def test_the_cli_refuses_a_missing_base_before_any_work(tmp_path):
+def test_the_cli_refuses_a_missing_base_before_any_work(tmp_path, repo_dir):
     child = _write(tmp_path / "child.json", {"extends": "nowhere.json"})
     r = subprocess.run([sys.executable, "-m", "specgen_addon", "train", "--config", str(child),
-                        "--out", str(tmp_path / "run")], capture_output=True, text=True, timeout=120)
+                        "--out", str(tmp_path / "run")], capture_output=True, text=True, timeout=120, cwd=repo_dir)
     assert r.returncode != 0
     assert "extends nowhere.json: config file not found" in r.stderr
     assert "Traceback" not in r.stderr
     assert not (tmp_path / "run").exists()
+
+
+def test_show_config_prints_the_resolved_configuration_and_exits(repo_dir):
+    r = subprocess.run([sys.executable, "-m", "specgen_addon", "train", "--show-config", "--config",
+                        str(repo_dir / "configs" / "continue_s51_recolour.json"), "--steps", "12"],
+                       capture_output=True, text=True, timeout=120, cwd=repo_dir)
+    assert r.returncode == 0, r.stderr
+    shown = json.loads(r.stdout)
+    assert shown["train"]["seed"] == 52 and shown["train"]["steps"] == 12           # file, then --steps
+    assert shown["train"]["recolour_p"] == 0.5                                       # from the base
+    assert shown["train"]["lr_decay_every"] == 3850
+    assert Path(shown["train"]["init_weights"]) == (repo_dir / "weights" / "specgen_default.pt").resolve()
+    assert shown["model"]["spectral_code_knots"] == 6 and "feature_dim" in shown["model"]  # defaults filled
+    assert "extends" not in shown
+
+
+def test_train_without_out_asks_for_it_in_one_sentence(repo_dir):
+    r = subprocess.run([sys.executable, "-m", "specgen_addon", "train"], capture_output=True, text=True,
+                       timeout=120, cwd=repo_dir)
+    assert r.returncode != 0 and "train needs --out" in r.stderr and "Traceback" not in r.stderr
