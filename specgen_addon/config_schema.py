@@ -25,6 +25,7 @@ TRAIN_BOUNDS: dict[str, tuple[float | None, float | None]] = {
     "spectral_materials_per_step": (1, 4096), "rgb_materials_per_step": (0, 4096),
     "angles_per_material": (1, 1 << 20), "wavelengths_per_angle": (1, 512),
     "tv_weight": (0.0, 1e6), "rgb_weight": (0.0, 1e6), "linear_loss_weight": (0.0, 1e6),
+    "balance_floor": (1e-6, 1e3),
     "input_jitter_px": (0.0, 8.0), "input_scale_jitter": (0.0, 0.5),
     "input_offgrid_fraction": (0.0, 1.0), "input_finder_error_px": (0.0, 2.0), "corpus_size": (1, 100_000),
     "corpus_seed": (0, 2**32 - 1), "input_variants": (1, 1000), "canonical_fraction": (0.0, 1.0),

@@ -62,6 +62,15 @@ class TrainConfig:
     #: Weight of the rendered-scale term (:func:`rendered_scale_loss`) added to each group's
     #: μ-law MSE (0: off, the paper's loss).
     linear_loss_weight: float = 0.0
+    #: How a group's μ-law MSE is pooled over its materials: "mean" (the paper: the MSE of all
+    #: points, so the worst-fitted materials steer the gradient) or "log" (:func:`balanced_mse`: the
+    #: gradient of the mean over materials of log(MSE_m + floor·M̄), scaled by the batch's M̄: each
+    #: material weighed as the figure it is scored by, a mean over materials of PSNR in dB, does).
+    material_balance: str = "mean"
+    #: With ``material_balance`` "log": the floor under each material's MSE, as a fraction of the
+    #: batch's mean MSE (a material fitted far better than the rest gets at most 1/floor times the
+    #: plain weight).
+    balance_floor: float = 0.1
     #: Largest random shift (network pixels, each axis) and relative scale change of every training
     #: input (0: off), as a real photo's crop leaves the sphere a fraction of a pixel off centre and
     #: a fraction of a pixel too wide (:mod:`.augment`).
@@ -161,7 +170,8 @@ class TrainConfig:
             v = getattr(self, key)
             if not is_int(v) or v < lo:
                 raise SpecGenError(f"training config: {key} must be an integer ≥ {lo}, got {v!r}")
-        for key in ("lr", "lr_decay", "tv_weight", "rgb_weight", "linear_loss_weight", "input_jitter_px",
+        for key in ("lr", "lr_decay", "tv_weight", "rgb_weight", "linear_loss_weight", "balance_floor",
+                    "input_jitter_px",
                     "input_scale_jitter", "input_finder_error_px", "canonical_fraction"):
             v = getattr(self, key)
             if not isinstance(v, (int, float)) or isinstance(v, bool) or not np.isfinite(v) or v < 0:
@@ -186,6 +196,11 @@ class TrainConfig:
             raise SpecGenError(f"training config: max_minutes must be > 0, got {self.max_minutes!r}")
         if self.device not in ("cpu", "cuda", "auto"):
             raise SpecGenError(f"training config: device must be 'cpu', 'cuda' or 'auto', got {self.device!r}")
+        if self.material_balance not in ("mean", "log"):
+            raise SpecGenError(f"training config: material_balance must be 'mean' or 'log', "
+                               f"got {self.material_balance!r}")
+        if self.material_balance == "log" and not self.balance_floor > 0:
+            raise SpecGenError("training config: balance_floor must be > 0 with material_balance \"log\"")
         if self.lighting not in ("variants", "mix"):
             raise SpecGenError(f"training config: lighting must be 'variants' or 'mix', got {self.lighting!r}")
         if self.spectral_materials_per_step + self.rgb_materials_per_step == 0:
@@ -374,6 +389,25 @@ def _masked_mse(pred: torch.Tensor, target: torch.Tensor, valid: torch.Tensor) -
     return ((pred - target) ** 2 * valid).sum() / valid.sum().clamp_min(1.0)
 
 
+def balanced_mse(pred: torch.Tensor, target: torch.Tensor, valid: torch.Tensor,
+                 floor: float) -> torch.Tensor:
+    """The masked MSE of ``(B, N)`` arrays in value, with the gradient of
+    M̄ · mean_m log(MSE_m + floor·M̄) over the rows (materials), M̄ the batch's mean MSE held constant.
+
+    The quality figure is a mean over materials of PSNR = −10·log10(MSE_m) (up to each material's
+    normalisation), so a material's error counts relative to its own level: halving a well-fitted
+    material's error gains as many dB as halving a poor one's. The gradient weighs each material's
+    MSE by M̄ / (MSE_m + floor·M̄): the plain MSE's scale (and learning rate) is kept while the step
+    steers as the figure does, and the floor keeps a nearly perfect material from taking the whole
+    step. The value stays the plain MSE, so logged losses compare with the paper loss's.
+    """
+    per = ((pred - target) ** 2 * valid).sum(dim=1) / valid.sum(dim=1).clamp_min(1.0)
+    level = per.mean().detach().clamp_min(1e-12)
+    weights = (level / (per + floor * level)).detach()
+    steer = (weights * per).mean()
+    return _masked_mse(pred, target, valid).detach() + steer - steer.detach()
+
+
 def inverse_mu_law(r: torch.Tensor, mu: float) -> torch.Tensor:
     """f_r (sr⁻¹) from r′ = ln(1 + μ·f_r) / ln(1 + μ), the inverse of the paper's μ-law."""
     return torch.expm1(r * math.log1p(mu)) / mu
@@ -405,16 +439,21 @@ def rendered_scale_loss(pred: torch.Tensor, target: torch.Tensor, valid: torch.T
     return _masked_mse(f_pred / scale, f_true / scale, valid)
 
 
-def group_loss(model: SpecGen, b: Batch, linear_weight: float = 0.0) -> tuple[torch.Tensor, torch.Tensor]:
+def group_loss(model: SpecGen, b: Batch, linear_weight: float = 0.0, balance: str = "mean",
+               balance_floor: float = 0.1) -> tuple[torch.Tensor, torch.Tensor]:
     """(data term, TV of the generated planes) for one batch group.
 
-    The data term is the MSE in μ-law space (paper §3.3), plus ``linear_weight`` times
-    :func:`rendered_scale_loss` when that is positive.
+    The data term is the MSE in μ-law space (paper §3.3) — pooled over all points (``balance``
+    "mean") or per material in log space (``"log"``, :func:`balanced_mse`) — plus
+    ``linear_weight`` times :func:`rendered_scale_loss` when that is positive.
     """
     t = _tensors(b, _device_of(model))
     planes = model.planes(t["images"])
     pred = model.query(planes, t["theta_h"], t["theta_d"], t["phi_d"], t["wavelength_nm"])
-    data = _masked_mse(pred, t["target"], t["valid"])
+    if balance == "log":
+        data = balanced_mse(pred, t["target"], t["valid"], balance_floor)
+    else:
+        data = _masked_mse(pred, t["target"], t["valid"])
     if linear_weight > 0:
         cos_w = foreshortening(t["theta_h"], t["theta_d"], t["phi_d"])
         data = data + linear_weight * rendered_scale_loss(pred, t["target"], t["valid"], cos_w,
@@ -546,7 +585,7 @@ def train(mcfg: Config, tcfg: TrainConfig, spectral: MaterialSet, rgb: MaterialS
         saved = {"ema_decay": 0.0, "linear_loss_weight": 0.0, "input_jitter_px": 0.0, "recycle_dormant": [],
                  "fresh_encoder": False, "frozen": [], "recycle_mode": "redo",
                  "input_scale_jitter": 0.0, "input_offgrid_fraction": 0.0, "input_finder_error_px": 0.07,
-                 "recolour_p": 0.0,
+                 "recolour_p": 0.0, "material_balance": "mean", "balance_floor": 0.1,
                  **ck["train_config"]}
         if ck["model_config"] != mcfg.to_dict() or saved != _tdict(tcfg, ignore_budget=True):
             raise SpecGenError(f"{ckpt_path}: checkpoint was made with a different configuration")
@@ -556,7 +595,8 @@ def train(mcfg: Config, tcfg: TrainConfig, spectral: MaterialSet, rgb: MaterialS
             ema.load_state_dict(ck["ema"])
         start_step, elapsed0, history = ck["step"], ck["elapsed"], ck["history"]
     val_batch = _validation_batch(tcfg, mcfg, val)
-    loss_fn = functools.partial(group_loss, linear_weight=tcfg.linear_loss_weight)
+    loss_fn = functools.partial(group_loss, linear_weight=tcfg.linear_loss_weight,
+                                balance=tcfg.material_balance, balance_floor=tcfg.balance_floor)
     step_losses = ddp.step_losses(model, loss_fn, dctx)  # this rank's share, DDP-averaged
 
     def checkpoint(step: int, elapsed: float) -> None:
