@@ -401,11 +401,13 @@ def balanced_mse(pred: torch.Tensor, target: torch.Tensor, valid: torch.Tensor,
     steers as the figure does, and the floor keeps a nearly perfect material from taking the whole
     step. The value stays the plain MSE, so logged losses compare with the paper loss's.
     """
-    per = ((pred - target) ** 2 * valid).sum(dim=1) / valid.sum(dim=1).clamp_min(1.0)
+    squared = (pred - target) ** 2 * valid
+    per = squared.sum(dim=1) / valid.sum(dim=1).clamp_min(1.0)
     level = per.mean().detach().clamp_min(1e-12)
     weights = (level / (per + floor * level)).detach()
     steer = (weights * per).mean()
-    return _masked_mse(pred, target, valid).detach() + steer - steer.detach()
+    pooled = squared.sum() / valid.sum().clamp_min(1.0)   # the value _masked_mse gives
+    return pooled.detach() + steer - steer.detach()
 
 
 def inverse_mu_law(r: torch.Tensor, mu: float) -> torch.Tensor:
