@@ -18,3 +18,7 @@ if [ "$(cat "$stamp" 2>/dev/null)" != "$want" ]; then
   .venv/bin/python -m pip install --quiet -r requirements.txt
   echo "$want" > "$stamp"
 fi
+# The package itself, editable: `specgen` and `python -m specgen_addon` from any folder.
+if [ ! -x .venv/bin/specgen ]; then
+  .venv/bin/python -m pip install --quiet --no-deps -e .
+fi
