@@ -26,7 +26,7 @@ import time
 from multiprocessing import get_context
 from pathlib import Path
 
-sys.path.insert(0, str(Path(__file__).resolve().parents[1]))
+sys.path.insert(0, str(Path(__file__).resolve().parents[2]))
 
 from specgen_addon.evaluation import ablation as abl  # noqa: E402
 from specgen_addon.evaluation.ablation_study import study_settings  # noqa: E402

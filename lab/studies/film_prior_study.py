@@ -31,7 +31,7 @@ from pathlib import Path
 
 import numpy as np
 
-sys.path.insert(0, str(Path(__file__).resolve().parents[1]))
+sys.path.insert(0, str(Path(__file__).resolve().parents[2]))
 
 ARMS = ("network", "shipped", "film", "film refined", "by self", "by held-out")
 PHOTOS = ("independent", "shifted")

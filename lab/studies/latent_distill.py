@@ -38,7 +38,7 @@ from pathlib import Path
 import numpy as np
 from machine import describe_machine  # bench/machine.py
 
-REPO = Path(__file__).resolve().parents[1]
+REPO = Path(__file__).resolve().parents[2]
 sys.path.insert(0, str(REPO))
 
 WAVELENGTH_GRID_NM = np.linspace(380.0, 780.0, 41)

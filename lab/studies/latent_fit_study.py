@@ -30,7 +30,7 @@ from pathlib import Path
 
 import numpy as np
 
-sys.path.insert(0, str(Path(__file__).resolve().parents[1]))
+sys.path.insert(0, str(Path(__file__).resolve().parents[2]))
 
 PHOTOS = ("independent", "shifted")
 COLUMNS = ("network", "refined", "fit", "fit+ref", "fit ho", "fit ho+ref", "fit kp", "fit kp+ref")

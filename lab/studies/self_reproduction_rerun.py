@@ -15,7 +15,7 @@ import json
 import sys
 from pathlib import Path
 
-sys.path.insert(0, str(Path(__file__).resolve().parents[1]))
+sys.path.insert(0, str(Path(__file__).resolve().parents[2]))
 
 from bench.machine import describe_machine  # noqa: E402
 
@@ -41,7 +41,7 @@ def main() -> int:
         if "rot" in label:
             rot = float(label.split("rot ")[1].split("°")[0])
         lighting = parse_lighting("canonical" if label.startswith("canonical") else name, rot)
-        rgl = Path(__file__).resolve().parents[2] / "shared" / "data" / "rgl" / f"{r['material']}.bsdf"
+        rgl = Path(__file__).resolve().parents[3] / "shared" / "data" / "rgl" / f"{r['material']}.bsdf"
         brdf = load_brdf(rgl) if rgl.is_file() else test_materials(names=[r["material"]])[0]
         new = study_one(r["material"], brdf, lighting, novel=False)
         out.append({"material": r["material"], "lighting": label, "before": r["self_psnr_refined"],

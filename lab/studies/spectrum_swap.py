@@ -35,7 +35,7 @@ import numpy as np
 from machine import describe_machine  # bench/machine.py
 from rows import family_groups  # bench/rows.py
 
-REPO = Path(__file__).resolve().parents[1]
+REPO = Path(__file__).resolve().parents[2]
 sys.path.insert(0, str(REPO))
 
 

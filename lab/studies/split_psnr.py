@@ -20,7 +20,7 @@ from pathlib import Path
 import numpy as np
 from machine import describe_machine  # bench/machine.py
 
-REPO = Path(__file__).resolve().parents[1]
+REPO = Path(__file__).resolve().parents[2]
 sys.path.insert(0, str(REPO))
 
 

@@ -21,7 +21,7 @@ from pathlib import Path
 
 import numpy as np
 
-sys.path.insert(0, str(Path(__file__).resolve().parents[1]))
+sys.path.insert(0, str(Path(__file__).resolve().parents[2]))
 
 PHOTOS = ("independent", "shifted")
 #: σ grids compared: none, the refinement's candidates (``BLUR_CANDIDATES_PX``), and :data:`FINE_GRID_PX`
