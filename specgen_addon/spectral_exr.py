@@ -18,6 +18,7 @@ import os
 import re
 from dataclasses import dataclass, field
 from pathlib import Path
+from collections.abc import Callable
 
 import numpy as np
 
@@ -148,11 +149,15 @@ def read_spectral_exr(path: str | os.PathLike) -> SpectralImage:
 
 
 def write_preview_png(path: str | os.PathLike, rgb_linear: np.ndarray, overwrite: bool = False,
-                      exposure: float = 1.0) -> Path:
-    """Write a linear-sRGB image (H, W, 3) as an 8-bit sRGB-encoded PNG, atomically."""
+                      exposure: float = 1.0,
+                      view: Callable[[np.ndarray], np.ndarray] | None = None) -> Path:
+    """Write a linear-sRGB image (H, W, 3) as an 8-bit PNG, atomically: through ``view`` (scene
+    linear -> display values in [0, 1], e.g. Blender's view transform from
+    :mod:`specgen_addon.view_transform`) when given, else the plain sRGB transfer curve."""
     from .image_io import write_png8
     from .spectra import srgb_encode
 
-    encoded = srgb_encode(np.clip(np.asarray(rgb_linear, dtype=np.float64) * exposure, 0.0, 1.0))
+    scaled = np.asarray(rgb_linear, dtype=np.float64) * exposure
+    encoded = srgb_encode(np.clip(scaled, 0.0, 1.0)) if view is None else view(scaled)
     pixels = np.round(np.clip(encoded, 0.0, 1.0) * 255.0).astype(np.uint8)
     return write_png8(path, pixels, overwrite=overwrite)
