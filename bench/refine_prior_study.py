@@ -29,7 +29,7 @@ from pathlib import Path
 
 import numpy as np
 
-sys.path.insert(0, str(Path(__file__).resolve().parents[2]))
+sys.path.insert(0, str(Path(__file__).resolve().parents[1]))
 
 #: candidate settings: label → RefineOptions fields ("shipped": the defaults; "before s34": the
 #: smoothness of the defaults before the thirty-fourth session)
