@@ -455,8 +455,9 @@ class _SceneState(SavedAttributes):
     """Temporarily switch a scene to the spectral set-up; restore everything on exit."""
 
     def __init__(self, scene: bpy.types.Scene, samples: int, resolution: tuple[int, int],
-                 out_dir: Path):
+                 out_dir: Path, holdout_others: bool = False):
         self.scene = scene
+        self.holdout_others = holdout_others
         self.samples = samples
         self.resolution = resolution
         self.out_dir = out_dir
@@ -494,7 +495,11 @@ class _SceneState(SavedAttributes):
                 self._set(obj, "hide_render", True)  # lighting happens in the shader
             elif obj.type in ("MESH", "CURVE", "SURFACE", "META", "FONT") and not any(
                     is_specgen_material(s.material) for s in obj.material_slots):
-                self._set(obj, "visible_camera", False)  # still occludes (shadow rays)
+                if self.holdout_others:  # occludes the camera too, draws black (Full Scene)
+                    if not obj.is_holdout:
+                        self._set(obj, "is_holdout", True)
+                else:
+                    self._set(obj, "visible_camera", False)  # still occludes (shadow rays)
         tree = bpy.data.node_groups.new("SpecGen passes", "CompositorNodeTree")
         self.created.append((bpy.data.node_groups, tree))
         layers = tree.nodes.new("CompositorNodeRLayers")
@@ -604,6 +609,9 @@ class SpectralRenderJob(RenderJobOutputs):
     preview_png: bool = True
     attributes: dict = field(default_factory=dict)
     warn: Callable[[str], None] = print
+    #: other objects as holdouts (hide what they cover) rather than invisible to the camera: the
+    #: full-scene mode's exact direct light (:mod:`.exact_direct`)
+    holdout_others: bool = False
     spectral: np.ndarray | None = field(default=None, init=False)
     wavelengths_nm: np.ndarray | None = field(default=None, init=False)
     basis: np.ndarray | None = field(default=None, init=False)
@@ -686,7 +694,7 @@ class SpectralRenderJob(RenderJobOutputs):
                             list(mat["specgen_atlas_groups"])[r] if other == g else ""
                         touch(mat)
                 t = time.perf_counter()
-                with _SceneState(self.scene, self.samples, self.resolution, out_dir):
+                with _SceneState(self.scene, self.samples, self.resolution, out_dir, self.holdout_others):
                     bpy.ops.render.render(write_still=False, scene=self.scene.name)
                 t_render += time.perf_counter() - t
                 for j in range(len(PASSES)):

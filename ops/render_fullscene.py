@@ -19,6 +19,7 @@ from __future__ import annotations
 import shutil
 import tempfile
 import time
+from contextlib import nullcontext
 from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Callable, Iterator
@@ -28,6 +29,7 @@ import numpy as np
 
 from ..specgen_addon import uplift
 from ..specgen_addon.errors import SpecGenError
+from .exact_direct import DirectOnlySettings, compose, has_specgen, render_exact_direct
 from .render import RenderJobOutputs, SavedAttributes
 from .scene_convert import SceneConversion
 
@@ -103,6 +105,8 @@ class FullSceneRenderJob(RenderJobOutputs):
     attributes: dict = field(default_factory=dict)
     warn: Callable[[str], None] = print
     log: Callable[[str], None] = print
+    #: direct light on SpecGen surfaces from the exact lookups (:mod:`.exact_direct`)
+    exact_direct: bool = True
     spectral: np.ndarray | None = field(default=None, init=False)
     alpha: np.ndarray | None = field(default=None, init=False)
     fit_errors: dict = field(default_factory=dict, init=False)
@@ -127,7 +131,8 @@ class FullSceneRenderJob(RenderJobOutputs):
         layer = _render_layer(self.scene).name
         work = Path(tempfile.mkdtemp(prefix="specgen_fullscene_"))
         conversion = SceneConversion(self.scene, wl, self.warn)
-        images = []
+        images, direct = [], []
+        exact = self.exact_direct and has_specgen(self.scene)
         try:
             with _RenderSettings(self.scene):
                 conversion.prepare()
@@ -139,16 +144,21 @@ class FullSceneRenderJob(RenderJobOutputs):
                 self.timings["convert_s"] = time.perf_counter() - t0
                 yield 0.02
                 t_render = []
-                for g, group in enumerate(groups):
-                    self._check()
-                    conversion.set_group(group)
-                    t = time.perf_counter()
-                    bpy.ops.render.render(write_still=False, layer=layer, scene=self.scene.name)
-                    t_render.append(time.perf_counter() - t)
-                    path = work / f"group{g:02d}.exr"
-                    bpy.data.images["Render Result"].save_render(str(path), scene=self.scene)
-                    images.append(_read_combined(path))
-                    yield 0.02 + 0.93 * (g + 1) / len(groups)
+                passes = [("group", images)] + ([("direct", direct)] if exact else [])
+                n_renders, done = len(passes) * len(groups), 0
+                for tag, out in passes:  # the whole scene, then the closures' direct light
+                    with DirectOnlySettings(self.scene) if tag == "direct" else nullcontext():
+                        for g, group in enumerate(groups):
+                            self._check()
+                            conversion.set_group(group)
+                            t = time.perf_counter()
+                            bpy.ops.render.render(write_still=False, layer=layer, scene=self.scene.name)
+                            t_render.append(time.perf_counter() - t)
+                            path = work / f"{tag}{g:02d}.exr"
+                            bpy.data.images["Render Result"].save_render(str(path), scene=self.scene)
+                            out.append(_read_combined(path))
+                            done += 1
+                            yield 0.02 + (0.8 if exact else 0.93) * done / n_renders
                 self.timings["render_s"] = t_render
         finally:
             conversion.restore()
@@ -157,6 +167,15 @@ class FullSceneRenderJob(RenderJobOutputs):
         stack = np.stack(images)                                  # (G, H, W, 4)
         self.alpha = stack[0, :, :, 3].copy()
         self.spectral = uplift.unpack_groups(stack[..., :3], wl.size)
+        if exact:
+            t = time.perf_counter()
+            exact_light = render_exact_direct(self.scene, wl, self.spectral.shape[:2], self.warn)
+            self.timings["exact_s"] = time.perf_counter() - t
+            self._check()
+            if exact_light is not None:
+                closure_light = uplift.unpack_groups(np.stack(direct)[..., :3], wl.size)
+                self.spectral = compose(self.spectral, closure_light, exact_light)
+            yield 0.95
         outs = self._outputs()
         if outs is not None:
             from ..specgen_addon.spectral_exr import (linear_srgb_preview, write_preview_png,

@@ -1,0 +1,108 @@
+"""Full Scene mode: direct light on SpecGen surfaces from the exact lookups, bounces from closures.
+
+The full-scene render draws SpecGen materials with their fitted native closure stack (Lambert +
+GGX lobes, :mod:`specgen_addon.fit.closures`), so Cycles can bounce light off them like any other
+material. A stack of a few lobes cannot hold every generated table (docs/blender.md, "Full Scene
+fidelity"), and what a viewer sees first is the direct light on the SpecGen surface itself. So the
+job composes each pixel as
+
+    L = L_closures(all paths) − L_closures(direct, SpecGen surfaces) + L_exact(direct, SpecGen surfaces)
+
+* ``L_closures(all paths)``: the ordinary band-group render of the whole scene;
+* ``L_closures(direct, …)``: the same band groups with no bounces, every other object a holdout
+  (it still occludes and casts shadows), lights the exact mode cannot evaluate (spot, area) hidden,
+  the background not drawn (transparent film; the world still lights);
+* ``L_exact(direct, …)``: the exact mode's OSL render (:class:`.render.SpectralRenderJob`) of the
+  same camera, other objects held out the same way.
+
+Both direct terms cover the same pixels with the same coverage, so their difference is exactly the
+SpecGen surfaces' correction, also at pixels that mix a SpecGen surface with something else. The
+correction replaces the closures' direct light from suns, point lights and the world; light that
+reaches a SpecGen surface after a bounce, and from spot and area lights and emissive objects, stays
+with the closures (whose rendered error the job reports per material).
+"""
+
+from __future__ import annotations
+
+from typing import Callable
+
+import bpy
+import numpy as np
+
+from ..specgen_addon.errors import SpecGenError
+from .render import SavedAttributes, SpectralRenderJob, is_specgen_material, specgen_materials
+
+#: Samples of the exact render at most (its suns and point lights are noiseless but for the pixel
+#: filter; the environment is importance-sampled in the shader).
+EXACT_SAMPLES_CAP = 64
+#: Light types the exact shader evaluates; the others keep their closure light.
+EXACT_LIGHTS = ("SUN", "POINT")
+SURFACES = ("MESH", "CURVE", "SURFACE", "META", "FONT", "CURVES", "POINTCLOUD", "VOLUME")
+
+
+def has_specgen(scene: bpy.types.Scene) -> bool:
+    """Whether a render-visible object of ``scene`` uses a SpecGen material."""
+    return bool(specgen_materials(scene))
+
+
+def _holds_specgen(obj: bpy.types.Object) -> bool:
+    return any(is_specgen_material(s.material) for s in getattr(obj, "material_slots", ()))
+
+
+class DirectOnlySettings(SavedAttributes):
+    """Scene settings of the closures' direct-light render of SpecGen surfaces; restored on exit."""
+
+    def __init__(self, scene: bpy.types.Scene):
+        self.scene = scene
+        self.saved: list[tuple[object, str, object]] = []
+
+    def __enter__(self) -> "DirectOnlySettings":
+        sc = self.scene
+        self._set(sc.cycles, "max_bounces", 0)          # camera hit + light sampling only
+        self._set(sc.render, "film_transparent", True)  # the world lights but is not drawn
+        for obj in sc.objects:
+            if obj.type == "LIGHT" and obj.data.type not in EXACT_LIGHTS and not obj.hide_render:
+                self._set(obj, "hide_render", True)
+            elif obj.type in SURFACES and not _holds_specgen(obj) and not obj.is_holdout:
+                self._set(obj, "is_holdout", True)       # occludes, shadows, draws nothing
+        return self
+
+    def __exit__(self, *exc) -> None:
+        self._restore_attributes()
+
+
+def _resample(spectral: np.ndarray, from_nm: np.ndarray, to_nm: np.ndarray) -> np.ndarray:
+    """(H, W, Λ_from) → (H, W, Λ_to), linear in λ (held beyond the ends)."""
+    from ..specgen_addon.spectra import interpolation_matrix
+
+    if from_nm.size == to_nm.size and np.allclose(from_nm, to_nm):
+        return spectral
+    return spectral @ interpolation_matrix(from_nm, to_nm)
+
+
+def render_exact_direct(scene: bpy.types.Scene, wavelengths_nm: np.ndarray, shape: tuple[int, int],
+                 warn: Callable[[str], None] = print) -> np.ndarray | None:
+    """The exact mode's direct light on SpecGen surfaces (H, W, Λ) at ``wavelengths_nm``, other
+    objects held out; None (with a warning saying why) when the exact mode cannot render the scene."""
+    r = scene.render
+    size = (round(r.resolution_x * r.resolution_percentage / 100),
+            round(r.resolution_y * r.resolution_percentage / 100))
+    if (size[1], size[0]) != tuple(shape):
+        warn("SpecGen: the render is cropped to a border; SpecGen surfaces show the native "
+             "closure stack only (no exact direct light)")
+        return None
+    samples = max(1, min(int(scene.cycles.samples), EXACT_SAMPLES_CAP))
+    job = SpectralRenderJob(scene, None, samples=samples, resolution=size, warn=warn,
+                            holdout_others=True)
+    try:
+        spectral = job.run()
+    except SpecGenError as exc:
+        warn(f"SpecGen: exact direct light unavailable ({exc}); SpecGen surfaces show the native "
+             "closure stack only")
+        return None
+    return _resample(spectral, job.wavelengths_nm, np.asarray(wavelengths_nm, np.float64))
+
+
+def compose(full: np.ndarray, closure_direct: np.ndarray, exact: np.ndarray) -> np.ndarray:
+    """``full − closure_direct + exact`` (H, W, Λ), clipped at 0 (noise in the two direct terms)."""
+    return np.maximum(full - closure_direct + exact, 0.0).astype(np.float32)
