@@ -1,4 +1,4 @@
-"""Corpus benchmarks (issue 3, item 7): manifest generation, tabulation, analytic evaluation.
+"""Corpus benchmarks: manifest generation, tabulation, analytic evaluation.
 
 Prints, for the default corpus (200 materials, seed 0):
 
@@ -9,11 +9,11 @@ Prints, for the default corpus (200 materials, seed 0):
   plus the one-off cost of the specular albedo table a process builds at its first plastic;
 * analytic ``eval_hd`` throughput on 10⁶ random angle triples, at 21 bands and at 1 band.
 
-With ``--figure PNG`` it also draws the corpus picture of docs/corpus.md: every material as a
+With ``--figure PNG`` it also draws the corpus picture of docs/dev/corpus.md: every material as a
 small sphere lit by one distant light (linear sRGB through :meth:`Material.eval_rgb`, clipped,
 sRGB-encoded), grouped by split, beside the metals' normal-incidence reflectance spectra.
 
-With ``--inputs K`` it instead measures the issue-11 corpus at scale: generating the default
+With ``--inputs K`` it instead measures the mixed-family corpus at scale: generating the default
 mixed corpus (2900 materials, seed 0) and rendering the training-input lighting components
 (:mod:`specgen_addon.train.lighting_mix`) of K train materials per family that share one
 environment variant (as the cache's ordering makes them), then extrapolates to every train/val

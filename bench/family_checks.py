@@ -1,4 +1,4 @@
-"""Issue 11's two family checks, truth against the prediction: the network alone, the network
+"""The two family checks, truth against the prediction: the network alone, the network
 refined to its input photo (:func:`specgen_addon.refine.refine_brdf`, the product's default) and,
 for the thin films, the thin-film family's fit to the photo (``infer --model thin-film``,
 :func:`specgen_addon.fit.thin_film.fit_thin_film`):
@@ -15,7 +15,7 @@ with other environment samples than the refinement's operator
 (:func:`specgen_addon.input_image.render_independent_input`), as a real photo shares none;
 ``--input-photo canonical`` gives it the canonical input render itself
 (:func:`specgen_addon.input_image.render_input`, the best case for the refinement and the fit:
-an inverse crime), as the checks did before the thirty-sixth session.
+an inverse crime).
 
 Usage: ``.venv/bin/python bench/family_checks.py [--weights W.pt] [--figure docs/img/thin_film_hue.png]``
 """

@@ -5,7 +5,7 @@ Prints, per corpus family and over all synthetic materials: n, mean PSNR (dB) ±
 and how many materials fall under ``--floor`` (the issue's per-family floor, 32 dB). The real RGL
 files are left out, as in :mod:`paired_families`.
 
-    python bench/family_table.py ../out/s40/whole128_a.json ../out/s40/whole128_b.json
+    python bench/family_table.py out/bench/whole128_a.json out/bench/whole128_b.json
 """
 
 from __future__ import annotations

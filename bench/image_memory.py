@@ -1,4 +1,4 @@
-"""Peak memory of reading a large photo of a sphere (issue 14: an 8000² PNG must peak ≤ 2 GB).
+"""Peak memory of reading a large photo of a sphere (target: an 8000² PNG peaks ≤ 2 GB).
 
 Writes a SIZE×SIZE 8-bit RGB photo of a sphere (a Lambertian-shaded disc with a sharp outline,
 drawn band by band), then loads it in a fresh

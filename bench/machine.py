@@ -30,8 +30,7 @@ def copy_bandwidth_gbs(megabytes: int = 200, repeat: int = 5) -> float:
     """Best memory bandwidth of one thread copying a ``megabytes`` array (GB/s, read + write).
 
     Printed beside timings so that machines of the same core count can be told apart: the same
-    code's full-table inference took 2.0–2.9 s on earlier sessions' 2-core machines and 7–10 s on
-    the twenty-ninth session's (docs/model.md, "Inference")."""
+    code's full-table inference has taken from 1.4 s to 10 s on different 2-core machines."""
     src = np.ones(megabytes * 2**20 // 8)
     dst = np.empty_like(src)
     best = float("inf")

@@ -6,7 +6,7 @@ Generates the network's table once (not timed), then times :func:`specgen_addon.
 (operator, design, solve, apply, and the two verification renders) ``--repeat`` times, each with a
 fresh lighting operator, in wall and CPU seconds. Peak memory is the largest traced allocation
 (``tracemalloc``; numpy reports its buffers) during one refinement, above what was held before it.
-Target (issue 10): ≤ 15 s on 2 cores.
+Target: ≤ 15 s on 2 cores.
 """
 
 from __future__ import annotations

@@ -16,7 +16,7 @@ Each photo's network table is then refined with every candidate setting of ``Ref
 protocol's distant lights (spectral PSNR, as ``evaluate --families``), beside the photo's
 self-reproduction. Settings are chosen on ``--split val``; figures are reported on ``test``.
 
-    cd bench && python refine_prior_study.py --split val --per-family 1 --json ../out/prior_val.json
+    cd bench && python refine_prior_study.py --split val --per-family 1 --json ../out/bench/prior_val.json
 """
 
 from __future__ import annotations
@@ -31,29 +31,29 @@ import numpy as np
 
 sys.path.insert(0, str(Path(__file__).resolve().parents[1]))
 
-#: candidate settings: label → RefineOptions fields ("shipped": the defaults; "before s34": the
-#: smoothness of the defaults before the thirty-fourth session)
+#: candidate settings: label → RefineOptions fields ("shipped": the defaults; "block smoothness":
+#: one smoothness weight per block of knots, the earlier default)
 SETTINGS: dict[str, dict] = {
     "shipped": {},
-    "before s34": {"smooth_weight": "block"},
+    "block smoothness": {"smooth_weight": "block"},
     "floor": {"fit_floor": 1.0},
     "block, floor": {"smooth_weight": "block", "fit_floor": 1.0},
     "body network": {"body_prior": "network"},
     "no relax": {"relax_below_db": 0.0},
-    # θh knots of the correction: the shipped ones start (0°, 0.5°, 1.1°, ...) since the
-    # thirty-fifth session; before it they also had 0.04° and 0.2°, inside one pixel of the highlight
-    "knots before s35": {"theta_h_knots": (0, 2, 4, 7, 10, 14, 19, 25, 32, 41, 51, 65, 89)},
+    # θh knots of the correction: the shipped ones start (0°, 0.5°, 1.1°, ...); the earlier ones
+    # also had 0.04° and 0.2°, inside one pixel of the highlight
+    "knots from 0.04°": {"theta_h_knots": (0, 2, 4, 7, 10, 14, 19, 25, 32, 41, 51, 65, 89)},
     "knots from 1.1°": {"theta_h_knots": (0, 10, 14, 19, 25, 32, 41, 51, 65, 89)},
-    # the relaxed fit only where it predicts held-out pixels better: shipped since the thirty-sixth
-    # session; "before s36" tried it wherever the smooth fit reproduced the photo below 42 dB
+    # the relaxed fit only where it predicts held-out pixels better (shipped); "relax below 42 dB"
+    # tries it wherever the smooth fit reproduced the photo below 42 dB
     "relax by holdout": {"relax_holdout": True},
-    "before s36": {"relax_holdout": False},
+    "relax below 42 dB": {"relax_holdout": False},
     # the lobe's correction only where it predicts held-out pixels better than the network's lobe
     "lobe by holdout": {"lobe_holdout": True},
-    # the relaxed fit loosens the θh smoothness only (thirty-sixth session, not adopted)
+    # the relaxed fit loosens the θh smoothness only (not adopted)
     "relax θh only": {"relax_axes": "theta_h", "relax_holdout": False},
-    # the body: a convex mix of Otsu 2018's and the network's colour-matched spectra (thirty-seventh
-    # session), the number being the network's share
+    # the body: a convex mix of Otsu 2018's and the network's colour-matched spectra (not adopted),
+    # the number being the network's share
     "body blend 1/2": {"body_prior": "blend", "body_blend": 0.5},
     "body blend 1/4": {"body_prior": "blend", "body_blend": 0.25},
     # Otsu 2018's body where the eye sees, the network's in the tails (visibility below 0.3 / 0.1)

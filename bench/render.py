@@ -1,6 +1,6 @@
 """Benchmark: spectral renders vs one plain RGB Cycles render of the same scene.
 
-* ``--mode fullscene`` (default): the full-scene mode on the ordinary scene of issue 12 (floor,
+* ``--mode fullscene`` (default): the full-scene mode on an ordinary scene (floor,
   Principled spheres, area light, sun, HDRI world, one SpecGen sphere), the whole job (scene
   conversion, ceil(bands/3) Cycles renders with persistent data, restore, EXR + PNG) against one
   plain RGB render (fresh, as F12) of the same file, resolution and samples.

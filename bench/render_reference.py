@@ -1,6 +1,6 @@
 """Benchmark of the reference renderer: speed, and how much the environment sampling moves PSNR.
 
-Prints markdown tables for docs/renderer.md:
+Prints markdown tables for docs/dev/renderer.md:
 
 1. seconds to render a 256² sphere at the default 21 bands under an environment map (corpus
    materials; "cold" includes preparing the scene's samples, "warm" reuses a prepared Scene);

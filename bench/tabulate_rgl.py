@@ -1,6 +1,6 @@
 """Seconds to tabulate each real RGL file onto the full MERL grid (90 × 90 × 180).
 
-Target (issue 2, item 10): ≤ 5 s per file on the 2-core CPU-only machine.
+Target: ≤ 5 s per file on the 2-core CPU-only machine.
 
 Usage: ``.venv/bin/python bench/tabulate_rgl.py [--repeat N] [--spectral] [FILE ...]``; without
 files it uses ../shared/data/rgl/*.bsdf beside the repository. ``--spectral`` also times a

@@ -6,7 +6,7 @@ each on its own, over ``--steps`` steps after ``--warmup``, for a training confi
 corpus (its input renders are cached as training caches them), so it says which of the two bounds a
 run on a given machine, and how the batch scales on a GPU.
 
-Usage: ``.venv/bin/python bench/train_throughput.py [--config configs/continue_s11_trunk.json]
+Usage: ``.venv/bin/python bench/train_throughput.py [--config configs/shipped.json]
 [--device cpu|cuda] [--batch-scale 1 4] [--model-override '{"trunk_upsample_stages": 0}']
 [--corpus-size 96] [--steps 40] [--json F]``. The weights are random (``init_weights`` is not
 read): throughput does not depend on them.
@@ -64,7 +64,7 @@ def main() -> int:
     from specgen_addon.train.loop import load_config
 
     ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
-    ap.add_argument("--config", type=Path, default=REPO / "configs" / "continue_s11_trunk.json")
+    ap.add_argument("--config", type=Path, default=REPO / "configs" / "shipped.json")
     ap.add_argument("--device", choices=("cpu", "cuda"), default="cpu")
     ap.add_argument("--threads", type=int, default=1, help="torch threads (default 1)")
     ap.add_argument("--batch-scale", type=int, nargs="+", default=[1],

@@ -1,7 +1,7 @@
 """Self-reproduction and novel-lighting study of the refinement; prints a table, writes JSON.
 
     python bench/self_reproduction.py [--limit N] [--lightings canonical forest:30 sunset:0]
-                                      [--no-novel] [--json out/self_reproduction.json]
+                                      [--no-novel] [--json out/bench/self_reproduction.json]
 
 For every held-out corpus test material (and the real RGL files in ../shared/data/rgl): its photo
 under each input lighting, the network's table, the refined table; self-reproduction RGB PSNR and
@@ -17,14 +17,14 @@ import sys
 import time
 from pathlib import Path
 
-sys.path.insert(0, str(Path(__file__).resolve().parents[1]))
+sys.path.insert(0, str(Path(__file__).resolve().parents[2]))
 
 from bench.machine import describe_machine  # noqa: E402
 from specgen_addon.evaluation.self_reproduction import run_study, study_items, summarise  # noqa: E402
 from specgen_addon.input_lighting import parse_lighting  # noqa: E402
 from specgen_addon.lighting import HELDOUT_ENVS  # noqa: E402
 
-RGL_DIR = Path(__file__).resolve().parents[2] / "shared" / "data" / "rgl"
+RGL_DIR = Path(__file__).resolve().parents[3] / "shared" / "data" / "rgl"
 
 
 def main() -> int:

@@ -1,0 +1,146 @@
+"""Check: the Full Scene render of generated materials against the reference renderer and Exact.
+
+Usage::
+
+    python bench/fullscene_vs_reference.py TABLE.npz [...]          # given tables
+    python bench/fullscene_vs_reference.py --check --cache DIR      # the whole check (below)
+
+``--check`` generates (network + refinement, as Generate does) from: the example photo
+``examples/sphere.png``; the canonical input photo of one held-out test material of every corpus
+family; the canonical input photo of every real RGL file in ``../shared/data/rgl`` (if present).
+Tables are kept in ``--cache`` and reused.
+
+Per table: bake it (default tolerance), put it on a sphere lit by one D65 sun (the same sphere,
+camera and sun as ``bench/bake_vs_reference.py``), render it with the Full Scene job
+(``ops.render_fullscene``) as shipped (exact direct light, closures for the bounces) and with the
+closure stack alone, and with the Exact mode; print per renderer the mean CIEDE2000 of the sRGB
+projections and the energy ratio (sum of all bands over the sphere) against the reference
+renderer (``specgen_addon.render``), plus the closure fit's rendered error under the three check
+lights (``specgen_addon.fit.fit_check``) that the panel shows.
+"""
+
+from __future__ import annotations
+
+import argparse
+import sys
+import tempfile
+import time
+from importlib import import_module
+from pathlib import Path
+
+import numpy as np
+
+from machine import describe_machine  # bench/machine.py, beside this script
+
+REPO = Path(__file__).resolve().parents[1]
+sys.path.insert(0, str(REPO))
+SUN = (0.35, 0.45, 0.82)
+RGL_DIR = REPO.parent / "shared" / "data" / "rgl"
+
+
+def check_tables(cache: Path) -> list[tuple[str, Path]]:
+    """(name, table path) of the whole check, generating the missing tables into ``cache``."""
+    from specgen_addon import input_image, pipeline
+    from specgen_addon.corpus.generate import material_family
+    from specgen_addon.formats import load_brdf
+    from specgen_addon.train.evaluate import mixed_test_materials
+
+    cache.mkdir(parents=True, exist_ok=True)
+    sources: list[tuple[str, object]] = [("example sphere.png", REPO / "examples" / "sphere.png")]
+    sources += [(f"{material_family(m)} ({m.name})", m) for m in mixed_test_materials(1)]
+    sources += [(f"RGL {p.stem}", p) for p in sorted(RGL_DIR.glob("*.bsdf"))]
+    out = []
+    for name, src in sources:
+        path = cache / (name.split(" (")[0].replace(" ", "_").replace(".", "_") + ".npz")
+        if not path.exists():
+            t = time.perf_counter()
+            photo = src if isinstance(src, Path) and src.suffix == ".png" else input_image.render_input(
+                load_brdf(src) if isinstance(src, Path) else src)
+            pipeline.generate(photo).table.save(path)
+            print(f"generated {name} in {time.perf_counter() - t:.0f} s", flush=True)
+        out.append((name, path))
+    return out
+
+
+def sphere_scene(bpy, render, scene_mod, info, res: int, samples: int):
+    """A new scene: the ortho camera, the sphere with the baked material, one D65 sun."""
+    bpy.ops.wm.read_factory_settings(use_empty=True)
+    sc = bpy.context.scene
+    scene_mod.add_camera(sc)
+    scene_mod.add_mesh(sc, "sphere").data.materials.append(render.make_material("check", info))
+    sc.cycles.filter_width = 0.01   # pixel centres, as the reference samples them
+    scene_mod.add_sun(sc, SUN, irradiance=np.pi)
+    sc.render.resolution_x = sc.render.resolution_y = res
+    sc.cycles.samples, sc.cycles.use_denoising = samples, False
+    return sc
+
+
+def compare(ref: np.ndarray, got: np.ndarray, wl: np.ndarray) -> tuple[float, float]:
+    """(mean ΔE2000 of the sRGB projections, energy ratio) over the reference's covered pixels."""
+    from specgen_addon.refine.report import delta_e2000, photo_scale
+    from specgen_addon.spectral_exr import linear_srgb_preview
+
+    mask = ref.sum(-1) > 0
+    a, b = linear_srgb_preview(ref, wl)[mask], linear_srgb_preview(got, wl)[mask]
+    return float(delta_e2000(a, b, photo_scale(a))), float(got[mask].sum() / ref[mask].sum())
+
+
+def main() -> int:
+    ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    ap.add_argument("tables", nargs="*", type=Path)
+    ap.add_argument("--check", action="store_true", help="the example, one per family, the RGL files")
+    ap.add_argument("--cache", type=Path, default=Path("fullscene_check_tables"))
+    ap.add_argument("--resolution", type=int, default=96)
+    ap.add_argument("--samples", type=int, default=16)
+    ap.add_argument("--only", default="", help="check only the materials whose name contains this")
+    args = ap.parse_args()
+    named = [(p.stem, p) for p in args.tables] + (check_tables(args.cache) if args.check else [])
+    named = [(n, p) for n, p in named if args.only.lower() in n.lower()]
+    if not named:
+        ap.error("give tables or --check")
+    import bpy
+
+    import batch
+    from specgen_addon.fit.fit_check import rendered_fit_error
+    from specgen_addon.render import DistantLight, render_spectral, sphere_geometry
+    from specgen_addon.table import BRDFTable
+
+    pkg = batch.load_package()
+    bake = import_module(f"{pkg.__name__}.specgen_addon.bake")
+    render = import_module(f"{pkg.__name__}.ops.render")
+    fullscene = import_module(f"{pkg.__name__}.ops.render_fullscene")
+    scene_mod = import_module(f"{pkg.__name__}.ops.scene")
+    print(describe_machine())
+    print(f"sphere {args.resolution}² px, one D65 sun from {SUN}, Full Scene {args.samples} samples")
+    print("| material | closure fit ΔE2000 (3 lights) | Full Scene ΔE2000 | energy | closures alone ΔE2000 "
+          "| energy | Exact ΔE2000 | energy | Full Scene vs Exact ΔE2000 |")
+    print("|---|---|---|---|---|---|---|---|---|")
+    quiet = lambda *_: None  # noqa: E731
+    res = args.resolution
+    with tempfile.TemporaryDirectory() as tmp:
+        for name, path in named:
+            table = BRDFTable.load(path)
+            wl = table.wavelengths
+            ref = render_spectral(table, sphere_geometry(res), lights=[DistantLight(SUN, np.pi)],
+                                  wavelengths_nm=wl).spectral
+            info = bake.bake_atlas(table, Path(tmp) / f"{path.stem}.exr")
+            fit_de = rendered_fit_error(info.closures, table)
+            got = {}
+            for label, exact in (("full", True), ("closures", False)):
+                sc = sphere_scene(bpy, render, scene_mod, info, res, args.samples)
+                got[label] = fullscene.FullSceneRenderJob(sc, None, wl, exact_direct=exact, warn=quiet,
+                                                          log=quiet, preview_png=False).run()
+            sc = sphere_scene(bpy, render, scene_mod, info, res, args.samples)
+            got["exact"] = render.SpectralRenderJob(sc, None, samples=2, resolution=(res, res),
+                                                    warn=quiet).run()
+            cells = [f"{fit_de:.2f}"]
+            for label in ("full", "closures", "exact"):
+                de, energy = compare(ref, got[label], wl)
+                cells += [f"{de:.2f}", f"{energy:.3f}"]
+            cells.append(f"{compare(got['exact'], got['full'], wl)[0]:.2f}")
+            print(f"| {name} | " + " | ".join(cells) + " |", flush=True)
+    return 0
+
+
+if __name__ == "__main__":
+    raise SystemExit(main())
