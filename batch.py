@@ -24,13 +24,15 @@ import warnings
 from pathlib import Path
 
 REPO = Path(__file__).resolve().parent
+if str(REPO) not in sys.path:  # the core is the top-level package specgen_addon in every entry
+    sys.path.insert(0, str(REPO))
 PACKAGE = "specgen"
 EXIT_BAD_INPUT = 2
 
 
 def load_package(name: str = PACKAGE):
     """Import this repository as the package ``name`` (as Blender imports the installed extension,
-    ``bl_ext.<repo>.specgen``), so ``ops`` reaches the core with the same relative imports."""
+    ``bl_ext.<repo>.specgen``) for the Blender tier ``ops``; the core is ``specgen_addon`` itself."""
     if name in sys.modules:
         return sys.modules[name]
     spec = importlib.util.spec_from_file_location(name, REPO / "__init__.py",
@@ -79,7 +81,7 @@ def build_parser() -> argparse.ArgumentParser:
                          "(e.g. 'Saved: ...') through to stdout")
     from importlib import import_module
 
-    import_module(f"{load_package().__name__}.specgen_addon.cli_model").add_refine_arguments(ap)
+    import_module("specgen_addon.cli_model").add_refine_arguments(ap)
     return ap
 
 
@@ -100,12 +102,12 @@ def run(args) -> Path:
     pkg = load_package()
     from importlib import import_module
 
-    errors = import_module(f"{pkg.__name__}.specgen_addon.errors")
-    lighting = import_module(f"{pkg.__name__}.specgen_addon.lighting")
-    spectra = import_module(f"{pkg.__name__}.specgen_addon.spectra")
-    interrupts = import_module(f"{pkg.__name__}.specgen_addon.interrupts")
+    errors = import_module("specgen_addon.errors")
+    lighting = import_module("specgen_addon.lighting")
+    spectra = import_module("specgen_addon.spectra")
+    interrupts = import_module("specgen_addon.interrupts")
 
-    import_module(f"{pkg.__name__}.specgen_addon.preflight").check_batch(args)  # all checks, up front
+    import_module("specgen_addon.preflight").check_batch(args)  # all checks, up front
     source = Path(args.image or args.brdf)
     if not source.is_file():
         kind = "input image" if args.image else "BRDF table"
@@ -113,12 +115,12 @@ def run(args) -> Path:
     if args.mesh not in ("sphere", "suzanne") and not Path(args.mesh).is_file():
         raise errors.SpecGenError(f"{args.mesh}: mesh file not found (use sphere, suzanne or an .obj path)")
     if args.image:
-        input_image = import_module(f"{pkg.__name__}.specgen_addon.input_image")
+        input_image = import_module("specgen_addon.input_image")
         with warnings.catch_warnings():  # keep a bad image to the one error line
             warnings.simplefilter("ignore")
             input_image.load_sphere_image(source)  # no sphere / unreadable -> ImageInputError, early
     env = lighting.load_environment(args.env)  # unknown name -> LightingAssetError with the list
-    cli_model = import_module(f"{pkg.__name__}.specgen_addon.cli_model")
+    cli_model = import_module("specgen_addon.cli_model")
     photo_lighting = cli_model.input_lighting_from_args(args)  # bad map/file/value -> LightingError
     out = Path(args.out)
     try:
@@ -134,7 +136,7 @@ def run(args) -> Path:
             raise errors.OutputExistsError(f"{p}: already exists (pass --overwrite to replace it)")
     wavelengths = spectra.wavelength_grid(args.wl_min, args.wl_max, args.bands)
 
-    bake = import_module(f"{pkg.__name__}.specgen_addon.bake")
+    bake = import_module("specgen_addon.bake")
     t0 = time.perf_counter()
     last = [-1]
 
@@ -159,7 +161,7 @@ def run(args) -> Path:
             for w in info.refinement.warnings:
                 print(f"warning: {w}", file=sys.stderr)
     else:
-        table_mod = import_module(f"{pkg.__name__}.specgen_addon.table")
+        table_mod = import_module("specgen_addon.table")
         table = table_mod.BRDFTable.load(source)
         info = bake.bake_atlas(table, out / "lookup" / f"{source.stem}_lookup.exr",
                                wavelengths_nm=wavelengths, progress=progress)
@@ -193,7 +195,7 @@ def run(args) -> Path:
                                    attributes={"specgenSource": str(source), "specgenMesh": args.mesh,
                                                "specgenEnvironment": args.env},
                                    warn=lambda m: print(m, file=sys.stderr))
-    quiet = import_module(f"{pkg.__name__}.specgen_addon.quiet")
+    quiet = import_module("specgen_addon.quiet")
     with quiet.native_stdout_silenced(not args.verbose):  # Cycles' "Saved: ..." lines
         job.run(lambda f: interrupts.raise_if_stopped())  # between band renders
     print(f"spectral render ({args.bands} bands, {args.resolution}², {args.samples} spp) in "
@@ -208,8 +210,8 @@ def run_scene(args) -> Path:
     pkg = load_package()
     from importlib import import_module
 
-    errors = import_module(f"{pkg.__name__}.specgen_addon.errors")
-    spectra = import_module(f"{pkg.__name__}.specgen_addon.spectra")
+    errors = import_module("specgen_addon.errors")
+    spectra = import_module("specgen_addon.spectra")
     import bpy
 
     if args.scene:
@@ -231,7 +233,7 @@ def run_scene(args) -> Path:
         if p.exists() and not args.overwrite:
             raise errors.OutputExistsError(f"{p}: already exists (pass --overwrite to replace it)")
     if Path(bpy.data.filepath or "").resolve() != blend:
-        quiet = import_module(f"{pkg.__name__}.specgen_addon.quiet")
+        quiet = import_module("specgen_addon.quiet")
         try:
             with quiet.native_stdout_silenced(not args.verbose):  # Blender's "Read blend: ..." lines
                 bpy.ops.wm.open_mainfile(filepath=str(blend), load_ui=False)
@@ -263,7 +265,7 @@ def run_scene(args) -> Path:
 def _write_rgb_exr(path: Path, rgb) -> None:
     from importlib import import_module
 
-    image_io = import_module(f"{load_package().__name__}.specgen_addon.image_io")  # OpenEXR or OIIO
+    image_io = import_module("specgen_addon.image_io")  # OpenEXR or OIIO
     image_io.write_exr(path, {c: rgb[..., i] for i, c in enumerate("RGB")}, overwrite=True)
 
 
@@ -275,11 +277,10 @@ def main(argv: list[str] | None = None) -> int:
     """Exit 0, 2 with one error line, or 130/143 on SIGINT/SIGTERM; new files removed on failure
     and temporary files (Cycles' OSL builds) kept in a folder removed on every exit path."""
     args = build_parser().parse_args(_script_argv(argv))
-    pkg = load_package()
     from importlib import import_module
 
-    cli = import_module(f"{pkg.__name__}.specgen_addon.cli")
-    interrupts = import_module(f"{pkg.__name__}.specgen_addon.interrupts")
+    cli = import_module("specgen_addon.cli")
+    interrupts = import_module("specgen_addon.interrupts")
     PHASE[0] = "input checks"
     with interrupts.private_tempdir("specgen_batch_"):
         return cli.run_guarded(lambda: f"batch.py {PHASE[0]}", lambda: run(args) and 0,

@@ -106,7 +106,7 @@ def main() -> int:
     from specgen_addon.table import BRDFTable
 
     pkg = batch.load_package()
-    bake = import_module(f"{pkg.__name__}.specgen_addon.bake")
+    bake = import_module("specgen_addon.bake")
     render = import_module(f"{pkg.__name__}.ops.render")
     fullscene = import_module(f"{pkg.__name__}.ops.render_fullscene")
     scene_mod = import_module(f"{pkg.__name__}.ops.scene")

@@ -39,7 +39,7 @@ def main() -> int:
     import batch
 
     pkg = batch.load_package()
-    bake = import_module(f"{pkg.__name__}.specgen_addon.bake")
+    bake = import_module("specgen_addon.bake")
     from specgen_addon.spectra import wavelength_grid
 
     wl = wavelength_grid(380.0, 780.0, args.bands)

@@ -13,8 +13,8 @@ from __future__ import annotations
 
 import bpy
 
-from ..specgen_addon.errors import SpecGenError
-from ..specgen_addon.fit import ClosureFit, StackClosure, stack_layout, standin_closures
+from specgen_addon.errors import SpecGenError
+from specgen_addon.fit import ClosureFit, StackClosure, stack_layout, standin_closures
 
 FIT_PROP = "specgen_closures"
 PREFIX = "SpecGen "

@@ -29,7 +29,7 @@ from typing import Callable
 import bpy
 import numpy as np
 
-from ..specgen_addon.errors import SpecGenError
+from specgen_addon.errors import SpecGenError
 from .render import SavedAttributes, SpectralRenderJob, is_specgen_material, specgen_materials
 
 #: Samples of the exact render at most (its suns and point lights are noiseless but for the pixel
@@ -73,7 +73,7 @@ class DirectOnlySettings(SavedAttributes):
 
 def _resample(spectral: np.ndarray, from_nm: np.ndarray, to_nm: np.ndarray) -> np.ndarray:
     """(H, W, Λ_from) → (H, W, Λ_to), linear in λ (held beyond the ends)."""
-    from ..specgen_addon.spectra import interpolation_matrix
+    from specgen_addon.spectra import interpolation_matrix
 
     if from_nm.size == to_nm.size and np.allclose(from_nm, to_nm):
         return spectral

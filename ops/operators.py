@@ -16,10 +16,10 @@ from pathlib import Path
 import bpy
 import numpy as np
 
-from ..specgen_addon.errors import SpecGenError
-from ..specgen_addon.spectra import wavelength_grid
-from ..specgen_addon import bake
-from ..specgen_addon.image_checks import check_pixel_count
+from specgen_addon.errors import SpecGenError
+from specgen_addon.spectra import wavelength_grid
+from specgen_addon import bake
+from specgen_addon.image_checks import check_pixel_count
 from . import naming
 from .properties import input_lighting, output_dir
 from .reporting import check_generate_settings, check_render_settings, report_exception
@@ -40,7 +40,7 @@ def _image_input(settings):
         img.pixels.foreach_get(px)
         rgb = px.reshape(h, w, 4)[::-1, :, :3].astype(np.float64)
         if not img.is_float and img.colorspace_settings.name.lower().startswith("srgb"):
-            from ..specgen_addon.spectra import srgb_decode
+            from specgen_addon.spectra import srgb_decode
 
             rgb = srgb_decode(rgb)
         return rgb
@@ -250,7 +250,7 @@ class SPECGEN_OT_render_stack(_Modal, bpy.types.Operator):
     def _job(self, context):
         from .render import SpectralRenderJob
 
-        from ..specgen_addon.limits import check_output_dir
+        from specgen_addon.limits import check_output_dir
 
         s = context.scene.specgen
         check_render_settings(s, self.filename)  # a plain .exr name: never outside the folder

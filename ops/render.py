@@ -33,9 +33,9 @@ from typing import Callable, Iterator
 import bpy
 import numpy as np
 
-from ..specgen_addon.errors import Cancelled, OutputExistsError, SpecGenError
-from ..specgen_addon import bake
-from ..specgen_addon.interrupts import private_tempdir
+from specgen_addon.errors import Cancelled, OutputExistsError, SpecGenError
+from specgen_addon import bake
+from specgen_addon.interrupts import private_tempdir
 
 SHADER_PATH = Path(__file__).resolve().parent / "osl" / "specgen_brdf.osl"
 SHADER_TEXT_NAME = "specgen_brdf.osl"
@@ -236,7 +236,7 @@ def specgen_materials(scene: bpy.types.Scene) -> list[bpy.types.Material]:
 
 # ------------------------------------------------------------------------------ scene lighting
 def _uplift(wavelengths_nm: np.ndarray) -> np.ndarray:
-    from ..specgen_addon.render.environment import uplift_basis
+    from specgen_addon.render.environment import uplift_basis
 
     return uplift_basis(wavelengths_nm)
 
@@ -540,7 +540,7 @@ class _SceneState(SavedAttributes):
 
 
 def _read_pass(path: Path) -> np.ndarray:
-    from ..specgen_addon.image_io import read_exr
+    from specgen_addon.image_io import read_exr
 
     ch, _ = read_exr(path)
     names = sorted(ch)
@@ -708,7 +708,7 @@ class SpectralRenderJob(RenderJobOutputs):
                                 for g, (basis, offsets, _) in enumerate(self.groups))
             outs = self._outputs()
             if outs is not None:
-                from ..specgen_addon.spectral_exr import (linear_srgb_preview, write_preview_png,
+                from specgen_addon.spectral_exr import (linear_srgb_preview, write_preview_png,
                                                           write_spectral_exr)
 
                 rgb = linear_srgb_preview(self.spectral, wl)

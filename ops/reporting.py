@@ -13,9 +13,9 @@ import traceback
 
 import bpy
 
-from ..specgen_addon import limits
-from ..specgen_addon.errors import Cancelled, SpecGenError
-from ..specgen_addon.interrupts import Interrupted
+from specgen_addon import limits
+from specgen_addon.errors import Cancelled, SpecGenError
+from specgen_addon.interrupts import Interrupted
 
 
 def debug_enabled() -> bool:

@@ -16,7 +16,7 @@ from collections.abc import Callable
 import bpy
 import numpy as np
 
-from ..specgen_addon.view_transform import (
+from specgen_addon.view_transform import (
     SCENE_LINEAR,
     ViewSettings,
     ViewTransform,

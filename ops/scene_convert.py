@@ -27,8 +27,8 @@ from typing import Callable
 import bpy
 import numpy as np
 
-from ..specgen_addon import uplift
-from ..specgen_addon.fit import group_closures, stack_layout
+from specgen_addon import uplift
+from specgen_addon.fit import group_closures, stack_layout
 from .closures import material_fit, set_stack
 from .render import is_specgen_material
 

@@ -1,8 +1,9 @@
 """The add-on's modules as Blender imports them, for the headless bpy tests.
 
-The repository is loaded as one package (:func:`batch.load_package`), as an installed extension is
-imported as ``bl_ext.<repo>.specgen``; ``ops`` reaches the core through relative imports in both
-cases. Import this module after ``pytest.importorskip("bpy")``.
+The repository is loaded as one package (:func:`batch.load_package`) for ``ops``, as an installed
+extension is imported as ``bl_ext.<repo>.specgen``; the core is the top-level ``specgen_addon`` in
+both cases, so ``addon_module("specgen_addon.errors")`` is ``specgen_addon.errors`` itself.
+Import this module after ``pytest.importorskip("bpy")``.
 """
 
 from __future__ import annotations
@@ -18,7 +19,10 @@ PKG = batch.load_package()
 
 
 def addon_module(dotted: str) -> ModuleType:
-    """``addon_module("ops.render")``: that module of the loaded add-on package."""
+    """``addon_module("ops.render")``: that module of the loaded add-on package (the core,
+    ``specgen_addon``, is one package for every entry)."""
+    if dotted.split(".")[0] == "specgen_addon":
+        return import_module(dotted)
     return import_module(f"{PKG.__name__}.{dotted}")
 
 

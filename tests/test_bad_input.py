@@ -668,9 +668,7 @@ def test_an_image_datablock_over_the_pixel_limit_is_refused_before_its_pixels_ar
     """A photo already loaded in Blender (no file to read a header from): its size is checked
     against the same limit before the operator copies its pixels."""
     bpy, s = addon
-    import batch
-
-    limits_mod = import_module(f"{batch.load_package().__name__}.specgen_addon.limits")
+    limits_mod = import_module("specgen_addon.limits")
     monkeypatch.setattr(limits_mod, "MAX_IMAGE_PIXELS", 1000)
     s.image = bpy.data.images.new("big photo", 64, 64)      # 4096 pixels, no file behind it
     with pytest.raises(RuntimeError) as info:
@@ -736,7 +734,7 @@ sys.path.insert(0, {repo!r})
 import bpy, batch
 pkg = batch.load_package()
 from importlib import import_module
-interrupts = import_module(pkg.__name__ + ".specgen_addon.interrupts")
+interrupts = import_module("specgen_addon.interrupts")
 pkg.register()
 s = bpy.context.scene.specgen
 s.image_path = {image!r}
@@ -811,11 +809,10 @@ def test_cancelled_generate_leaves_nothing_in_the_lookup_folder(after_calls, sta
     """The panel's Esc: Generate's worker polls ``cancel`` between network blocks, in the
     refinement and between bake groups; wherever it stops, nothing is left."""
     pytest.importorskip("bpy")
-    import batch
     from importlib import import_module
 
-    bake = import_module(f"{batch.load_package().__name__}.specgen_addon.bake")
-    errors = import_module(f"{batch.load_package().__name__}.specgen_addon.errors")
+    bake = import_module("specgen_addon.bake")
+    errors = import_module("specgen_addon.errors")
     out = tmp_path / "lookup"
     calls = []
 
