@@ -5,10 +5,14 @@ Runs inside Blender or on the ``bpy`` module, with the same arguments::
     blender --background --python batch.py -- --image IMG --mesh sphere --env studio --out DIR
     python batch.py --image IMG --mesh suzanne --env courtyard --out DIR [--bands 21 ...]
     python batch.py --scene FILE.blend --out DIR [--bands 21 ...]        # full-scene spectral
+    python batch.py --scene FILE.blend --apply photo.png:Cube photo2.jpg:Suzanne:env=forest \
+        --frames 1-10 --out DIR
     blender --background FILE.blend --python batch.py -- --scene --out DIR
 
 Writes ``DIR/<image>_<mesh>_<env>.exr`` (Fichet et al. 2021 spectral layout with an RGB preview)
 and ``…_preview.png``, plus the generated BRDF table and its baked lookups under ``DIR/lookup/``.
+With ``--scene``: ``DIR/<scene>_<camera>_f<frame>.exr`` per frame (preview through the scene's
+view transform), after ``--apply`` has given each photo's material to its object.
 Bad input (missing file, image without a sphere, unknown environment, unwritable output) exits
 with status 2 and one line on stderr.
 """
@@ -76,6 +80,16 @@ def build_parser() -> argparse.ArgumentParser:
     ap.add_argument("--backend", choices=("onnx", "torch"), default=None,
                     help="inference backend (default: onnx if onnxruntime is installed)")
     ap.add_argument("--overwrite", action="store_true", help="replace existing output files")
+    sc = ap.add_argument_group("whole scene (--scene)")
+    sc.add_argument("--apply", nargs="+", metavar="IMG:OBJECT[:OPTS]",
+                    help="before rendering, generate each photo's material and give it to that "
+                    "mesh object of the scene; OPTS: the photo's lighting, e.g. "
+                    "env=forest,rotation=30,exposure=2,key-light=on (default: the --input-* options)")
+    sc.add_argument("--frames", metavar="LIST",
+                    help="frames to render, e.g. 1-10 or 1,3,5-7 (default: the scene's current "
+                    "frame); one <scene>_<camera>_f<frame>.exr each")
+    sc.add_argument("--preview", action="store_true",
+                    help="quick preview: 25%% resolution, at most 16 samples, no denoising")
     ap.add_argument("--verbose", action="store_true",
                     help="print the traceback of an error, and let Blender's own log lines "
                          "(e.g. 'Saved: ...') through to stdout")
@@ -97,6 +111,12 @@ def run(args) -> Path:
     """Generate, bake, build the scene, render; returns the spectral EXR path."""
     if args.scene is not None:
         return run_scene(args)
+    for flag, value in (("--apply", args.apply), ("--frames", args.frames), ("--preview", args.preview)):
+        if value:
+            from importlib import import_module
+
+            errors = import_module(f"{load_package().__name__}.specgen_addon.errors")
+            raise errors.SpecGenError(f"{flag} needs --scene")
     args.samples = 16 if args.samples is None else args.samples
     args.resolution = 256 if args.resolution is None else args.resolution
     pkg = load_package()
@@ -124,7 +144,7 @@ def run(args) -> Path:
     photo_lighting = cli_model.input_lighting_from_args(args)  # bad map/file/value -> LightingError
     out = Path(args.out)
     try:
-        out.mkdir(parents=True, exist_ok=True)
+        import_module("specgen_addon.io_utils").make_dirs(out)  # removed if the run fails
     except OSError as exc:
         raise errors.SpecGenError(f"{out}: cannot create the output folder ({exc.strerror})") from None
     if not os.access(out, os.W_OK):
@@ -206,14 +226,22 @@ def run(args) -> Path:
 
 
 def run_scene(args) -> Path:
-    """Full-scene spectral render of a .blend file (or the one already open); returns the EXR."""
+    """Full-scene spectral render of a .blend file (or the one already open), after giving the
+    ``--apply`` photos' materials to their objects; one EXR per frame. Returns the last EXR."""
     pkg = load_package()
     from importlib import import_module
 
-    errors = import_module("specgen_addon.errors")
-    spectra = import_module("specgen_addon.spectra")
+    def core(name: str):
+        return import_module(f"{pkg.__name__}.specgen_addon.{name}")
+
+    errors, spectra, scene_args = core("errors"), core("spectra"), core("scene_args")
     import bpy
 
+    # everything that can be checked without the scene, before opening it
+    frames = scene_args.parse_frames(args.frames) if args.frames else None
+    applies = [scene_args.parse_apply(a) for a in args.apply or ()]
+    wavelengths = spectra.wavelength_grid(args.wl_min, args.wl_max, args.bands)
+    lightings = _check_photos(applies, args) if applies else []
     if args.scene:
         blend = Path(args.scene).resolve()
         if blend.suffix.lower() != ".blend" or not blend.is_file():
@@ -222,18 +250,13 @@ def run_scene(args) -> Path:
         blend = Path(bpy.data.filepath)
     else:
         raise errors.SpecGenError("--scene needs a .blend file (or start Blender with one)")
-    wavelengths = spectra.wavelength_grid(args.wl_min, args.wl_max, args.bands)
     out = Path(args.out)
     try:
         out.mkdir(parents=True, exist_ok=True)
     except OSError as exc:
         raise errors.SpecGenError(f"{out}: cannot create the output folder ({exc.strerror})") from None
-    target = out / f"{blend.stem}.exr"
-    for p in (target, target.with_name(target.stem + "_preview.png")):
-        if p.exists() and not args.overwrite:
-            raise errors.OutputExistsError(f"{p}: already exists (pass --overwrite to replace it)")
     if Path(bpy.data.filepath or "").resolve() != blend:
-        quiet = import_module("specgen_addon.quiet")
+        quiet = core("quiet")
         try:
             with quiet.native_stdout_silenced(not args.verbose):  # Blender's "Read blend: ..." lines
                 bpy.ops.wm.open_mainfile(filepath=str(blend), load_ui=False)
@@ -241,25 +264,142 @@ def run_scene(args) -> Path:
             reason = " ".join(str(exc).split()).removeprefix("Error: ")  # Blender's text ends in "\n"
             raise errors.SpecGenError(f"{blend}: cannot open the .blend file ({reason})") from None
     scene = bpy.context.scene
+    scene_args.check_objects(applies, {o.name: o.type for o in scene.objects}, scene.name)
+    targets = _scene_targets(scene, frames or [scene.frame_current], out, args.overwrite)
+    stems = _lookup_stems(applies, out / "lookup", args.overwrite)
+
+    interrupts = core("interrupts")
+    render = import_module(f"{pkg.__name__}.ops.render")
+    for spec, lighting, stem in zip(applies, lightings, stems):
+        PHASE[0] = f"BRDF generation for {spec.object_name!r}"
+        info = _generate(spec, lighting, stem, out / "lookup", wavelengths, args)
+        _assign(scene.objects[spec.object_name], render.make_material(f"SpecGen {stem}", info))
+        print(f"material 'SpecGen {stem}' applied to {spec.object_name!r}", flush=True)
     if args.samples is not None:
         scene.cycles.samples = args.samples
     if args.resolution is not None:
         scene.render.resolution_x = scene.render.resolution_y = args.resolution
         scene.render.resolution_percentage = 100
     fullscene = import_module(f"{pkg.__name__}.ops.render_fullscene")
+    settings = import_module(f"{pkg.__name__}.ops.render_settings")
+    PHASE[0] = "spectral render"
+    for frame, target in targets:
+        scene.frame_set(frame)
+        t0 = time.perf_counter()
+        job = fullscene.FullSceneRenderJob(scene, target, wavelengths, overwrite=args.overwrite,
+                                           attributes={"specgenScene": str(blend),
+                                                       "specgenFrame": str(frame)},
+                                           warn=lambda m: print(m, file=sys.stderr),
+                                           log=lambda m: print(m, flush=True), show_result=False)
+        with settings.QuickPreview(scene, args.preview):
+            job.run(lambda f: interrupts.raise_if_stopped())  # between band renders
+            h, w = job.spectral.shape[:2]
+            spp = scene.cycles.samples
+        print(f"full-scene spectral render of {blend.name}, frame {frame} ({args.bands} bands, "
+              f"{w}x{h}, {spp} spp, {len(job.timings['render_s'])} Cycles renders) in "
+              f"{time.perf_counter() - t0:.1f} s", flush=True)
+        print(f"wrote {target}")
+        print(f"wrote {target.with_name(target.stem + '_preview.png')}")
+    return targets[-1][1]
+
+
+def _check_photos(applies, args) -> list:
+    """Each ``--apply`` photo: readable, holds a sphere, and its lighting options are valid."""
+    from importlib import import_module
+
+    pkg = load_package()
+    preflight = import_module(f"{pkg.__name__}.specgen_addon.preflight")
+    input_image = import_module(f"{pkg.__name__}.specgen_addon.input_image")
+    parse_lighting = import_module(f"{pkg.__name__}.specgen_addon.input_lighting").parse_lighting
+    preflight.check_weights_file(args.weights)
+    defaults = {"env": args.input_env, "rotation_deg": args.input_rotation,
+                "exposure": args.input_exposure, "key_light": args.input_key_light}
+    lightings = []
+    for spec in applies:
+        preflight.check_image_file(spec.image)
+        with warnings.catch_warnings():  # keep a bad image to the one error line
+            warnings.simplefilter("ignore")
+            input_image.load_sphere_image(spec.image)  # no sphere / unreadable -> one sentence
+        lightings.append(parse_lighting(**spec.lighting_args(defaults)))
+    return lightings
+
+
+def _scene_targets(scene, frames: list[int], out: Path, overwrite: bool) -> list[tuple[int, Path]]:
+    """``(frame, <scene>_<camera>_fNNNN.exr)`` for each frame; refuses existing outputs (unless
+    ``overwrite``) and frames without a camera, before any work."""
+    from importlib import import_module
+
+    pkg = load_package()
+    errors = import_module(f"{pkg.__name__}.specgen_addon.errors")
+    naming = import_module(f"{pkg.__name__}.ops.naming")
+    limits = import_module(f"{pkg.__name__}.specgen_addon.limits")
+    targets = []
+    current = scene.frame_current
+    try:
+        for frame in frames:
+            scene.frame_set(frame)           # camera markers can switch the camera per frame
+            if scene.camera is None:
+                raise errors.SpecGenError(f"scene {scene.name!r} has no camera at frame {frame}")
+            target = out / naming.render_output_name(scene.name, scene.camera.name, frame)
+            for p in (target, target.with_name(target.stem + "_preview.png")):
+                limits.check_name_length(p)
+                if p.exists() and not overwrite:
+                    raise errors.OutputExistsError(f"{p}: already exists (pass --overwrite to "
+                                                   "replace it)")
+            targets.append((frame, target))
+    finally:
+        scene.frame_set(current)
+    return targets
+
+
+def _lookup_stems(applies, lookup: Path, overwrite: bool) -> list[str]:
+    """A distinct lookup name per photo (``photo``, ``photo.001`` …); existing lookups of those
+    names are refused unless ``overwrite``."""
+    from importlib import import_module
+
+    pkg = load_package()
+    naming = import_module(f"{pkg.__name__}.ops.naming")
+    errors = import_module(f"{pkg.__name__}.specgen_addon.errors")
+    stems: list[str] = []
+    for spec in applies:
+        stem = naming.unique_stem(naming.clean_stem(spec.image.name), lambda s: s in stems)
+        found = naming.files_of(lookup, stem)
+        if found and not overwrite:
+            raise errors.OutputExistsError(f"{found[0]}: already exists (pass --overwrite to "
+                                           "replace it)")
+        stems.append(stem)
+    return stems
+
+
+def _generate(spec, lighting, stem: str, lookup: Path, wavelengths, args):
+    """Generate and bake one ``--apply`` photo's BRDF (printing what refinement reached)."""
+    from importlib import import_module
+
+    pkg = load_package()
+    bake = import_module(f"{pkg.__name__}.specgen_addon.bake")
+    cli_model = import_module(f"{pkg.__name__}.specgen_addon.cli_model")
     t0 = time.perf_counter()
-    job = fullscene.FullSceneRenderJob(scene, target, wavelengths, overwrite=args.overwrite,
-                                       attributes={"specgenScene": str(blend)},
-                                       warn=lambda m: print(m, file=sys.stderr),
-                                       log=lambda m: print(m, flush=True))
-    job.run()
-    h, w = job.spectral.shape[:2]
-    print(f"full-scene spectral render of {blend.name} ({args.bands} bands, {w}x{h}, "
-          f"{scene.cycles.samples} spp, {len(job.timings['render_s'])} Cycles renders) in "
-          f"{time.perf_counter() - t0:.1f} s", flush=True)
-    print(f"wrote {target}")
-    print(f"wrote {target.with_name(target.stem + '_preview.png')}")
-    return target
+    info = bake.generate_lookup(str(spec.image), lookup, wavelengths, weights=args.weights,
+                                backend=args.backend, name=stem, lighting=lighting,
+                                refine=args.refine, model=args.model, overwrite=args.overwrite)
+    if info.film_fit is not None:
+        print(cli_model.film_fit_summary(info.film_fit, lighting.label), flush=True)
+    if info.refinement is not None:
+        print(f"{spec.image.name} under {lighting.label}: {info.refinement.summary()}", flush=True)
+    for w in ([] if info.refinement is None else info.refinement.warnings) + \
+            ([] if info.film_fit is None else info.film_fit.warnings):
+        print(f"warning: {w}", file=sys.stderr)
+    print(f"{spec.image.name}: BRDF generated and baked in {time.perf_counter() - t0:.1f} s",
+          flush=True)
+    return info
+
+
+def _assign(obj, material) -> None:
+    """``material`` in the object's active slot (other slots keep theirs), as Apply does."""
+    if obj.material_slots:
+        obj.material_slots[obj.active_material_index].material = material
+    else:
+        obj.data.materials.append(material)
 
 
 def _write_rgb_exr(path: Path, rgb) -> None:

@@ -281,7 +281,7 @@ def bake_atlas(table, path: str | os.PathLike, wavelengths_nm: np.ndarray | None
     wl = np.asarray(table.wavelengths if wavelengths_nm is None else wavelengths_nm, dtype=np.float64)
     # the closure fit only reads the table: it runs on a second thread beside the basis
     with ThreadPoolExecutor(max_workers=1) as pool:
-        closures = pool.submit(fit_closures, table, None if wavelengths_nm is None else wl)
+        closures = pool.submit(fit_closures, table, None if wavelengths_nm is None else wl, check=True)
         values = table.values
         if wavelengths_nm is not None:
             weights = table.wavelength_weights(wl).astype(np.float32)       # (C, Λ)
@@ -542,8 +542,10 @@ def generate_lookup(image, out_dir: str | os.PathLike, wavelengths_nm: np.ndarra
         existing += sorted(out.glob(f"{name}_lookup.g*.exr"))
         if existing:
             raise OutputExistsError(f"{existing[0]}: already exists (turn on Overwrite to replace it)")
-    with OutputGuard([out]):  # failed, cancelled or interrupted: nothing new stays in out_dir
-        out.mkdir(parents=True, exist_ok=True)
+    from .io_utils import make_dirs
+
+    with OutputGuard([out]):  # failed, cancelled or interrupted: nothing it made stays in out_dir
+        make_dirs(out)
         return _generate_lookup(image, out, wavelengths_nm, weights, n_phi_d, tolerance, backend,
                                 name, progress, cancel, lighting, refine, save_table, preview, model)
 
@@ -559,11 +561,17 @@ def _generate_lookup(image, out: Path, wavelengths_nm, weights, n_phi_d, toleran
                   progress=sub(0.0, 0.8), cancel=cancel, model=model)
     try:
         generated = generate(image, backend=chosen, **kwargs)
-    except WeightsError:
+    except WeightsError as exc:
         import importlib.util
+        import warnings
 
-        if backend is not None or chosen != "onnx" or importlib.util.find_spec("torch") is None:
+        from .model.checksums import DamagedWeightsError
+
+        if backend is not None or chosen != "onnx" or importlib.util.find_spec("torch") is None \
+                or isinstance(exc, DamagedWeightsError):
             raise
+        # the graphs are missing or unusable: say so, the backend never changes silently
+        warnings.warn(f"the onnx backend cannot run ({exc}); using the torch backend", stacklevel=2)
         generated = generate(image, backend="torch", **kwargs)
     table = generated.table
     if save_table:

@@ -77,21 +77,23 @@ def run_guarded(what: str | Callable[[], str], work, outputs=([], []), verbose: 
     from .interrupts import (EXIT_ERROR, OutputGuard, as_interrupted, on_hard_stop, print_traceback_if,
                              raise_if_stopped, stop_on_signals)
 
-    folders, files = outputs
-    existing = {Path(f) for f in files if Path(f).exists()}
-    guard = OutputGuard(folders, keep=keep)
+    from .io_utils import OutputLock, created_since, ledger_mark, remove_created
 
-    def remove_new_files() -> None:
-        for f in files:
-            if Path(f) not in existing and Path(f).is_file():
-                Path(f).unlink()
+    folders, files = outputs
+    guard = OutputGuard(folders, keep=keep)
+    lock = OutputLock([*folders, *files])  # a second command on these outputs is refused
+    mark = ledger_mark()
+
+    def remove_new_files() -> None:  # only the files this process made (by identity)
+        remove_created(created_since(mark, files))
 
     def stopped(signal_name: str) -> str:
         return f"cancelled: {what() if callable(what) else what} stopped by {signal_name}; " \
                f"{guard.left_behind()}"
 
     try:
-        with stop_on_signals(stopped), on_hard_stop(remove_new_files), one_line_warnings(verbose):
+        with stop_on_signals(stopped), lock, on_hard_stop(lock.release), \
+                on_hard_stop(remove_new_files), one_line_warnings(verbose):
             try:
                 with guard:
                     code = int(work() or 0)

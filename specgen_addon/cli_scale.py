@@ -33,8 +33,9 @@ def add_parser(sub: argparse._SubParsersAction) -> argparse.ArgumentParser:
                    help="extra attempts for an item that crashed or timed out (default 1); "
                         "a bad input is reported at once")
     p.add_argument("--timeout", type=float, default=None, help="seconds allowed per item step")
-    p.add_argument("--dashboard-address", default=":8787",
-                   help="LocalCluster dashboard address (default :8787; :0 picks a free port)")
+    p.add_argument("--dashboard-address", default="127.0.0.1:8787",
+                   help="LocalCluster dashboard address (default 127.0.0.1:8787, this machine only; "
+                        "give HOST:PORT or :PORT to open it to the network; :0 picks a free port)")
     p.add_argument("--blender", default=None, metavar="EXE",
                    help="run batch.py inside this Blender (--background) instead of the bpy module")
     p.add_argument("--batch-script", type=Path, default=None, help=argparse.SUPPRESS)

@@ -35,6 +35,14 @@ class OutputExistsError(SpecGenError):
     """An output file exists and overwriting was not requested."""
 
 
+class OutputBusyError(SpecGenError):
+    """An output is being written by another SpecGen process (its lock file is held)."""
+
+
+class OutputWriteError(SpecGenError):
+    """An output could not be written (disk full, quota, I/O error); nothing partial was left."""
+
+
 class Cancelled(SpecGenError):
     """Long work was cancelled by the user; nothing partial was written."""
 

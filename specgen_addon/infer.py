@@ -164,9 +164,12 @@ class _OnnxBackend:
         import json
 
         tables_path, head_path = onnx_paths(weights)
+        from .model.checksums import verify
+
         for p in (tables_path, head_path):
             if not p.is_file():
                 raise WeightsError(f"{p}: ONNX graph not found (run `python -m specgen_addon export-onnx`)")
+            verify(p)  # a damaged shipped graph is refused, not silently replaced by another backend
         # Parallel over blocks (evaluate_grid's two worker threads share the session, whose run()
         # is thread-safe): one thread per run, no intra-op pool to spin or synchronise; full graph
         # optimisation (MatMul+Add+Relu fusions). A session per worker measured the same.

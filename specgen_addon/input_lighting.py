@@ -93,6 +93,7 @@ class InputLighting:
             path = Path(self.env)
             if not path.is_file():
                 raise LightingError(f"{path}: no such HDRI file")
+            check_map_header(path)
             return
         from . import lighting
 
@@ -157,12 +158,97 @@ def parse_lighting(env: str | None, rotation_deg: float = 0.0, exposure: float =
     return light
 
 
+#: Accepted width / height of an equirectangular map: 2, within this relative tolerance.
+MAP_ASPECT_TOLERANCE = 0.01
+#: Width a user's map is box-averaged down to while it is read (as the renderer's own maps).
+MAP_WORK_WIDTH = 512
+
+
+def check_map_header(path: str | Path) -> tuple[int, int] | None:
+    """Refuse an environment map from its header alone, before any pixel is read: over the photo
+    pixel limit (the same limit and message as photos), empty, or not 2:1 (equirectangular)."""
+    from .errors import ImageInputError
+    from .image_checks import check_image_header
+
+    try:
+        size = check_image_header(path)
+    except ImageInputError as exc:
+        raise LightingError(str(exc)) from None
+    if size is None:
+        return None
+    w, h = size
+    if abs(w / h - 2.0) > 2.0 * MAP_ASPECT_TOLERANCE:
+        raise LightingError(f"{path}: environment map is {w}×{h}; an equirectangular map is twice as "
+                            "wide as it is tall (2:1)")
+    return w, h
+
+
+def read_map_bounded(path: str | Path, max_width: int = MAP_WORK_WIDTH) -> np.ndarray | None:
+    """(H, W, 3) float32 linear RGB of an equirect map, read a strip of rows at a time and
+    box-averaged by the power of two that brings it to ``max_width`` (what the renderer's
+    halving does), so a 100-megapixel map never exists in memory at full size. NaN/Inf texels are
+    refused and negative ones reported (they are clamped to 0), each with its count, as for
+    photos. None when OpenImageIO is not importable (the renderer's reader is used instead)."""
+    import warnings
+
+    try:
+        import OpenImageIO as oiio
+    except ImportError:
+        return None
+    from .image_checks import ImageNote
+
+    inp = oiio.ImageInput.open(str(path))
+    if inp is None:
+        raise LightingError(f"{path}: not a readable HDRI ({oiio.geterror().strip() or 'unreadable'})")
+    try:
+        spec = inp.spec()
+        w, h, names = spec.width, spec.height, list(spec.channelnames)
+        if all(c in names for c in "RGB"):
+            idx = [names.index(c) for c in "RGB"]
+        elif spec.nchannels >= 3:
+            idx = [0, 1, 2]
+        else:
+            raise LightingError(f"{path}: environment map has no R, G, B channels (has {names})")
+        f = 1
+        while w // f > max_width and (h // f) % 2 == 0 and (w // f) % 2 == 0:
+            f *= 2
+        out = np.empty((h // f, w // f, 3), np.float32)
+        rows = max(f, ((1 << 21) // max(w, 1)) // f * f)  # about 2 M texels per strip
+        negative = bad = 0
+        for y in range(0, h, rows):
+            px = inp.read_scanlines(0, 0, y, min(y + rows, h), 0, 0, spec.nchannels, oiio.FLOAT)
+            if px is None:
+                raise LightingError(f"{path}: not a readable HDRI ({oiio.geterror().strip() or 'truncated'})")
+            rgb = np.asarray(px, np.float32).reshape(-1, w, spec.nchannels)[..., idx]
+            bad += int(rgb.size - np.isfinite(rgb).sum())
+            negative += int((rgb < 0).sum())
+            n = rgb.shape[0] // f
+            out[y // f:y // f + n] = rgb[:n * f].reshape(n, f, w // f, f, 3).mean(axis=(1, 3))
+    finally:
+        inp.close()
+    if bad:
+        raise LightingError(f"{path}: environment map holds {bad:,} NaN or infinite values "
+                            f"(of {w * h * 3:,}); fix or re-export it")
+    if negative:
+        warnings.warn(f"{path}: {negative:,} negative values (of {w * h * 3:,}) clamped to 0",
+                      ImageNote, stacklevel=2)
+    return out
+
+
 @functools.lru_cache(maxsize=4)
 def _file_environment(path: str, exposure: float, rotation_rad: float):
     from .render.environment import Environment
 
+    check_map_header(path)
     try:
-        return Environment.from_file(path, exposure=exposure, rotation_rad=rotation_rad)
+        rgb = read_map_bounded(path)
+        if rgb is None:
+            return Environment.from_file(path, exposure=exposure, rotation_rad=rotation_rad)
+        env = Environment(rgb, rotation_rad=rotation_rad, name=Path(path).stem)  # as from_file
+        env.rgb = env.rgb * np.float32(exposure / env.mean_luminance())
+        return env
+    except LightingError:
+        raise
     except SpecGenError as exc:
         raise LightingError(f"{path}: {exc}") from None
     except (OSError, ValueError) as exc:

@@ -3,9 +3,10 @@
 :func:`stop_on_signals` turns both signals into :class:`Interrupted` (a ``KeyboardInterrupt``, so
 ``except Exception`` never swallows it) raised in the main thread, and records the request so
 long loops and per-band renders can also poll :func:`stop_requested` (for code where Blender's own
-signal handling delays Python's). :class:`OutputGuard` snapshots the output folders and, when the
-work fails or is stopped, removes whatever appeared in them (``keep`` names files left on purpose,
-such as a resumable training checkpoint), so the final message can say truthfully what is left.
+signal handling delays Python's). :class:`OutputGuard`, when the work fails or is stopped, removes
+the files this process made in its output folders, by identity (``keep`` names files left on
+purpose, such as a resumable training checkpoint), so the final message can say truthfully what
+is left, and never removes a file another process wrote there.
 :func:`private_tempdir` keeps other libraries' temporary files (Cycles' OSL compiler) in a folder
 removed on every exit path.
 """
@@ -27,8 +28,6 @@ from typing import Iterable, Iterator
 EXIT_ERROR = 2
 EXIT_SIGINT = 128 + signal.SIGINT    # 130
 EXIT_SIGTERM = 128 + signal.SIGTERM  # 143
-#: Folders with more entries than this are snapshotted at their top level only.
-MAX_SNAPSHOT_ENTRIES = 20_000
 
 _requested: list[int] = []
 
@@ -352,36 +351,30 @@ def as_interrupted(exc: BaseException) -> Interrupted:
     return exc if isinstance(exc, Interrupted) else Interrupted(_requested[0] if _requested else signal.SIGINT)
 
 
-def _snapshot(folder: Path) -> set[str]:
-    if not folder.is_dir():
-        return set()
-    seen: set[str] = set()
-    for root, dirs, files in os.walk(folder):
-        for name in dirs + files:
-            seen.add(os.path.relpath(os.path.join(root, name), folder))
-        if len(seen) > MAX_SNAPSHOT_ENTRIES:
-            return {p for p in seen if os.sep not in p}
-    return seen
-
-
 class OutputGuard:
-    """Remove what a failed or stopped command created in its output folders.
+    """Remove what a failed or stopped command created in its output folders, and nothing else.
 
-    ``folders`` are snapshotted on entry (a missing one is removed whole if it was created);
-    ``keep`` holds paths to leave in place on purpose. After the block, :attr:`removed` and
-    :attr:`kept` list what happened, for the final message.
+    Ownership is by identity, not by a snapshot of the folders: only files and folders in this
+    process's ledger (:mod:`.io_utils`: every :func:`~.io_utils.atomic_write` publication and
+    :func:`~.io_utils.make_dirs` folder) made while the guard was active, and still the very
+    files made, are removed; another process's files in the same folders stay. A folder that did
+    not exist on entry is removed only when empty. ``keep`` holds paths to leave in place on
+    purpose. After the block, :attr:`removed` and :attr:`kept` list what happened.
     """
 
     def __init__(self, folders: Iterable[str | os.PathLike], keep: Iterable[str | os.PathLike] = ()):
         self.folders = [Path(f) for f in folders if f is not None]
-        self.keep = {Path(k).resolve() for k in keep}
+        self.keep = [Path(k) for k in keep]
         self.removed: list[Path] = []
         self.kept: list[Path] = []
-        self._before: dict[Path, set[str] | None] = {}
+        self._missing: list[Path] = []
+        self._mark = 0
 
     def __enter__(self) -> "OutputGuard":
-        for f in self.folders:
-            self._before[f] = _snapshot(f) if f.exists() else None
+        from .io_utils import ledger_mark
+
+        self._missing = [f for f in self.folders if not f.exists()]
+        self._mark = ledger_mark()
         _cleanups.append(self.clean)
         return self
 
@@ -399,39 +392,17 @@ class OutputGuard:
         return False
 
     def clean(self) -> None:
-        """Remove what appeared in the folders since entry (except ``keep``)."""
-        for folder, before in self._before.items():
-            self._clean(folder, before)
+        """Remove what this process made in the folders since entry (except ``keep``)."""
+        from .io_utils import created_since, is_ours, remove_created
 
-    def _clean(self, folder: Path, before: set[str] | None) -> None:
-        if not folder.is_dir():
-            return
-        # deepest first, so a new folder is empty (bar kept files) when its turn comes
-        for rel in sorted(_snapshot(folder) - (before or set()), key=lambda p: -p.count(os.sep)):
-            path = folder / rel
-            if path.resolve() in self.keep:
-                self.kept.append(path)
-                continue
+        mine = created_since(self._mark, self.folders)
+        keep = {os.path.abspath(k) for k in self.keep}
+        self.kept += [p for p in mine if os.path.abspath(p) in keep and is_ours(p)
+                      and p not in self.kept]
+        self.removed += remove_created(mine, keep=self.keep)
+        for folder in self._missing:  # made by this run, or by a library on its behalf
             with contextlib.suppress(OSError):
-                if path.is_dir() and not path.is_symlink():
-                    self._remove_new_folder(path)
-                else:
-                    path.unlink()
-                self.removed.append(path)
-        if before is None:
-            with contextlib.suppress(OSError):
-                folder.rmdir()
-
-    def _remove_new_folder(self, path: Path) -> None:
-        """Remove a folder that appeared since entry: empty it too when what is inside was not in
-        the snapshot (a huge folder, or files written meanwhile), unless a kept path is inside."""
-        try:
-            path.rmdir()
-        except OSError:
-            resolved = path.resolve()
-            if any(resolved in k.parents for k in self.keep):
-                raise  # fails (kept) when a kept file is inside
-            shutil.rmtree(path)
+                folder.rmdir()  # only when empty
 
     def left_behind(self) -> str:
         """One clause for a message: what the stopped command left on purpose, or that it left

@@ -88,6 +88,31 @@ def safe_name(name: str, what: str = "name") -> str:
     return name
 
 
+def name_max(folder: str | os.PathLike) -> int:
+    """Longest file name (bytes) the file system holding ``folder`` (or its nearest existing
+    ancestor) accepts; 255 where it cannot be asked."""
+    folder = Path(folder)
+    for f in [folder, *folder.parents]:
+        if f.is_dir():
+            try:
+                return int(os.pathconf(f, "PC_NAME_MAX"))
+            except (OSError, ValueError, AttributeError):
+                break
+    return 255
+
+
+def check_name_length(path: str | os.PathLike) -> Path:
+    """Refuse an output whose file name (or a folder name on its way) is longer than the file
+    system allows, before any work: the write itself would fail only at its very end."""
+    path = Path(path)
+    for part in path.parts:
+        size = len(os.fsencode(part))
+        if part not in (os.sep, "/") and size > name_max(path.parent):
+            raise SpecGenError(f"{path}: the name {part[:24]}… is {size} bytes long; this file system "
+                               f"allows {name_max(path.parent)} (choose a shorter name)")
+    return path
+
+
 def check_input_file(path: str | os.PathLike, what: str = "input file") -> Path:
     """An existing, readable regular file (a folder or an unreadable file is named as such)."""
     path = Path(path)
@@ -108,7 +133,7 @@ def check_output_dir(path: str | os.PathLike, create: bool = True) -> Path:
     With ``create`` the folder is made only after every check passed (its missing ancestors are
     checked for a file in the way first), so a refused command leaves nothing behind.
     """
-    path = Path(path)
+    path = check_name_length(path)
     for parent in [path, *path.parents]:
         if parent.exists():
             if not parent.is_dir():
@@ -117,8 +142,10 @@ def check_output_dir(path: str | os.PathLike, create: bool = True) -> Path:
                 raise SpecGenError(f"{path}: folder {parent} is not writable")
             break
     if create:
+        from .io_utils import make_dirs  # folders it makes are this run's (removed on failure)
+
         try:
-            path.mkdir(parents=True, exist_ok=True)
+            make_dirs(path)
         except OSError as exc:
             raise SpecGenError(f"{path}: cannot create the output folder ({exc.strerror})") from None
     return path
@@ -128,7 +155,7 @@ def check_output_file(path: str | os.PathLike, overwrite: bool = False,
                       suffixes: Iterable[str] | None = None) -> Path:
     """An output file whose folder exists and is writable, which is not a folder and which only
     replaces an existing file when ``overwrite``."""
-    path = Path(path)
+    path = check_name_length(path)
     if suffixes is not None and path.suffix.lower() not in tuple(suffixes):
         raise SpecGenError(f"{path}: output must end in {' or '.join(suffixes)}")
     if path.is_dir():

@@ -313,9 +313,18 @@ def check_batch(args: argparse.Namespace) -> None:
     mesh_tag = args.mesh if args.mesh in ("sphere", "suzanne") else Path(args.mesh).stem
     target = out / f"{source.stem}_{mesh_tag}_{args.env}.exr"
     lookup = out / "lookup"
+    for p in (target, target.with_name(target.stem + "_preview.png"), lookup / f"{source.stem}.npz",
+              lookup / f"{source.stem}_lookup.json", lookup / f"{source.stem}_lookup.g00.exr",
+              lookup / f"env_{args.env}.exr"):
+        limits.check_name_length(p)  # the longest names it will write, before any work
     for p in (target, target.with_name(target.stem + "_preview.png")):
+        if p.is_dir():
+            raise SpecGenError(f"{p}: is a folder, expected an output file name")
         if p.exists() and not args.overwrite:
             raise OutputExistsError(f"{p}: already exists (pass --overwrite to replace it)")
+    if lookup.is_symlink() or (lookup.exists() and lookup.resolve().parent != out.resolve()):
+        raise SpecGenError(f"{lookup}: is a link; batch.py writes its lookup textures only in a "
+                           "real folder inside the output folder (remove the link)")
     if lookup.exists() and not lookup.is_dir():
         raise SpecGenError(f"{lookup}: is a file; batch.py writes its lookup textures in that folder")
     if lookup.is_dir() and any(lookup.iterdir()) and not args.overwrite:

@@ -19,7 +19,7 @@ import numpy as np
 
 from . import spectra
 from .errors import BRDFFormatError, Cancelled, SpecGenError
-from .io_utils import atomic_write
+from .io_utils import atomic_write, write_npz
 from .rusinkiewicz import fold_phi_d, half_diff_from_io
 
 N_THETA_H = 90
@@ -230,10 +230,9 @@ class BRDFTable:
         header = {"format": TABLE_FORMAT, "version": TABLE_FORMAT_VERSION,
                   "channels": list(self.channels), "metadata": self.metadata}
         with atomic_write(path, overwrite=overwrite) as tmp:
-            with open(tmp, "wb") as fh:
-                np.savez(fh, values=self.values,
-                         wavelengths=(self.wavelengths if self.is_spectral else np.zeros(0)),
-                         header=np.frombuffer(json.dumps(header).encode(), dtype=np.uint8))
+            write_npz(tmp, values=self.values,
+                      wavelengths=(self.wavelengths if self.is_spectral else np.zeros(0)),
+                      header=np.frombuffer(json.dumps(header).encode(), dtype=np.uint8))
         return path
 
     @classmethod

@@ -184,7 +184,35 @@ MAKERS = {
     "blend_bad": lambda r: ((r / "bad.blend").write_bytes(b"BLENDER-v300" + bytes(50)), r / "bad.blend")[1],
     "fifo": lambda r: (os.mkfifo(r / "pipe.png"), r / "pipe.png")[1],   # reading it would block
     "weights_with_graphs": lambda r: _weights_with_graphs(r),
+    # faults and limits: environment maps refused from their header like photos
+    "env_huge": lambda r: _exr_declaring(r / "huge_env.exr", 20000, 10000),
+    "env_square": lambda r: _exr(r / "square_env.exr", np.full((64, 64, 3), 0.5)),
+    "env_tall": lambda r: _exr(r / "tall_env.exr", np.full((64, 1, 3), 0.5)),
+    "env_wide": lambda r: _exr(r / "wide_env.exr", np.full((1, 64, 3), 0.5)),
+    "lookup_link": lambda r: _lookup_link(r),
 }
+
+
+def _exr_declaring(path: Path, width: int, height: int) -> Path:
+    """An EXR whose header declares width × height (its pixels would need gigabytes): a 2×1 file
+    with its data and display windows rewritten."""
+    import struct
+
+    _exr(path, np.full((1, 2, 3), 0.5))
+    data = bytearray(path.read_bytes())
+    for name in (b"dataWindow", b"displayWindow"):
+        at = data.index(name + b"\0box2i\0") + len(name) + 7 + 4
+        data[at:at + 16] = struct.pack("<4i", 0, 0, width - 1, height - 1)
+    path.write_bytes(bytes(data))
+    return path
+
+
+def _lookup_link(root: Path) -> Path:
+    """An output folder whose ``lookup`` is a link to a folder outside it."""
+    (root / "elsewhere").mkdir()
+    (root / "linked_out").mkdir()
+    (root / "linked_out" / "lookup").symlink_to(root / "elsewhere")
+    return root / "linked_out"
 
 
 def _weights_with_graphs(root: Path) -> Path:
@@ -341,6 +369,14 @@ CLI_CASES = {
     "train-config-named-pipe": (lambda w: ["train", "--config", str(w.fifo), "--out", str(w.out / "t"), Q], "not a regular file"),
     "export-onnx-existing-graphs": (lambda w: ["export-onnx", "--weights", str(w.weights_with_graphs)], "already exists"),
     "batch-many-batch-args-resolution-0": (lambda w: ["batch-many", "--out", str(w.out / "bm"), "--batch-args=--resolution 0", str(EXAMPLE), Q], "--resolution"),
+    # faults and limits: refused before any work
+    "infer-input-env-over-pixel-limit": (lambda w: ["infer", str(EXAMPLE), "-o", str(w.out / "b.npz"), "--input-env", str(w.env_huge), Q], "megapixels"),
+    "infer-input-env-square": (lambda w: ["infer", str(EXAMPLE), "-o", str(w.out / "b.npz"), "--input-env", str(w.env_square), Q], "2:1"),
+    "infer-input-env-1-to-64": (lambda w: ["infer", str(EXAMPLE), "-o", str(w.out / "b.npz"), "--input-env", str(w.env_tall), Q], "2:1"),
+    "infer-input-env-64-to-1": (lambda w: ["infer", str(EXAMPLE), "-o", str(w.out / "b.npz"), "--input-env", str(w.env_wide), Q], "2:1"),
+    "infer-output-name-256-bytes": (lambda w: ["infer", str(EXAMPLE), "-o", str(w.out / ("n" * 252 + ".npz")), Q], "256 bytes long"),
+    "infer-rgb-output-name-too-long": (lambda w: ["infer", str(EXAMPLE), "-o", str(w.out / ("n" * 250 + ".npz")), "--rgb", Q], "bytes long"),
+    "tabulate-output-name-256-bytes": (lambda w: ["tabulate", str(w.npz_good), "-o", str(w.out / ("t" * 252 + ".npz"))], "256 bytes long"),
 }
 
 
@@ -472,7 +508,21 @@ BATCH_CASES = {
     "existing-output": (lambda w: _batch_args(w) if _touch(w.out / "sphere_sphere_studio.exr") else [], "already exists"),
     "existing-preview": (lambda w: _batch_args(w) if _touch(w.out / "sphere_sphere_studio_preview.png") else [], "already exists"),
     "scene-not-a-blend": (lambda w: ["--scene", str(w.blend_bad), "--out", str(w.out)], "cannot open the .blend"),
+    # faults and limits: refused before any work
+    "lookup-is-a-link-out-of-the-folder": (lambda w: _batch_args(w, out=str(w.lookup_link)), "is a link"),
+    "target-is-a-folder-with-overwrite": (lambda w: _batch_args(w, overwrite=None) + ["--overwrite"]
+                                          if (w.out / "sphere_sphere_studio.exr").mkdir() is None else [], "is a folder"),
+    "input-env-over-pixel-limit": (lambda w: _batch_args(w, input_env=str(w.env_huge)), "megapixels"),
+    "input-env-not-2-to-1": (lambda w: _batch_args(w, input_env=str(w.env_square)), "2:1"),
+    "image-name-too-long": (lambda w: _batch_args(w, image=str(_long_named_copy(w))), "bytes long"),
 }
+
+
+def _long_named_copy(w: Workspace) -> Path:
+    """The example photo under a 240-byte name: batch.py's outputs add to it past 255 bytes."""
+    path = w.root / ("p" * 236 + ".png")
+    path.write_bytes(EXAMPLE.read_bytes())
+    return path
 
 
 def _touch_lookup(w: Workspace) -> Path:
@@ -783,8 +833,11 @@ def test_cli_infer_stops_cleanly_on_sigint(tmp_path):
     assert list(out.iterdir()) == []
 
 
-def test_output_guard_removes_new_files_and_keeps_only_what_it_is_told(tmp_path):
+def test_output_guard_removes_what_it_made_keeps_what_it_is_told_and_never_a_neighbours_file(tmp_path):
+    """Ownership is by identity: the files this process published and the folders it made go;
+    a file another process wrote into the same folders meanwhile stays, as does ``keep``."""
     from specgen_addon.interrupts import OutputGuard
+    from specgen_addon.io_utils import atomic_write, make_dirs
 
     out = tmp_path / "run"
     out.mkdir()
@@ -792,13 +845,17 @@ def test_output_guard_removes_new_files_and_keeps_only_what_it_is_told(tmp_path)
     guard = OutputGuard([out, tmp_path / "created"], keep=[out / "checkpoint.pt"])
     with pytest.raises(KeyboardInterrupt):
         with guard:
-            (out / "checkpoint.pt").write_text("resumable")
-            (out / "sub").mkdir()
-            (out / "sub" / "partial.npz").write_text("partial")
-            (tmp_path / "created").mkdir()
-            (tmp_path / "created" / "x").write_text("x")
+            with atomic_write(out / "checkpoint.pt") as tmp:
+                tmp.write_text("resumable")
+            make_dirs(out / "sub")
+            with atomic_write(out / "sub" / "partial.npz") as tmp:
+                tmp.write_text("partial")
+            make_dirs(tmp_path / "created")
+            with atomic_write(tmp_path / "created" / "x") as tmp:
+                tmp.write_text("x")
+            (out / "neighbour.exr").write_text("another process's finished output")
             raise KeyboardInterrupt
-    assert sorted(p.name for p in out.iterdir()) == ["checkpoint.pt", "old.txt"]
+    assert sorted(p.name for p in out.iterdir()) == ["checkpoint.pt", "neighbour.exr", "old.txt"]
     assert not (tmp_path / "created").exists()
     assert guard.left_behind() == f"kept {out / 'checkpoint.pt'}"
 

@@ -97,6 +97,7 @@ def test_a_signal_inside_a_slow_import_is_raised_in_the_code_after_it(tmp_path):
 
 FAKE_BLENDER = r"""
 import os, time
+from specgen_addon import io_utils
 
 
 def busy_writing(folder, seconds):
@@ -104,7 +105,12 @@ def busy_writing(folder, seconds):
     t = time.monotonic()
     i = 0
     while time.monotonic() - t < seconds:
-        (folder / f"from_blender_{i % 500}.txt").write_text("x")
+        path = folder / f"from_blender_{i % 500}.txt"
+        path.write_text("x")
+        # SpecGen's writer called from Blender's code: the file enters the ledger of what the
+        # command made (inline, so that no frame of SpecGen's own code runs here)
+        st = os.lstat(path)
+        io_utils._LEDGER[os.path.abspath(path)] = (st.st_dev, st.st_ino, next(io_utils._SEQ))
         i += 1
     return i
 
@@ -141,9 +147,12 @@ from specgen_addon import cli
 
 out = Path({out!r})
 
+from specgen_addon.io_utils import make_dirs, record_created
+
 def work():
-    (out / "lookup").mkdir()
+    make_dirs(out / "lookup")
     (out / "lookup" / "table.json").write_text("{{}}")   # written before the stop, by our code
+    record_created(out / "lookup" / "table.json")
     {before}
     print("READY", flush=True)
     {call}
@@ -151,6 +160,7 @@ def work():
     t = time.monotonic()
     while time.monotonic() - t < 20:
         (out / "lookup" / "ours.txt").write_text("x")
+        record_created(out / "lookup" / "ours.txt")
     return 0
 
 sys.exit(cli.run_guarded("the work", work, ([out], []), prog="s"))

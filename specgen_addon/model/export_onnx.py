@@ -30,6 +30,7 @@ import numpy as np
 import torch
 
 from ..io_utils import atomic_write
+from . import checksums
 from .fast import GridHead, GridHeadLowRank, GridTables, lambda_coords
 from .specgen import load_weights
 
@@ -133,6 +134,7 @@ def export_onnx(weights: str | Path | None = None, out_stem: str | Path | None =
                                   output_names=list(outs), dynamic_axes=dyn, opset_version=OPSET,
                                   dynamo=False)
             _finish_graph(tmp, cfg_json, half)
+        checksums.record(path)  # the shipped folder's SHA256SUMS follows a re-export
     return tables_path, head_path
 
 

@@ -15,6 +15,7 @@ from torch import nn
 
 from ..errors import WeightsError
 from ..io_utils import atomic_write
+from . import checksums
 from .boost import BoostEncoder
 from .config import Config
 from .decoder import BRDFMapping
@@ -86,6 +87,7 @@ def save_weights(model: SpecGen, path: str | Path, meta: dict[str, Any] | None =
                "state_dict": state, "meta": dict(meta or {})}
     with atomic_write(path, overwrite=overwrite) as tmp:
         torch.save(payload, tmp)
+    checksums.record(path)  # a folder with SHA256SUMS (the shipped one) keeps its sums current
     return Path(path)
 
 
@@ -102,6 +104,7 @@ def load_weights(path: str | Path | None = None, expect: Config | None = None) -
         raise WeightsError(f"{path}: weights file not found")
     if not os.access(path, os.R_OK):
         raise WeightsError(f"{path}: weights file is not readable (permission denied)")
+    checksums.verify(path)  # a shipped file with flipped bytes would load and change the output
     try:
         payload = torch.load(path, map_location="cpu", weights_only=True)
     except Exception as exc:  # torch raises many types for corrupt pickles/zips

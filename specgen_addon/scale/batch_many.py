@@ -53,7 +53,8 @@ class BatchManyOptions:
     retries: int = 1                   #: extra attempts after a failure that is not a bad input
     overwrite: bool = False
     timeout: float | None = None       #: seconds per pipeline step of one item
-    dashboard_address: str = ":8787"   #: LocalCluster dashboard (":0" picks a free port)
+    #: LocalCluster dashboard (":0" picks a free port); loopback unless another address is given
+    dashboard_address: str = "127.0.0.1:8787"
     batch_script: Path = DEFAULT_BATCH_SCRIPT
     blender: str | None = None         #: run batch.py in this Blender instead of the bpy module
     progress: bool = True
@@ -156,8 +157,32 @@ def _workers_ignore_ctrl_c() -> Iterator[None]:
 
 
 def run_batch_many(opts: BatchManyOptions, log: Callable[[str], None] = print) -> dict:
-    """Run every item not finished yet; returns the report (also written to ``OUT/report.json``)."""
+    """Run every item not finished yet; returns the report (also written to ``OUT/report.json``).
+
+    One batch-many at a time per output folder (its lock file); what a killed earlier run left
+    in ``OUT/.work`` is removed first. Items are done exactly once: a published item is skipped
+    by every later attempt and run, and the report takes each item's record from ``item.json``.
+    """
+    from ..io_utils import OutputLock
+
     all_items = _validate(opts)
+    with OutputLock([opts.out]):
+        _remove_stale_work(opts.out)
+        return _run_locked(opts, all_items, log)
+
+
+def _remove_stale_work(out: Path) -> None:
+    """``OUT/.work`` of a killed run (with the folder's lock held, no other run is using it)."""
+    staging = out / ".work"
+    if staging.is_dir() and not staging.is_symlink():
+        shutil.rmtree(staging, ignore_errors=True)
+
+
+def _published(opts: BatchManyOptions, it: items_mod.Item, run: str) -> dict | None:
+    return worker_mod.published_record(opts.out / it.id, run, it.fingerprint(opts.batch_args))
+
+
+def _run_locked(opts: BatchManyOptions, all_items: list[items_mod.Item], log: Callable[[str], None]) -> dict:
     todo_plan = items_mod.plan(all_items, opts.out, opts.batch_args, overwrite=opts.overwrite)
     run = time.strftime("%Y%m%dT%H%M%S") + "-" + uuid.uuid4().hex[:6]
     records: dict[str, dict] = {it.id: {**rec, "status": "skipped"} for it, rec in todo_plan.skipped}
@@ -211,7 +236,10 @@ def _run_on_cluster(opts: BatchManyOptions, todo: list[items_mod.Item], run: str
         failed = 0
         for fut in as_completed(futures):
             it = futures[fut]
-            if fut.status == "finished":
+            published = _published(opts, it, run)
+            if published is not None:  # item.json is the truth (a lost worker may have made it)
+                rec = published
+            elif fut.status == "finished":
                 rec = fut.result()
             else:
                 counter = staging / f"{it.id}.{run}.attempts"

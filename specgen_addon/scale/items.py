@@ -104,20 +104,37 @@ def collect_inputs(paths: Iterable[Path], manifest: Path | None = None) -> list[
     return unique
 
 
+#: Names batch-many itself uses in the output folder (compared case-insensitively); hidden
+#: names (``.work``, lock files) are kept out by :func:`folder_name` too.
+RESERVED_NAMES = ("failed", "report.json", "work")
+
+
+def folder_name(stem: str) -> str:
+    """An item folder name for a file stem that can never be one of batch-many's own entries:
+    leading dots dropped (no hidden names, no ``.``/``..``), a name made only of dots becomes
+    ``item``, and a reserved name gets ``_item`` appended."""
+    name = stem.lstrip(".") or "item"
+    if name.lower() in RESERVED_NAMES:
+        name += "_item"
+    return name
+
+
 def make_items(files: Sequence[Path]) -> list[Item]:
-    """Items with folder names that are stable for a given input list: the file stem, with the
-    suffix added where two inputs share a stem, and a counter where they still collide."""
+    """Items with folder names that are stable for a given input list: the file stem (made safe
+    by :func:`folder_name`), with the suffix added where two inputs share a stem, and a counter
+    where they still collide."""
     stems: dict[str, int] = {}
     for f in files:
-        stems[f.stem] = stems.get(f.stem, 0) + 1
+        stems[folder_name(f.stem)] = stems.get(folder_name(f.stem), 0) + 1
     used: set[str] = set()
     items = []
     for f in files:
-        name = f.stem if stems[f.stem] == 1 else f"{f.stem}_{f.suffix.lstrip('.').lower()}"
+        stem = folder_name(f.stem)
+        name = stem if stems[stem] == 1 else f"{stem}_{f.suffix.lstrip('.').lower()}"
         base, n = name, 2
-        while name in used:
+        while name.lower() in used:  # case-insensitive file systems too
             name, n = f"{base}_{n}", n + 1
-        used.add(name)
+        used.add(name.lower())
         st = f.stat()
         items.append(Item(name, str(f), input_kind(f) or "", st.st_size, st.st_mtime_ns))
     return items

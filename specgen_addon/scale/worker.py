@@ -90,6 +90,9 @@ def run_item(item: dict, out: str, run: str, batch_cmd: list[str], batch_args: l
     t0 = time.perf_counter()
     out_dir = Path(out)
     item_id = item["id"]
+    done = published_record(out_dir / item_id, run, fingerprint)
+    if done is not None:  # an earlier attempt of this run published it, then its worker was lost
+        return done
     staging = out_dir / ".work"
     work = staging / f"{item_id}.{run}"
     failed_log = out_dir / "failed" / f"{item_id}.log"
@@ -137,7 +140,7 @@ def run_item(item: dict, out: str, run: str, batch_cmd: list[str], batch_args: l
         shutil.rmtree(work / "input", ignore_errors=True)  # prepared inputs are intermediate
         outputs = sorted(str(p.relative_to(work)) for p in work.rglob("*") if p.is_file())
         record.update(status="done", error=None, outputs=outputs, seconds=round(time.perf_counter() - t0, 2),
-                      cpu_seconds=round(cpu[0], 2), fingerprint=fingerprint)
+                      cpu_seconds=round(cpu[0], 2), fingerprint=fingerprint, run=run)
         (work / RECORD_NAME).write_text(json.dumps(record, indent=1))
         _publish(work, out_dir / item_id, staging / f"{item_id}.old.{run}")
     except BaseException:
@@ -146,6 +149,19 @@ def run_item(item: dict, out: str, run: str, batch_cmd: list[str], batch_args: l
     failed_log.unlink(missing_ok=True)
     counter.unlink(missing_ok=True)
     return record
+
+
+def published_record(folder: Path, run: str, fingerprint: dict) -> dict | None:
+    """The record of ``folder`` if run ``run`` already published it with this fingerprint (a
+    worker lost after publishing: its item is done, and must not be made again), else None."""
+    try:
+        record = json.loads((folder / RECORD_NAME).read_text())
+    except (OSError, ValueError):
+        return None
+    if isinstance(record, dict) and record.get("run") == run and record.get("fingerprint") == fingerprint \
+            and record.get("status") == "done":
+        return record
+    return None
 
 
 def _publish(work: Path, final: Path, aside: Path) -> None:
