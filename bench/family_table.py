@@ -2,7 +2,7 @@
 halves of a whole-split run made one per core).
 
 Prints, per corpus family and over all synthetic materials: n, mean PSNR (dB) ± its standard error,
-and how many materials fall under ``--floor`` (the issue's per-family floor, 32 dB). The real RGL
+and how many materials fall under ``--floor`` (the per-family floor, 32 dB). The real RGL
 files are left out, as in :mod:`paired_families`.
 
     python bench/family_table.py out/bench/whole128_a.json out/bench/whole128_b.json

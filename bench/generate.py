@@ -5,7 +5,7 @@ Usage: ``python bench/generate.py [IMAGE] [--bands 21] [--lookup 180] [--repeat 
 Registers the add-on as Blender does, then times ``bpy.ops.specgen.generate_brdf()`` (what the
 button runs: image → network → spectral basis → lookup textures, then the material and its
 preview) with the backend a stock Blender uses (onnxruntime), and :func:`specgen_addon.bake.generate_lookup`
-alone (inference + bake, the issue's target of ≤ 5 s) for onnx and torch. Runs are interleaved
+alone (inference + bake, target ≤ 5 s) for onnx and torch. Runs are interleaved
 so a busy machine slows all alike; the load average is printed with the machine, and the
 process CPU time (all threads) beside the wall time, which a shared machine inflates less.
 """
@@ -49,7 +49,7 @@ def main() -> int:
     s = bpy.context.scene.specgen
     s.image_path, s.output_dir, s.bands, s.lookup_resolution = str(args.image), str(out), args.bands, args.lookup
     s.overwrite = True
-    s.refine = False  # the issue times Generate without refinement (bench/refine.py times that)
+    s.refine = False  # Generate is timed without refinement (bench/refine.py times that)
     bake.generate_lookup(str(args.image), out, wl, n_phi_d=int(args.lookup), backend="onnx", refine=False)  # warm-up:
     bake.generate_lookup(str(args.image), out, wl, n_phi_d=int(args.lookup), backend="torch", refine=False)  # model loads
     times: dict[str, list[float]] = {"operator (onnx)": [], "onnx": [], "torch": []}
