@@ -115,7 +115,7 @@ def run(args) -> Path:
         if value:
             from importlib import import_module
 
-            errors = import_module(f"{load_package().__name__}.specgen_addon.errors")
+            errors = import_module("specgen_addon.errors")
             raise errors.SpecGenError(f"{flag} needs --scene")
     args.samples = 16 if args.samples is None else args.samples
     args.resolution = 256 if args.resolution is None else args.resolution
@@ -232,7 +232,7 @@ def run_scene(args) -> Path:
     from importlib import import_module
 
     def core(name: str):
-        return import_module(f"{pkg.__name__}.specgen_addon.{name}")
+        return import_module(f"specgen_addon.{name}")
 
     errors, spectra, scene_args = core("errors"), core("spectra"), core("scene_args")
     import bpy
@@ -307,10 +307,9 @@ def _check_photos(applies, args) -> list:
     """Each ``--apply`` photo: readable, holds a sphere, and its lighting options are valid."""
     from importlib import import_module
 
-    pkg = load_package()
-    preflight = import_module(f"{pkg.__name__}.specgen_addon.preflight")
-    input_image = import_module(f"{pkg.__name__}.specgen_addon.input_image")
-    parse_lighting = import_module(f"{pkg.__name__}.specgen_addon.input_lighting").parse_lighting
+    preflight = import_module("specgen_addon.preflight")
+    input_image = import_module("specgen_addon.input_image")
+    parse_lighting = import_module("specgen_addon.input_lighting").parse_lighting
     preflight.check_weights_file(args.weights)
     defaults = {"env": args.input_env, "rotation_deg": args.input_rotation,
                 "exposure": args.input_exposure, "key_light": args.input_key_light}
@@ -330,9 +329,9 @@ def _scene_targets(scene, frames: list[int], out: Path, overwrite: bool) -> list
     from importlib import import_module
 
     pkg = load_package()
-    errors = import_module(f"{pkg.__name__}.specgen_addon.errors")
+    errors = import_module("specgen_addon.errors")
     naming = import_module(f"{pkg.__name__}.ops.naming")
-    limits = import_module(f"{pkg.__name__}.specgen_addon.limits")
+    limits = import_module("specgen_addon.limits")
     targets = []
     current = scene.frame_current
     try:
@@ -359,7 +358,7 @@ def _lookup_stems(applies, lookup: Path, overwrite: bool) -> list[str]:
 
     pkg = load_package()
     naming = import_module(f"{pkg.__name__}.ops.naming")
-    errors = import_module(f"{pkg.__name__}.specgen_addon.errors")
+    errors = import_module("specgen_addon.errors")
     stems: list[str] = []
     for spec in applies:
         stem = naming.unique_stem(naming.clean_stem(spec.image.name), lambda s: s in stems)
@@ -375,9 +374,8 @@ def _generate(spec, lighting, stem: str, lookup: Path, wavelengths, args):
     """Generate and bake one ``--apply`` photo's BRDF (printing what refinement reached)."""
     from importlib import import_module
 
-    pkg = load_package()
-    bake = import_module(f"{pkg.__name__}.specgen_addon.bake")
-    cli_model = import_module(f"{pkg.__name__}.specgen_addon.cli_model")
+    bake = import_module("specgen_addon.bake")
+    cli_model = import_module("specgen_addon.cli_model")
     t0 = time.perf_counter()
     info = bake.generate_lookup(str(spec.image), lookup, wavelengths, weights=args.weights,
                                 backend=args.backend, name=stem, lighting=lighting,

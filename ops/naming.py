@@ -8,8 +8,12 @@ Each Generate makes one *set*, found from its stem ``<stem>`` (e.g. ``sphere``, 
 * files in the output folder: ``<stem>_lookup.gNN.exr`` (lookups), ``<stem>_lookup.json`` (basis
   and layout), ``<stem>_preview.png``, and ``<stem>.npz`` only when the table is exported.
 
-With *Overwrite* off a new Generate never reuses a stem that has a material, a node group or
-files; with it on, the stem of the input is reused and its set replaced.
+With *Replace Materials* off a new Generate never reuses a stem that has a material, a node group
+or files; with it on, the stem of the input is reused and its set replaced.
+
+A spectral render is named after the scene, the camera and the frame
+(:func:`render_output_name`, ``Scene_Camera_f0001.exr``); *Replace Outputs* decides whether an
+existing one may be replaced.
 """
 
 from __future__ import annotations
@@ -24,9 +28,12 @@ MAX_STEM = 48
 
 def clean_stem(raw: str) -> str:
     """A file- and datablock-safe stem from an image or file name (``"my photo.png"`` → ``my_photo``)."""
-    stem = Path(raw).stem if "." in Path(raw).name else Path(raw).name
-    stem = re.sub(r"[^A-Za-z0-9_\-]+", "_", stem).strip("_")
-    return stem[:MAX_STEM] or "brdf"
+    return clean_name(Path(raw).stem if "." in Path(raw).name else Path(raw).name, "brdf")
+
+
+def clean_name(raw: str, fallback: str) -> str:
+    """A file-safe version of a datablock name (``"cam.001"`` → ``cam_001``), ``fallback`` if empty."""
+    return re.sub(r"[^A-Za-z0-9_\-]+", "_", raw).strip("_")[:MAX_STEM] or fallback
 
 
 def material_name(stem: str) -> str:
@@ -73,11 +80,19 @@ def unique_stem(base: str, taken: Callable[[str], bool]) -> str:
 
 def stem_for_generate(source: str, out_dir: str | Path, overwrite: bool,
                       material_names: Iterable[str], group_names: Iterable[str] = ()) -> str:
-    """The stem a Generate of ``source`` uses: the input's own with Overwrite on, else the first
-    whose material, node group and files do not exist yet."""
+    """The stem a Generate of ``source`` uses: the input's own with Replace Materials on, else the
+    first whose material, node group and files do not exist yet."""
     base = clean_stem(source)
     if overwrite:
         return base
     materials, groups = set(material_names), set(group_names)
     return unique_stem(base, lambda s: material_name(s) in materials or group_name(s) in groups
                        or bool(files_of(out_dir, s)))
+
+
+def render_output_name(scene: str, camera: str | None, frame: int) -> str:
+    """The spectral EXR of one render: ``<scene>_<camera>_f0001.exr`` (names made file-safe;
+    the preview PNG is ``<…>_preview.png`` beside it)."""
+    cam = clean_name(camera or "", "nocamera")
+    sign = "-" if frame < 0 else ""
+    return f"{clean_name(scene, 'scene')}_{cam}_f{sign}{abs(int(frame)):04d}.exr"

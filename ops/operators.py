@@ -1,27 +1,34 @@
-"""Operators of the SpecGen panel: Generate BRDF, Apply to selected objects, Render spectral stack.
+"""Operators of the SpecGen panel: Generate BRDF, Apply to selected objects, Render spectral stack,
+Estimate render time.
 
 The two long steps are modal: they show progress in the status bar and the window-manager progress
 indicator, Esc cancels, and the UI keeps running. *Generate* runs the network and the bake on a
-worker thread (bpy-free numerics); *Render* advances :class:`ops.render.SpectralRenderJob` one Cycles
-render per timer tick. Both also have a blocking ``execute`` (used headless, e.g. by tests and
-scripts). Failures reach the user through ``self.report`` as one line, never a traceback.
+worker thread (bpy-free numerics); *Render* advances the render job one step per timer tick, each
+band render running as Blender's own render job so that Esc stops it inside the render
+(:func:`ops.render_settings.band_render`). Before a Full Scene render two tiny test renders give
+a time estimate (reported), and the quick preview (25 %, 16 samples, no denoising) applies to that
+render only. Both also have a blocking ``execute`` (used headless, e.g. by tests and scripts).
+Failures reach the user through ``self.report`` as one line, never a traceback.
 """
 
 from __future__ import annotations
 
 import os
 import threading
+import time
 from pathlib import Path
 
 import bpy
 import numpy as np
 
-from specgen_addon.errors import SpecGenError
+from specgen_addon.errors import OutputExistsError, SpecGenError
 from specgen_addon.spectra import wavelength_grid
 from specgen_addon import bake
 from specgen_addon.image_checks import check_pixel_count
+from specgen_addon.render_estimate import format_duration
 from . import naming
 from .properties import input_lighting, output_dir
+from .render_settings import PREVIEW_PERCENT, PREVIEW_SAMPLES
 from .reporting import check_generate_settings, check_render_settings, report_exception
 
 TIMER_STEP_S = 0.1
@@ -244,49 +251,111 @@ class SPECGEN_OT_render_stack(_Modal, bpy.types.Operator):
     bl_options = {"REGISTER"}
     label = "Rendering spectral stack"
 
-    filename: bpy.props.StringProperty(name="File Name", default="spectral.exr",
-                                       options={"SKIP_SAVE"})
+    filename: bpy.props.StringProperty(name="File Name", default="", options={"SKIP_SAVE"},
+                                       description="Name of the spectral EXR; empty: "
+                                       "<scene>_<camera>_f<frame>.exr")
+    estimate_time: bpy.props.BoolProperty(name="Estimate Time", default=True, options={"SKIP_SAVE"},
+                                          description="Time two tiny test renders first and say "
+                                          "how long the Full Scene render will take")
 
     def _job(self, context):
         from .render import SpectralRenderJob
 
         from specgen_addon.limits import check_output_dir
 
-        s = context.scene.specgen
-        check_render_settings(s, self.filename)  # a plain .exr name: never outside the folder
+        s, sc = context.scene.specgen, context.scene
+        name = self.filename or naming.render_output_name(
+            sc.name, sc.camera.name if sc.camera else None, sc.frame_current)
+        check_render_settings(s, name)  # a plain .exr name: never outside the folder
         folder = check_output_dir(output_dir(s))
         if s.render_mode == "FULL_SCENE":
             from .render_fullscene import FullSceneRenderJob
 
-            return FullSceneRenderJob(context.scene, folder / self.filename, _wavelengths(s),
-                                      overwrite=s.overwrite,
+            return FullSceneRenderJob(sc, folder / name, _wavelengths(s),
+                                      overwrite=s.overwrite_outputs,
                                       warn=lambda msg: self.report({"WARNING"}, msg),
                                       log=lambda msg: self.report({"INFO"}, msg))
-        return SpectralRenderJob(context.scene, folder / self.filename, samples=s.samples,
-                                 resolution=(s.resolution, s.resolution), overwrite=s.overwrite,
-                                 env_samples=s.env_samples,
+        res = s.resolution if not s.quick_preview else max(8, s.resolution * PREVIEW_PERCENT // 100)
+        samples = s.samples if not s.quick_preview else min(s.samples, PREVIEW_SAMPLES)
+        return SpectralRenderJob(sc, folder / name, samples=samples, resolution=(res, res),
+                                 overwrite=s.overwrite_outputs, env_samples=s.env_samples,
                                  warn=lambda msg: self.report({"WARNING"}, msg))
+
+    def _begin(self, context, interactive: bool):
+        """The job, with the quick preview (and the render-job settings) applied until _end."""
+        from .render_settings import InteractiveRender, QuickPreview
+
+        sc, s = context.scene, context.scene.specgen
+        job = self._job(context)
+        self._contexts = [QuickPreview(sc, s.quick_preview and s.render_mode == "FULL_SCENE")]
+        if interactive:
+            self._contexts.append(InteractiveRender(sc))
+        for ctx in self._contexts:
+            ctx.__enter__()
+        try:
+            try:
+                job._check_outputs()   # before any test render: a name taken is one sentence now
+            except OutputExistsError as exc:
+                raise OutputExistsError(str(exc).replace("pass overwrite", "turn on Replace "
+                                                         "Outputs")) from None
+            if s.render_mode == "FULL_SCENE":
+                job.interactive = interactive
+                if self.estimate_time:
+                    self._estimate(context)
+        except BaseException:
+            self._end()
+            raise
+        self._t0 = time.perf_counter()
+        return job
+
+    def _estimate(self, context) -> None:
+        from .render_settings import estimate, measure_cost
+
+        sc, s = context.scene, context.scene.specgen
+        seconds, text = estimate(sc, s.bands, measure_cost(sc))
+        self._estimated = seconds
+        s.estimate = f"Last estimate: {text}"
+        self.report({"INFO"}, f"SpecGen: Full Scene render, {text}")
+
+    def _end(self) -> None:
+        for ctx in reversed(getattr(self, "_contexts", [])):
+            ctx.__exit__(None, None, None)
+        self._contexts = []
+
+    def _wrote(self, job) -> None:
+        took = time.perf_counter() - self._t0
+        est = getattr(self, "_estimated", None)
+        guess = "" if est is None else f", estimated {format_duration(est)}"
+        self.report({"INFO"}, f"SpecGen: wrote {job.output} in {format_duration(took)}{guess}")
 
     def execute(self, context):
         try:
-            job = self._job(context)
-            job.run()
+            job = self._begin(context, interactive=False)
+            try:
+                job.run()
+            finally:
+                self._end()
         except BaseException as exc:  # Ctrl-C in a headless run included
             return report_exception(self, exc, "Spectral render")
-        self.report({"INFO"}, f"SpecGen: wrote {job.output}")
+        self._wrote(job)
         return {"FINISHED"}
 
     def invoke(self, context, event):
         try:
-            self._job_obj = self._job(context)
+            self._job_obj = self._begin(context, interactive=True)
         except Exception as exc:
             return report_exception(self, exc, "Spectral render")
         self._steps = self._job_obj.steps()
+        self._fraction = 0.0
         self._start(context)
         return {"RUNNING_MODAL"}
 
+    def _finish(self, context) -> None:
+        self._end()
+        super()._finish(context)
+
     def modal(self, context, event):
-        if event.type == "ESC":
+        if event.type == "ESC":   # between renders; inside one, Blender's render job takes Esc
             self._job_obj.cancel()
             self._steps.close()  # runs the job's cleanup; nothing was written
             self._finish(context)
@@ -295,19 +364,48 @@ class SPECGEN_OT_render_stack(_Modal, bpy.types.Operator):
         if event.type != "TIMER":
             return {"PASS_THROUGH"}
         try:
-            fraction = next(self._steps)  # at most one Cycles render
+            fraction = next(self._steps)  # at most one Cycles render (None: a render job runs)
         except StopIteration:
             self._finish(context)
-            self.report({"INFO"}, f"SpecGen: wrote {self._job_obj.output}")
+            self._wrote(self._job_obj)
             return {"FINISHED"}
-        except Exception as exc:
+        except BaseException as exc:  # a render stopped by Esc inside it arrives as Cancelled
             self._finish(context)
             return report_exception(self, exc, "Spectral render")
-        self._progress(context, fraction)
+        if fraction is not None:
+            self._fraction = fraction
+        self._progress(context, self._fraction)
+        if self._fraction > 0.05:
+            left = (time.perf_counter() - self._t0) * (1.0 - self._fraction) / self._fraction
+            _set_status(context, f"{self.label}: {100 * self._fraction:.0f}%, about "
+                                 f"{format_duration(left)} left  (Esc to cancel)")
         return {"RUNNING_MODAL"}
 
 
-CLASSES = (SPECGEN_OT_generate_brdf, SPECGEN_OT_apply, SPECGEN_OT_render_stack)
+class SPECGEN_OT_estimate_time(bpy.types.Operator):
+    """Time two tiny test renders of the scene and estimate its Full Scene spectral render"""
+
+    bl_idname = "specgen.estimate_time"
+    bl_label = "Estimate Render Time"
+    bl_options = {"REGISTER"}
+
+    def execute(self, context):
+        from .render_settings import QuickPreview, estimate, measure_cost
+
+        sc, s = context.scene, context.scene.specgen
+        try:
+            check_render_settings(s, "estimate.exr")
+            with QuickPreview(sc, s.quick_preview):
+                _, text = estimate(sc, s.bands, measure_cost(sc))
+        except BaseException as exc:
+            return report_exception(self, exc, "Time estimate")
+        s.estimate = f"Estimate: {text}"
+        self.report({"INFO"}, f"SpecGen: Full Scene render, {text}")
+        return {"FINISHED"}
+
+
+CLASSES = (SPECGEN_OT_generate_brdf, SPECGEN_OT_apply, SPECGEN_OT_render_stack,
+           SPECGEN_OT_estimate_time)
 
 
 register, unregister = bpy.utils.register_classes_factory(CLASSES)

@@ -50,13 +50,17 @@ class SPECGEN_PT_main(bpy.types.Panel):
 
         col = layout.column(heading="Render", align=True)
         col.prop(s, "render_mode")
-        if s.render_mode == "EXACT":  # the full-scene mode takes these from the scene
+        if s.render_mode == "EXACT":
             col.prop(s, "samples")
             col.prop(s, "resolution")
             col.prop(s, "env_samples")
+        else:  # the full-scene mode renders with the scene's own settings: shown and edited here
+            _scene_render_settings(layout, context.scene)
         col = layout.column()
+        col.prop(s, "quick_preview")
         col.prop(s, "output_dir")
         col.prop(s, "overwrite")
+        col.prop(s, "overwrite_outputs")
         col.prop(s, "export_table")
 
         col = layout.column(heading="Material")
@@ -78,6 +82,12 @@ class SPECGEN_PT_main(bpy.types.Panel):
         col.operator("specgen.generate_brdf", icon="MATERIAL")
         col.operator("specgen.apply", icon="CHECKMARK")
         col.operator("specgen.render_stack", icon="RENDER_STILL")
+        if s.render_mode == "FULL_SCENE":
+            row = layout.row()
+            row.enabled = not s.running
+            row.operator("specgen.estimate_time", icon="TIME")
+            if s.estimate:
+                layout.label(text=s.estimate, icon="TIME")
         if s.running:
             layout.progress(factor=s.progress, type="BAR", text=f"{s.running}… (Esc cancels)")
         elif s.atlas_json:
@@ -85,9 +95,36 @@ class SPECGEN_PT_main(bpy.types.Panel):
             if s.refine_summary:
                 layout.label(text=s.refine_summary, icon="IMAGE_REFERENCE")
         mat = getattr(context.object, "active_material", None)
-        if mat is not None and "specgen_fit_error" in mat:
+        if mat is not None and "specgen_fit_delta_e" in mat:  # the closures' rendered colour error
+            de = mat["specgen_fit_delta_e"]
+            layout.label(text=f"Closures vs table: ΔE2000 {de:.2f}"
+                         + (" (bounces and F12 only; the direct light is exact)" if de > 2.0 else ""),
+                         icon="ERROR" if de > 2.0 else "INFO")
+        elif mat is not None and "specgen_fit_error" in mat:
             layout.label(text=f"Closure fit error: {100 * mat['specgen_fit_error']:.1f} %",
                          icon="INFO")
+
+
+def _scene_render_settings(layout, scene) -> None:
+    """The scene's resolution, samples and denoising (its own properties, so edits are the
+    scene's), and what the quick preview would use instead."""
+    r = scene.render
+    col = layout.column(align=True)
+    col.prop(r, "resolution_x", text="Resolution X")
+    col.prop(r, "resolution_y", text="Y")
+    col.prop(r, "resolution_percentage", text="%")
+    cycles = getattr(scene, "cycles", None)
+    if cycles is not None:                      # Cycles' settings exist once Cycles is loaded
+        col = layout.column()
+        col.prop(cycles, "samples", text="Scene Samples")
+        col.prop(cycles, "use_denoising", text="Denoise")
+    if scene.specgen.quick_preview:
+        from .render_settings import PREVIEW_PERCENT, PREVIEW_SAMPLES
+
+        pct = min(r.resolution_percentage, PREVIEW_PERCENT)
+        w, h = int(r.resolution_x * pct / 100), int(r.resolution_y * pct / 100)
+        spp = min(cycles.samples, PREVIEW_SAMPLES) if cycles is not None else PREVIEW_SAMPLES
+        layout.label(text=f"Preview: {w}×{h}, {spp} samples, no denoising", icon="INFO")
 
 
 def _thumbnail(layout, image) -> None:

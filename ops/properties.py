@@ -88,8 +88,17 @@ class SpecGenSettings(bpy.types.PropertyGroup):
                              description="Environment directions the shader samples per Cycles sample")
     output_dir: StringProperty(name="Output", subtype="DIR_PATH", default="//specgen/", options=_PATH,
                                description="Folder for baked lookups and spectral EXR renders")
-    overwrite: BoolProperty(name="Overwrite", default=False,
-                            description="Replace existing output files")
+    overwrite: BoolProperty(name="Replace Materials", default=False,
+                            description="Generate reuses the photo's name and replaces its SpecGen "
+                            "material, node group and lookup files (off: a new numbered set)")
+    overwrite_outputs: BoolProperty(name="Replace Outputs", default=False,
+                                    description="Render Spectral Stack replaces an existing "
+                                    "spectral EXR and preview of the same scene, camera and frame")
+    quick_preview: BoolProperty(name="Quick Preview", default=False,
+                                description="Render at 25 % resolution, at most 16 samples, no "
+                                "denoising (this render only; the scene keeps its settings)")
+    estimate: StringProperty(name="Estimate", default="", options={"HIDDEN"},
+                             description="The last time estimate of a Full Scene render")
     model: EnumProperty(name="Model", default="network",
                         items=[("network", "SpecGen Network", "The network's BRDF (then refined to the photo)"),
                                ("thin-film", "Thin-Film Fit", "Fit an interference film (soap, oil, "
@@ -113,7 +122,7 @@ class SpecGenSettings(bpy.types.PropertyGroup):
                                "21 bands) beside the lookups")
     material: PointerProperty(name="Material", type=bpy.types.Material, poll=_is_specgen_material,
                               description="SpecGen material that Apply assigns (each Generate "
-                              "makes a new one unless Overwrite is on)")
+                              "makes a new one unless Replace Materials is on)")
     refine_residual: FloatProperty(name="Refinement Residual", default=-1.0, precision=4,
                                    description="RMS residual of the last refinement against the "
                                    "input photo (negative: not refined)")

@@ -10,8 +10,9 @@ in Cycles between them, so only shaders and lights are re-synced.
 Output follows the scene: camera, frame, resolution and percentage, pixel aspect, border,
 view layer (the active one), film transparency (alpha channel), samples and the rest of the
 Cycles settings; the band grid comes from the panel. The stack is written as a Fichet et al.
-(2021) spectral EXR (with ``A``) plus an sRGB PNG preview (CIE 1931 CMFs, D65 white, sRGB
-transfer; not Blender's view transform).
+(2021) spectral EXR (with ``A``; its RGB is the CIE 1931 projection, D65 white, linear sRGB)
+plus a PNG preview through the scene's view transform (:mod:`.result_view`), and the linear sRGB
+is shown in Blender as the image ``SpecGen Result``.
 """
 
 from __future__ import annotations
@@ -31,6 +32,8 @@ from specgen_addon import uplift
 from specgen_addon.errors import SpecGenError
 from .exact_direct import DirectOnlySettings, compose, has_specgen, render_exact_direct
 from .render import RenderJobOutputs, SavedAttributes
+from .render_settings import band_render
+from .result_view import preview_transform, show_result
 from .scene_convert import SceneConversion
 
 FIT_WARN = 0.05  # closure-fit error (relative RMS) above which the user is warned
@@ -107,6 +110,9 @@ class FullSceneRenderJob(RenderJobOutputs):
     log: Callable[[str], None] = print
     #: direct light on SpecGen surfaces from the exact lookups (:mod:`.exact_direct`)
     exact_direct: bool = True
+    show_result: bool = True   # the result's linear sRGB as the image "SpecGen Result"
+    interactive: bool = False  # band renders as Blender render jobs that Esc stops (the panel)
+    result_image: object = field(default=None, init=False)
     spectral: np.ndarray | None = field(default=None, init=False)
     alpha: np.ndarray | None = field(default=None, init=False)
     fit_errors: dict = field(default_factory=dict, init=False)
@@ -152,7 +158,7 @@ class FullSceneRenderJob(RenderJobOutputs):
                             self._check()
                             conversion.set_group(group)
                             t = time.perf_counter()
-                            bpy.ops.render.render(write_still=False, layer=layer, scene=self.scene.name)
+                            yield from band_render(self.scene, layer, self.interactive)
                             t_render.append(time.perf_counter() - t)
                             path = work / f"{tag}{g:02d}.exr"
                             bpy.data.images["Render Result"].save_render(str(path), scene=self.scene)
@@ -176,21 +182,25 @@ class FullSceneRenderJob(RenderJobOutputs):
                 closure_light = uplift.unpack_groups(np.stack(direct)[..., :3], wl.size)
                 self.spectral = compose(self.spectral, closure_light, exact_light)
             yield 0.95
+        from specgen_addon.spectral_exr import (linear_srgb_preview, write_preview_png,
+                                                write_spectral_exr)
+
+        rgb = linear_srgb_preview(self.spectral, wl)
         outs = self._outputs()
         if outs is not None:
-            from specgen_addon.spectral_exr import (linear_srgb_preview, write_preview_png,
-                                                      write_spectral_exr)
-
-            rgb = linear_srgb_preview(self.spectral, wl)
+            view = preview_transform(self.scene, self.warn) if self.preview_png else None
+            shown = "plain sRGB curve" if view is None else view.settings.label()
             attrs = {"specgenRenderer": "SpecGen full-scene Cycles (3 bands per render)",
                      "specgenPreviewTransform": "RGB = CIE 1931 2deg projection, D65 white, linear "
-                                                "sRGB; Blender's view transform not applied",
+                                                f"sRGB (Blender's scene linear); PNG: {shown}",
                      "specgenSamples": str(self.scene.cycles.samples),
                      **{k: str(v) for k, v in self.attributes.items()}}
             write_spectral_exr(outs[0], self.spectral, wl, overwrite=self.overwrite, rgb=rgb,
                                attributes=attrs, alpha=self.alpha)
             if self.preview_png:
-                write_preview_png(outs[1], rgb, overwrite=self.overwrite)
+                write_preview_png(outs[1], rgb, overwrite=self.overwrite, view=view)
+        if self.show_result:
+            self.result_image = show_result(rgb, self.alpha)
         self.timings["total_s"] = time.perf_counter() - t0
         yield 1.0
 

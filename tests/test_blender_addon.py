@@ -307,10 +307,15 @@ def test_panel_draws_every_setting_and_the_three_buttons():
     props = {r.name for r in rows if r.kind in ("prop", "template")}
     assert {"image", "image_path", "weights_path", "wl_min", "wl_max", "bands", "lookup_resolution",
             "render_mode", "output_dir", "overwrite", "export_table", "material"} <= props
-    assert "samples" not in props                            # full-scene: the scene's own settings
+    # full-scene: the scene's own resolution, samples and denoising, editable in the panel
+    assert {"resolution_x", "resolution_y", "resolution_percentage", "samples", "use_denoising",
+            "quick_preview", "overwrite_outputs"} <= props
+    assert "env_samples" not in props
     assert {"samples", "resolution", "env_samples"} <= {r.name for r in exact_rows if r.kind == "prop"}
+    assert "resolution_x" not in {r.name for r in exact_rows if r.kind == "prop"}
     buttons = [r.name for r in rows if r.kind == "operator"]
-    assert buttons == ["specgen.generate_brdf", "specgen.apply", "specgen.render_stack"]
+    assert buttons == ["specgen.generate_brdf", "specgen.apply", "specgen.render_stack",
+                       "specgen.estimate_time"]
     assert all(r.enabled for r in rows if r.kind == "operator")
     # while a job runs the buttons are disabled and a progress bar is shown
     assert not any(r.enabled for r in busy if r.kind == "operator")
@@ -340,10 +345,12 @@ def test_operators_apply_and_render_headless_and_report_errors(table, tmp_path):
         assert bpy.ops.specgen.apply() == {"FINISHED"}
         assert render.is_specgen_material(obj.active_material)
         assert bpy.ops.specgen.render_stack() == {"FINISHED"}
-        assert (tmp_path / "out" / "spectral.exr").is_file()
+        # named after the scene, the camera and the frame
+        assert (tmp_path / "out" / f"{sc.name}_SpecGen_camera_f{sc.frame_current:04d}.exr").is_file()
         with pytest.raises(RuntimeError, match="already exists"):
             bpy.ops.specgen.render_stack()          # never overwritten unless asked
-        s.overwrite = True
+        s.overwrite_outputs = True                   # outputs only; materials keep their switch
+        assert not s.overwrite
         assert bpy.ops.specgen.render_stack() == {"FINISHED"}
         s.render_mode = "FULL_SCENE"                 # the scene's resolution and samples
         sc.render.resolution_x, sc.render.resolution_y, sc.cycles.samples = 12, 8, 1

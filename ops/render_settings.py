@@ -1,0 +1,163 @@
+"""The scene's render settings as the Full Scene mode uses them: the quick preview, the time
+estimate before a render, and band renders that Esc stops inside the render.
+
+* :class:`QuickPreview`: 25 % resolution, at most 16 samples, no denoising, for one spectral render
+  only (everything is put back afterwards).
+* :func:`measure_cost` / :func:`estimate`: two tiny test renders of the scene as it is give the
+  cost per render and per pixel-sample on this machine (:mod:`specgen_addon.render_estimate`).
+* :func:`band_render`: one Cycles render of a band group. From the panel it is started as Blender's
+  own render job (``INVOKE_DEFAULT``), so the interface keeps running and Esc (or the status bar's
+  cancel button) stops Cycles mid-render; Blender's ``render_cancel`` handler then tells the job,
+  which writes nothing. Headless (and in ``execute``) it is the ordinary blocking render.
+"""
+
+from __future__ import annotations
+
+import math
+import time
+from collections.abc import Iterator
+
+import bpy
+
+from specgen_addon import uplift
+from specgen_addon.errors import Cancelled, SpecGenError
+from specgen_addon.render_estimate import RenderCost, fit_cost, format_duration
+from .render import SavedAttributes, specgen_materials
+
+PREVIEW_PERCENT = 25
+PREVIEW_SAMPLES = 16
+#: Test renders of the estimate: about this many pixels, at these two sample counts.
+TEST_PIXELS = 4096
+TEST_SAMPLES = (1, 4)
+#: Polls (timer ticks) a started render job may take to show up as running.
+START_POLLS = 50
+
+
+class _Settings(SavedAttributes):
+    def __init__(self, scene: bpy.types.Scene):
+        self.scene = scene
+        self.saved: list[tuple[object, str, object]] = []
+
+    def __enter__(self) -> _Settings:
+        return self
+
+    def __exit__(self, *exc) -> None:
+        self._restore_attributes()
+
+
+class QuickPreview(_Settings):
+    """25 % resolution, at most 16 samples, denoising off, while the context is open."""
+
+    def __init__(self, scene: bpy.types.Scene, enabled: bool = True):
+        super().__init__(scene)
+        self.enabled = enabled
+
+    def __enter__(self) -> QuickPreview:
+        if self.enabled:
+            r, c = self.scene.render, self.scene.cycles
+            self._set(r, "resolution_percentage", min(r.resolution_percentage, PREVIEW_PERCENT))
+            self._set(c, "samples", min(c.samples, PREVIEW_SAMPLES))
+            self._set(c, "use_denoising", False)
+        return self
+
+
+class InteractiveRender(_Settings):
+    """While band renders run as Blender render jobs: no render window pops up for them (they are
+    false-colour band groups) and the scene is locked against edits."""
+
+    def __enter__(self) -> InteractiveRender:
+        self._set(bpy.context.preferences.view, "render_display_type", "NONE")
+        self._set(self.scene.render, "use_lock_interface", True)
+        return self
+
+
+def render_size(scene: bpy.types.Scene) -> tuple[int, int]:
+    """Width and height in pixels of the scene's render (resolution × percentage)."""
+    r = scene.render
+    f = r.resolution_percentage / 100.0
+    return max(1, int(r.resolution_x * f)), max(1, int(r.resolution_y * f))
+
+
+def planned_renders(scene: bpy.types.Scene, bands: int, exact_direct: bool = True) -> int:
+    """Cycles renders of a Full Scene job: one per band group, twice when the direct light on
+    SpecGen surfaces is recomputed exactly, plus that exact render."""
+    groups = len(uplift.band_groups(bands))
+    if exact_direct and specgen_materials(scene):
+        return 2 * groups + 1
+    return groups
+
+
+def _timed_render(scene: bpy.types.Scene) -> float:
+    t = time.perf_counter()
+    bpy.ops.render.render(write_still=False, scene=scene.name)
+    return time.perf_counter() - t
+
+
+def measure_cost(scene: bpy.types.Scene) -> RenderCost:
+    """Cost model of the scene from two tiny test renders (a second or two for simple scenes)."""
+    w, h = render_size(scene)
+    scale = min(1.0, math.sqrt(TEST_PIXELS / (w * h)))
+    with _Settings(scene) as s:
+        r, c = scene.render, scene.cycles
+        s._set(r, "engine", "CYCLES")
+        s._set(r, "resolution_percentage", max(1, int(r.resolution_percentage * scale)))
+        s._set(r, "use_persistent_data", False)
+        s._set(r, "use_compositing", False)
+        s._set(c, "use_denoising", False)
+        s._set(c, "use_adaptive_sampling", False)
+        s._set(c, "samples", TEST_SAMPLES[0])
+        _timed_render(scene)                      # kernels and caches warm, as in the real job
+        t1 = _timed_render(scene)
+        c.samples = TEST_SAMPLES[1]
+        t2 = _timed_render(scene)
+        tw, th = render_size(scene)
+    return fit_cost(tw * th, TEST_SAMPLES, (t1, t2))
+
+
+def estimate(scene: bpy.types.Scene, bands: int, cost: RenderCost) -> tuple[float, str]:
+    """Seconds of the Full Scene job with the scene's current settings, and one line saying so."""
+    w, h = render_size(scene)
+    n = planned_renders(scene, bands)
+    samples = scene.cycles.samples
+    seconds = cost.predict(n, w * h, samples)
+    extra = ", plus denoising" if scene.cycles.use_denoising else ""
+    return seconds, (f"about {format_duration(seconds)}: {n} Cycles renders of {w}×{h} at "
+                     f"{samples} samples{extra}")
+
+
+def band_render(scene: bpy.types.Scene, layer: str, interactive: bool) -> Iterator[None]:
+    """Render ``layer`` of ``scene`` once; as a cancellable render job when ``interactive`` and a
+    window exists (yields ``None`` while it runs), else blocking. Raises Cancelled if the user
+    stopped the render."""
+    if not interactive or bpy.app.background:
+        bpy.ops.render.render(write_still=False, layer=layer, scene=scene.name)
+        return
+    state: dict[str, str] = {}
+
+    def complete(*_args) -> None:
+        state.setdefault("end", "complete")
+
+    def cancel(*_args) -> None:
+        state.setdefault("end", "cancel")
+
+    handlers = bpy.app.handlers
+    handlers.render_complete.append(complete)
+    handlers.render_cancel.append(cancel)
+    try:
+        started = bpy.ops.render.render("INVOKE_DEFAULT", write_still=False, layer=layer,
+                                        scene=scene.name)
+        if "CANCELLED" in started:
+            raise SpecGenError("Blender did not start the band render (is another render running?)")
+        seen_running, polls = False, 0
+        while "end" not in state:
+            running = bpy.app.is_job_running("RENDER")
+            if (seen_running or polls > START_POLLS) and not running:
+                break                              # ended (or never ran) without a handler call
+            seen_running, polls = seen_running or running, polls + 1
+            yield None
+        if state.get("end") == "cancel":
+            raise Cancelled("spectral render cancelled inside a band render; nothing was written")
+    finally:
+        for lst, fn in ((handlers.render_complete, complete), (handlers.render_cancel, cancel)):
+            if fn in lst:
+                lst.remove(fn)
