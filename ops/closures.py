@@ -74,7 +74,11 @@ def build_closure_stack(mat: bpy.types.Material, fit: ClosureFit, output: bpy.ty
     tree.links.new(_sum(tree, shaders, -100), stack.inputs[0])
     tree.links.new(stack.outputs[0], output.inputs["Surface"])
     mat[FIT_PROP] = fit.to_json()
-    mat["specgen_fit_error"] = fit.max_error  # shown in the panel
+    mat["specgen_fit_error"] = fit.max_error
+    if fit.rendered_error is not None:  # shown in the panel
+        mat["specgen_fit_delta_e"] = float(fit.rendered_error)
+    elif "specgen_fit_delta_e" in mat:
+        del mat["specgen_fit_delta_e"]
     set_stack(mat, standin_closures(fit, stack_layout(fit)))
 
 

@@ -106,3 +106,31 @@ def render_exact_direct(scene: bpy.types.Scene, wavelengths_nm: np.ndarray, shap
 def compose(full: np.ndarray, closure_direct: np.ndarray, exact: np.ndarray) -> np.ndarray:
     """``full − closure_direct + exact`` (H, W, Λ), clipped at 0 (noise in the two direct terms)."""
     return np.maximum(full - closure_direct + exact, 0.0).astype(np.float32)
+
+
+def report_fit(name: str, fit, exact: bool, warn: Callable[[str], None] = print,
+               log: Callable[[str], None] = print) -> float | None:
+    """Say how far material ``name``'s closure stack renders from its table (the fit's rendered
+    ΔE2000, :mod:`specgen_addon.fit.fit_check`) and what that touches in this render: with
+    ``exact`` direct light only the bounces and F12/viewport; without it, everything the Full Scene
+    render shows of the material. Above :data:`~specgen_addon.fit.fit_check.WARN_DELTA_E` a
+    warning names the material and the faithful alternative. Returns the ΔE2000 (None for a
+    material baked before it was measured)."""
+    from specgen_addon.fit.fit_check import CHECK_LIGHTS, WARN_DELTA_E
+
+    de = fit.rendered_error
+    if de is None:
+        log(f"SpecGen: material {name!r}: native closure fit, worst band error "
+            f"{100 * fit.max_error:.1f} % (relative RMS; Apply it again for its rendered error)")
+        return None
+    what = f"its native closures render ΔE2000 {de:.2f} from its table ({len(CHECK_LIGHTS)} lights)"
+    if de <= WARN_DELTA_E:
+        log(f"SpecGen: material {name!r}: {what}")
+    elif exact:
+        warn(f"SpecGen: material {name!r}: {what}; Full Scene draws its direct light exactly, but "
+             "light it bounces onto itself or other objects, and the F12/viewport stand-in, "
+             "carry that error")
+    else:
+        warn(f"SpecGen: material {name!r}: {what}, and Full Scene shows it so; the Exact mode "
+             "renders it faithfully (direct light)")
+    return de

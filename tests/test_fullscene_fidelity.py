@@ -1,0 +1,128 @@
+"""Full Scene shows the generated material: SpecGen surfaces against the reference renderer.
+
+The Full Scene render draws a SpecGen material's direct light from the exact lookups and leaves
+only the bounces to the fitted closure stack (ops/exact_direct.py); the closure fit weighs table
+entries by the direction pairs they stand for and reports its rendered colour error
+(specgen_addon/fit/fit_check.py). Truth: the NumPy reference renderer (specgen_addon.render) on
+the same sphere under the same D65 sun (as bench/fullscene_vs_reference.py).
+"""
+
+from __future__ import annotations
+
+from pathlib import Path
+
+import numpy as np
+import pytest
+
+from specgen_addon.fit import fit_closures, ggx_lobe
+from specgen_addon.fit.closures import cell_volumes
+from specgen_addon.fit.fit_check import WARN_DELTA_E, rendered_fit_error
+from specgen_addon.rusinkiewicz import io_from_half_diff
+from specgen_addon.table import BRDFTable
+
+WL = np.array([420.0, 480.0, 540.0, 600.0, 660.0, 720.0])
+RHO = np.interp(WL, [400, 550, 720], [0.1, 0.45, 0.6])
+SUN = (0.35, 0.45, 0.82)
+#: The target of the Full Scene render against the reference renderer.
+MAX_DELTA_E, MAX_ENERGY_OFF = 1.0, 0.03
+
+
+def _outside_the_model(th, td, pd):
+    """A body that brightens with the half angle θd (which Lambert and a view Fresnel cannot
+    follow) under a sharp, tall GGX peak: a closure fit misses it, as it missed the example."""
+    wi, wo = io_from_half_diff(th, td, pd)
+    above = ((wi[:, 2] > 0) & (wo[:, 2] > 0))[:, None]
+    body = above * RHO / np.pi * (0.4 + 1.6 * np.sin(td)[:, None] ** 2)
+    return body + ggx_lobe(wi, wo, 0.12)[:, None] * np.interp(WL, [400, 720], [0.3, 0.1])
+
+
+def _inside_the_model(th, td, pd):
+    wi, wo = io_from_half_diff(th, td, pd)
+    above = ((wi[:, 2] > 0) & (wo[:, 2] > 0))[:, None]
+    return above * RHO / np.pi + ggx_lobe(wi, wo, 0.3)[:, None] * 0.2
+
+
+@pytest.fixture(scope="module")
+def outside_table() -> BRDFTable:
+    return BRDFTable.tabulate(_outside_the_model, WL)
+
+
+# ------------------------------------------------------------------------- no bpy
+def test_cell_volumes_integrate_the_hemisphere_measure():
+    vh, vd = cell_volumes()
+    assert vh.sum() == pytest.approx(1.0)          # ∫ sin θh dθh over [0, π/2]
+    assert vd.sum() == pytest.approx(0.5)          # ∫ sin θd cos θd dθd
+    assert vh[:30].sum() < 0.06                    # the first third of the θh rows: < 10°
+
+
+def test_rendered_fit_error_is_small_inside_the_model_and_flags_a_material_outside_it(outside_table):
+    inside = fit_closures(BRDFTable.tabulate(_inside_the_model, WL), check=True)
+    assert inside.rendered_error < 0.1
+    outside = fit_closures(outside_table, check=True)
+    assert outside.rendered_error > WARN_DELTA_E           # the user is warned ...
+    assert outside.max_error < 0.05                        # ... where the residual looked fine
+    assert outside.rendered_error == pytest.approx(rendered_fit_error(outside, outside_table))
+
+
+# ------------------------------------------------------------------------- Cycles
+def _sphere_render(table: BRDFTable, tmp_path: Path, res: int = 40, samples: int = 8):
+    """(reference, Full Scene, closures alone, warnings) for ``table`` on the bench's sphere."""
+    bpy = pytest.importorskip("bpy")
+    from addon_modules import addon_module
+
+    from specgen_addon.render import DistantLight, render_spectral, sphere_geometry
+
+    bake = addon_module("specgen_addon.bake")
+    render = addon_module("ops.render")
+    fullscene = addon_module("ops.render_fullscene")
+    scene_mod = addon_module("ops.scene")
+    info = bake.bake_atlas(table, tmp_path / "t.exr")
+    ref = render_spectral(table, sphere_geometry(res), lights=[DistantLight(SUN, np.pi)],
+                          wavelengths_nm=table.wavelengths).spectral
+    out, warnings = {}, []
+    for exact in (True, False):
+        bpy.ops.wm.read_factory_settings(use_empty=True)
+        sc = bpy.context.scene
+        scene_mod.add_camera(sc)
+        scene_mod.add_mesh(sc, "sphere").data.materials.append(render.make_material("SpecGen fid", info))
+        sc.cycles.filter_width = 0.01
+        scene_mod.add_sun(sc, SUN, irradiance=np.pi)
+        sc.render.resolution_x = sc.render.resolution_y = res
+        sc.cycles.samples, sc.cycles.use_denoising = samples, False
+        job = fullscene.FullSceneRenderJob(sc, None, table.wavelengths, exact_direct=exact,
+                                           warn=warnings.append, log=lambda _: None)
+        out[exact] = job.run()
+    return ref, out[True], out[False], warnings, info.closures
+
+
+def _score(ref: np.ndarray, got: np.ndarray, wl: np.ndarray) -> tuple[float, float]:
+    from specgen_addon.refine.report import delta_e2000, photo_scale
+    from specgen_addon.spectral_exr import linear_srgb_preview
+
+    mask = ref.sum(-1) > 0
+    a, b = linear_srgb_preview(ref, wl)[mask], linear_srgb_preview(got, wl)[mask]
+    return delta_e2000(a, b, photo_scale(a)), float(got[mask].sum() / ref[mask].sum())
+
+
+@pytest.mark.blender
+def test_full_scene_renders_a_material_the_closures_cannot_hold(outside_table, tmp_path):
+    ref, full, closures, warnings, fit = _sphere_render(outside_table, tmp_path)
+    de, energy = _score(ref, full, WL)
+    assert de <= MAX_DELTA_E and abs(energy - 1) <= MAX_ENERGY_OFF, (de, energy)
+    de_closures, _ = _score(ref, closures, WL)
+    assert de_closures > 2 * MAX_DELTA_E, de_closures      # what the closure stack alone showed
+    named = [w for w in warnings if "'SpecGen fid'" in w and "ΔE2000" in w]
+    assert fit.rendered_error > WARN_DELTA_E and named, warnings
+    assert any("Exact mode" in w for w in named)           # closures alone: the better mode named
+
+
+@pytest.mark.blender
+@pytest.mark.slow
+def test_full_scene_renders_the_example_photos_material_as_the_reference(repo_dir, tmp_path):
+    from specgen_addon import pipeline
+
+    table = pipeline.generate(repo_dir / "examples" / "sphere.png").table   # network + refinement
+    ref, full, _, warnings, fit = _sphere_render(table, tmp_path, res=48)
+    de, energy = _score(ref, full, table.wavelengths)
+    assert de <= MAX_DELTA_E and abs(energy - 1) <= MAX_ENERGY_OFF, (de, energy)
+    assert (fit.rendered_error > WARN_DELTA_E) == any("'SpecGen fid'" in w for w in warnings), warnings
