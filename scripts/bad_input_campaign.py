@@ -1,4 +1,4 @@
-"""Repeatable bad-input campaign (issue 14): run the commands as a careful, adversarial user would.
+"""Repeatable bad-input campaign: run the commands as a careful, adversarial user would.
 
 Independent of tests/test_bad_input.py (its own fixtures and cases). Every case runs one fresh
 subprocess (``python -m specgen_addon …``, ``python batch.py …`` or a ``python -c`` call of the

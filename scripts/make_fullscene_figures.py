@@ -3,7 +3,7 @@
 * ``docs/figures/fullscene_cornell.png``: a Cornell box with a white SpecGen sphere, full-scene
   spectral render projected to sRGB, beside Blender's RGB render of the same file, and the
   sphere's spectra on its red-wall and green-wall sides (colour bleeding).
-* ``docs/figures/fullscene_ordinary.png``: the ordinary scene of issue 12 (floor, Principled
+* ``docs/figures/fullscene_ordinary.png``: an ordinary scene (floor, Principled
   spheres, area light, sun, HDRI through a rotated Mapping + a second Background, one SpecGen
   sphere made from corpus material ``mat0001``), spectral → sRGB beside Blender's RGB render
   (which shows the SpecGen material's RGB stand-in).

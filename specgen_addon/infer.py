@@ -190,7 +190,7 @@ class _OnnxBackend:
         #: "low_rank" (the current export), "channels_first" (earlier exports) or "plain" (Hadamard)
         self.head_layout = HEAD_LAYOUTS[names]
         self._inputs = names
-        #: whether the head takes a run of φd nodes (exports since the thirty-eighth session) or
+        #: whether the head takes a run of φd nodes (current exports) or
         #: all 180 (earlier ones): then only the lookup's reach is computed
         self.phi_d_runs = self.head_layout == "low_rank" and not isinstance(
             self.head.get_inputs()[names.index("f2")].shape[3], int)

@@ -3,7 +3,7 @@
 The encoder maps the photo to a latent ``z`` (and its mean colour ``c``, which feeds the spectral
 code); the decoder turns ``(z, c)`` into the six planes and so into the whole table. The
 encoder's guess is not the best the decoder can do: latents fitted to the *true* BRDF score
-7–12 dB higher (docs/model.md, "The twenty-fourth session"). This module fits ``(z, c)`` to the
+7–12 dB higher (lab/notebook). This module fits ``(z, c)`` to the
 only measurement there is, the photo, by rendering the decoded table under the photo's lighting
 and descending on the photo's error. The result stays on the decoder's manifold, so the angles
 the photo does not show follow the network's prior, not a basis of hats.
@@ -42,9 +42,9 @@ With ``keep_peak`` the specular peak finer than the photo's pixel is left to the
 nodes below :func:`unresolved_theta_h_nodes` (the angle the normal turns across one pixel at the
 sphere's centre) keep the encoder's values in every render and in the returned table, so the fit
 moves only what the photo resolves. Without it the fit can reshape a sub-pixel peak to suit a
-pixel's integral (docs/refinement.md, "Thirty-ninth session"); with it, a coat whose peak the
+pixel's integral (lab/notebook); with it, a coat whose peak the
 network has wrong cannot be corrected, and on fresh validation photos it lost 0.6 dB against the
-fit without it, so it is off (docs/refinement.md, "Fortieth session").
+fit without it, so it is off (lab/notebook).
 
 The loss is the squared difference of ``log(ε + rgb)``, ε a fraction of the photo's level
 (:func:`specgen_addon.refine.report.photo_scale`), so the body and the highlight both count;
@@ -73,7 +73,7 @@ CancelFn = Callable[[], bool]
 
 @dataclass(frozen=True)
 class LatentFitOptions:
-    """Settings of :func:`fit_latent` (the defaults are the ones the thirty-ninth session chose)."""
+    """Settings of :func:`fit_latent` (the defaults are the measured best, lab/notebook)."""
 
     steps: int = 100                   # Adam steps
     lr: float = 0.02                   # Adam's step size on z and c

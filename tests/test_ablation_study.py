@@ -189,7 +189,7 @@ def test_ablate_refuses_bad_records_files_before_any_work(content, needle, tmp_p
 def test_arms_cached_before_newer_config_fields_keep_their_keys():
     """Fields added to the configs later, at their defaults, leave an arm's cache key unchanged.
 
-    The keys are those the twenty-third session recorded (docs/ablation_3000_six_knots.json), so the
+    The keys are those a recorded study holds (docs/ablation_3000_six_knots.json), so the
     documented command still finds its trained arms instead of training them again."""
     import json
     from pathlib import Path

@@ -1,4 +1,4 @@
-"""Undo after Apply (issue 12, item 4), headless with the bpy module.
+"""Undo after Apply, headless with the bpy module.
 
 The bpy module has a window manager with one window, so Blender's memfile undo runs as in the UI:
 an operator called with ``undo=True`` (as a button click is) pushes an undo step when it has

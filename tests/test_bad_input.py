@@ -1,4 +1,4 @@
-"""Bad input across the CLI, batch.py, the operators (headless bpy) and the Python API (issue 14).
+"""Bad input across the CLI, batch.py, the operators (headless bpy) and the Python API.
 
 Every case asserts: the exit status (2 for an error, 130/143 for SIGINT/SIGTERM), no "Traceback"
 in the output, a message naming the problem, and that the test's whole folder (inputs, output

@@ -1,4 +1,4 @@
-"""Corpus families of issue 11: physics (non-negative, reciprocal, albedo ≤ 1, analytic cases),
+"""Corpus families: physics (non-negative, reciprocal, albedo ≤ 1, analytic cases),
 serialisation, the mixed corpus' splits and mix, and refusal of bad mixes."""
 
 from __future__ import annotations

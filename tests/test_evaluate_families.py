@@ -1,4 +1,4 @@
-"""Per-family evaluation (issue 11): rows per family of the mixed test split, and the RGL rows."""
+"""Per-family evaluation: rows per family of the mixed test split, and the RGL rows."""
 
 from __future__ import annotations
 

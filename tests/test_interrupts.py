@@ -198,7 +198,7 @@ def _run_guarded_script(tmp_path, call: str, delay: float, before: str = ""):
 
 
 def test_a_signal_inside_blender_code_that_keeps_running_is_acted_on_once_in_our_code(tmp_path):
-    """The CI failure of the thirty-first session: a signal landing in Blender's own Python (bpy's
+    """A past CI failure: a signal landing in Blender's own Python (bpy's
     start-up, read_factory_settings) was deferred, and the watcher's hard stop cleaned the output
     folder while the main thread went on writing and then raised the same stop itself. Files were
     left behind. Now the watcher waits while the main thread runs, and the stop is acted on once."""

@@ -1,4 +1,4 @@
-"""Deterministic generation of the synthetic spectral BRDF corpus (issue 3, item 1).
+"""Deterministic generation of the synthetic spectral BRDF corpus.
 
 Material ``i`` of a corpus with seed ``s`` draws everything from its own stream
 ``numpy.random.default_rng([s, i])``, so a smaller corpus is a prefix of a larger one and any
@@ -99,7 +99,7 @@ def generate_corpus(n: int = 200, seed: int = 0,
     return out
 
 
-# --- the mixed-family corpus (issue 11) ------------------------------------------------------------
+# --- the mixed-family corpus ------------------------------------------------------------
 
 #: Default share of each family in a mixed corpus (normalised); "classic" is :func:`make_material`.
 FAMILY_MIX: dict[str, float] = {"classic": 0.25, "tinted_coat": 0.15, "car_paint": 0.15,

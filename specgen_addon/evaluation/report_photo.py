@@ -1,4 +1,4 @@
-"""The photo-only protocol's part of the report (issue 10, item 3).
+"""The photo-only protocol's part of the report.
 
 Every method gets what a real user has: the one input photo (:meth:`.tables.Harness.input_photo`) and its
 known lighting. SpecGen generates its BRDF from it; each photo-only baseline fits an analytic RGB
@@ -18,7 +18,7 @@ import numpy as np
 
 from . import baselines, protocol, report, tables
 
-#: Required margin (dB) of SpecGen over every photo-only baseline (issue 10, "Done when").
+#: Required margin (dB) of SpecGen over every photo-only baseline.
 TARGET_MARGIN_DB = 2.0
 
 
@@ -94,7 +94,7 @@ def section(h: "tables.Harness", mats: Sequence[Any], specgen_arm: str, add: Cal
     rows = specgen_variants(specgen_arm) + photo_rows(methods)
     heading("## (f) Photo-only protocol: every method sees only the input photo")
     add("")
-    add("The fair counterpart of tables (a) and (e) (issue 10, item 3): a baseline gets what a real user "
+    add("The fair counterpart of tables (a) and (e): a baseline gets what a real user "
         "has, the same single sphere photo SpecGen gets (see *Protocol*) and its known "
         "lighting. It fits an analytic RGB BRDF to the photo (`specgen_addon/evaluation/photo_fit.py`: "
         "diffuse colour, specular F0 colour, GGX roughness, white Schlick grazing term, clear coat "

@@ -109,13 +109,13 @@ def compose(h: tables.Harness, mats: Sequence[Any], specgen_arm: str, weights: P
     # Targets ------------------------------------------------------------------------------------
     photo_targets = report_photo.target_rows(get, names, specgen_arm, list(h.s.photo_baselines))
     if photo_only:
-        add("## Targets (issue 10, item 3)")
+        add("## Targets (photo-only protocol)")
         add("")
         add(report.targets_table(photo_targets))
         add("")
         report_photo.section(h, mats, specgen_arm, add, section, _lighting)
         return "\n".join(lines)
-    add("## Targets (issue 6, item 5: oracle protocol; issue 10, item 3: photo-only protocol)")
+    add("## Targets (oracle and photo-only protocols)")
     add("")
     trows = []
     for b in (baselines.MALLETT2019, baselines.SMITS1999, baselines.JAKOB2019):
@@ -192,7 +192,7 @@ def compose(h: tables.Harness, mats: Sequence[Any], specgen_arm: str, weights: P
     add("The first SpecGen column is the network alone, not told the input's lighting. The second is "
         "what the product does when the user names the lighting the photo was taken under "
         "(`infer --input-env MAP`, the panel's input lighting): the photo brought to the canonical "
-        "white level for the network, then refined under that lighting (issue 10, item 2).")
+        "white level for the network, then refined under that lighting.")
     add("")
     add("SpecGen per material (input under the map, network alone):")
     add("")
@@ -292,14 +292,14 @@ def compose(h: tables.Harness, mats: Sequence[Any], specgen_arm: str, weights: P
         n_fam = 1 if h.s.smoke else h.s.family_materials
         section("## (g) Per corpus family: the mixed test split, network alone")
         add("")
-        add("Issue 11's families (`specgen_addon/corpus/families/`): the first materials of each family "
+        add("The corpus families (`specgen_addon/corpus/families/`): the first materials of each family "
             "in the mixed corpus' test split (their spectra and metals never occur in training), canonical "
             "sphere input, network alone (no refinement), 20 bands; the real RGL files in RGB under the "
             f"distant lights. 128² renders: the same numbers as `python -m specgen_addon evaluate --families {n_fam} --family-resolution 128 --no-refine`. "
             f"{n_fam} materials per family are a small sample: one sharp lobe can move a row by a "
-            "decibel or more. docs/model.md scores the whole test split (582 materials) at 128², distant lights, "
-            "network alone (\"The fortieth session\"), and each material's own table, the grid's "
-            "ceiling (\"The forty-second session\").")
+            "decibel or more. The model card (docs/model-card.md) scores the whole test split (582 materials) at 128², "
+            f"distant lights, network alone, with these weights (`{weights.name}`), and each "
+            "material's own table, the grid's ceiling.")
         add("")
         add(family_table(families))
         add("")

@@ -192,7 +192,7 @@ def run_paper_tables(out: Path, img_dir: Path | None = None, smoke: bool = False
     else:
         real_note = f"(skipped: {REAL_RGL_DIR} not found)"
 
-    # 3b. Per corpus family (issue 11), network alone.
+    # 3b. Per corpus family, network alone.
     families = None if photo_only else (read_json(cache / "families" / f"{specgen_arm}.json") if report_only
                                         else h.run_families(weights_path, specgen_arm,
                                                             REAL_RGL_DIR if REAL_RGL_DIR.is_dir() else None))

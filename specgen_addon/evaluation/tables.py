@@ -31,13 +31,13 @@ SELF_ROLE = "self_reproduction"
 
 
 #: Bumped whenever the refinement's defaults change, so cached refined cells are not reused:
-#: 2 = Otsu 2018 body, smoothness 3 and the added angular term (fifth session); 3 = the photo's
-#: blur modelled (fourteenth session: most exactly framed photos choose σ = 0, some do not, e.g.
+#: 2 = Otsu 2018 body, smoothness 3 and the added angular term; 3 = the photo's
+#: blur modelled (most exactly framed photos choose σ = 0, some do not, e.g.
 #: mat0003 under ``city`` and ``interior`` choose 0.35 px, so cached refined cells changed);
-#: 4 = the pair-weighted smoothness (thirty-fourth session, ``RefineOptions.smooth_weight``);
-#: 5 = no θh knots inside one pixel of the highlight (thirty-fifth session, ``basis.THETA_H_KNOTS``);
-#: 6 = the relaxed fit only where it predicts held-out pixels better (thirty-sixth session,
-#: ``RefineOptions.relax_holdout``).
+#: 4 = the pair-weighted smoothness (``RefineOptions.smooth_weight``);
+#: 5 = no θh knots inside one pixel of the highlight (``basis.THETA_H_KNOTS``);
+#: 6 = the relaxed fit only where it predicts held-out pixels better
+#: (``RefineOptions.relax_holdout``).
 REFINE_VERSION = "v6"
 
 
@@ -411,7 +411,7 @@ class Harness:
         return out
 
     def run_families(self, weights: Path | None, arm: str, rgl_dir: Path | None) -> dict[str, Any]:
-        """Per-family scores of the mixed corpus' test split, network alone (issue 11), cached per
+        """Per-family scores of the mixed corpus' test split, network alone, cached per
         arm: :func:`specgen_addon.train.evaluate.evaluate_families` with
         :attr:`Settings.family_materials` per family and the held-out maps (1 material and distant
         lights only in the smoke run)."""

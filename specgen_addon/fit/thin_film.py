@@ -1,5 +1,5 @@
 """Fit of the thin-film family to the photo: an interference film's angle-dependent colour from one
-sphere photo, where the network's prior cannot place it (issue 11).
+sphere photo, where the network's prior cannot place it.
 
 The model is the corpus family :class:`~specgen_addon.corpus.families.thin_film.ThinFilm`: a GGX
 lobe (roughness ``α``) whose Fresnel factor is the exact Airy reflectance ``R(θd, λ)`` of a film

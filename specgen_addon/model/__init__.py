@@ -12,7 +12,7 @@ from .config import Config
 #: inputs, renders framed on whole pixels).
 DEFAULT_WEIGHTS = Path(__file__).resolve().parents[2] / "weights" / "specgen_default.pt"
 #: The shipped network for a sphere resampled from a photo (off the pixel grid, antialiased, another
-#: size: every camera photo), trained on such inputs only (docs/model.md, "The sixteenth session").
+#: size: every camera photo), trained on such inputs only (docs/model-card.md).
 RESAMPLED_WEIGHTS = DEFAULT_WEIGHTS.with_name("specgen_resampled.pt")
 
 

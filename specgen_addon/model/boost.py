@@ -1,6 +1,6 @@
 """A second image encoder whose output is added to the first one's latent (``boost_channels``).
 
-The twenty-fourth and twenty-fifth sessions found the trained decoder able to do far better than
+Studies (lab/notebook) found the trained decoder able to do far better than
 the latent its encoder gives it (its best latents beat the encoder's by 4.6 dB in μ-law MSE on
 the training materials), while the trained encoder stood still when trained further and a new
 encoder of the same size flattened just above it. This branch adds capacity on the encoder's side

@@ -32,7 +32,7 @@ class Config:
     # encoder: stride-2 3×3 convs, then a linear layer to the latent vector
     encoder_channels: tuple[int, ...] = (32, 64, 96, 128)
     #: Slope of the encoder's activations below zero, its convs' and the latent's: 0 is the ReLU
-    #: (every weights file before the twenty-fifth session); a small slope (leaky ReLU) keeps a
+    #: (older weights files); a small slope (leaky ReLU) keeps a
     #: unit that is negative for every input learning, where a ReLU unit dies for good
     #: (:mod:`.activity`).
     encoder_negative_slope: float = 0.0
@@ -41,7 +41,7 @@ class Config:
     detail_factor: int = 1
     latent_dim: int = 256
     #: A second encoder whose output is added to the latent (:mod:`.boost`): the widths of its
-    #: stride-2 convs (empty: none, every weights file before the twenty-seventh session) and of
+    #: stride-2 convs (empty: none, older weights files) and of
     #: its bottleneck layer. Its last layer starts at zero, so :mod:`.grow` adds it exactly.
     boost_channels: tuple[int, ...] = ()
     boost_width: int = 96
@@ -58,7 +58,7 @@ class Config:
     spectral_code: bool = True
     #: Knots of that profile along each spectral plane's angle axis (θh, θd or φd), interpolated
     #: linearly between them: 1 is one profile per plane, constant over angle (weights made
-    #: before the sixth session); more let the latent colour the highlight apart from the body and
+    #: the first weights files); more let the latent colour the highlight apart from the body and
     #: move a thin film's hue with θd.
     spectral_code_knots: int = 6
     #: Residual Linear–ReLU–Linear blocks on the latent (image -> latent capacity) and residual

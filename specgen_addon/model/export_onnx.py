@@ -8,7 +8,7 @@ Two graphs, beside the ``.pt`` weights (see :func:`specgen_addon.infer.onnx_path
   exported as :class:`~specgen_addon.model.fast.GridHeadLowRank`, which onnxruntime runs ~2.5×
   faster than the plain head; graphs exported earlier in the channels-first arrangement of
   :class:`~specgen_addon.model.fast.GridHeadChannelsFirst` still run), with dynamic block sizes,
-  band count and run of φd nodes (since the thirty-eighth session: the backend computes only the
+  band count and run of φd nodes (current graphs: the backend computes only the
   φd nodes a lookup can touch, :mod:`specgen_addon.lookup_reach`; heads exported earlier take all
   180 and still run).
 

@@ -21,7 +21,7 @@ exact rewrites remove the remaining passes or shrink them:
   ``[W2 | b2]``), and ``r' = w3·g / t + b3`` divides once per point, not once per channel.
 * **dead first-layer units dropped.** ``h`` is a convex combination of six table rows, so a unit
   whose entries are ≤ 0 in every row of this image's tables is ≤ 0 everywhere and its ReLU is 0:
-  its column of the row table and its row of ``[W2 | b2]`` are dropped (7 of 32 for ``run19`` on
+  its column of the row table and its row of ``[W2 | b2]`` are dropped (7 of 32 for one trained network on
   ``examples/sphere.png``).
 * **θh rows at the end of the row table.** Rows that depend on θh (t1, t2, t4) sit after the
   fixed rows (t3, t5, t6) in a per-thread buffer, so a point's six row indices are fixed sums of

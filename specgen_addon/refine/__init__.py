@@ -56,16 +56,16 @@ CancelFn = Callable[[], bool]
 #: Self-reproduction below this (dB) means the lighting does not explain the photo: warn.
 WARN_PSNR_DB = 30.0
 #: Self-reproduction (dB) below which the smoothness is relaxed to :data:`RELAXED_SMOOTH` and the
-#: better-reproducing of the two corrections is kept (issue 10's target is 40 dB).
+#: better-reproducing of the two corrections is kept (the photo target is 40 dB).
 RELAX_BELOW_DB = 42.0
 RELAXED_SMOOTH = 0.01
 #: The relaxed fit replaces the smooth one only if it reproduces the photo at least this much better
 #: (dB): a small gain is as likely the operator's sampling error or the photo's resampling fitted as
-#: the material (docs/refinement.md, thirty-fifth session).
+#: the material (docs/refinement.md).
 RELAX_MIN_GAIN_DB = 0.0
 #: The relaxed fit is tried only if, fitted to half of the sphere's pixels, it predicts the other half
 #: better than the smooth fit does (:mod:`.holdout`): a looser fit that gains only on the pixels it
-#: was fitted to is fitting their noise (chosen on fresh validation photos, thirty-sixth session:
+#: was fitted to is fitting their noise (chosen on fresh validation photos:
 #: +1.05 dB of truth on average, no photo worse; docs/refinement.md).
 RELAX_HOLDOUT = True
 #: Which smoothness the relaxed fit loosens: ``"both"`` axes, or ``"theta_h"`` only (a lobe may be
@@ -77,7 +77,7 @@ RELAX_AXES_CHOICES = ("both", "theta_h")
 #: lobe (with the body's tint and the added Lambertian fitted either way, :mod:`.holdout`).
 LOBE_HOLDOUT = False
 #: The fit stops at this multiple of the renderer's own sampling-error variance (the discrepancy
-#: principle, :mod:`.discrepancy`). Off by default: on the thirty-fourth session's photos it lowered
+#: principle, :mod:`.discrepancy`). Off by default: on the validation photos it lowered
 #: the fit of brightness and colour where the sampling error is large (docs/refinement.md).
 FIT_FLOOR: float | None = None
 #: Photo values at or above this fraction of the maximum 8-bit level count as clipped.
@@ -111,7 +111,7 @@ class RefineOptions:
     ``smooth_weight``: ``"pair"`` weights each difference between neighbouring knots by
     the data weight of the two knots it ties (at least the block's median), so that knots the photo
     sees strongly move together (a sharp highlight's); ``"block"`` uses the block's median for all
-    (before the thirty-fourth session). ``prior_floor`` adds the same pull to every coefficient, as a fraction of the largest
+    (the earlier default). ``prior_floor`` adds the same pull to every coefficient, as a fraction of the largest
     data weight: combinations of coefficients the photo barely constrains stay with the network.
     ``score_holdout``: also report how well the kept setting, fitted to one half of the sphere's
     pixels, predicts the other (:attr:`RefineResult.holdout_db`, two more solves): a score of the

@@ -35,7 +35,7 @@ from ..table import N_THETA_D, N_THETA_H
 #: θh knots as MERL grid indices (index i ↔ θh = (i/90)² · π/2): 0°, 0.5°, 1.1°, 2.2°, 4°, 6.9°,
 #: 11.4°, 18.7°, 28.9°, 46.9°, 88°. The first step spans a peak the photo cannot resolve: one pixel
 #: of the 128² sphere turns the normal by ≈ 0.9° at its centre, and the knots at 0.04° and 0.2°
-#: (before the thirty-fifth session) let the fit set a peak height no pixel determines (a refined
+#: (the earlier default) let the fit set a peak height no pixel determines (a refined
 #: peak 3× too bright under a light the photo never saw; docs/refinement.md).
 THETA_H_KNOTS = (0, 7, 10, 14, 19, 25, 32, 41, 51, 65, 89)
 #: θd knots as grid indices (index j ↔ θd = j · 1°): 0°, 30°, 50°, 65°, 77°, 89°.

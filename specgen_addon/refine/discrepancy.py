@@ -5,7 +5,7 @@ directions per pixel for the input lighting). A real photo shares none of them, 
 material, rendered by the operator, misses the photo by the operator's sampling error. Fitting the
 photo more closely than that fits the error: the correction bends the lobe until the operator's
 noise matches the photo's, and the material gets worse (a shiny metal lost 11 dB of truth on such a
-photo while its self-reproduction rose by 4 dB; docs/refinement.md, thirty-fourth session).
+photo while its self-reproduction rose by 4 dB; docs/refinement.md).
 
 The sampling error is measured, not assumed: the network's table is rendered twice under the
 input's lighting, with the operator's samples and with an independent set (another seed), and

@@ -1,4 +1,4 @@
-"""Scale-out on existing engines (issue 15): many materials on a Dask cluster (``batch-many``).
+"""Scale-out on existing engines: many materials on a Dask cluster (``batch-many``).
 
 * :mod:`.items` finds the inputs, names them and plans what a (re)run has left to do;
 * :mod:`.worker` is what a Dask worker runs for one item: ``batch.py`` in a child process, into a

@@ -3,7 +3,7 @@
 The corpus renders are framed exactly: the sphere's outline on the pixel grid, its outline pixels
 point-sampled. A user's sphere lies off the grid, and :mod:`specgen_addon.input_image` finds it to
 a fraction of a pixel and resamples it; the resampling blurs the image a little and the outline
-pixels mix with the background. The thirteenth and fourteenth sessions measured what that costs a
+pixels mix with the background. Measurements (lab/notebook) show what that costs a
 network trained on exact framing (docs/model.md, ``evaluate --input-shift``).
 
 * :func:`jitter_framing` moves and scales the sphere by up to the old whole-pixel crop's error.

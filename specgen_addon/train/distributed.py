@@ -1,4 +1,4 @@
-"""Data-parallel training under ``torchrun`` with PyTorch DDP (issue 15).
+"""Data-parallel training under ``torchrun`` with PyTorch DDP.
 
 Every rank builds the *same* global batch of a step from the seeded stream ``(seed, step)``
 (:func:`~specgen_addon.train.loop.make_step_batches`) and keeps a disjoint, contiguous shard of its

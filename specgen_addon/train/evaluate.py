@@ -8,7 +8,7 @@ PSNR/SSIM come from :mod:`specgen_addon.metrics` (one normalisation used project
 With ``refine`` (the CLI's default) the table is also refined to its input photo
 (:func:`specgen_addon.refine.refine_brdf`, canonical lighting) and scored the same way, and both
 tables' *self-reproduction* is reported: rendered under the input's lighting against the input
-image, RGB PSNR and mean ΔE2000 (issue 10: every fidelity figure comes with it).
+image, RGB PSNR and mean ΔE2000 (every fidelity figure comes with it).
 """
 
 from __future__ import annotations
@@ -100,7 +100,7 @@ def format_results(res: dict[str, Any]) -> str:
     return "\n".join(lines)
 
 
-# --- per-family evaluation (issue 11) ------------------------------------------------------------
+# --- per-family evaluation ------------------------------------------------------------
 
 #: The mixed corpus the default model trains on (configs/default.json), whose test split is scored.
 MIXED_CORPUS_SIZE = 2900

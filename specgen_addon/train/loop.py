@@ -92,7 +92,7 @@ class TrainConfig:
     val_every: int = 250
     val_materials: int = 8
     threads: int = 2
-    #: Family mix of the corpus (family → weight); None: the classic recipe only (issue 3).
+    #: Family mix of the corpus (family → weight); None: the classic recipe only.
     families: dict[str, float] | None = None
     #: Chance of each family at every step's draw (family → weight; normalised): each material is
     #: drawn with its family's weight shared among the family's materials, so the corpus (and with

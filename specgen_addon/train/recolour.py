@@ -2,7 +2,7 @@
 
 The network fits its training materials 1.1 dB better than held-out ones, and a training material
 whose reflectances are swapped for *other training* spectra loses as much as with held-out ones
-(docs/model.md, "The forty-fourth session"): it learns the corpus's materials as combinations.
+(lab/notebook): it learns the corpus's materials as combinations.
 This module makes new combinations at every step without rendering anything new.
 
 A corpus BRDF is affine in many of its reflectance spectra ρ(λ) (a diffuse base under a coat, a

@@ -1,4 +1,4 @@
-"""Corpus material families beyond the classic plastic/metal recipe (issue 11), one module each.
+"""Corpus material families beyond the classic plastic/metal recipe, one module each.
 
 ``classic`` (:class:`~..material.Material`), :class:`TintedCoat`, :class:`CarPaint`,
 :class:`ThinFilm`, :class:`Sheen` and :class:`Lobes` (long-tailed, very sharp and retro-reflective
