@@ -15,7 +15,7 @@ from __future__ import annotations
 
 import math
 import time
-from collections.abc import Iterator
+from collections.abc import Callable, Iterator
 
 import bpy
 
@@ -27,8 +27,10 @@ from .render import SavedAttributes, specgen_materials
 PREVIEW_PERCENT = 25
 PREVIEW_SAMPLES = 16
 #: Test renders of the estimate: about this many pixels, at these two sample counts.
-TEST_PIXELS = 4096
-TEST_SAMPLES = (1, 4)
+TEST_PIXELS = 16384
+TEST_SAMPLES = (1, 8)
+#: Seconds the adaptive-sampling test render may take at most (with all samples taken).
+ADAPTIVE_TEST_S = 1.5
 #: Polls (timer ticks) a started render job may take to show up as running.
 START_POLLS = 50
 
@@ -94,13 +96,16 @@ def _timed_render(scene: bpy.types.Scene) -> float:
 
 
 def measure_cost(scene: bpy.types.Scene) -> RenderCost:
-    """Cost model of the scene from two tiny test renders (a second or two for simple scenes)."""
+    """Cost model of the scene from tiny test renders (a few seconds for simple scenes): two at
+    fixed samples for the overhead and the rate, and with adaptive sampling on, one at the scene's
+    own samples for the share adaptive sampling takes."""
     w, h = render_size(scene)
     scale = min(1.0, math.sqrt(TEST_PIXELS / (w * h)))
+    r, c = scene.render, scene.cycles
+    samples, adaptive, percent = c.samples, c.use_adaptive_sampling, r.resolution_percentage
     with _Settings(scene) as s:
-        r, c = scene.render, scene.cycles
         s._set(r, "engine", "CYCLES")
-        s._set(r, "resolution_percentage", max(1, int(r.resolution_percentage * scale)))
+        s._set(r, "resolution_percentage", max(1, int(percent * scale)))
         s._set(r, "use_persistent_data", False)
         s._set(r, "use_compositing", False)
         s._set(c, "use_denoising", False)
@@ -111,7 +116,16 @@ def measure_cost(scene: bpy.types.Scene) -> RenderCost:
         c.samples = TEST_SAMPLES[1]
         t2 = _timed_render(scene)
         tw, th = render_size(scene)
-    return fit_cost(tw * th, TEST_SAMPLES, (t1, t2))
+        cost = fit_cost(tw * th, TEST_SAMPLES, (t1, t2))
+        if adaptive and samples > TEST_SAMPLES[1]:
+            # as many pixels as fit ADAPTIVE_TEST_S at all samples (at least a 16-pixel square)
+            pixels = max(256.0, ADAPTIVE_TEST_S / (cost.rate_s * samples))
+            r.resolution_percentage = max(1, min(percent, int(percent * math.sqrt(pixels / (w * h)))))
+            c.use_adaptive_sampling, c.samples = True, samples
+            t3 = _timed_render(scene)
+            aw, ah = render_size(scene)
+            cost = cost.with_adaptive(aw * ah, samples, t3)
+    return cost
 
 
 def estimate(scene: bpy.types.Scene, bands: int, cost: RenderCost) -> tuple[float, str]:
@@ -121,6 +135,8 @@ def estimate(scene: bpy.types.Scene, bands: int, cost: RenderCost) -> tuple[floa
     samples = scene.cycles.samples
     seconds = cost.predict(n, w * h, samples)
     extra = ", plus denoising" if scene.cycles.use_denoising else ""
+    if cost.sample_fraction < 1.0:
+        extra += f", adaptive sampling taking ~{100 * cost.sample_fraction:.0f} % of the samples"
     return seconds, (f"about {format_duration(seconds)}: {n} Cycles renders of {w}×{h} at "
                      f"{samples} samples{extra}")
 
@@ -132,6 +148,14 @@ def band_render(scene: bpy.types.Scene, layer: str, interactive: bool) -> Iterat
     if not interactive or bpy.app.background:
         bpy.ops.render.render(write_still=False, layer=layer, scene=scene.name)
         return
+    yield from render_job(lambda: bpy.ops.render.render("INVOKE_DEFAULT", write_still=False,
+                                                        layer=layer, scene=scene.name))
+
+
+def render_job(start: Callable[[], set[str]]) -> Iterator[None]:
+    """Run ``start`` (which starts Blender's render job) and yield until Blender's
+    ``render_complete`` or ``render_cancel`` handler fires (or the job ends without either);
+    raises Cancelled when the render was cancelled."""
     state: dict[str, str] = {}
 
     def complete(*_args) -> None:
@@ -144,9 +168,8 @@ def band_render(scene: bpy.types.Scene, layer: str, interactive: bool) -> Iterat
     handlers.render_complete.append(complete)
     handlers.render_cancel.append(cancel)
     try:
-        started = bpy.ops.render.render("INVOKE_DEFAULT", write_still=False, layer=layer,
-                                        scene=scene.name)
-        if "CANCELLED" in started:
+        started = start()
+        if "CANCELLED" in started and "end" not in state:
             raise SpecGenError("Blender did not start the band render (is another render running?)")
         seen_running, polls = False, 0
         while "end" not in state:

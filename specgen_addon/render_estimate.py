@@ -4,7 +4,9 @@ A Cycles render costs roughly ``overhead + rate × pixels × samples``: the over
 BVH, kernels, image handling) does not grow with the image, the rest does. Two tiny test renders
 of the scene itself at the same size with different sample counts separate the two
 (:func:`fit_cost`); the stack then costs that per band group (:meth:`RenderCost.predict`).
-Adaptive sampling and persistent data only make the real render faster, so the figure leans high.
+With adaptive sampling on, a third tiny render at the scene's own sample count measures the share
+of samples it really takes (:meth:`RenderCost.with_adaptive`). Persistent data only makes the
+real render faster, so the figure leans high.
 """
 
 from __future__ import annotations
@@ -16,14 +18,23 @@ from .errors import SpecGenError
 
 @dataclass(frozen=True)
 class RenderCost:
-    """``overhead_s`` per render and ``rate_s`` per pixel-sample, measured on this machine."""
+    """``overhead_s`` per render and ``rate_s`` per pixel-sample, measured on this machine;
+    ``sample_fraction``: the share of the samples adaptive sampling actually takes (1: all)."""
 
     overhead_s: float
     rate_s: float
+    sample_fraction: float = 1.0
 
     def render_s(self, pixels: int, samples: int) -> float:
         """Seconds of one render of ``pixels`` pixels at ``samples`` samples per pixel."""
-        return self.overhead_s + self.rate_s * float(pixels) * float(samples)
+        return self.overhead_s + self.rate_s * float(pixels) * float(samples) * self.sample_fraction
+
+    def with_adaptive(self, pixels: int, samples: int, seconds: float) -> RenderCost:
+        """This cost with the sample share of adaptive sampling, from one render of ``pixels``
+        pixels with adaptive sampling up to ``samples`` that took ``seconds``."""
+        full = self.rate_s * pixels * samples
+        share = (seconds - self.overhead_s) / full if full > 0 else 1.0
+        return RenderCost(self.overhead_s, self.rate_s, float(min(max(share, 0.01), 1.0)))
 
     def predict(self, renders: int, pixels: int, samples: int) -> float:
         """Seconds of ``renders`` renders (one per band group) of the same size and samples."""

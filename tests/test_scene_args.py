@@ -74,6 +74,10 @@ def test_render_cost_model_separates_overhead_from_samples():
     assert cost.predict(7, 1920 * 1080, 16) == pytest.approx(7 * (0.4 + 2e-6 * 1920 * 1080 * 16))
     noisy = fit_cost(4096, (1, 4), (0.5, 0.49))    # timer noise: never a negative rate
     assert noisy.rate_s > 0 and noisy.overhead_s >= 0
+    adaptive = truth.with_adaptive(256, 4096, truth.render_s(256, 4096 // 4))  # a quarter taken
+    assert adaptive.sample_fraction == pytest.approx(0.25)
+    assert adaptive.render_s(1000, 4096) == pytest.approx(truth.render_s(1000, 1024))
+    assert truth.with_adaptive(256, 64, 1e3).sample_fraction == 1.0       # never above all samples
     assert [format_duration(s) for s in (45, 210, 9000)] == ["45 s", "3.5 min", "2.5 h"]
     with pytest.raises(SpecGenError):
         fit_cost(4096, (4, 4), (1.0, 1.0))
