@@ -19,8 +19,8 @@ from pathlib import Path
 
 import numpy as np
 
-from .errors import ImageInputError
 from . import limits
+from .errors import ImageInputError
 from .limits import MAX_WORK_SIDE
 
 
@@ -58,9 +58,8 @@ def image_size(path: str | Path) -> tuple[int, int] | None:
                 return int(x1 - x0 + 1), int(y1 - y0 + 1)
         from PIL import Image
 
-        with _unlimited_pil():
-            with Image.open(path) as im:
-                return im.size
+        with _unlimited_pil(), Image.open(path) as im:
+            return im.size
     except ImportError:
         return None
     except Exception as exc:  # unreadable header: one line naming the file
@@ -73,9 +72,8 @@ def _pil_header_size(path: Path) -> tuple[int, int] | None:
     try:
         from PIL import Image
 
-        with _unlimited_pil():
-            with Image.open(path) as im:
-                return im.size
+        with _unlimited_pil(), Image.open(path) as im:
+            return im.size
     except Exception:  # noqa: BLE001 - the caller reports the first reader's error
         return None
 
@@ -129,33 +127,51 @@ def _srgb_lut(levels: int) -> np.ndarray:
     return _SRGB_LUT[levels]
 
 
-def _to_linear_rows(rows: np.ndarray, levels: int, has_alpha: bool) -> np.ndarray:
-    """Integer codes (r, W, C) → float32: colour through the sRGB table, alpha divided linearly."""
-    out = _srgb_lut(levels)[rows]
+def _linear_lut(levels: int) -> np.ndarray:
+    """Value of each code of a linearly encoded ``levels``-level channel (float32)."""
+    return (np.arange(levels, dtype=np.float64) / (levels - 1)).astype(np.float32)
+
+
+def _to_linear_rows(rows: np.ndarray, levels: int, has_alpha: bool, linear: bool = False) -> np.ndarray:
+    """Integer codes (r, W, C) → float32: colour through the sRGB table (or as stored, ``linear``),
+    alpha divided linearly."""
+    out = (_linear_lut(levels) if linear else _srgb_lut(levels))[rows]
     if has_alpha:
         out[..., -1] = rows[..., -1].astype(np.float32) / (levels - 1)
     return out
 
 
-def _decode_downsampled(codes: np.ndarray, levels: int, has_alpha: bool, factor: int) -> np.ndarray:
+def _decode_downsampled(codes: np.ndarray, levels: int, has_alpha: bool, factor: int,
+                        linear: bool = False, saturated: list | None = None) -> np.ndarray:
     """Linear float32 image from integer codes (H, W, C), box-averaged by ``factor`` in linear
-    light a band of rows at a time (memory: the codes plus one band)."""
+    light a band of rows at a time (memory: the codes plus one band). ``saturated``, a list, gets
+    the (H', W') mask of output pixels holding any colour code at full scale appended."""
     h, w, c = codes.shape
+    colours = c - 1 if has_alpha else c
     if factor <= 1:
-        return _to_linear_rows(codes, levels, has_alpha)
+        if saturated is not None:
+            saturated.append(np.any(codes[..., :colours] >= levels - 1, axis=-1))
+        return _to_linear_rows(codes, levels, has_alpha, linear)
     oh, ow = h // factor, w // factor
     out = np.empty((oh, ow, c), np.float32)
+    sat = np.zeros((oh, ow), bool)
     band = max(1, (1 << 22) // max(1, w * c * factor))  # ~16 MB of float32 per band
     for y0 in range(0, oh, band):
         y1 = min(oh, y0 + band)
         rows = codes[y0 * factor:y1 * factor, :ow * factor]
-        lin = _to_linear_rows(rows, levels, has_alpha)
+        lin = _to_linear_rows(rows, levels, has_alpha, linear)
         out[y0:y1] = lin.reshape(y1 - y0, factor, ow, factor, c).mean(axis=(1, 3))
+        sat[y0:y1] = np.any(rows[..., :colours] >= levels - 1, axis=-1) \
+            .reshape(y1 - y0, factor, ow, factor).any(axis=(1, 3))
+    if saturated is not None:
+        saturated.append(sat)
     return out
 
 
-def pil_to_linear(im, path: str | Path) -> np.ndarray:
-    """A Pillow image (header read, pixels not yet decoded) as linear float32 (H, W, 3|4)."""
+def pil_to_linear(im, path: str | Path, linear: bool = False, saturated: list | None = None) -> np.ndarray:
+    """A Pillow image (header read, pixels not yet decoded) as linear float32 (H, W, 3|4): codes
+    sRGB-decoded, or taken as stored with ``linear``. ``saturated`` (a list) gets the mask of pixels
+    with a colour code at full scale appended."""
     mode = im.mode
     w, h = im.size
     factor = max(1, math.ceil(max(w, h) / MAX_WORK_SIDE))
@@ -194,7 +210,7 @@ def pil_to_linear(im, path: str | Path) -> np.ndarray:
     if codes.shape[-1] not in (3, 4):
         raise ImageInputError(f"{path}: expected an RGB or RGBA image, got {codes.shape[-1]} channels "
                               f"(mode {mode})")
-    out = _decode_downsampled(codes, levels, codes.shape[-1] == 4, factor)
+    out = _decode_downsampled(codes, levels, codes.shape[-1] == 4, factor, linear, saturated)
     if factor > 1:
         notes.append(f"downsampled {factor}× to {out.shape[1]}×{out.shape[0]}")
     if notes:

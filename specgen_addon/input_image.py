@@ -16,12 +16,16 @@ Canonical input (:func:`render_input`), fixed so that every training and test im
 Training variants (:func:`render_training_input`) keep geometry and key light and change the
 environment map (among :data:`specgen_addon.lighting.TRAIN_ENVS`), its rotation and the exposure.
 
-User images (:func:`load_sphere_image`): EXR (linear) or PNG/JPEG (8/16-bit, sRGB-decoded), RGB or
-RGBA. The sphere is found from the alpha channel when there is one, else as a circle fitted (RANSAC)
+User images (:func:`load_sphere_image`): read by :mod:`specgen_addon.photo_read` (EXR/HDR linear,
+8/16-bit PNG/TIFF/JPEG sRGB-decoded or linear, camera RAW developed linearly; saturated pixels
+marked), RGB or RGBA. The circle can be the user's (:class:`PhotoSource`: ``--circle``, ``--mask``).
+Else the sphere is found from the alpha channel when there is one, else as a circle fitted (RANSAC)
 to the outline of the foreground (pixels whose colour departs from the border's median colour by
 more than a threshold; on an exactly black background, every non-zero pixel). The circle is then
 refined to a fraction of a pixel from the outline's partly covered pixels
-(:mod:`specgen_addon.sphere_edge`). A sphere framed on whole pixels is cropped to its bounding
+(:mod:`specgen_addon.sphere_edge`). A camera photo (no black or single-colour background, or no
+foreground outline that is a circle) is found from its lit outline instead
+(:mod:`specgen_addon.sphere_detect`). A sphere framed on whole pixels is cropped to its bounding
 square and copied pixel for pixel; any other (off the grid, antialiased, another size) is
 resampled bilinearly about the refined circle. Either way the background becomes 0.
 :func:`crop_sphere` also says which of the two it did (:class:`SphereCrop`), and the pipeline gives
@@ -32,9 +36,9 @@ from __future__ import annotations
 
 import functools
 import warnings
+from collections.abc import Callable
 from dataclasses import dataclass, replace
 from pathlib import Path
-from typing import Callable
 
 import numpy as np
 
@@ -160,9 +164,8 @@ def write_exr_rgb(path: str | Path, rgb: np.ndarray, overwrite: bool = False) ->
 
     rgb = np.ascontiguousarray(rgb, dtype=np.float32)
     header = {"compression": OpenEXR.ZIP_COMPRESSION, "type": OpenEXR.scanlineimage}
-    with atomic_write(path, overwrite=overwrite) as tmp:
-        with OpenEXR.File(header, {"RGB": rgb}) as f:
-            f.write(str(tmp))
+    with atomic_write(path, overwrite=overwrite) as tmp, OpenEXR.File(header, {"RGB": rgb}) as f:
+        f.write(str(tmp))
 
 
 def write_png_srgb(path: str | Path, rgb: np.ndarray, overwrite: bool = False) -> None:
@@ -205,64 +208,15 @@ def save_input(rgb: np.ndarray, path: str | Path, overwrite: bool = False) -> li
 
 # -- loading user images --------------------------------------------------------------------------
 
-def read_image(path: str | Path) -> np.ndarray:
-    """Read an image as float (H, W, C): EXR values as stored (linear); 8/16-bit PNG/JPEG/TIFF
-    normalised to [0, 1] and sRGB-decoded (alpha kept linear)."""
-    path = Path(path)
-    if not path.is_file():
-        raise ImageInputError(f"{path}: {'is a folder, not an image file' if path.is_dir() else 'no such image file'}")
-    image_checks.check_image_header(path)  # pixel limit, before any decoding
-    from .image_io import ImageIOError, read_exr, read_ldr
+def read_image(path: str | Path, encoding: str = "auto") -> np.ndarray:
+    """Read an image as linear float (H, W, C) (:func:`specgen_addon.photo_read.read_photo`): EXR
+    values as stored; 8/16-bit PNG/JPEG/TIFF normalised to [0, 1] and sRGB-decoded unless
+    ``encoding="linear"`` (alpha kept linear)."""
+    from .photo_read import read_photo, warn_notes
 
-    if path.suffix.lower() == ".exr":
-        try:
-            channels, _ = read_exr(path)  # OpenEXR, or Blender's bundled OpenImageIO
-        except ImageIOError as exc:
-            raise ImageInputError(f"{path}: cannot read EXR ({exc})") from None
-        names = [n for n in ("R", "G", "B", "A") if n in channels]
-        if names[:3] != ["R", "G", "B"]:
-            raise ImageInputError(f"{path}: EXR needs R, G, B channels, has "
-                                  f"{', '.join(sorted(channels))} ({len(channels)} channels)")
-        arr = np.stack([np.asarray(channels[n], np.float32) for n in names], -1)
-        return image_checks.clean_exr_pixels(image_checks.downsample_linear(arr), path)
-    try:
-        from PIL import Image, UnidentifiedImageError
-    except ImportError:  # a stock Blender: its bundled OpenImageIO decodes the file
-        try:
-            arr = read_ldr(path)
-        except ImageIOError as exc:
-            raise ImageInputError(str(exc)) from None
-        if arr.shape[-1] in (3, 4):
-            arr[..., :3] = spectra.srgb_decode(arr[..., :3]).astype(np.float32)
-        return image_checks.downsample_linear(arr)
-    try:
-        with Image.open(path) as im:  # header only: the limit is checked before decoding
-            return image_checks.pil_to_linear(im, path)
-    except (UnidentifiedImageError, OSError) as exc:
-        raise ImageInputError(f"{path}: cannot read image ({exc})") from None
-
-
-def _read_png16_rgb(path: Path) -> np.ndarray | None:
-    """Pillow reads 16-bit RGB(A) PNGs as 8-bit; OpenImageIO keeps all 16 bits."""
-    try:
-        import OpenImageIO as oiio
-    except ImportError:  # pragma: no cover - OpenImageIO is a pinned requirement
-        return None
-    inp = oiio.ImageInput.open(str(path))
-    if inp is None:
-        return None
-    try:
-        spec = inp.spec()
-        if spec.format != oiio.UINT16 or spec.nchannels not in (3, 4) \
-                or spec.width * spec.height > image_checks.MAX_WORK_SIDE ** 2:
-            return None  # gray, gray+alpha and large 16-bit images: read_image converts them
-        data = inp.read_image(0, 0, 0, spec.nchannels, "float")
-    finally:
-        inp.close()
-    arr = np.asarray(data, np.float32).reshape(spec.height, spec.width, spec.nchannels)
-    if arr.shape[-1] in (3, 4):
-        arr[..., :3] = spectra.srgb_decode(arr[..., :3]).astype(np.float32)
-    return arr
+    photo = read_photo(path, encoding=encoding)
+    warn_notes(photo, path)
+    return photo.rgb
 
 
 @dataclass(frozen=True)
@@ -273,11 +227,88 @@ class SphereCrop:
     copied pixel for pixel (a canonical render); False when it was resampled (off the grid,
     antialiased, another size: every camera photo). The two kinds of input look different to the
     network, and the shipped weights hold one network for each
-    (:func:`specgen_addon.model.shipped_weights`).
+    (:func:`specgen_addon.model.shipped_weights`). ``circle`` is the circle used (cx, cy, r in
+    the source image's pixels, centres at +0.5) and ``circle_source`` how it was obtained;
+    ``saturated`` marks the crop's pixels that saw a saturated source pixel (None: none).
     """
 
     image: np.ndarray  # (size, size, 3) linear sRGB, float32
     copied: bool
+    circle: tuple[float, float, float] | None = None
+    circle_source: str = ""
+    saturated: np.ndarray | None = None   # (size, size) bool
+    encoding: str = ""
+
+    def describe(self) -> str:
+        """One line for a run's report: the circle, how it was found, and the saturated share."""
+        if self.circle is None:
+            return "sphere: as given"
+        cx, cy, r = self.circle
+        sat = ""
+        if self.saturated is not None and self.saturated.any():
+            sat = f"; {100 * self.saturated.mean() / (np.pi / 4):.1f} % of the sphere saturated (left out of the fit)"
+        enc = f"; decoded {self.encoding}" if self.encoding else ""
+        return f"sphere: centre ({cx:.2f}, {cy:.2f}) px, radius {r:.2f} px ({self.circle_source}){enc}{sat}"
+
+
+@dataclass(frozen=True)
+class PhotoSource:
+    """A photo file and the user's choices about it: how its codes are encoded
+    (:data:`specgen_addon.photo_read.ENCODINGS`), a white level above which values count as
+    saturated, and where the sphere is: a circle (cx, cy, r in pixels, x right, y down, from the
+    top-left corner) or a mask file (the sphere white), else found in the photo."""
+
+    path: Path
+    encoding: str = "auto"
+    white_level: float | None = None
+    circle: tuple[float, float, float] | None = None
+    mask: Path | None = None
+
+    def crop(self, size: int = CANONICAL_SIZE) -> SphereCrop:
+        return load_sphere_crop(self.path, size, encoding=self.encoding, white_level=self.white_level,
+                                circle=self.circle, mask=self.mask)
+
+    @property
+    def linear(self) -> bool:
+        """Whether the photo's values are unclipped linear light (a float file)."""
+        from .photo_read import FLOAT_SUFFIXES
+
+        return Path(self.path).suffix.lower() in FLOAT_SUFFIXES
+
+
+def parse_circle(text: str) -> tuple[float, float, float]:
+    """``"X,Y,R"`` (pixels) → (cx, cy, r); one clear sentence when it is not three numbers with R > 0."""
+    try:
+        values = tuple(float(v) for v in str(text).replace(" ", "").split(","))
+    except ValueError:
+        values = ()
+    if len(values) != 3 or not all(np.isfinite(values)) or values[2] <= 0:
+        raise ImageInputError(f"--circle takes X,Y,R in pixels (centre from the top-left corner, radius > 0), "
+                              f"got {text!r}")
+    return values  # type: ignore[return-value]
+
+
+def read_mask(path: str | Path, shape: tuple[int, int]) -> np.ndarray:
+    """A mask file as coverage in [0, 1] (H, W): its alpha if it has one, else its brightness."""
+    from .photo_read import read_photo
+
+    photo = read_photo(path, encoding="linear")
+    arr = photo.rgb
+    cov = arr[..., 3] if arr.shape[-1] == 4 and not np.all(arr[..., 3] > 0.999) else arr[..., :3].mean(-1)
+    if cov.shape != tuple(shape):
+        raise ImageInputError(f"{path}: the mask is {cov.shape[1]}×{cov.shape[0]} pixels, the photo "
+                              f"{shape[1]}×{shape[0]}")
+    return np.clip(cov, 0.0, 1.0)
+
+
+def mask_circle(coverage: np.ndarray) -> tuple[float, float, float]:
+    """The circle of a soft or hard mask: centroid and area-equivalent radius (pixels)."""
+    area = float(coverage.sum())
+    if area < np.pi * MIN_SPHERE_RADIUS_PX ** 2 * 0.5:
+        raise ImageInputError("the mask covers no sphere")
+    ys, xs = np.mgrid[0:coverage.shape[0], 0:coverage.shape[1]]
+    return (float((coverage * (xs + 0.5)).sum() / area), float((coverage * (ys + 0.5)).sum() / area),
+            float(np.sqrt(area / np.pi)))
 
 
 def load_sphere_image(path: str | Path, size: int = CANONICAL_SIZE) -> np.ndarray:
@@ -289,20 +320,59 @@ def load_sphere_image(path: str | Path, size: int = CANONICAL_SIZE) -> np.ndarra
     return load_sphere_crop(path, size).image
 
 
-def load_sphere_crop(path: str | Path, size: int = CANONICAL_SIZE) -> SphereCrop:
-    """:func:`load_sphere_image`, with whether the sphere was copied or resampled."""
+def load_sphere_crop(path: str | Path, size: int = CANONICAL_SIZE, encoding: str = "auto",
+                     white_level: float | None = None, circle: tuple[float, float, float] | None = None,
+                     mask: str | Path | None = None) -> SphereCrop:
+    """:func:`load_sphere_image`, with whether the sphere was copied or resampled, the circle used
+    and the saturated pixels (:class:`PhotoSource` names the choices)."""
+    from .photo_read import read_photo, warn_notes
+
     path = Path(path)
-    arr = None
-    if path.is_file():
-        image_checks.check_image_header(path)
-    if path.suffix.lower() == ".png":
-        arr = _read_png16_rgb(path) if path.is_file() else None
-    if arr is None:
-        arr = read_image(path)
+    photo = read_photo(path, encoding=encoding, white_level=white_level)
+    warn_notes(photo, path)
+    arr = photo.rgb
+    scale = 1.0
     try:
-        return crop_sphere(arr, size)
+        if circle is not None or mask is not None:
+            full = image_checks.image_size(path) if path.suffix.lower() not in _raw_suffixes() else None
+            scale = arr.shape[1] / full[0] if full else 1.0   # a photo downsampled on reading
+            if mask is not None:
+                cov = read_mask(mask, arr.shape[:2])
+                c = mask_circle(cov)
+                return _crop_at(arr, c, size, f"from the mask {Path(mask).name}", photo)
+            cx, cy, r = (v * scale for v in circle)
+            return _crop_at(arr, (cx, cy, r), size, "given", photo)
+        crop = crop_sphere(arr, size)
+        return replace(crop, saturated=_saturated_in_crop(photo.saturated, crop.circle, size),
+                       encoding=photo.encoding)
     except ImageInputError as exc:
         raise ImageInputError(f"{path}: {exc}") from None
+
+
+def _raw_suffixes() -> tuple[str, ...]:
+    from .photo_read import RAW_SUFFIXES
+
+    return RAW_SUFFIXES
+
+
+def _crop_at(arr: np.ndarray, circle: tuple[float, float, float], size: int, source: str, photo) -> SphereCrop:
+    """The crop about a circle the user gave (directly or as a mask), checked to lie in the frame."""
+    cx, cy, r = circle
+    h, w = arr.shape[:2]
+    if r < MIN_SPHERE_RADIUS_PX / 2 or cx - r < -0.5 * r or cy - r < -0.5 * r or cx + r > w + 0.5 * r \
+            or cy + r > h + 0.5 * r:
+        raise ImageInputError(f"the circle ({cx:g}, {cy:g}, r {r:g}) does not lie in the {w}×{h} image")
+    rgb = np.clip(np.asarray(arr[..., :3], np.float64), 0.0, None)
+    return SphereCrop(_resample_circle(rgb, cx, cy, r, size), False, (cx, cy, r), source,
+                      _saturated_in_crop(photo.saturated, (cx, cy, r), size), photo.encoding)
+
+
+def _saturated_in_crop(saturated: np.ndarray | None, circle, size: int) -> np.ndarray | None:
+    """The crop's pixels that any saturated source pixel reaches (through the resampling)."""
+    if saturated is None or circle is None or not saturated.any():
+        return None
+    spread = _resample_circle(np.repeat(saturated[..., None].astype(np.float64), 3, -1), *circle, size)
+    return spread[..., 0] > 1e-3
 
 
 def prepare_sphere_array(arr: np.ndarray, size: int = CANONICAL_SIZE) -> np.ndarray:
@@ -332,41 +402,75 @@ def crop_sphere(arr: np.ndarray, size: int = CANONICAL_SIZE) -> SphereCrop:
             raise ImageInputError("the alpha channel covers no sphere")
         contrast = coverage
         rough = _circle_of_mask(mask, fit_outline=False)
+        source = "from the alpha channel"
     else:
         try:
             mask, contrast = _foreground(rgb)
             rough = _circle_of_mask(mask, fit_outline=True)
+            source = "found: foreground outline"
         except ImageInputError as exc:
             try:  # JPEG noise around a black background: ignore the darkest 1 % of the range
                 mask, contrast = _foreground(rgb, noise_floor=0.01)
                 rough = _circle_of_mask(mask, fit_outline=True)
+                source = "found: foreground outline"
             except ImageInputError:
-                raise exc from None
+                if _clean_background(rgb):   # a render's outline that is not a circle
+                    raise exc from None
+                # a camera photo: the unlit side merges with the ground, a stand touches the ball
+                return _photo_crop(rgb, size, exc)
+        if not _clean_background(rgb):
+            return _photo_crop(rgb, size, None, fallback=(mask, contrast, rough))
     framed = _whole_pixel_framing(rough, mask)
     if framed is not None:  # a sphere already framed exactly stays untouched
-        return SphereCrop(_resample_circle(rgb, *framed, size), copied=2.0 * framed[2] == size)
-    return SphereCrop(_resample_circle(rgb, *_refined_circle(contrast, rough), size), copied=False)
+        return SphereCrop(_resample_circle(rgb, *framed, size), copied=2.0 * framed[2] == size,
+                          circle=framed, circle_source=source + ", whole pixels")
+    refined = _refined_circle(contrast, rough)
+    return SphereCrop(_resample_circle(rgb, *refined, size), copied=False, circle=tuple(refined),
+                      circle_source=source)
+
+
+def _clean_background(rgb: np.ndarray) -> bool:
+    """Whether the background is a render's: exactly black around the object, or a single colour
+    along the whole border (then the foreground's outline is the sphere's)."""
+    lum = rgb @ np.array([0.2126, 0.7152, 0.0722])
+    if np.mean(lum == 0) >= 0.1:
+        return True
+    border = np.concatenate([lum[:2].ravel(), lum[-2:].ravel(), lum[:, :2].ravel(), lum[:, -2:].ravel()])
+    top = float(np.percentile(lum, 99.5))
+    return top > 0 and float(np.ptp(border)) <= 1e-3 * top
+
+
+def _photo_crop(rgb: np.ndarray, size: int, error: ImageInputError | None, fallback=None) -> SphereCrop:
+    """The crop of a camera photo about the ball found from its lit outline
+    (:func:`specgen_addon.sphere_detect.find_ball`); where that finds nothing, the foreground's
+    circle (``fallback``), else ``error``."""
+    from .sphere_detect import find_ball
+
+    try:
+        found = find_ball(rgb)
+    except ImageInputError as exc:
+        if fallback is None:
+            raise (error or exc) from None
+        _, contrast, rough = fallback
+        refined = _refined_circle(contrast, rough)
+        return SphereCrop(_resample_circle(rgb, *refined, size), False, tuple(refined), "found: foreground outline")
+    return SphereCrop(_resample_circle(rgb, *found.circle, size), False, found.circle,
+                      f"found: lit outline, {found.arc:.0%} of it seen, rms {found.rms_px:.2f} px")
 
 
 def _ndimage():
-    """scipy.ndimage, or its numpy twin (:mod:`specgen_addon.ndimage_np`) in a stock Blender."""
-    try:
-        from scipy import ndimage
-    except ImportError:
-        from . import ndimage_np as ndimage
-    return ndimage
+    """The numpy ndimage twin (:mod:`specgen_addon.ndimage_np`): one implementation on every path,
+    the CLI's and a stock Blender's alike (scipy serves the tests as an oracle)."""
+    from . import ndimage_np
+
+    return ndimage_np
 
 
 def _ransac_circle(pts: np.ndarray, residual_threshold: float, max_trials: int):
-    """skimage's RANSAC circle fit, or its numpy twin in a stock Blender: (model, inliers)."""
-    try:
-        from skimage.measure import CircleModel, ransac
-    except ImportError:
-        from .ndimage_np import ransac_circle
+    """RANSAC circle fit (numpy, :func:`specgen_addon.ndimage_np.ransac_circle`): (model, inliers)."""
+    from .ndimage_np import ransac_circle
 
-        return ransac_circle(pts, residual_threshold=residual_threshold, max_trials=max_trials)
-    return ransac(pts, CircleModel, min_samples=3, residual_threshold=residual_threshold,
-                  max_trials=max_trials, rng=0)
+    return ransac_circle(pts, residual_threshold=residual_threshold, max_trials=max_trials)
 
 
 def _foreground(rgb: np.ndarray, noise_floor: float = 0.0) -> tuple[np.ndarray, np.ndarray]:

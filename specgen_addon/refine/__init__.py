@@ -139,6 +139,9 @@ class RefineOptions:
     energy_check: bool = True
     blur_px: float | None = None
     score_holdout: bool = False
+    #: (S, S) bool, pixels of the crop left out of the fit (saturated in the source photo in any
+    #: format: :attr:`specgen_addon.input_image.SphereCrop.saturated`); None: none beyond clip_level
+    exclude: np.ndarray | None = field(default=None, compare=False, hash=False)
 
     def __post_init__(self) -> None:
         if self.blur_px is not None and not (np.isfinite(self.blur_px) and 0.0 <= self.blur_px <= 4.0):
@@ -272,6 +275,8 @@ def refine_brdf(table: BRDFTable, photo: np.ndarray, lighting=None, options: Ref
     clipped = np.zeros(b.shape[0], dtype=bool)
     if options.clip_level is not None:
         clipped = np.any(b >= options.clip_level, axis=1)
+    if options.exclude is not None:
+        clipped |= op.observe(np.repeat(np.asarray(options.exclude, np.float64)[..., None], 3, -1))[:, 0] > 0.5
     clipped_fraction = float(clipped.mean()) if clipped.size else 0.0
     if clipped_fraction > 0.25:
         warnings.append(f"{100 * clipped_fraction:.0f}% of the sphere is clipped at full scale; "
