@@ -25,6 +25,7 @@ import json
 import os
 import secrets
 import socket
+import stat
 import time
 from pathlib import Path
 from typing import Iterable, Iterator
@@ -32,8 +33,8 @@ from typing import Iterable, Iterator
 from .errors import OutputBusyError, OutputExistsError, OutputWriteError, SpecGenError
 from .limits import check_output_file, name_max
 
-#: Files and folders this process created: absolute path -> (st_dev, st_ino, sequence number).
-_LEDGER: dict[str, tuple[int, int, int]] = {}
+#: Files and folders this process created: absolute path -> (identity, sequence number).
+_LEDGER: dict[str, tuple[tuple, int]] = {}
 _SEQ = itertools.count(1)
 
 
@@ -43,19 +44,23 @@ def _current_umask() -> int:
     return mask
 
 
-def _identity(path: Path) -> tuple[int, int] | None:
+def _identity(path: Path) -> tuple | None:
+    """(device, inode, and for a file its modification time and size): an inode number freed
+    and reused by another process's new file at the same path is not taken for ours."""
     try:
         st = os.lstat(path)
     except OSError:
         return None
-    return st.st_dev, st.st_ino
+    if stat.S_ISDIR(st.st_mode):
+        return st.st_dev, st.st_ino
+    return st.st_dev, st.st_ino, st.st_mtime_ns, st.st_size
 
 
 def record_created(path: str | os.PathLike) -> None:
     """Enter ``path`` (just created by this process) in the ledger with its identity."""
     ident = _identity(Path(path))
     if ident is not None:
-        _LEDGER[os.path.abspath(path)] = (*ident, next(_SEQ))
+        _LEDGER[os.path.abspath(path)] = (ident, next(_SEQ))
 
 
 def ledger_mark() -> int:
@@ -66,14 +71,14 @@ def ledger_mark() -> int:
 def is_ours(path: str | os.PathLike) -> bool:
     """Whether ``path`` is still the very file or folder this process created."""
     entry = _LEDGER.get(os.path.abspath(path))
-    return entry is not None and _identity(Path(path)) == entry[:2]
+    return entry is not None and _identity(Path(path)) == entry[0]
 
 
 def created_since(mark: int, under: Iterable[str | os.PathLike] = ()) -> list[Path]:
     """Ledger entries made after ``mark`` (:func:`ledger_mark`), inside ``under`` if given
     (each a folder or a file), deepest first."""
     roots = [os.path.abspath(u) for u in under]
-    found = [p for p, (_, _, t) in _LEDGER.items() if t > mark and
+    found = [p for p, (_, t) in _LEDGER.items() if t > mark and
              (not roots or any(p == r or p.startswith(r.rstrip(os.sep) + os.sep) for r in roots))]
     return [Path(p) for p in sorted(found, key=lambda p: -p.count(os.sep))]
 
@@ -199,23 +204,33 @@ def atomic_write(path: str | os.PathLike, overwrite: bool = False) -> Iterator[P
 
 
 def _publish(tmp: Path, target: Path, overwrite: bool) -> None:
-    existed = target.exists()
-    if overwrite:
-        os.replace(tmp, target)
-    else:
-        try:
-            os.link(tmp, target)  # atomic, and never replaces a file that appeared meanwhile
-        except FileExistsError:
-            raise OutputExistsError(f"{target}: was written by another process meanwhile; "
-                                    "kept it (pass --overwrite to replace it)") from None
-        except OSError as exc:
-            if exc.errno not in (errno.EPERM, errno.ENOTSUP, errno.EXDEV, errno.EMLINK):
-                raise
-            os.replace(tmp, target)  # a file system without hard links
+    """Move the staged file onto ``target``. The ledger learns the file first (a rename or link
+    keeps its identity), so a stop at any instant leaves no published file unaccounted for; a
+    path that was another process's before stays theirs (it is never removed by a clean-up)."""
+    key = os.path.abspath(target)
+    ours = not os.path.lexists(target) or is_ours(target)
+    if ours:
+        record_created(tmp)
+        _LEDGER[key] = _LEDGER.pop(os.path.abspath(tmp))
+    try:
+        if overwrite:
+            os.replace(tmp, target)
         else:
-            tmp.unlink()
-    if not existed:
-        record_created(target)
+            try:
+                os.link(tmp, target)  # atomic, and never replaces a file that appeared meanwhile
+            except FileExistsError:
+                raise OutputExistsError(f"{target}: was written by another process meanwhile; "
+                                        "kept it (pass --overwrite to replace it)") from None
+            except OSError as exc:
+                if exc.errno not in (errno.EPERM, errno.ENOTSUP, errno.EXDEV, errno.EMLINK):
+                    raise
+                os.replace(tmp, target)  # a file system without hard links
+            else:
+                tmp.unlink()
+    except BaseException:
+        if ours and not is_ours(target):
+            _LEDGER.pop(key, None)
+        raise
 
 
 def write_npz(path: str | os.PathLike, **arrays) -> None:

@@ -110,7 +110,8 @@ def busy_writing(folder, seconds):
         # SpecGen's writer called from Blender's code: the file enters the ledger of what the
         # command made (inline, so that no frame of SpecGen's own code runs here)
         st = os.lstat(path)
-        io_utils._LEDGER[os.path.abspath(path)] = (st.st_dev, st.st_ino, next(io_utils._SEQ))
+        io_utils._LEDGER[os.path.abspath(path)] = ((st.st_dev, st.st_ino, st.st_mtime_ns, st.st_size),
+                                                   next(io_utils._SEQ))
         i += 1
     return i
 
@@ -147,20 +148,22 @@ from specgen_addon import cli
 
 out = Path({out!r})
 
-from specgen_addon.io_utils import make_dirs, record_created
+from specgen_addon.io_utils import atomic_write, make_dirs
+
+def write(path):
+    with atomic_write(path, overwrite=True) as tmp:
+        tmp.write_text("x")
 
 def work():
     make_dirs(out / "lookup")
-    (out / "lookup" / "table.json").write_text("{{}}")   # written before the stop, by our code
-    record_created(out / "lookup" / "table.json")
+    write(out / "lookup" / "table.json")   # written before the stop, by our code
     {before}
     print("READY", flush=True)
     {call}
     print("BACK IN OUR CODE", flush=True)
     t = time.monotonic()
     while time.monotonic() - t < 20:
-        (out / "lookup" / "ours.txt").write_text("x")
-        record_created(out / "lookup" / "ours.txt")
+        write(out / "lookup" / "ours.txt")
     return 0
 
 sys.exit(cli.run_guarded("the work", work, ([out], []), prog="s"))

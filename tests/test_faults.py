@@ -1,0 +1,324 @@
+"""Faults lose nothing: shared outputs, locks, full disks, long names, damaged networks.
+
+The disk-full cases use a 1 MiB tmpfs where the machine lets the tests mount one (root on
+Linux), and a write patched to fail with ENOSPC everywhere else.
+"""
+
+from __future__ import annotations
+
+import errno
+import json
+import os
+import shutil
+import socket
+import subprocess
+import sys
+import time
+from pathlib import Path
+
+import numpy as np
+import pytest
+
+from specgen_addon.errors import OutputBusyError, OutputExistsError, OutputWriteError, SpecGenError
+from specgen_addon.io_utils import OutputLock, atomic_write, lock_path
+
+REPO = Path(__file__).resolve().parents[1]
+EXAMPLE = REPO / "examples" / "sphere.png"
+WEIGHTS = REPO / "weights" / "specgen_default.pt"
+
+
+# ------------------------------------------------------------------------ owning what it made
+def test_a_failed_command_never_removes_a_file_another_process_published(tmp_path):
+    """The loser of a race on one output used to delete the winner's file on its way out."""
+    from specgen_addon.cli import run_guarded
+
+    out = tmp_path / "b.npz"
+
+    def work():
+        out.write_text("the other process's finished table")  # published meanwhile, not by us
+        with atomic_write(out) as tmp:  # our own write then finds it: refused
+            tmp.write_text("ours")
+
+    code = run_guarded("infer", work, ([], [out]))
+    assert code == 2
+    assert out.read_text() == "the other process's finished table"
+
+
+def test_a_write_without_overwrite_never_replaces_a_file_that_appeared_meanwhile(tmp_path):
+    out = tmp_path / "t.json"
+    with pytest.raises(OutputExistsError, match="another process"):
+        with atomic_write(out) as tmp:
+            tmp.write_text("ours")
+            out.write_text("theirs")
+    assert out.read_text() == "theirs"
+    assert sorted(p.name for p in tmp_path.iterdir()) == ["t.json"]
+
+
+def test_a_stopped_command_keeps_a_neighbours_outputs_in_its_folder(tmp_path):
+    """Two batch.py runs into one folder: the stopped one removes only what it made."""
+    from specgen_addon.interrupts import OutputGuard
+
+    out = tmp_path / "out"
+    out.mkdir()
+    with pytest.raises(KeyboardInterrupt):
+        with OutputGuard([out]):
+            with atomic_write(out / "mine.exr") as tmp:
+                tmp.write_text("mine")
+            (out / "theirs.exr").write_text("a neighbour's finished render")
+            raise KeyboardInterrupt
+    assert sorted(p.name for p in out.iterdir()) == ["theirs.exr"]
+
+
+def test_cleanup_spares_a_file_replaced_by_another_process_after_we_wrote_it(tmp_path):
+    from specgen_addon.interrupts import OutputGuard
+
+    out = tmp_path / "out"
+    out.mkdir()
+    with pytest.raises(RuntimeError):
+        with OutputGuard([out]):
+            with atomic_write(out / "a.exr") as tmp:
+                tmp.write_text("ours")
+            os.unlink(out / "a.exr")
+            (out / "a.exr").write_text("theirs, same name")  # another inode: not ours any more
+            raise RuntimeError("failed later")
+    assert (out / "a.exr").read_text() == "theirs, same name"
+
+
+# ------------------------------------------------------------------------------------ locks
+def test_an_output_being_written_is_refused_up_front_by_its_lock(tmp_path):
+    out = tmp_path / "b.npz"
+    with OutputLock([out]):
+        assert lock_path(out).is_file()
+        info = json.loads(lock_path(out).read_text())
+        assert info["pid"] == os.getpid() and info["host"] == socket.gethostname()
+        # another process on the same output: refused in well under a second, nothing written
+        t0 = time.perf_counter()
+        done = subprocess.run([sys.executable, "-m", "specgen_addon", "infer", str(EXAMPLE), "-o", str(out),
+                               "--quiet"], cwd=REPO, capture_output=True, text=True, timeout=120)
+        text = done.stdout + done.stderr
+        assert done.returncode == 2, text
+        assert "Traceback" not in text and f"SpecGen process {os.getpid()}" in text, text
+        assert time.perf_counter() - t0 < 60
+    assert not lock_path(out).exists()  # released on exit
+    assert sorted(p.name for p in tmp_path.iterdir()) == []
+
+
+def test_a_stale_lock_of_a_process_that_is_gone_is_taken_over(tmp_path):
+    out = tmp_path / "out"
+    gone = subprocess.run([sys.executable, "-c", "import os; print(os.getpid())"], capture_output=True,
+                          text=True).stdout.strip()
+    lock_path(out).write_text(json.dumps({"pid": int(gone), "host": socket.gethostname()}))
+    with OutputLock([out]) as lock:
+        assert lock.held and json.loads(lock_path(out).read_text())["pid"] == os.getpid()
+    assert not lock_path(out).exists()
+
+
+def test_a_lock_held_on_another_host_is_refused_with_its_owner(tmp_path):
+    out = tmp_path / "out"
+    lock_path(out).write_text(json.dumps({"pid": 1, "host": "render-node-7"}))
+    with pytest.raises(OutputBusyError, match="process 1 on render-node-7"):
+        with OutputLock([out]):
+            pass
+    assert lock_path(out).exists()  # not ours to remove
+
+
+def test_a_long_output_name_gets_a_lock_name_that_fits(tmp_path):
+    out = tmp_path / ("x" * 250 + ".npz")
+    assert len(lock_path(out).name.encode()) <= 255
+    with OutputLock([out]):
+        assert lock_path(out).is_file()
+
+
+# ------------------------------------------------------------------------------------ names
+@pytest.mark.parametrize("size", [246, 250, 255])
+def test_names_up_to_the_file_system_limit_are_written_despite_the_staging_name(tmp_path, size):
+    out = tmp_path / ("n" * (size - 4) + ".npz")
+    with atomic_write(out) as tmp:
+        assert len(tmp.name.encode()) <= 255 and tmp.suffix == ".npz"
+        tmp.write_bytes(b"x")
+    assert out.read_bytes() == b"x"
+
+
+def test_a_name_over_the_limit_is_one_sentence_before_any_work(tmp_path):
+    from specgen_addon.limits import check_output_file
+
+    with pytest.raises(SpecGenError, match="256 bytes long"):
+        check_output_file(tmp_path / ("n" * 252 + ".npz"))
+
+
+# ------------------------------------------------------------------------------- full disks
+@pytest.fixture
+def full_dir(tmp_path):
+    """A 1 MiB tmpfs (every table, render or big JSON overflows it); skipped where mounting is
+    not permitted (not root, a container without CAP_SYS_ADMIN, not Linux)."""
+    folder = tmp_path / "small"
+    folder.mkdir()
+    if sys.platform != "linux" or shutil.which("mount") is None:
+        pytest.skip("needs Linux mount for a size-limited tmpfs")
+    done = subprocess.run(["mount", "-t", "tmpfs", "-o", "size=1m", "tmpfs", str(folder)],
+                          capture_output=True, text=True)
+    if done.returncode != 0:
+        pytest.skip(f"cannot mount a size-limited tmpfs here ({done.stderr.strip() or done.returncode})")
+    try:
+        yield folder
+    finally:
+        subprocess.run(["umount", "-l", str(folder)], capture_output=True)
+
+
+def _big_table():
+    from specgen_addon.table import GRID_SHAPE, BRDFTable
+
+    return BRDFTable(np.full(GRID_SHAPE + (2,), 0.1, np.float32), np.array([500.0, 600.0]),
+                     ("500", "600"), {})
+
+
+def _writers(folder: Path) -> dict:
+    from specgen_addon import image_io, spectral_exr
+
+    def big_json():
+        with atomic_write(folder / "report.json") as tmp:
+            tmp.write_text(json.dumps(list(range(400_000))))
+
+    return {
+        "npz": (folder / "t.npz", lambda: _big_table().save(folder / "t.npz")),
+        "exr": (folder / "a.exr", lambda: image_io.write_exr(
+            folder / "a.exr", {c: np.random.rand(512, 512).astype(np.float32) for c in "RGB"})),
+        "spectral-exr": (folder / "s.exr", lambda: spectral_exr.write_spectral_exr(
+            folder / "s.exr", np.random.rand(128, 128, 21).astype(np.float32), np.linspace(380, 780, 21))),
+        "png": (folder / "p.png", lambda: image_io.write_png8(
+            folder / "p.png", (np.random.rand(1024, 1024, 3) * 255).astype(np.uint8))),
+        "json": (folder / "report.json", big_json),
+    }
+
+
+@pytest.mark.parametrize("kind", ["npz", "exr", "spectral-exr", "png", "json"])
+def test_a_full_disk_is_one_sentence_naming_the_output_and_leaves_nothing(kind, full_dir):
+    target, write = _writers(full_dir)[kind]
+    with pytest.raises(OutputWriteError) as info:
+        write()
+    assert str(info.value) == f"{target}: cannot be written (No space left on device); nothing partial was left"
+    assert list(full_dir.iterdir()) == []
+
+
+@pytest.mark.parametrize("kind", ["npz", "json"])
+def test_a_write_failing_with_enospc_is_one_sentence_where_no_tmpfs_can_be_mounted(kind, tmp_path,
+                                                                                   monkeypatch):
+    import builtins
+
+    real_open = builtins.open
+
+    class Full:
+        def __init__(self, fh):
+            self.fh, self.n = fh, 0
+
+        def write(self, data):
+            self.n += len(data)
+            if self.n > 100_000:
+                raise OSError(errno.ENOSPC, os.strerror(errno.ENOSPC))
+            return self.fh.write(data)
+
+        def __getattr__(self, name):
+            return getattr(self.fh, name)
+
+        def __enter__(self):
+            return self
+
+        def __exit__(self, *exc):
+            self.fh.close()
+
+    def fake_open(path, mode="r", *a, **k):
+        fh = real_open(path, mode, *a, **k)
+        return Full(fh) if "w" in mode and str(path).startswith(str(tmp_path)) else fh
+
+    monkeypatch.setattr(builtins, "open", fake_open)
+    monkeypatch.setattr(Path, "write_text", lambda self, text, *a, **k: fake_open(self, "w").write(text))
+    target, write = _writers(tmp_path)[kind]
+    with pytest.raises(OutputWriteError, match=f"^{target}: cannot be written \\(No space left on device\\)"):
+        write()
+    assert list(tmp_path.iterdir()) == []
+
+
+def test_a_full_disk_under_the_cli_prints_one_line_without_a_traceback(full_dir):
+    """numpy's zip writer used to leave its archive open after ENOSPC: one line of error, then
+    "Exception ignored … ValueError: seek of closed file" at exit."""
+    code = ("import sys, numpy as np; sys.path.insert(0, %r)\n"
+            "from specgen_addon.cli import run_guarded\n"
+            "from specgen_addon.table import GRID_SHAPE, BRDFTable\n"
+            "t = BRDFTable(np.full(GRID_SHAPE + (2,), 0.1, np.float32), np.array([500.0, 600.0]), ('a', 'b'), {})\n"
+            "sys.exit(run_guarded('infer', lambda: t.save(%r), ([], [%r])))\n"
+            % (str(REPO), str(full_dir / "b.npz"), str(full_dir / "b.npz")))
+    done = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True, timeout=120)
+    text = done.stdout + done.stderr
+    assert done.returncode == 2, text
+    assert text.strip() == f"error: {full_dir / 'b.npz'}: cannot be written (No space left on device); " \
+                           "nothing partial was left", text
+    assert list(full_dir.iterdir()) == []
+
+
+# -------------------------------------------------------------------------- damaged networks
+def _copy_shipped(tmp_path: Path) -> Path:
+    if not (WEIGHTS.is_file() and (WEIGHTS.parent / "SHA256SUMS").is_file()):
+        pytest.skip("needs the shipped weights and their SHA256SUMS")
+    for name in ("specgen_default.pt", "specgen_default.tables.onnx", "specgen_default.head.onnx", "SHA256SUMS"):
+        shutil.copyfile(WEIGHTS.parent / name, tmp_path / name)
+    return tmp_path / "specgen_default.pt"
+
+
+def test_every_shipped_network_file_is_listed_with_its_current_sum():
+    from specgen_addon.model.checksums import read_sums, sha256
+
+    sums = read_sums(WEIGHTS.parent)
+    shipped = sorted(p.name for p in WEIGHTS.parent.iterdir() if p.suffix in (".pt", ".onnx"))
+    assert shipped and sorted(sums) == shipped
+    assert all(sha256(WEIGHTS.parent / n) == h for n, h in sums.items())
+
+
+def test_flipped_bytes_in_shipped_weights_are_refused_with_the_file_named(tmp_path):
+    pytest.importorskip("torch")
+    from specgen_addon.model import load_weights
+    from specgen_addon.model.checksums import DamagedWeightsError
+
+    pt = _copy_shipped(tmp_path)
+    data = bytearray(pt.read_bytes())
+    for i in range(64):
+        data[len(data) // 2 + i] ^= 0xFF
+    pt.write_bytes(bytes(data))
+    with pytest.raises(DamagedWeightsError, match=f"^{pt}: damaged or modified"):
+        load_weights(pt)
+
+
+def test_a_truncated_shipped_graph_is_refused_not_replaced_by_torch(tmp_path):
+    """batch.py's onnx→torch fallback used to take a damaged graph silently."""
+    pytest.importorskip("onnxruntime")
+    from specgen_addon import bake
+    from specgen_addon.model.checksums import DamagedWeightsError
+
+    pt = _copy_shipped(tmp_path)
+    graph = tmp_path / "specgen_default.tables.onnx"
+    graph.write_bytes(graph.read_bytes()[: graph.stat().st_size // 2])
+    with pytest.raises(DamagedWeightsError, match="specgen_default.tables.onnx: damaged"):
+        bake.generate_lookup(str(EXAMPLE), tmp_path / "lookup", np.linspace(400, 700, 4), weights=pt,
+                             refine=False)
+    assert not (tmp_path / "lookup").exists()
+
+
+def test_a_fallback_to_torch_is_said(tmp_path, monkeypatch):
+    """Graphs missing beside the user's own weights: the torch backend runs, with a warning."""
+    pytest.importorskip("onnxruntime")
+    pytest.importorskip("torch")
+    from specgen_addon import bake, pipeline
+    from specgen_addon.errors import WeightsError
+
+    calls = []
+
+    def fake_generate(image, backend, **kw):
+        calls.append(backend)
+        if backend == "onnx":
+            raise WeightsError("w.tables.onnx: ONNX graph not found")
+        raise RuntimeError("stop here")
+
+    monkeypatch.setattr(pipeline, "generate", fake_generate)
+    with pytest.warns(UserWarning, match="onnx backend cannot run .*using the torch backend"):
+        with pytest.raises(RuntimeError, match="stop here"):
+            bake.generate_lookup(str(EXAMPLE), tmp_path / "lookup", np.linspace(400, 700, 4))
+    assert calls == ["onnx", "torch"]
