@@ -76,6 +76,24 @@ def run_arm(settings: abl.AblationSettings, arm: str, seed: int, cache_dir: str,
             **score}
 
 
+def prepare_data(settings: abl.AblationSettings, jobs: Sequence[tuple[str, int]], cache_dir: Path,
+                 log: Callable[[str], None] = print) -> None:
+    """Render the training inputs that the arms still to train need, here, with the configured
+    render workers: an arm's own process is a pool worker, which cannot start render workers of
+    its own, so it then finds every render in the shared cache instead of making them one by one."""
+    seen: set[str] = set()
+    for name, seed in jobs:
+        arm = abl.ARMS_BY_NAME[name]
+        arm_dir = Path(cache_dir) / settings.key(arm, seed)
+        if (arm_dir / "arm.json").is_file() and (arm_dir / "specgen.pt").is_file():
+            continue
+        mcfg, tcfg = settings.configs(arm, seed)
+        ident = repr(({**mcfg.to_dict(), "fusion": None}, dataclasses.replace(tcfg, seed=0)))
+        if ident not in seen:
+            seen.add(ident)
+            abl._material_sets(tcfg, mcfg, abl._data_cache(), log)
+
+
 def _ignore_sigint() -> None:
     signal.signal(signal.SIGINT, signal.SIG_IGN)
 
@@ -97,6 +115,7 @@ def run_study(steps: int, seeds: Sequence[int] = STUDY_SEEDS, arms: Sequence[str
     else:
         # Workers ignore Ctrl-C: the parent takes it (a clean stop) and ends them; a stopped arm
         # keeps its last checkpoint in the cache, and the next run resumes it.
+        prepare_data(settings, jobs, cache, log)
         pool = get_context("spawn").Pool(workers, initializer=_ignore_sigint)
         try:
             pending = [pool.apply_async(run_arm, (settings, a, s, str(cache), per_family, resolution))

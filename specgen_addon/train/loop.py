@@ -480,6 +480,12 @@ def total_loss(tcfg: TrainConfig, g_spec: tuple[torch.Tensor, torch.Tensor] | No
     return sum(terms) + tcfg.tv_weight * l_tv, parts
 
 
+def _step_batches(tcfg: TrainConfig, mcfg: Config, spectral: MaterialSet, rgb: MaterialSet,
+                  dctx: ddp.DistContext | None, step: int) -> tuple[Batch | None, Batch | None]:
+    """:func:`make_step_batches` with the step last (a picklable partial for spawned data workers)."""
+    return make_step_batches(tcfg, mcfg, spectral, rgb, step, dctx)
+
+
 def make_step_batches(tcfg: TrainConfig, mcfg: Config, spectral: MaterialSet, rgb: MaterialSet,
                       step: int, dctx: ddp.DistContext | None = None) -> tuple[Batch | None, Batch | None]:
     """The spectral and RGB batches of ``step``: a pure function of ``(seed, step)``.
@@ -625,7 +631,7 @@ def train(mcfg: Config, tcfg: TrainConfig, spectral: MaterialSet, rgb: MaterialS
     t0 = time.perf_counter()
     step = start_step
     stopped = False
-    with contextlib.closing(step_batches(lambda s: make_step_batches(tcfg, mcfg, spectral, rgb, s, dctx),
+    with contextlib.closing(step_batches(functools.partial(_step_batches, tcfg, mcfg, spectral, rgb, dctx),
                                          start_step, tcfg.steps, tcfg.data_workers)) as batches:
         # (closing: the data workers, if any, stop however the loop ends)
         for b_spec, b_rgb in batches:

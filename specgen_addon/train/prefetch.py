@@ -10,17 +10,23 @@ cores the network is, and the default is no workers.
 from __future__ import annotations
 
 import collections
-import multiprocessing as mp
 import signal
 from typing import Any, Callable, Iterator
 
-#: The batch maker the forked workers call (set before the pool starts; fork copies it).
+#: The batch maker a worker calls (set by :func:`_start_worker` in each worker).
 _MAKE: Callable[[int], Any] | None = None
 
 
 def _ignore_interrupts() -> None:
     """Workers leave Ctrl-C to the training process, which stops them (no traceback per worker)."""
     signal.signal(signal.SIGINT, signal.SIG_IGN)
+
+
+def _start_worker(make: Callable[[int], Any]) -> None:
+    """Each worker's start: keep the batch maker (copied by fork, pickled by spawn)."""
+    global _MAKE
+    _ignore_interrupts()
+    _MAKE = make
 
 
 def _make(step: int) -> Any:
@@ -32,7 +38,7 @@ def step_batches(make: Callable[[int], Any], start: int, stop: int, workers: int
                  ahead: int | None = None) -> Iterator[Any]:
     """``make(step)`` for ``step`` in ``[start, stop)``, in order.
 
-    With ``workers`` > 0 they are made by that many forked processes, at most ``ahead`` steps
+    With ``workers`` > 0 they are made by that many worker processes, at most ``ahead`` steps
     (default ``2 · workers``) ahead of the consumer, so memory stays bounded however fast the
     workers are. The pool is torn down when the consumer stops early (a time budget, Ctrl-C).
     """
@@ -40,9 +46,13 @@ def step_batches(make: Callable[[int], Any], start: int, stop: int, workers: int
         for step in range(start, stop):
             yield make(step)
         return
-    global _MAKE
-    _MAKE = make
-    pool = mp.get_context("fork").Pool(workers, initializer=_ignore_interrupts)
+    from ..processes import can_pool, context
+
+    if not can_pool(make):  # inside a pool worker, or spawn and ``make`` cannot travel
+        for step in range(start, stop):
+            yield make(step)
+        return
+    pool = context().Pool(workers, initializer=_start_worker, initargs=(make,))
     try:
         steps = iter(range(start, stop))
         pending: collections.deque = collections.deque()
@@ -59,4 +69,3 @@ def step_batches(make: Callable[[int], Any], start: int, stop: int, workers: int
     finally:
         pool.terminate()
         pool.join()
-        _MAKE = None
