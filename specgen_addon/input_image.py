@@ -430,14 +430,13 @@ def crop_sphere(arr: np.ndarray, size: int = CANONICAL_SIZE) -> SphereCrop:
 
 
 def _clean_background(rgb: np.ndarray) -> bool:
-    """Whether the background is a render's: exactly black around the object, or a single colour
-    along the whole border (then the foreground's outline is the sphere's)."""
+    """Whether the background is a render's: a single colour (black, say) along half of the
+    border or more (the rest: a sphere touching the frame), so the foreground's outline is the
+    sphere's; a camera's background never is."""
     lum = rgb @ np.array([0.2126, 0.7152, 0.0722])
-    if np.mean(lum == 0) >= 0.1:
-        return True
     border = np.concatenate([lum[:2].ravel(), lum[-2:].ravel(), lum[:, :2].ravel(), lum[:, -2:].ravel()])
     top = float(np.percentile(lum, 99.5))
-    return top > 0 and float(np.ptp(border)) <= 1e-3 * top
+    return top > 0 and float(np.mean(np.abs(border - np.median(border)) <= 1e-3 * top)) >= 0.5
 
 
 def _photo_crop(rgb: np.ndarray, size: int, error: ImageInputError | None, fallback=None) -> SphereCrop:
