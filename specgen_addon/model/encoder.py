@@ -8,6 +8,7 @@ import torch
 import torch.nn.functional as F
 from torch import nn
 
+from ..resample import aa_bilinear_weights
 from .config import Config
 from .residual import mlp_blocks
 
@@ -30,7 +31,7 @@ class ImageEncoder(nn.Module):
     follow the linear layer.
 
     With ``detail_factor`` k > 1 the conv stack sees the image resampled to S/k (the antialiased
-    bilinear weights of :func:`specgen_addon.infer.resample_square`, as fixed matrices), and a
+    bilinear weights of :func:`specgen_addon.resample.resample_square`, as fixed matrices), and a
     *detail branch* of stride-2 convs sees it at full size, so a sharp highlight spans k² times
     as many pixels. The branch's output joins the first conv's before its ReLU; its last layer
     starts at zero, so weights of the S/k model start this one exactly (:mod:`.grow`).
@@ -53,9 +54,7 @@ class ImageEncoder(nn.Module):
         self.register_buffer("coords", pixel_coords(base), persistent=False)
         self.detail: nn.Sequential | None = None
         if cfg.detail_factor > 1:
-            from ..infer import _aa_bilinear_weights
-
-            w = torch.from_numpy(_aa_bilinear_weights(cfg.image_size, base)).float()
+            w = torch.from_numpy(aa_bilinear_weights(cfg.image_size, base)).float()
             self.register_buffer("down", w, persistent=False)          # (base, S): rows and columns alike
             self.register_buffer("coords_full", pixel_coords(cfg.image_size), persistent=False)
             width = max(8, cfg.encoder_channels[0] // 2)

@@ -47,7 +47,7 @@ def network_inputs(images: list[np.ndarray], image_size: int, png_augment: bool 
     so the network copes with PNG/JPEG inputs as well as linear EXR (2K images).
     """
     from .. import input_image
-    from ..infer import resample_square
+    from ..resample import resample_square
 
     if png_augment:
         images = list(images) + [png_like(im) for im in images]

@@ -28,6 +28,7 @@ import zlib
 import numpy as np
 
 from .. import input_image, spectra
+from ..resample import aa_bilinear_weights
 
 #: Unit directions (world; camera looks down −z, +y up) of the six synthetic suns.
 SUN_DIRECTIONS = ((-0.6, 0.6, 0.53), (0.7, 0.5, 0.5), (0.0, 0.9, 0.44), (-0.85, -0.1, 0.52),
@@ -179,13 +180,11 @@ class ComponentCache:
 
 def resample_stack(stack: np.ndarray, size: int) -> np.ndarray:
     """``(K, H, W, 3)`` → ``(K, 3, size, size)`` float16 with the antialiased bilinear weights of
-    :func:`specgen_addon.infer.resample_square`, applied separably (two small matrix products
+    :func:`specgen_addon.resample.resample_square`, applied separably (two small matrix products
     instead of its one four-index ``einsum``, which is ~100× slower at 128² → 64²)."""
-    from ..infer import _aa_bilinear_weights
-
     chw = np.ascontiguousarray(np.asarray(stack, dtype=np.float32).transpose(0, 3, 1, 2))
     if chw.shape[2:] == (size, size):
         return chw.astype(np.float16)
-    wy = _aa_bilinear_weights(chw.shape[2], size).astype(np.float32)
-    wx = _aa_bilinear_weights(chw.shape[3], size).astype(np.float32)
+    wy = aa_bilinear_weights(chw.shape[2], size).astype(np.float32)
+    wx = aa_bilinear_weights(chw.shape[3], size).astype(np.float32)
     return (wy @ chw @ wx.T).astype(np.float16)
