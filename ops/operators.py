@@ -299,6 +299,7 @@ class SPECGEN_OT_render_stack(_Modal, bpy.types.Operator):
                 raise OutputExistsError(str(exc).replace("pass overwrite", "turn on Replace "
                                                          "Outputs")) from None
             if s.render_mode == "FULL_SCENE":
+                job._preflight()        # camera, view layer, band grid: before the test renders
                 job.interactive = interactive
                 if self.estimate_time:
                     self._estimate(context)

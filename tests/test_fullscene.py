@@ -250,7 +250,8 @@ def test_batch_renders_a_blend_file_in_full_scene_mode(white_atlas, tmp_path):
                            str(tmp_path / "a"), "--bands", "6"], capture_output=True, text=True,
                           timeout=600)
     assert done.returncode == 0, done.stderr[-2000:]
-    assert read_spectral_exr(tmp_path / "a" / "ordinary.exr").values.shape == (14, 20, 6)
+    exr = "Scene_Camera_f0001.exr"                      # <scene>_<camera>_f<frame>.exr
+    assert read_spectral_exr(tmp_path / "a" / exr).values.shape == (14, 20, 6)
     # as `blender --background ordinary.blend --python batch.py -- --scene --out b`
     script = ("import sys, runpy, bpy\n"
               f"bpy.ops.wm.open_mainfile(filepath={str(blend)!r})\n"
@@ -260,7 +261,7 @@ def test_batch_renders_a_blend_file_in_full_scene_mode(white_atlas, tmp_path):
     done = subprocess.run([sys.executable, "-c", script], capture_output=True, text=True,
                           timeout=600, cwd=repo)
     assert done.returncode == 0, done.stderr[-2000:]
-    assert read_spectral_exr(tmp_path / "b" / "ordinary.exr").values.shape == (14, 20, 4)
+    assert read_spectral_exr(tmp_path / "b" / exr).values.shape == (14, 20, 4)
     bad = subprocess.run([sys.executable, str(repo / "batch.py"), "--scene", str(tmp_path / "no.blend"),
                           "--out", str(tmp_path / "c")], capture_output=True, text=True, timeout=600)
     assert bad.returncode == 2 and bad.stderr.strip().count("\n") == 0 and "no such .blend" in bad.stderr
