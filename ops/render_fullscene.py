@@ -95,8 +95,10 @@ class _RenderSettings(SavedAttributes):
 class FullSceneRenderJob(RenderJobOutputs):
     """Render the whole ``scene`` per band group and write a spectral EXR (+ PNG preview).
 
-    Iterate :meth:`steps` (one Cycles render per step, yields progress in [0, 1]) or call
-    :meth:`run`; :meth:`cancel` stops before the next render, restores the scene, writes nothing.
+    Iterate :meth:`steps` (one Cycles render per step, yields progress in [0, 1], or None while
+    an ``interactive`` band render runs as Blender's render job) or call :meth:`run`;
+    :meth:`cancel` stops before the next render, and a render job cancelled by the user stops the
+    job inside that render; either way the scene is restored and nothing is written.
     """
 
     scene: bpy.types.Scene
