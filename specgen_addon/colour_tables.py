@@ -91,6 +91,9 @@ def mallett2019_basis(wavelengths_nm: np.ndarray) -> np.ndarray:
 
 def illuminant(name: str) -> tuple[np.ndarray, np.ndarray]:
     """(wavelengths nm, relative SPD) of the CIE illuminant ``name`` as colour-science tabulates it."""
+    kelvin = blackbody_temperature(name)
+    if kelvin is not None:
+        return blackbody(kelvin)
     t = tables()
     names = [str(n) for n in t["illuminant_names"]]
     if name not in names:
@@ -98,6 +101,31 @@ def illuminant(name: str) -> tuple[np.ndarray, np.ndarray]:
     i = names.index(name)
     lo, hi = t["illuminant_offsets"][i], t["illuminant_offsets"][i + 1]
     return t["illuminant_wavelengths_nm"][lo:hi], t["illuminant_values"][lo:hi]
+
+
+def blackbody_temperature(name: str) -> float | None:
+    """The colour temperature (K) a name like ``"3200K"`` gives, None for any other name; a
+    temperature outside 1000–40000 K is refused."""
+    text = str(name).strip()
+    if not text.upper().endswith("K"):
+        return None
+    try:
+        kelvin = float(text[:-1])
+    except ValueError:
+        return None
+    if not 1000.0 <= kelvin <= 40000.0:
+        raise SpecGenError(f"colour temperature {text} lies outside 1000–40000 K")
+    return kelvin
+
+
+def blackbody(kelvin: float) -> tuple[np.ndarray, np.ndarray]:
+    """(wavelengths nm, relative SPD) of a black body at ``kelvin`` (Planck's law, 360–830 nm, 1 nm;
+    the same curve as ``colour.sd_blackbody``), scaled to 1 at 560 nm."""
+    wl = np.arange(360.0, 831.0, 1.0)
+    c1, c2 = 3.741771852e-16, 1.438776877e-2          # 2πhc² (W·m²), hc/k (m·K)
+    lam = wl * 1e-9
+    spd = c1 / lam ** 5 / np.expm1(c2 / (lam * kelvin))
+    return wl, spd / spd[200]
 
 
 def von_kries_bradford(xyz_source_white: np.ndarray, xyz_target_white: np.ndarray) -> np.ndarray:

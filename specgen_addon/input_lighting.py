@@ -8,7 +8,16 @@ Three kinds (:class:`InputLighting`):
   rotated about the up axis and scaled by an exposure;
 * a **file**: the user's own equirectangular HDRI (``.exr`` or Radiance ``.hdr``).
 
-Maps are normalised to unit mean luminance before the exposure is applied (as the renderer does for
+To these, the room's own light as the user measured it (:class:`Light`): distant lights and a
+sun by direction in the camera's frame (x right, y up, z towards the camera; or azimuth and
+elevation: azimuth 0° faces the camera, +90° is to the right; elevation +90° is straight up),
+power (1: as bright as the canonical key light, an irradiance of π) and colour (a CIE illuminant
+or a colour temperature such as ``3200K``), several at once, plus a uniform ambient radiance. With
+lights and no map (``env="none"``) they alone light the photo.
+
+Maps are normalised to unit mean luminance before the exposure is applied, unless the user says
+the panorama is calibrated (``calibrated``: its values are radiance as photographed, kept as they
+are) (as the renderer does for
 its own maps), and the photo is taken to be ``EXPOSURE × radiance`` like the canonical input, so an
 exposure of 1 means "as bright as the canonical studio". The same object serves the network's input
 preparation (:meth:`InputLighting.network_gain`: the photo is brought to the canonical lighting's
@@ -28,6 +37,8 @@ import numpy as np
 from .errors import SpecGenError
 
 CANONICAL = "canonical"
+#: No environment map: the given lights (and ambient) alone.
+NO_MAP = "none"
 HDRI_SUFFIXES = (".exr", ".hdr")
 #: Exposure multipliers accepted (a factor of 2^±10 around the canonical level).
 EXPOSURE_RANGE = (2.0 ** -10, 2.0 ** 10)
@@ -35,6 +46,72 @@ EXPOSURE_RANGE = (2.0 ** -10, 2.0 ** 10)
 
 class LightingError(SpecGenError):
     """An input lighting specification cannot be used (unknown map, unreadable file, bad value)."""
+
+
+@dataclass(frozen=True)
+class Light:
+    """A distant light of the room: unit direction towards it in the camera's frame (x right, y up,
+    z towards the camera), power (1 = the canonical key light's irradiance, π) and colour (a CIE
+    illuminant name or a temperature such as ``"3200K"``)."""
+
+    direction: tuple[float, float, float]
+    power: float = 1.0
+    colour: str = "D65"
+
+    def __post_init__(self) -> None:
+        d = np.asarray(self.direction, np.float64)
+        if d.shape != (3,) or not np.all(np.isfinite(d)) or not np.linalg.norm(d) > 0:
+            raise LightingError(f"a light needs a direction (a non-zero vector), got {self.direction}")
+        if not (math.isfinite(self.power) and self.power > 0):
+            raise LightingError(f"a light's power must be a positive number, got {self.power}")
+        from . import colour_tables
+
+        try:
+            colour_tables.illuminant(self.colour)
+        except SpecGenError as exc:
+            raise LightingError(f"light colour: {exc}") from None
+        object.__setattr__(self, "direction", tuple(float(v) for v in d / np.linalg.norm(d)))
+
+    @classmethod
+    def from_angles(cls, azimuth_deg: float, elevation_deg: float, power: float = 1.0,
+                    colour: str = "D65") -> Light:
+        """A light by azimuth (0° faces the camera, +90° to the right) and elevation (+90° up), degrees."""
+        az, el = math.radians(azimuth_deg), math.radians(elevation_deg)
+        return cls((math.cos(el) * math.sin(az), math.sin(el), math.cos(el) * math.cos(az)), power, colour)
+
+    def distant_light(self):
+        from .render import DistantLight
+
+        return DistantLight(self.direction, float(self.power * np.pi), self.colour)
+
+    @property
+    def label(self) -> str:
+        x, y, z = self.direction
+        az = math.degrees(math.atan2(x, z))
+        el = math.degrees(math.asin(max(-1.0, min(1.0, y))))
+        return f"light az {az:.0f}° el {el:.0f}° ×{self.power:g} {self.colour}"
+
+
+def parse_light(text: str, vector: bool = False) -> Light:
+    """``"AZ,EL[,POWER[,COLOUR]]"`` (degrees), or with ``vector`` ``"X,Y,Z[,POWER[,COLOUR]]"``, as a
+    :class:`Light`; one clear sentence for a light without a direction."""
+    parts = [p.strip() for p in str(text).split(",")]
+    n = 3 if vector else 2
+    what = "X,Y,Z" if vector else "AZIMUTH,ELEVATION (degrees)"
+    try:
+        values = [float(p) for p in parts[:n]]
+    except ValueError:
+        values = []
+    if len(values) != n or len(parts) > n + 2:
+        raise LightingError(f"a light needs a direction: {what}[,POWER[,COLOUR]], got {text!r}")
+    try:
+        power = float(parts[n]) if len(parts) > n and parts[n] else 1.0
+    except ValueError:
+        raise LightingError(f"a light's power must be a number, got {parts[n]!r} in {text!r}") from None
+    colour = parts[n + 1] if len(parts) > n + 1 and parts[n + 1] else "D65"
+    if vector:
+        return Light(tuple(values), power, colour)  # type: ignore[arg-type]
+    return Light.from_angles(values[0], values[1], power, colour)
 
 
 @dataclass(frozen=True)
@@ -51,12 +128,21 @@ class InputLighting:
         Multiplier on the map's unit-mean-luminance radiance (ignored for ``canonical``).
     key_light
         Add the canonical D65 key light (always on for ``canonical``; off by default otherwise).
+    lights
+        The room's distant lights (:class:`Light`), besides the map (or alone, ``env="none"``).
+    ambient
+        Uniform ambient radiance added to the map (× the canonical key light's radiance, 1).
+    calibrated
+        The file map's values are radiance as photographed: no normalisation to unit mean.
     """
 
     env: str = CANONICAL
     rotation_deg: float = 0.0
     exposure: float = 1.0
     key_light: bool = False
+    lights: tuple[Light, ...] = ()
+    ambient: float = 0.0
+    calibrated: bool = False
 
     def __post_init__(self) -> None:
         if not isinstance(self.env, str) or not self.env.strip():
@@ -66,6 +152,15 @@ class InputLighting:
         lo, hi = EXPOSURE_RANGE
         if not (math.isfinite(self.exposure) and lo <= self.exposure <= hi):
             raise LightingError(f"input lighting exposure must lie in [{lo:g}, {hi:g}], got {self.exposure}")
+        if not (math.isfinite(self.ambient) and self.ambient >= 0):
+            raise LightingError(f"the ambient term must be a non-negative number, got {self.ambient}")
+        if self.env == NO_MAP and not self.lights and self.ambient == 0 and not self.key_light:
+            raise LightingError("input lighting 'none' needs at least one light or an ambient term")
+        if (self.lights or self.ambient) and self.env == CANONICAL:
+            raise LightingError("lights or an ambient term describe the room instead of the canonical "
+                                "studio: give them with no map (none), or with a map")
+        if self.calibrated and not self.is_file:
+            raise LightingError("only a panorama file can be calibrated (its values taken as radiance)")
 
     # -- what kind ------------------------------------------------------------------------------
     @property
@@ -77,22 +172,40 @@ class InputLighting:
         return Path(self.env).suffix.lower() in HDRI_SUFFIXES
 
     @property
+    def has_map(self) -> bool:
+        return self.env != NO_MAP
+
+    @property
     def label(self) -> str:
         """Short description for reports, e.g. ``forest (rot 30°, ×1)``."""
         if self.is_canonical:
             return "canonical studio"
-        name = Path(self.env).name if self.is_file else self.env
-        key = " + key light" if self.key_light else ""
-        return f"{name} (rot {self.rotation_deg:g}°, ×{self.exposure:g}){key}"
+        parts = []
+        if self.has_map:
+            name = Path(self.env).name if self.is_file else self.env
+            cal = ", calibrated" if self.calibrated else ""
+            parts.append(f"{name} (rot {self.rotation_deg:g}°, ×{self.exposure:g}{cal})")
+        if self.key_light:
+            parts.append("key light")
+        parts += [light.label for light in self.lights]
+        if self.ambient:
+            parts.append(f"ambient {self.ambient:g}")
+        return " + ".join(parts)
 
     def validate(self) -> None:
         """Check the map exists and is readable, cheaply (before any expensive work)."""
-        if self.is_canonical:
+        if self.is_canonical or not self.has_map:
             return
         if self.is_file:
             path = Path(self.env)
             if not path.is_file():
                 raise LightingError(f"{path}: no such HDRI file")
+            from .image_checks import image_size
+
+            size = image_size(path)
+            if size is not None and size[0] != 2 * size[1]:
+                raise LightingError(f"{path}: a panorama must be equirectangular, twice as wide as it is "
+                                    f"high; this one is {size[0]}×{size[1]}")
             check_map_header(path)
             return
         from . import lighting
@@ -111,10 +224,20 @@ class InputLighting:
         if self.is_canonical:
             return lighting.load_environment(input_image.CANONICAL_ENV)
         rot = math.radians(self.rotation_deg)
-        if self.is_file:
-            return _file_environment(str(Path(self.env).resolve()), float(self.exposure), rot)
-        self.validate()
-        return lighting.load_environment(self.env, exposure=self.exposure, rotation_rad=rot)
+        if not self.has_map:
+            env = None
+        elif self.is_file:
+            env = _file_environment(str(Path(self.env).resolve()), float(self.exposure), rot, self.calibrated)
+        else:
+            self.validate()
+            env = lighting.load_environment(self.env, exposure=self.exposure, rotation_rad=rot)
+        if self.ambient > 0:
+            from .render.environment import Environment
+
+            if env is None:
+                return Environment.uniform((self.ambient,) * 3)
+            return Environment(env.rgb + np.float32(self.ambient), env.rotation_rad, env.uplift, env.name)
+        return env
 
     def scene(self, size: int | None = None):
         """Prepared renderer scene of the input photo (canonical sphere geometry), cached."""
@@ -149,11 +272,16 @@ class InputLighting:
 
 
 def parse_lighting(env: str | None, rotation_deg: float = 0.0, exposure: float = 1.0,
-                   key_light: bool | None = None) -> InputLighting:
-    """Build and validate an :class:`InputLighting` from CLI/panel values (``None`` → canonical)."""
+                   key_light: bool | None = None, lights: tuple[Light, ...] = (), ambient: float = 0.0,
+                   calibrated: bool = False) -> InputLighting:
+    """Build and validate an :class:`InputLighting` from CLI/panel values (``None`` → canonical;
+    with lights or an ambient term and no map named, no map)."""
     env = CANONICAL if env in (None, "", CANONICAL) else str(env)
+    if env == CANONICAL and (lights or ambient):
+        env = NO_MAP
     light = InputLighting(env, float(rotation_deg), float(exposure),
-                          bool(key_light) if key_light is not None else env == CANONICAL)
+                          bool(key_light) if key_light is not None else env == CANONICAL,
+                          tuple(lights), float(ambient), bool(calibrated))
     light.validate()
     return light
 
@@ -260,7 +388,7 @@ def _scene(light: InputLighting, size: int):
     from . import input_image
     from .render import Scene, sphere_geometry
 
-    lights = [input_image._key_light()] if light.key_light else []
+    lights = ([input_image._key_light()] if light.key_light else []) + [li.distant_light() for li in light.lights]
     return Scene(sphere_geometry(size), lights, light.environment(), sampling=input_image.input_sampling())
 
 
@@ -272,8 +400,10 @@ def _white_rgb(light: InputLighting, size: int) -> np.ndarray:
 
     geo = sphere_geometry(size or 32)
     n = geo.normals[geo.mask]
-    rgb = light.environment().irradiance_rgb(n) / np.pi
-    if light.key_light or light.is_canonical:
-        key = input_image._key_light()
+    env = light.environment()
+    rgb = env.irradiance_rgb(n) / np.pi if env is not None else np.zeros((n.shape[0], 3))
+    keys = ([input_image._key_light()] if light.key_light or light.is_canonical else []) + \
+        [li.distant_light() for li in light.lights]
+    for key in keys:
         rgb = rgb + np.maximum(n @ key.unit_direction(), 0.0)[:, None] * key.rgb()[None] / np.pi
     return rgb.mean(axis=0) * light.image_exposure
