@@ -145,7 +145,7 @@ def _evaluate(a) -> None:
         if not a.families:
             raise SpecGenError("--family needs --families N "
                                "(it selects the families of the per-family evaluation)")
-        from .corpus.generate import check_family_names
+        from .corpus.families import check_family_names
 
         check_family_names(a.family)
     if getattr(a, "input_antialias", False):

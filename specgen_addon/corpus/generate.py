@@ -10,10 +10,12 @@ within :data:`~.spectra_sources.DUPLICATE_RMS` of any spectrum of another split.
 
 from __future__ import annotations
 
-from typing import Callable, Iterable
+from typing import Callable
 
 import numpy as np
 
+from ..errors import SpecGenError
+from .families import CarPaint, Lobes, Sheen, ThinFilm, TintedCoat, check_family_names
 from .material import ClearCoat, Conductor, Dielectric, Material, Reflectance
 from .spectra_sources import (DUPLICATE_RMS, METAL_SPLITS, SPLITS, draw_otsu2018, measured_groups,
                               measured_spectra, rms_distance)
@@ -109,21 +111,8 @@ FILM_ETA = (1.33, 2.4)
 FILM_THICKNESS_NM = (100.0, 900.0)
 
 
-def check_family_names(names: Iterable[str]) -> None:
-    """SpecGenError naming every entry of ``names`` that is not a corpus family."""
-    from ..errors import SpecGenError
-    from .families import FAMILY_NAMES
-
-    unknown = sorted(set(names) - set(FAMILY_NAMES))
-    if unknown:
-        raise SpecGenError(f"unknown material famil{'y' if len(unknown) == 1 else 'ies'} "
-                           f"{', '.join(map(repr, unknown))}; known: {', '.join(FAMILY_NAMES)}")
-
-
 def check_mix(mix: dict[str, float]) -> dict[str, float]:
     """``mix`` normalised to sum 1; SpecGenError naming an unknown family or a bad weight."""
-    from ..errors import SpecGenError
-
     if not isinstance(mix, dict) or not mix:
         raise SpecGenError("the family mix must be a non-empty mapping of family → weight")
     check_family_names(mix)
@@ -136,8 +125,6 @@ def check_mix(mix: dict[str, float]) -> dict[str, float]:
 
 def _family_material(family: str, seed: int, index: int, drawn: list[tuple[str, np.ndarray]]):
     """Material ``index`` of family ``family``; split drawn first exactly as :func:`make_material`."""
-    from .families import CarPaint, Lobes, Sheen, ThinFilm, TintedCoat
-
     rng = np.random.default_rng([seed, index])
     split = SPLITS[int(rng.choice(len(SPLITS), p=[SPLIT_WEIGHTS[s] for s in SPLITS]))]
     name = f"mat{index:04d}"

@@ -5,7 +5,8 @@
 lobes) all follow the BRDF protocol; :func:`material_from_dict` rebuilds any of them.
 """
 
-from .base import FAMILIES, FamilyMaterial, directional_albedo, halfvector_quadrature, hemisphere_quadrature, material_from_dict
+from .base import (FAMILIES, FamilyMaterial, check_family_names, directional_albedo, family_names,
+                   halfvector_quadrature, hemisphere_quadrature, material_from_dict)
 from .car_paint import CarPaint
 from .lobes import Lobes
 from .sheen import Sheen
@@ -13,8 +14,8 @@ from .thin_film import ThinFilm, airy_reflectance
 from .tinted_coat import TintedCoat
 
 #: Every family name, the classic recipe first.
-FAMILY_NAMES: tuple[str, ...] = ("classic",) + tuple(FAMILIES)
+FAMILY_NAMES: tuple[str, ...] = family_names()
 
 __all__ = ["CarPaint", "FAMILIES", "FAMILY_NAMES", "FamilyMaterial", "Lobes", "Sheen", "ThinFilm",
-           "TintedCoat", "airy_reflectance", "directional_albedo", "halfvector_quadrature",
+           "TintedCoat", "airy_reflectance", "check_family_names", "directional_albedo", "family_names", "halfvector_quadrature",
            "hemisphere_quadrature", "material_from_dict"]

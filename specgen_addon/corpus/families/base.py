@@ -19,7 +19,7 @@ from __future__ import annotations
 import dataclasses
 import functools
 from dataclasses import dataclass
-from typing import Any, Callable, ClassVar
+from typing import Any, Callable, ClassVar, Iterable
 
 import numpy as np
 
@@ -151,6 +151,20 @@ def _decode(v: Any) -> Any:
     return v
 
 
+def family_names() -> tuple[str, ...]:
+    """Every family name, the classic recipe first (the registered families in import order)."""
+    return ("classic",) + tuple(FAMILIES)
+
+
+def check_family_names(names: Iterable[str]) -> None:
+    """SpecGenError naming every entry of ``names`` that is not a corpus family."""
+    known = family_names()
+    unknown = sorted(set(names) - set(known))
+    if unknown:
+        raise SpecGenError(f"unknown material famil{'y' if len(unknown) == 1 else 'ies'} "
+                           f"{', '.join(map(repr, unknown))}; known: {', '.join(known)}")
+
+
 def material_from_dict(d: dict[str, Any]):
     """A corpus material (any family; no ``family`` key means the classic :class:`Material`)."""
     if not isinstance(d, dict):
@@ -158,8 +172,6 @@ def material_from_dict(d: dict[str, Any]):
     family = d.get("family", "classic")
     if family == "classic":
         return Material.from_dict({k: v for k, v in d.items() if k != "family"})
-    from ..generate import check_family_names
-
     check_family_names([family])
     cls = FAMILIES[family]
     try:
