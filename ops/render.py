@@ -718,7 +718,11 @@ class SpectralRenderJob(RenderJobOutputs):
                 write_spectral_exr(outs[0], self.spectral, wl, overwrite=self.overwrite, rgb=rgb,
                                    attributes=attrs)
                 if self.preview_png:
-                    write_preview_png(outs[1], rgb, overwrite=self.overwrite)
+                    from .result_view import preview_transform, show_result
+
+                    write_preview_png(outs[1], rgb, overwrite=self.overwrite,
+                                      view=preview_transform(self.scene, self.warn))
+                    show_result(rgb)            # the result in Blender, as the Full Scene mode
             self.timings["total_s"] = time.perf_counter() - t0
             yield 1.0
         finally:

@@ -15,6 +15,7 @@ from __future__ import annotations
 import multiprocessing as mp
 import os
 import pickle
+import signal
 import sys
 from typing import Any
 
@@ -42,6 +43,13 @@ def context() -> Any:
     return mp.get_context(start_method())
 
 
+def quiet_worker() -> None:
+    """Pool initializer: the worker leaves Ctrl-C to its parent, which stops the pool. Under fork
+    the at-fork hooks of :mod:`.interrupts` see to that; a spawned worker starts with Python's
+    default handler and would print a KeyboardInterrupt traceback of its own."""
+    signal.signal(signal.SIGINT, signal.SIG_IGN)
+
+
 def may_start_workers() -> bool:
     """False inside a pool worker (a daemonic process), which cannot have children."""
     return not mp.current_process().daemon
@@ -56,15 +64,16 @@ def picklable(obj: Any) -> bool:
     return True
 
 
-def can_pool(task: Any = None) -> bool:
-    """Whether a pool may run ``task`` here: not inside a pool worker, and ``task`` picklable where
-    the start method sends it to the worker (anything but fork)."""
+def can_pool(task: Any = None, per_task: bool = False) -> bool:
+    """Whether a pool may run ``task`` here: not inside a pool worker, and ``task`` picklable when
+    it travels to the workers: always for a function given with each task (``Pool.imap``,
+    ``per_task``), and at the workers' start under any start method but fork (``initargs``)."""
     if not may_start_workers():
         return False
-    return task is None or start_method() == "fork" or picklable(task)
+    return task is None or (start_method() == "fork" and not per_task) or picklable(task)
 
 
-def pool_workers(workers: int, task: Any = None) -> int:
+def pool_workers(workers: int, task: Any = None, per_task: bool = False) -> int:
     """How many processes a pool for ``task`` may use: ``workers``, or 1 (in-process) where
     :func:`can_pool` says no."""
-    return workers if workers <= 1 or can_pool(task) else 1
+    return workers if workers <= 1 or can_pool(task, per_task) else 1

@@ -118,18 +118,18 @@ def make_batch(materials: Sequence[TrainingMaterial], images: Sequence[np.ndarra
 def render_all(make: Callable[[Any], None], todo: Sequence[Any], workers: int = 2,
                progress: Callable[[float], None] | None = None, chunksize: int = 4) -> None:
     """``make(item)`` for every item, on ``workers`` processes (in order when 1), reporting the
-    fraction done: the render caches' fill. Inside a pool worker (an ablation arm), or where a
-    spawned worker could not receive ``make``, the items are made in this process."""
-    from ..processes import context, pool_workers
+    fraction done: the render caches' fill. Inside a pool worker (an ablation arm), or where
+    ``make`` cannot be pickled to a worker, the items are made in this process."""
+    from ..processes import context, pool_workers, quiet_worker
 
-    workers = pool_workers(workers, make)
+    workers = pool_workers(workers, make, per_task=True)
     if workers <= 1:
         for i, item in enumerate(todo):
             make(item)
             if progress:
                 progress((i + 1) / len(todo))
         return
-    with context().Pool(workers) as pool:
+    with context().Pool(workers, initializer=quiet_worker) as pool:
         for i, _ in enumerate(pool.imap_unordered(make, todo, chunksize=chunksize)):
             if progress:
                 progress((i + 1) / len(todo))
