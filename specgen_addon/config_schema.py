@@ -42,7 +42,8 @@ MODEL_BOUNDS: dict[str, tuple[float | None, float | None]] = {
 }
 
 
-def _type_error(where: str, expected: str, value: Any) -> SpecGenError:
+def type_error(where: str, expected: str, value: Any) -> SpecGenError:
+    """The one-sentence error for a setting of the wrong type (``where`` names the setting)."""
     return SpecGenError(f"{where} must be {expected}, got {json.dumps(value, default=str)} "
                         f"({type(value).__name__})")
 
@@ -64,25 +65,25 @@ def _check_value(where: str, annotation: str, value: Any,
         ann = ann[:-5]
     if ann == "bool":
         if not isinstance(value, bool):
-            raise _type_error(where, "true or false", value)
+            raise type_error(where, "true or false", value)
         return
     if ann == "str":
         if not isinstance(value, str):
-            raise _type_error(where, "a string", value)
+            raise type_error(where, "a string", value)
         return
     if ann.startswith(("tuple[", "list[")):
         item = ann[ann.index("[") + 1:-1].split(",")[0]
         if not isinstance(value, (list, tuple)) or not value:
-            raise _type_error(where, f"a non-empty list of {item}", value)
+            raise type_error(where, f"a non-empty list of {item}", value)
         for i, v in enumerate(value):
             _check_value(f"{where}[{i}]", item, v, bounds if item != "str" else None)
         return
     if ann == "int":
         if not _is_int(value):
-            raise _type_error(where, "a whole number", value)
+            raise type_error(where, "a whole number", value)
     elif ann == "float":
         if not _is_number(value):
-            raise _type_error(where, "a number", value)
+            raise type_error(where, "a number", value)
     if _is_number(value):
         if not math.isfinite(value):
             raise SpecGenError(f"{where} must be a finite number, got {value}")
@@ -99,7 +100,7 @@ def validate_section(cls, data: Any, where: str,
                      default_bounds: tuple[float | None, float | None] | None = None) -> None:
     """Check ``data`` (a JSON object) against dataclass ``cls``'s fields, types and ``bounds``."""
     if not isinstance(data, dict):
-        raise _type_error(where, "an object of settings", data)
+        raise type_error(where, "an object of settings", data)
     fields = {f.name: f for f in dataclasses.fields(cls)}
     unknown = sorted(set(data) - set(fields))
     if unknown:
@@ -135,7 +136,7 @@ def _resolve_extends(path: Path, chain: tuple[Path, ...]) -> dict:
         return data
     base_name = data.pop(EXTENDS_KEY)
     if not isinstance(base_name, str) or not base_name:
-        raise _type_error(f"{path}: {EXTENDS_KEY}", "the path of a base config file", base_name)
+        raise type_error(f"{path}: {EXTENDS_KEY}", "the path of a base config file", base_name)
     base = (path.parent / base_name).resolve()
     here = (*chain, path.resolve())
     if base in here:
@@ -192,25 +193,3 @@ def _read_config_file(path: Path) -> dict:
     if not isinstance(data, dict):
         raise SpecGenError(f"{path}: a config file holds an object with 'model' and 'train' sections")
     return data
-
-
-def validate_train_config(path: str | os.PathLike, overrides: dict[str, Any] | None = None) -> None:
-    """Refuse a training config file (plus command-line ``overrides`` of train keys) that does not
-    fit the schema, before any data is prepared."""
-    from .model.config import Config
-    from .train.loop import TrainConfig
-
-    data = read_config_dict(path)
-    unknown = sorted(set(data) - {"model", "train"})
-    if unknown:
-        raise SpecGenError(f"{path}: unknown section(s) {', '.join(unknown)} (expected model, train)")
-    validate_section(Config, data.get("model", {}), f"{path}: model", MODEL_BOUNDS, (1, None))
-    train = data.get("train", {})
-    if not isinstance(train, dict):
-        raise _type_error(f"{path}: train", "an object of settings", train)
-    train = {**train, **(overrides or {})}
-    validate_section(TrainConfig, train, f"{path}: train", TRAIN_BOUNDS)
-    try:
-        Config.from_dict(data.get("model", {}))
-    except TypeError as exc:
-        raise SpecGenError(f"{path}: model: {exc}") from None

@@ -70,7 +70,7 @@ def _corpus(a) -> None:
 
 
 def _train(a) -> None:
-    from .config_schema import validate_train_config
+    from .train.loop import validate_train_config
     from .model import DEFAULT_WEIGHTS
 
     limits.check_numbers({"steps": a.steps, "max-minutes": a.max_minutes})

@@ -565,7 +565,7 @@ API_CASES = {
     "obj-out-of-range": (lambda w: __import__("specgen_addon.mesh_checks", fromlist=["x"]).check_obj(w.obj_out_of_range), SpecGenError, "out of range"),
     "safe-name-dotdot": (lambda w: __import__("specgen_addon.limits", fromlist=["x"]).safe_name("../x.exr"), SpecGenError, "plain file name"),
     "safe-name-absolute": (lambda w: __import__("specgen_addon.limits", fromlist=["x"]).safe_name("/tmp/x.exr"), SpecGenError, "plain file name"),
-    "config-lr-nan": (lambda w: __import__("specgen_addon.config_schema", fromlist=["x"]).validate_train_config(w.cfg_lr_nan), SpecGenError, "finite"),
+    "config-lr-nan": (lambda w: __import__("specgen_addon.train.loop", fromlist=["x"]).validate_train_config(w.cfg_lr_nan), SpecGenError, "finite"),
     # found by the fresh campaign (scripts/bad_input_campaign.py)
     "table-load-nan-wavelengths": (lambda w: BRDFTable.load(w.npz_wl_nan), SpecGenError, "finite"),
     "refine-not-a-table": (lambda w: _api("refine").refine_brdf("t.npz", np.full((64, 64, 3), 0.1)), SpecGenError, "BRDFTable"),

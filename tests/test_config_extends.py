@@ -9,7 +9,8 @@ from pathlib import Path
 
 import pytest
 
-from specgen_addon.config_schema import read_config_dict, validate_train_config
+from specgen_addon.config_schema import read_config_dict
+from specgen_addon.train.loop import validate_train_config
 from specgen_addon.errors import SpecGenError
 from specgen_addon.train.loop import load_config
 

@@ -195,7 +195,7 @@ def test_growing_trunk_upsample_stages_keeps_the_network_function_and_then_train
 
 
 def test_config_files_accept_no_added_blocks_and_refuse_too_many(tmp_path):
-    from specgen_addon.config_schema import validate_train_config
+    from specgen_addon.train.loop import validate_train_config
 
     path = tmp_path / "c.json"
     path.write_text('{"model": {"latent_res_blocks": 0, "trunk_res_blocks": 0, "trunk_upsample_stages": 0}}')

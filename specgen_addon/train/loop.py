@@ -21,6 +21,7 @@ import csv
 import dataclasses
 import functools
 import math
+import os
 import time
 from dataclasses import dataclass, field
 from pathlib import Path
@@ -29,6 +30,7 @@ from typing import Any, Callable, Sequence
 import numpy as np
 import torch
 
+from ..config_schema import MODEL_BOUNDS, TRAIN_BOUNDS, type_error, read_config_dict, validate_section
 from ..errors import SpecGenError
 from ..io_utils import atomic_write
 from ..model import Config, SpecGen, count_parameters, save_weights
@@ -248,8 +250,6 @@ def load_config(path: str | Path) -> tuple[Config, TrainConfig]:
     """Read ``{"model": {...}, "train": {...}}`` from a JSON or TOML file, its ``extends`` bases
     merged in and a relative ``init_weights`` taken against the folder of the file that names it
     (:func:`~specgen_addon.config_schema.read_config_dict`)."""
-    from ..config_schema import read_config_dict
-
     d = read_config_dict(path)
     unknown = set(d) - {"model", "train"}
     if unknown:
@@ -745,3 +745,21 @@ def plot_history(history: Sequence[dict[str, float]], path: str | Path, title: s
     plt.close(fig)
     return path
 
+
+def validate_train_config(path: str | os.PathLike, overrides: dict[str, Any] | None = None) -> None:
+    """Refuse a training config file (plus command-line ``overrides`` of train keys) that does not
+    fit the schema, before any data is prepared."""
+    data = read_config_dict(path)
+    unknown = sorted(set(data) - {"model", "train"})
+    if unknown:
+        raise SpecGenError(f"{path}: unknown section(s) {', '.join(unknown)} (expected model, train)")
+    validate_section(Config, data.get("model", {}), f"{path}: model", MODEL_BOUNDS, (1, None))
+    train = data.get("train", {})
+    if not isinstance(train, dict):
+        raise type_error(f"{path}: train", "an object of settings", train)
+    train = {**train, **(overrides or {})}
+    validate_section(TrainConfig, train, f"{path}: train", TRAIN_BOUNDS)
+    try:
+        Config.from_dict(data.get("model", {}))
+    except TypeError as exc:
+        raise SpecGenError(f"{path}: model: {exc}") from None
