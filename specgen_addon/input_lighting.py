@@ -200,13 +200,7 @@ class InputLighting:
             path = Path(self.env)
             if not path.is_file():
                 raise LightingError(f"{path}: no such HDRI file")
-            from .image_checks import image_size
-
-            size = image_size(path)
-            if size is not None and size[0] != 2 * size[1]:
-                raise LightingError(f"{path}: a panorama must be equirectangular, twice as wide as it is "
-                                    f"high; this one is {size[0]}×{size[1]}")
-            check_map_header(path)
+            check_map_header(path)  # pixel limit and 2:1, from the header alone
             return
         from . import lighting
 
@@ -286,15 +280,13 @@ def parse_lighting(env: str | None, rotation_deg: float = 0.0, exposure: float =
     return light
 
 
-#: Accepted width / height of an equirectangular map: 2, within this relative tolerance.
-MAP_ASPECT_TOLERANCE = 0.01
 #: Width a user's map is box-averaged down to while it is read (as the renderer's own maps).
 MAP_WORK_WIDTH = 512
 
 
 def check_map_header(path: str | Path) -> tuple[int, int] | None:
-    """Refuse an environment map from its header alone, before any pixel is read: over the photo
-    pixel limit (the same limit and message as photos), empty, or not 2:1 (equirectangular)."""
+    """Refuse a panorama from its header alone, before any pixel is read: over the photo pixel
+    limit (the same limit and message as photos), empty, or not exactly 2:1 (equirectangular)."""
     from .errors import ImageInputError
     from .image_checks import check_image_header
 
@@ -305,9 +297,9 @@ def check_map_header(path: str | Path) -> tuple[int, int] | None:
     if size is None:
         return None
     w, h = size
-    if abs(w / h - 2.0) > 2.0 * MAP_ASPECT_TOLERANCE:
-        raise LightingError(f"{path}: environment map is {w}×{h}; an equirectangular map is twice as "
-                            "wide as it is tall (2:1)")
+    if w != 2 * h:
+        raise LightingError(f"{path}: a panorama must be equirectangular, twice as wide as it is "
+                            f"high; this one is {w}×{h}")
     return w, h
 
 
@@ -341,10 +333,14 @@ def read_map_bounded(path: str | Path, max_width: int = MAP_WORK_WIDTH) -> np.nd
         while w // f > max_width and (h // f) % 2 == 0 and (w // f) % 2 == 0:
             f *= 2
         out = np.empty((h // f, w // f, 3), np.float32)
-        rows = max(f, ((1 << 21) // max(w, 1)) // f * f)  # about 2 M texels per strip
+        tile = spec.tile_height if spec.tile_width > 0 else 0
+        step = max(f, tile)  # whole tiles (OpenImageIO's scanline reads crash on tiled files)
+        rows = max(step, ((1 << 21) // max(w, 1)) // step * step)  # about 2 M texels per strip
         negative = bad = 0
         for y in range(0, h, rows):
-            px = inp.read_scanlines(0, 0, y, min(y + rows, h), 0, 0, spec.nchannels, oiio.FLOAT)
+            y1 = min(y + rows, h)
+            px = (inp.read_tiles(0, 0, 0, w, y, y1, 0, 1, 0, spec.nchannels, oiio.FLOAT) if tile else
+                  inp.read_scanlines(0, 0, y, y1, 0, 0, spec.nchannels, oiio.FLOAT))
             if px is None:
                 raise LightingError(f"{path}: not a readable HDRI ({oiio.geterror().strip() or 'truncated'})")
             rgb = np.asarray(px, np.float32).reshape(-1, w, spec.nchannels)[..., idx]
@@ -364,16 +360,19 @@ def read_map_bounded(path: str | Path, max_width: int = MAP_WORK_WIDTH) -> np.nd
 
 
 @functools.lru_cache(maxsize=4)
-def _file_environment(path: str, exposure: float, rotation_rad: float):
+def _file_environment(path: str, exposure: float, rotation_rad: float, calibrated: bool = False):
+    """A panorama file as the renderer's environment: unit mean luminance × exposure, or, when
+    ``calibrated``, its values as radiance × exposure. Read in strips (:func:`read_map_bounded`)."""
     from .render.environment import Environment
 
     check_map_header(path)
     try:
         rgb = read_map_bounded(path)
         if rgb is None:
-            return Environment.from_file(path, exposure=exposure, rotation_rad=rotation_rad)
+            return Environment.from_file(path, exposure=exposure, rotation_rad=rotation_rad,
+                                         normalise=not calibrated)
         env = Environment(rgb, rotation_rad=rotation_rad, name=Path(path).stem)  # as from_file
-        env.rgb = env.rgb * np.float32(exposure / env.mean_luminance())
+        env.rgb = env.rgb * np.float32(exposure if calibrated else exposure / env.mean_luminance())
         return env
     except LightingError:
         raise

@@ -1,8 +1,8 @@
-"""Repeatable bad-input campaign: run the commands as a careful, adversarial user would.
+"""The bad-input campaign's fixtures and cases: every command run as a careful, adversarial user
+would, each case one fresh subprocess (``python -m specgen_addon …``, ``python batch.py …`` or a
+``python -c`` call of the Python API) in its own folder, with ``TMPDIR`` pointed inside it.
 
-Independent of tests/test_bad_input.py (its own fixtures and cases). Every case runs one fresh
-subprocess (``python -m specgen_addon …``, ``python batch.py …`` or a ``python -c`` call of the
-Python API) in its own folder, with ``TMPDIR`` pointed inside it, and records:
+:func:`run_case` records, and ``tests/test_bad_input.py`` asserts for every case:
 
 - the exit status and the last line of stderr (the message);
 - ``traceback``: "Traceback" anywhere in stdout/stderr;
@@ -16,15 +16,10 @@ Python API) in its own folder, with ``TMPDIR`` pointed inside it, and records:
 
 One case decodes an 8000×8000 PNG through ``infer`` and records its peak resident memory
 (``/usr/bin/time -v``; target ≤ 2 GB).
-
-Usage: ``nice -n 15 .venv/bin/python scripts/bad_input_campaign.py --json campaign.json
-[--jobs 2] [-k SUBSTRING ...] [--no-big]``
 """
 
 from __future__ import annotations
 
-import argparse
-import concurrent.futures as cf
 import hashlib
 import json
 import os
@@ -32,11 +27,10 @@ import shutil
 import struct
 import subprocess
 import sys
-import tempfile
 import textwrap
 import time
 import zlib
-from dataclasses import asdict, dataclass, field
+from dataclasses import dataclass, field
 from pathlib import Path
 
 import numpy as np
@@ -820,68 +814,3 @@ def run_case(case: Case, base: Path, fx: Path) -> Result:
         r.misleading = True
     shutil.rmtree(work, ignore_errors=True)
     return r
-
-
-def main(argv: list[str] | None = None) -> int:
-    ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
-    ap.add_argument("--json", required=True, help="write every case's record here")
-    ap.add_argument("--jobs", type=int, default=2, help="cases run at once (default 2)")
-    ap.add_argument("-k", action="append", default=[], help="only cases whose name contains this (repeatable)")
-    ap.add_argument("--no-big", action="store_true", help="skip the 8000² PNG memory case")
-    args = ap.parse_args(argv)
-    if not 1 <= args.jobs <= 16:
-        ap.error("--jobs must be between 1 and 16")
-    sys.path.insert(0, str(REPO / "bench"))
-    from machine import describe_machine
-
-    base = Path(tempfile.mkdtemp(prefix="specgen-campaign-"))
-    try:
-        fx = base / "fixtures"
-        big = not args.no_big and (not args.k or any("8000" in k for k in args.k))
-        make_fixtures(fx, big)
-        fx_before = snapshot(fx)
-        todo = [c for c in cases((fx / "good.bsdf").exists(), big) if not args.k or any(k in c.name for k in args.k)]
-        names = [c.name for c in todo]
-        assert len(names) == len(set(names)), "duplicate case names"
-        print(f"{len(todo)} cases, {args.jobs} at a time; {describe_machine()}", flush=True)
-        results: list[Result] = []
-        with cf.ThreadPoolExecutor(args.jobs) as pool:
-            futures = {pool.submit(run_case, c, base, fx): c for c in todo}
-            for fut in cf.as_completed(futures):
-                r = fut.result()
-                results.append(r)
-                flags = [k for k in ("traceback", "silently_accepted", "wrongly_refused", "internal",
-                                     "misleading", "timeout") if getattr(r, k)] + (["leftovers"] if r.leftovers else [])
-                print(f"{'ok  ' if r.clean else 'FAIL'} {r.name:55s} exit={r.exit} {r.seconds:6.1f}s "
-                      f"{' '.join(flags)} | {r.message[:110]}", flush=True)
-        fx_changed = sorted(k for k, v in snapshot(fx).items() if fx_before.get(k) != v)
-    finally:
-        shutil.rmtree(base, ignore_errors=True)
-    results.sort(key=lambda r: names.index(r.name))
-    big_case = next((r for r in results if r.peak_rss_gb is not None), None)
-    tally = {
-        "cases": len(results),
-        "clean": sum(r.clean for r in results),
-        "tracebacks": sum(r.traceback for r in results),
-        "silently_accepted": sum(r.silently_accepted for r in results),
-        "wrongly_refused": sum(r.wrongly_refused for r in results),
-        "leftovers": sum(bool(r.leftovers) for r in results),
-        "internal_errors": sum(r.internal for r in results),
-        "misleading": sum(r.misleading for r in results),
-        "timeouts": sum(r.timeout for r in results),
-        "fixtures_changed": fx_changed,
-        "png8000_peak_rss_gb": None if big_case is None else round(big_case.peak_rss_gb, 2),
-        "png8000_seconds": None if big_case is None else big_case.seconds,
-        "machine": describe_machine(),
-        "date": time.strftime("%Y-%m-%d %H:%M UTC", time.gmtime()),
-    }
-    report = {"tally": tally, "failures": [r.name for r in results if not r.clean],
-              "cases": [{**asdict(r), "clean": r.clean} for r in results]}
-    Path(args.json).write_text(json.dumps(report, indent=1))
-    print(json.dumps(tally, indent=1))
-    print("failures:", *report["failures"], sep="\n  ")
-    return 0 if tally["clean"] == tally["cases"] and not fx_changed else 1
-
-
-if __name__ == "__main__":
-    sys.exit(main())

@@ -176,7 +176,7 @@ MAKERS = {
     "cfg_broken": lambda r: _cfg(r, "broken.json", "{not json"),
     "run_dir": lambda r: _run_dir(r, b"not a checkpoint"),
     "weights_nan": lambda r: _nan_weights(r / "nan.pt"),
-    # found by the fresh campaign (scripts/bad_input_campaign.py)
+    # found by the campaign (tests/bad_input_cases.py)
     "npz_wl_nan": lambda r: _npz_wavelengths(r / "wlnan.npz", np.array([400.0, np.nan, 600.0, 700.0])),
     "rgl_version_fraction": lambda r: _rgl(r / "ver15.bsdf", version=np.array([1.5, 0.0], np.float32)),
     "cfg_train_null": lambda r: _cfg(r, "trainnull.json", {"train": None}),
@@ -354,7 +354,7 @@ CLI_CASES = {
     "paper-tables-out-folder-missing": (lambda w: ["paper-tables", "--out", str(w.root / "no" / "r.md"), Q], "does not exist"),
     "paper-tables-ablation-steps-0": (lambda w: ["paper-tables", "--out", str(w.out / "r.md"), "--ablation-steps", "0", Q], "--ablation-steps"),
     "export-onnx-missing-weights": (lambda w: ["export-onnx", "--weights", str(w.root / "w.pt")], "not found"),
-    # found by the fresh campaign (scripts/bad_input_campaign.py)
+    # found by the campaign (tests/bad_input_cases.py)
     "info-npz-nan-wavelengths": (lambda w: ["info", str(w.npz_wl_nan)], "finite and increasing"),
     "info-rgl-version-fraction": (lambda w: ["info", str(w.rgl_version_fraction)], "whole numbers"),
     "train-config-train-null": (lambda w: ["train", "--config", str(w.cfg_train_null), "--out", str(w.out / "t"), Q], "train must be an object"),
@@ -371,9 +371,9 @@ CLI_CASES = {
     "batch-many-batch-args-resolution-0": (lambda w: ["batch-many", "--out", str(w.out / "bm"), "--batch-args=--resolution 0", str(EXAMPLE), Q], "--resolution"),
     # faults and limits: refused before any work
     "infer-input-env-over-pixel-limit": (lambda w: ["infer", str(EXAMPLE), "-o", str(w.out / "b.npz"), "--input-env", str(w.env_huge), Q], "megapixels"),
-    "infer-input-env-square": (lambda w: ["infer", str(EXAMPLE), "-o", str(w.out / "b.npz"), "--input-env", str(w.env_square), Q], "2:1"),
-    "infer-input-env-1-to-64": (lambda w: ["infer", str(EXAMPLE), "-o", str(w.out / "b.npz"), "--input-env", str(w.env_tall), Q], "2:1"),
-    "infer-input-env-64-to-1": (lambda w: ["infer", str(EXAMPLE), "-o", str(w.out / "b.npz"), "--input-env", str(w.env_wide), Q], "2:1"),
+    "infer-input-env-square": (lambda w: ["infer", str(EXAMPLE), "-o", str(w.out / "b.npz"), "--input-env", str(w.env_square), Q], "twice as wide"),
+    "infer-input-env-1-to-64": (lambda w: ["infer", str(EXAMPLE), "-o", str(w.out / "b.npz"), "--input-env", str(w.env_tall), Q], "twice as wide"),
+    "infer-input-env-64-to-1": (lambda w: ["infer", str(EXAMPLE), "-o", str(w.out / "b.npz"), "--input-env", str(w.env_wide), Q], "twice as wide"),
     "infer-output-name-256-bytes": (lambda w: ["infer", str(EXAMPLE), "-o", str(w.out / ("n" * 252 + ".npz")), Q], "256 bytes long"),
     "infer-rgb-output-name-too-long": (lambda w: ["infer", str(EXAMPLE), "-o", str(w.out / ("n" * 250 + ".npz")), "--rgb", Q], "bytes long"),
     "tabulate-output-name-256-bytes": (lambda w: ["tabulate", str(w.npz_good), "-o", str(w.out / ("t" * 252 + ".npz"))], "256 bytes long"),
@@ -513,7 +513,7 @@ BATCH_CASES = {
     "target-is-a-folder-with-overwrite": (lambda w: _batch_args(w, overwrite=None) + ["--overwrite"]
                                           if (w.out / "sphere_sphere_studio.exr").mkdir() is None else [], "is a folder"),
     "input-env-over-pixel-limit": (lambda w: _batch_args(w, input_env=str(w.env_huge)), "megapixels"),
-    "input-env-not-2-to-1": (lambda w: _batch_args(w, input_env=str(w.env_square)), "2:1"),
+    "input-env-not-2-to-1": (lambda w: _batch_args(w, input_env=str(w.env_square)), "twice as wide"),
     "image-name-too-long": (lambda w: _batch_args(w, image=str(_long_named_copy(w))), "bytes long"),
 }
 
@@ -566,7 +566,7 @@ API_CASES = {
     "safe-name-dotdot": (lambda w: __import__("specgen_addon.limits", fromlist=["x"]).safe_name("../x.exr"), SpecGenError, "plain file name"),
     "safe-name-absolute": (lambda w: __import__("specgen_addon.limits", fromlist=["x"]).safe_name("/tmp/x.exr"), SpecGenError, "plain file name"),
     "config-lr-nan": (lambda w: __import__("specgen_addon.train.loop", fromlist=["x"]).validate_train_config(w.cfg_lr_nan), SpecGenError, "finite"),
-    # found by the fresh campaign (scripts/bad_input_campaign.py)
+    # found by the campaign (tests/bad_input_cases.py)
     "table-load-nan-wavelengths": (lambda w: BRDFTable.load(w.npz_wl_nan), SpecGenError, "finite"),
     "refine-not-a-table": (lambda w: _api("refine").refine_brdf("t.npz", np.full((64, 64, 3), 0.1)), SpecGenError, "BRDFTable"),
     "bake-negative-tolerance": (lambda w: _api("bake").bake_atlas(BRDFTable.load(w.npz_good), w.out / "a.exr", tolerance=-1), SpecGenError, "tolerance"),
@@ -881,3 +881,44 @@ def test_cancelled_generate_leaves_nothing_in_the_lookup_folder(after_calls, sta
         bake.generate_lookup(str(EXAMPLE), out, np.linspace(400, 700, 4), cancel=cancel)
     assert stage in str(info.value)
     assert not out.exists()
+
+
+# ------------------------------------------------------------------------------- the campaign
+# The independent campaign (tests/bad_input_cases.py: its own fixtures and ~390 cases across every
+# command, batch.py and the Python API), each case a fresh process in its own folder with TMPDIR
+# inside it. Slow: about 8 minutes on two cores (`-m slow -k campaign`).
+import bad_input_cases as campaign  # noqa: E402
+
+CAMPAIGN = {c.name: c for c in campaign.cases(campaign.RGL_DIR.is_dir(), big=False)}
+
+
+@pytest.fixture(scope="module")
+def campaign_fixtures(tmp_path_factory):
+    base = tmp_path_factory.mktemp("campaign")
+    campaign.make_fixtures(base / "fixtures", big=False)
+    before = campaign.snapshot(base / "fixtures")
+    yield base
+    assert campaign.snapshot(base / "fixtures") == before, "a case changed the shared fixtures"
+
+
+def _flags(r) -> list[str]:
+    return [k for k in ("traceback", "silently_accepted", "wrongly_refused", "internal", "misleading",
+                        "timeout") if getattr(r, k)] + ([f"leftovers {r.leftovers}"] if r.leftovers else [])
+
+
+@pytest.mark.slow
+@pytest.mark.parametrize("name", list(CAMPAIGN))
+def test_campaign_case_ends_as_decided_with_one_line_and_no_leftovers(name, campaign_fixtures):
+    r = campaign.run_case(CAMPAIGN[name], campaign_fixtures, campaign_fixtures / "fixtures")
+    assert r.clean, f"{name}: {', '.join(_flags(r))} (exit {r.exit}): {r.message}"
+
+
+@pytest.mark.slow
+def test_campaign_infer_on_an_8000_px_photo_peaks_under_2_gb(tmp_path):
+    if not Path("/usr/bin/time").is_file():
+        pytest.skip("needs /usr/bin/time -v for the peak resident memory")
+    campaign.make_fixtures(tmp_path / "fixtures", big=True)
+    [case] = [c for c in campaign.cases(False, big=True) if c.measure_memory]
+    r = campaign.run_case(case, tmp_path, tmp_path / "fixtures")
+    assert r.clean, f"{', '.join(_flags(r))} (exit {r.exit}): {r.message}"
+    assert r.peak_rss_gb is not None and r.peak_rss_gb <= 2.0, r.peak_rss_gb

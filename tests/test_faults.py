@@ -322,3 +322,66 @@ def test_a_fallback_to_torch_is_said(tmp_path, monkeypatch):
         with pytest.raises(RuntimeError, match="stop here"):
             bake.generate_lookup(str(EXAMPLE), tmp_path / "lookup", np.linspace(400, 700, 4))
     assert calls == ["onnx", "torch"]
+
+
+# ----------------------------------------------------------------------------- environment maps
+def _tiled_exr(path: Path, rgb: np.ndarray, tile: int = 16) -> Path:
+    oiio = pytest.importorskip("OpenImageIO")
+    spec = oiio.ImageSpec(rgb.shape[1], rgb.shape[0], 3, oiio.FLOAT)
+    spec.tile_width = spec.tile_height = tile
+    out = oiio.ImageOutput.create(str(path))
+    out.open(str(path), spec)
+    out.write_image(np.ascontiguousarray(rgb, np.float32))
+    out.close()
+    return path
+
+
+def test_a_20000_by_10000_map_is_refused_from_its_header_in_under_a_second(tmp_path):
+    import struct
+
+    from specgen_addon import image_io
+    from specgen_addon.input_lighting import LightingError, parse_lighting
+
+    path = tmp_path / "huge.exr"
+    image_io.write_exr(path, {c: np.full((1, 2), 0.5, np.float32) for c in "RGB"})
+    data = bytearray(path.read_bytes())  # the header declares 20000×10000
+    for name in (b"dataWindow", b"displayWindow"):
+        at = data.index(name + b"\0box2i\0") + len(name) + 11
+        data[at:at + 16] = struct.pack("<4i", 0, 0, 19999, 9999)
+    path.write_bytes(bytes(data))
+    t0 = time.perf_counter()
+    with pytest.raises(LightingError, match="20000×10000 = 200 megapixels; the limit is 100 megapixels"):
+        parse_lighting(str(path))
+    assert time.perf_counter() - t0 < 1.0
+
+
+@pytest.mark.parametrize("shape", [(64, 64), (8, 512), (512, 8)])
+def test_a_map_that_is_not_2_to_1_is_refused(tmp_path, shape):
+    from specgen_addon import image_io
+    from specgen_addon.input_lighting import LightingError, parse_lighting
+
+    path = tmp_path / "map.exr"
+    image_io.write_exr(path, {c: np.full(shape, 0.5, np.float32) for c in "RGB"})
+    with pytest.raises(LightingError, match="twice as wide as it is high"):
+        parse_lighting(str(path))
+
+
+@pytest.mark.parametrize("tiled", [False, True])
+def test_a_map_is_read_in_strips_as_the_renderer_reads_it_and_negative_texels_are_said(tmp_path, tiled):
+    from specgen_addon import image_io
+    from specgen_addon.image_checks import ImageNote
+    from specgen_addon.input_lighting import read_map_bounded
+    from specgen_addon.render.environment import _box_downsample, read_exr_rgb
+
+    rgb = np.random.default_rng(1).random((1024, 2048, 3)).astype(np.float32)
+    rgb[:3, :5, 1] = -0.25
+    path = tmp_path / "map.exr"
+    if tiled:
+        _tiled_exr(path, rgb)
+    else:
+        image_io.write_exr(path, {c: rgb[..., i] for i, c in enumerate("RGB")})
+    with pytest.warns(ImageNote, match="15 negative values .* clamped to 0"):
+        got = read_map_bounded(path, max_width=512)
+    want = _box_downsample(read_exr_rgb(path), 512)
+    assert got.shape == want.shape == (256, 512, 3)
+    np.testing.assert_allclose(got, want, rtol=1e-5, atol=1e-6)
