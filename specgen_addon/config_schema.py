@@ -32,7 +32,9 @@ TRAIN_BOUNDS: dict[str, tuple[float | None, float | None]] = {
     "checkpoint_every": (1, None), "val_every": (1, None), "val_materials": (0, 10_000),
     "threads": (1, 256), "ema_decay": (0.0, 0.999999),
     "snapshot_every": (0, None), "snapshot_from": (0, None), "render_workers": (1, 256),
-    "data_workers": (0, 256),
+    "data_workers": (0, 256), "real_materials_per_step": (0, 4096), "real_weight": (0.0, 1e6),
+    "real_exposure_jitter": (0.0, 4.0), "real_white_balance_jitter": (0.0, 1.0),
+    "corpus_train_limit": (0, 10_000_000),
 }
 #: Numeric model sizes are at least 1 (and finite); these have other bounds.
 MODEL_BOUNDS: dict[str, tuple[float | None, float | None]] = {

@@ -68,6 +68,10 @@ def build_material_sets(mcfg: Config, tcfg: TrainConfig, cache_dir: str | Path,
         corpus = generate_mixed_corpus(tcfg.corpus_size, tcfg.corpus_seed, tcfg.families)
     train = [m for m in corpus if m.split == "train"]
     val = [m for m in corpus if m.split == "val"]
+    if tcfg.corpus_train_limit and tcfg.corpus_train_limit < len(train):
+        # evenly over the corpus order (every family), and only the validation materials scored
+        pick = np.linspace(0, len(train) - 1, tcfg.corpus_train_limit).round().astype(int)
+        train, val = [train[i] for i in pick], val[: tcfg.val_materials]
     spectral = [TrainingMaterial(m.name, m, True, "train") for m in train]
     rgb = [TrainingMaterial(m.name + "/rgb", m, False, "train") for m in train] if tcfg.rgb_weight > 0 else []
     dirs = [Path(d) for d in tcfg.brdf_dirs]

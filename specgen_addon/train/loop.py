@@ -90,6 +90,19 @@ class TrainConfig:
     canonical_fraction: float = 0.75
     use_shared_rgl: bool = False
     brdf_dirs: list[str] = field(default_factory=list)
+    #: Real RGB measurements drawn at every step (0: off), each supervising the RGB side in colour
+    #: and grey (:mod:`.real_rgb`), weighed by ``real_weight``; taken from ``real_rgb_dir`` (None:
+    #: ../shared/data/rgl) less the stems in ``real_exclude`` (a cross-validation fold's held-out
+    #: files), augmented by exposure (σ in stops) and white balance (σ of each channel's log gain).
+    real_materials_per_step: int = 0
+    real_weight: float = 1.0
+    real_rgb_dir: str | None = None
+    real_exclude: list[str] = field(default_factory=list)
+    real_exposure_jitter: float = 0.0
+    real_white_balance_jitter: float = 0.0
+    #: Train on at most this many of the corpus' training materials, spread evenly over its order
+    #: (0: all): a short fine-tune renders only the inputs it uses; the split stays the corpus'.
+    corpus_train_limit: int = 0
     checkpoint_every: int = 250
     val_every: int = 250
     val_materials: int = 8
@@ -168,12 +181,13 @@ class TrainConfig:
                         ("angles_per_material", 1), ("wavelengths_per_angle", 1), ("input_variants", 1),
                         ("lr_decay_every", 1), ("checkpoint_every", 1), ("val_every", 1),
                         ("val_materials", 0), ("threads", 1), ("render_workers", 1), ("data_workers", 0),
-                        ("snapshot_every", 0), ("snapshot_from", 0)):
+                        ("snapshot_every", 0), ("snapshot_from", 0), ("real_materials_per_step", 0),
+                        ("corpus_train_limit", 0)):
             v = getattr(self, key)
             if not is_int(v) or v < lo:
                 raise SpecGenError(f"training config: {key} must be an integer ≥ {lo}, got {v!r}")
         for key in ("lr", "lr_decay", "tv_weight", "rgb_weight", "linear_loss_weight", "balance_floor",
-                    "input_jitter_px",
+                    "input_jitter_px", "real_weight", "real_exposure_jitter", "real_white_balance_jitter",
                     "input_scale_jitter", "input_finder_error_px", "canonical_fraction"):
             v = getattr(self, key)
             if not isinstance(v, (int, float)) or isinstance(v, bool) or not np.isfinite(v) or v < 0:
@@ -464,12 +478,14 @@ def group_loss(model: SpecGen, b: Batch, linear_weight: float = 0.0, balance: st
 
 
 def total_loss(tcfg: TrainConfig, g_spec: tuple[torch.Tensor, torch.Tensor] | None,
-               g_rgb: tuple[torch.Tensor, torch.Tensor] | None) -> tuple[torch.Tensor, dict[str, float]]:
-    """``L = L_spec + w_rgb · L_RGB + α · L_TV`` from the groups' ``(MSE, TV)`` (either may be
-    ``None``), and the logged parts ``spec``, ``rgb``, ``tv``."""
+               g_rgb: tuple[torch.Tensor, torch.Tensor] | None,
+               g_real: tuple[torch.Tensor, torch.Tensor] | None = None) -> tuple[torch.Tensor, dict[str, float]]:
+    """``L = L_spec + w_rgb · L_RGB + w_real · L_real + α · L_TV`` from the groups' ``(MSE, TV)``
+    (any may be ``None``), and the logged parts ``spec``, ``rgb``, ``real``, ``tv``."""
     parts: dict[str, float] = {}
     terms, tv_terms = [], []
-    for key, group, weight in (("spec", g_spec, 1.0), ("rgb", g_rgb, tcfg.rgb_weight)):
+    for key, group, weight in (("spec", g_spec, 1.0), ("rgb", g_rgb, tcfg.rgb_weight),
+                               ("real", g_real, tcfg.real_weight)):
         if group is not None:
             mse, tv = group
             terms.append(weight * mse)
@@ -529,15 +545,22 @@ def _validation_batch(tcfg: TrainConfig, mcfg: Config, val: MaterialSet) -> Batc
 def train(mcfg: Config, tcfg: TrainConfig, spectral: MaterialSet, rgb: MaterialSet, val: MaterialSet,
           out_dir: str | Path, resume: bool = False, show_progress: bool = True,
           meta: dict[str, Any] | None = None,
-          on_step: Callable[[int, dict[str, float]], None] | None = None) -> TrainResult:
+          on_step: Callable[[int, dict[str, float]], None] | None = None,
+          real: Any = None) -> TrainResult:
     """Train SpecGen; writes ``checkpoint.pt``, ``history.csv`` and ``specgen.pt`` into ``out_dir``.
 
     With ``resume`` an existing checkpoint in ``out_dir`` is continued (same configs required).
     ``max_minutes`` stops this call early at a step boundary (the weights then say how many steps
-    ran); a resumed run's earlier calls do not count against it.
+    ran); a resumed run's earlier calls do not count against it. ``real``: the real RGB
+    materials (:class:`.real_rgb.RealSource`); by default built from the config when it asks for them.
     """
     if len(spectral) == 0 and len(rgb) == 0:
         raise SpecGenError("no training materials")
+    if real is None and tcfg.real_materials_per_step > 0:
+        from ..evaluation.cache import cache_root
+        from .real_rgb import real_source
+
+        real = real_source(tcfg, cache_root() / "train-data", log=print if show_progress else (lambda _m: None))
     if tcfg.family_draw is not None:  # once, before any output and before data workers fork
         spectral, rgb = (dataclasses.replace(m, draw_p=family_draw_probabilities(m.materials, tcfg.family_draw))
                          if len(m) else m for m in (spectral, rgb))
@@ -594,6 +617,8 @@ def train(mcfg: Config, tcfg: TrainConfig, spectral: MaterialSet, rgb: MaterialS
                  "fresh_encoder": False, "frozen": [], "recycle_mode": "redo",
                  "input_scale_jitter": 0.0, "input_offgrid_fraction": 0.0, "input_finder_error_px": 0.07,
                  "recolour_p": 0.0, "material_balance": "mean", "balance_floor": 0.1,
+                 "real_materials_per_step": 0, "real_weight": 1.0, "real_rgb_dir": None, "real_exclude": [],
+                 "real_exposure_jitter": 0.0, "real_white_balance_jitter": 0.0, "corpus_train_limit": 0,
                  **ck["train_config"]}
         if ck["model_config"] != mcfg.to_dict() or saved != _tdict(tcfg, ignore_budget=True):
             raise SpecGenError(f"{ckpt_path}: checkpoint was made with a different configuration")
@@ -643,7 +668,13 @@ def train(mcfg: Config, tcfg: TrainConfig, spectral: MaterialSet, rgb: MaterialS
                 g["lr"] = lr_at(tcfg, step)
             model.train()
             opt.zero_grad(set_to_none=True)
-            loss, parts = total_loss(tcfg, *step_losses(b_spec, b_rgb))
+            g_real = None
+            if real is not None:
+                from .real_rgb import real_loss
+
+                g_real = real_loss(model, real.batch(tcfg.seed, step, mcfg.image_size,
+                                                     tcfg.angles_per_material, mcfg.mu))
+            loss, parts = total_loss(tcfg, *step_losses(b_spec, b_rgb), g_real)
             rec: dict[str, float] = {"step": step + 1, "lr": lr_at(tcfg, step), **parts}
             loss.backward()
             opt.step()
@@ -660,7 +691,7 @@ def train(mcfg: Config, tcfg: TrainConfig, spectral: MaterialSet, rgb: MaterialS
                 on_step(step, rec)
             if bar is not None:
                 bar.update(1)
-                post = {k: f"{rec[k]:.4g}" for k in ("loss", "spec", "rgb", "tv") if k in rec}
+                post = {k: f"{rec[k]:.4g}" for k in ("loss", "spec", "rgb", "real", "tv") if k in rec}
                 if "val" in rec:
                     post["val"] = f"{rec['val']:.4g}"
                 bar.set_postfix(post, refresh=False)
@@ -704,7 +735,7 @@ def _tdict(tcfg: TrainConfig, ignore_budget: bool = False) -> dict[str, Any]:
 
 
 def _write_history(path: Path, history: Sequence[dict[str, float]]) -> None:
-    keys = ["step", "lr", "loss", "spec", "rgb", "tv", "val", "elapsed"]
+    keys = ["step", "lr", "loss", "spec", "rgb", "real", "tv", "val", "elapsed"]
     with atomic_write(path, overwrite=True) as tmp:
         with open(tmp, "w", newline="") as fh:
             w = csv.DictWriter(fh, fieldnames=keys, extrasaction="ignore")

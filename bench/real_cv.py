@@ -1,0 +1,247 @@
+"""The network on real materials, cross-validated over the real RGL RGB files.
+
+``baseline``: the given weights (default: the shipped ones, which have never seen a real file, so
+every file is held out for them) scored on every real file, network alone and refined, under the
+distant lights and the held-out maps, beside each file's own MERL-grid table (the representation's
+ceiling; :mod:`specgen_addon.evaluation.real_files`).
+
+``cv``: a k-fold cross-validation. The files are split into ``--folds`` folds (a seeded shuffle);
+each fold fine-tunes ``init_weights`` of ``--config`` with the real files of the *other* folds in
+joint training (``real_exclude`` = its own files, :mod:`specgen_addon.train.real_rgb`) for the same
+``--steps`` (and at most ``--max-minutes``), then scores its held-out files. The control arm is the
+same fine-tune without real files (``real_materials_per_step`` 0): it sees no real file, so one run
+serves every fold and the gain over it is the real files'. Both arms, and the initial weights, are
+also scored on a subset of the synthetic test split (``--synthetic-per-family`` per family, 64²,
+distant lights, network alone), paired. Each fold's run and score is kept under ``--out`` and reused,
+so an interrupted study continues.
+
+Usage::
+
+    .venv/bin/python bench/real_cv.py baseline --out out/real_baseline
+    .venv/bin/python bench/real_cv.py cv --config lab/configs/real_joint_cv.json --folds 7 \\
+        --steps 150 --out out/real_cv
+
+Each writes ``report.json`` and ``report.md`` into ``--out``.
+"""
+
+from __future__ import annotations
+
+import argparse
+import dataclasses
+import sys
+import time
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+
+REPO = Path(__file__).resolve().parents[1]
+sys.path.insert(0, str(REPO))
+sys.path.insert(0, str(Path(__file__).resolve().parent))
+
+from machine import describe_machine
+
+
+def _json(path: Path) -> Any | None:
+    from specgen_addon.evaluation.cache import read_json
+
+    return read_json(path)
+
+
+def _save(path: Path, data: Any) -> None:
+    from specgen_addon.evaluation.cache import write_json
+
+    write_json(path, data)
+
+
+def score_files(files: list[Path], weights: Path | None, out: Path, refine: bool, resolution: int,
+                ceiling: bool = False) -> list[dict[str, Any]]:
+    """Per-file rows (cached as ``out/<stem>.json``)."""
+    from specgen_addon.evaluation.real_files import score_real_file, table_ceiling
+
+    rows = []
+    for p in files:
+        cell = out / f"{p.stem}.json"
+        row = _json(cell)
+        if row is None:
+            row = score_real_file(p, weights, resolution, refine=refine)
+            if ceiling:
+                row |= table_ceiling(p, resolution)
+            _save(cell, row)
+        print(f"  {p.stem}: " + ", ".join(f"{k[5:]} {v:.2f}" for k, v in row.items() if k.startswith("psnr_")),
+              flush=True)
+        rows.append(row)
+    return rows
+
+
+def synthetic(weights: Path | None, out: Path, per_family: int) -> dict[str, Any]:
+    """Network alone on ``per_family`` test materials per family, 64², distant lights (cached)."""
+    done = _json(out)
+    if done is not None:
+        return done
+    from specgen_addon.train.evaluate import evaluate_families
+
+    res = evaluate_families(weights=weights, per_family=per_family, envs=False, resolution=64,
+                            self_reproduction=False)
+    rows = [{"material": r["material"], "family": r["family"], "psnr": r["psnr_distant"]} for r in res["materials"]]
+    done = {"per_family": per_family, "rows": rows, "mean": float(np.mean([r["psnr"] for r in rows]))}
+    _save(out, done)
+    return done
+
+
+def folds_of(files: list[Path], k: int, seed: int) -> list[list[Path]]:
+    """``k`` folds of (nearly) equal size from a seeded shuffle of ``files``."""
+    order = np.random.default_rng(seed).permutation(len(files))
+    return [[files[i] for i in sorted(order[j::k])] for j in range(k)]
+
+
+def fine_tune(config: Path, out: Path, steps: int, max_minutes: float | None, exclude: list[str],
+              real: bool) -> Path:
+    """Fine-tune per ``config`` into ``out`` (reused when done): the joint arm trains on the real
+    files less ``exclude``, the control arm on none."""
+    weights = out / "specgen.pt"
+    if weights.is_file():
+        return weights
+    from specgen_addon.evaluation.cache import cache_root
+    from specgen_addon.train import build_material_sets
+    from specgen_addon.train.loop import load_config, train
+
+    mcfg, tcfg = load_config(config)
+    tcfg = dataclasses.replace(tcfg, steps=steps, max_minutes=max_minutes, real_exclude=list(exclude),
+                               **({} if real else {"real_materials_per_step": 0}))
+    tcfg.validate()
+    spectral, rgb, val = build_material_sets(mcfg, tcfg, cache_root() / "train-data")
+    res = train(mcfg, tcfg, spectral, rgb, val, out, show_progress=False,
+                meta={"config_file": str(config), "real_exclude": list(exclude)})
+    print(f"  trained {res.steps} steps in {res.wall_seconds:.0f} s -> {res.weights}", flush=True)
+    return res.weights
+
+
+def table_md(rows: list[dict[str, Any]], cols: list[tuple[str, str]]) -> list[str]:
+    """Markdown rows: a file per row, then the mean and the minimum."""
+    lines = ["| file | " + " | ".join(h for h, _ in cols) + " |", "| --- |" + " ---: |" * len(cols)]
+    for r in rows:
+        lines.append(f"| {r['material']} | " + " | ".join(f"{r[k]:.2f}" if k in r else "—" for _, k in cols) + " |")
+    for what, fn in (("**mean**", np.mean), ("min", np.min)):
+        lines.append(f"| {what} | " + " | ".join(
+            f"{fn([r[k] for r in rows]):.2f}" if all(k in r for r in rows) else "—" for _, k in cols) + " |")
+    return lines
+
+
+def run_baseline(args: argparse.Namespace) -> int:
+    from specgen_addon.evaluation.real_files import scenes, summarise
+
+    files = sorted(args.rgl.glob("*.bsdf"))
+    t0 = time.perf_counter()
+    rows = score_files(files, args.weights, args.out / "files", refine=not args.no_refine,
+                       resolution=args.resolution, ceiling=True)
+    labels = [lab for lab, _ in scenes()]
+    report = {"what": "baseline on every real file (none seen in training)", "weights": str(args.weights or "shipped"),
+              "resolution": args.resolution, "scenes": labels, "rows": rows, "summary": summarise(rows),
+              "machine": describe_machine(), "seconds": round(time.perf_counter() - t0, 1)}
+    _save(args.out / "report.json", report)
+    cols = [(f"network {lab}", f"psnr_{lab}") for lab in labels]
+    cols += [(f"refined {lab}", f"psnr_refined_{lab}") for lab in labels]
+    cols += [(f"table ceiling {lab}", f"ceiling_{lab}") for lab in labels]
+    md = [(f"Real RGL RGB files, weights {report['weights']}, {args.resolution}² renders, PSNR dB; "
+          f"{report['machine']}"), ""] + table_md(rows, cols)
+    (args.out / "report.md").write_text("\n".join(md) + "\n")
+    print("\n".join(md))
+    return 0
+
+
+def run_cv(args: argparse.Namespace) -> int:
+    from specgen_addon.evaluation.real_files import scenes, summarise
+
+    files = sorted(args.rgl.glob("*.bsdf"))
+    folds = folds_of(files, args.folds, args.fold_seed)
+    labels = [lab for lab, _ in scenes()]
+    t0 = time.perf_counter()
+    print("control arm (no real files)", flush=True)
+    control_w = fine_tune(args.config, args.out / "control", args.steps, args.max_minutes, [], real=False)
+    joint_rows, fold_info = [], []
+    for k, held in enumerate(folds):
+        names = [p.stem for p in held]
+        print(f"fold {k}: held out {', '.join(names)}", flush=True)
+        w = fine_tune(args.config, args.out / f"fold{k}", args.steps, args.max_minutes, names, real=True)
+        meta = _weights_meta(w)
+        fold_info.append({"fold": k, "held_out": names, "weights": str(w), "steps": meta.get("steps"),
+                          "wall_seconds": meta.get("wall_seconds")})
+        joint_rows += [r | {"fold": k} for r in score_files(held, w, args.out / f"fold{k}" / "scores",
+                                                             not args.no_refine, args.resolution)]
+    print("control arm scores", flush=True)
+    control_rows = score_files(files, control_w, args.out / "control" / "scores", not args.no_refine,
+                               args.resolution)
+    synth = {}
+    if args.synthetic_per_family:
+        print("synthetic split subset", flush=True)
+        synth = {"initial": synthetic(None, args.out / "synthetic_initial.json", args.synthetic_per_family),
+                 "control": synthetic(control_w, args.out / "synthetic_control.json", args.synthetic_per_family),
+                 "fold0": synthetic(args.out / "fold0" / "specgen.pt", args.out / "synthetic_fold0.json",
+                                    args.synthetic_per_family)}
+    report = {"what": f"{args.folds}-fold cross-validation over the real RGL RGB files", "config": str(args.config),
+              "steps": args.steps, "max_minutes": args.max_minutes, "resolution": args.resolution,
+              "scenes": labels, "folds": fold_info, "joint": joint_rows, "control": control_rows,
+              "summary": {"joint": summarise(joint_rows), "control": summarise(control_rows)},
+              "control_arm": {"weights": str(control_w), **{k: _weights_meta(control_w).get(k)
+                                                              for k in ("steps", "wall_seconds")}},
+              "synthetic": {k: {"mean": v["mean"], "n": len(v["rows"])} for k, v in synth.items()},
+              "machine": describe_machine(), "seconds": round(time.perf_counter() - t0, 1)}
+    if synth:
+        init = {r["material"]: r["psnr"] for r in synth["initial"]["rows"]}
+        for arm in ("control", "fold0"):
+            d = np.array([r["psnr"] - init[r["material"]] for r in synth[arm]["rows"]])
+            report["synthetic"][arm]["paired_vs_initial"] = {"mean": float(d.mean()),
+                                                             "se": float(d.std(ddof=1) / np.sqrt(d.size))}
+    _save(args.out / "report.json", report)
+    by_name = {r["material"]: r for r in control_rows}
+    merged = [r | {f"control_{k}": by_name[r["material"]][k] for k in by_name[r["material"]] if k.startswith("psnr_")}
+              for r in sorted(joint_rows, key=lambda r: r["material"])]
+    cols = [(f"joint {lab}", f"psnr_{lab}") for lab in labels] + \
+           [(f"control {lab}", f"control_psnr_{lab}") for lab in labels]
+    if not args.no_refine:
+        cols += [(f"joint refined {lab}", f"psnr_refined_{lab}") for lab in labels]
+    md = [(f"{report['what']}: {args.steps} steps per fine-tune ({args.config}), {args.resolution}² renders, "
+          f"PSNR dB, every file scored by the fold that did not train on it; {report['machine']}"), ""]
+    md += table_md(merged, cols)
+    for arm, s in report["synthetic"].items():
+        pv = s.get("paired_vs_initial")
+        md.append(f"\nsynthetic test subset ({s['n']} materials, 64², distant): {arm} {s['mean']:.2f} dB"
+                  + (f", paired vs the initial weights {pv['mean']:+.2f} ± {pv['se']:.2f} dB" if pv else ""))
+    (args.out / "report.md").write_text("\n".join(md) + "\n")
+    print("\n".join(md))
+    return 0
+
+
+def _weights_meta(path: Path) -> dict[str, Any]:
+    import torch
+
+    return torch.load(path, map_location="cpu", weights_only=True).get("meta", {})
+
+
+def main() -> int:
+    ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    sub = ap.add_subparsers(dest="mode", required=True)
+    for name in ("baseline", "cv"):
+        p = sub.add_parser(name)
+        p.add_argument("--out", type=Path, required=True)
+        p.add_argument("--rgl", type=Path, default=REPO.parent / "shared" / "data" / "rgl")
+        p.add_argument("--resolution", type=int, default=64)
+        p.add_argument("--no-refine", action="store_true", help="network alone only")
+    sub.choices["baseline"].add_argument("--weights", type=Path, default=None)
+    cv = sub.choices["cv"]
+    cv.add_argument("--config", type=Path, required=True)
+    cv.add_argument("--folds", type=int, default=7)
+    cv.add_argument("--fold-seed", type=int, default=0)
+    cv.add_argument("--steps", type=int, default=150)
+    cv.add_argument("--max-minutes", type=float, default=None)
+    cv.add_argument("--synthetic-per-family", type=int, default=2)
+    args = ap.parse_args()
+    if not args.rgl.is_dir():
+        ap.error(f"{args.rgl}: real RGB folder not found")
+    args.out.mkdir(parents=True, exist_ok=True)
+    return run_baseline(args) if args.mode == "baseline" else run_cv(args)
+
+
+if __name__ == "__main__":
+    sys.exit(main())
