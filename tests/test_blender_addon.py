@@ -244,6 +244,13 @@ def test_extension_zip_installs_and_registers(tmp_path):
         "assert hasattr(bpy.types, 'SPECGEN_PT_main') and hasattr(bpy.types.Scene, 'specgen')\n"
         "from specgen_addon import bake\n"
         "assert bake.__file__.startswith(ext.__file__.rsplit('__init__', 1)[0]), bake.__file__\n"
+        "from bl_ext.user_default.specgen.ops import reporting\n"
+        "from specgen_addon import errors\n"
+        "from specgen_addon.cli import run_guarded\n"
+        "assert reporting.Cancelled is errors.Cancelled  # one core for the extension and the CLI\n"
+        "def work():\n"
+        "    raise reporting.Cancelled('stopped in the extension')\n"
+        "print('SPECGEN-GUARD', run_guarded('the test', work))\n"
         "print('SPECGEN-INSTALLED', ext.__file__)\n")
     env = {**os.environ, "HOME": str(tmp_path / "home")}
     (tmp_path / "home").mkdir()
@@ -251,6 +258,7 @@ def test_extension_zip_installs_and_registers(tmp_path):
                           timeout=240, cwd=tmp_path)
     assert "SPECGEN-INSTALLED" in done.stdout, done.stdout[-2000:] + done.stderr[-2000:]
     assert str(tmp_path / "home") in done.stdout
+    assert "SPECGEN-GUARD 2" in done.stdout and "error: stopped in the extension" in done.stderr
 
 
 @pytest.mark.parametrize("case", ["missing", "no_sphere", "unknown_env", "unwritable"])
