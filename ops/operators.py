@@ -356,8 +356,10 @@ class SPECGEN_OT_render_stack(_Modal, bpy.types.Operator):
         super()._finish(context)
 
     def modal(self, context, event):
-        if event.type == "ESC":   # between renders; inside one, Blender's render job takes Esc
+        if event.type == "ESC":
             self._job_obj.cancel()
+            if bpy.app.is_job_running("RENDER"):  # inside a band render: Blender's render job
+                return {"PASS_THROUGH"}           # stops Cycles, its render_cancel ends the job
             self._steps.close()  # runs the job's cleanup; nothing was written
             self._finish(context)
             self.report({"WARNING"}, "SpecGen: render cancelled, nothing written")
