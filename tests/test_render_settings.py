@@ -100,3 +100,11 @@ def test_render_job_waits_for_blenders_handlers_and_a_cancel_becomes_cancelled()
     with pytest.raises(Cancelled, match="inside a band render"):
         list(settings.render_job(cancelled_start))
     assert (len(bpy.app.handlers.render_complete), len(bpy.app.handlers.render_cancel)) == before
+
+
+def test_render_jobs_open_no_window_and_lock_the_scene_only_while_the_job_runs():
+    prefs, sc = bpy.context.preferences.view, bpy.context.scene
+    before = (prefs.render_display_type, sc.render.use_lock_interface)
+    with settings.InteractiveRender(sc):
+        assert (prefs.render_display_type, sc.render.use_lock_interface) == ("NONE", True)
+    assert (prefs.render_display_type, sc.render.use_lock_interface) == before
