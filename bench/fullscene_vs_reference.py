@@ -16,7 +16,8 @@ camera and sun as ``bench/bake_vs_reference.py``), render it with the Full Scene
 closure stack alone, and with the Exact mode; print per renderer the mean CIEDE2000 of the sRGB
 projections and the energy ratio (sum of all bands over the sphere) against the reference
 renderer (``specgen_addon.render``), plus the closure fit's rendered error under the three check
-lights (``specgen_addon.fit.fit_check``) that the panel shows.
+lights (``specgen_addon.fit.fit_check``) that the panel shows, and Cycles' closure stack against the
+same fitted model rendered by the reference renderer (how exactly Cycles draws the fit).
 """
 
 from __future__ import annotations
@@ -101,7 +102,7 @@ def main() -> int:
     import bpy
 
     import batch
-    from specgen_addon.fit.fit_check import rendered_fit_error
+    from specgen_addon.fit.fit_check import FitBRDF, rendered_fit_error
     from specgen_addon.render import DistantLight, render_spectral, sphere_geometry
     from specgen_addon.table import BRDFTable
 
@@ -113,8 +114,9 @@ def main() -> int:
     print(describe_machine())
     print(f"sphere {args.resolution}² px, one D65 sun from {SUN}, Full Scene {args.samples} samples")
     print("| material | closure fit ΔE2000 (3 lights) | Full Scene ΔE2000 | energy | closures alone ΔE2000 "
-          "| energy | Exact ΔE2000 | energy | Full Scene vs Exact ΔE2000 |")
-    print("|---|---|---|---|---|---|---|---|---|")
+          "| energy | Exact ΔE2000 | energy | Full Scene vs Exact ΔE2000 "
+          "| Cycles closures vs NumPy fit ΔE2000 |")
+    print("|---|---|---|---|---|---|---|---|---|---|")
     quiet = lambda *_: None  # noqa: E731
     res = args.resolution
     with tempfile.TemporaryDirectory() as tmp:
@@ -125,6 +127,8 @@ def main() -> int:
                                   wavelengths_nm=wl).spectral
             info = bake.bake_atlas(table, Path(tmp) / f"{path.stem}.exr")
             fit_de = rendered_fit_error(info.closures, table)
+            fit_ref = render_spectral(FitBRDF(info.closures), sphere_geometry(res),
+                                      lights=[DistantLight(SUN, np.pi)], wavelengths_nm=wl).spectral
             got = {}
             for label, exact in (("full", True), ("closures", False)):
                 sc = sphere_scene(bpy, render, scene_mod, info, res, args.samples)
@@ -138,6 +142,7 @@ def main() -> int:
                 de, energy = compare(ref, got[label], wl)
                 cells += [f"{de:.2f}", f"{energy:.3f}"]
             cells.append(f"{compare(got['exact'], got['full'], wl)[0]:.2f}")
+            cells.append(f"{compare(fit_ref, got['closures'], wl)[0]:.2f}")
             print(f"| {name} | " + " | ".join(cells) + " |", flush=True)
     return 0
 

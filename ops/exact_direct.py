@@ -29,8 +29,10 @@ from typing import Callable
 import bpy
 import numpy as np
 
+from specgen_addon import bake
 from specgen_addon.errors import SpecGenError
-from .render import SavedAttributes, SpectralRenderJob, is_specgen_material, specgen_materials
+from .render import (SavedAttributes, SpectralRenderJob, is_specgen_material, script_node,
+                     specgen_materials)
 
 #: Samples of the exact render at most (its suns and point lights are noiseless but for the pixel
 #: filter; the environment is importance-sampled in the shader).
@@ -40,9 +42,18 @@ EXACT_LIGHTS = ("SUN", "POINT")
 SURFACES = ("MESH", "CURVE", "SURFACE", "META", "FONT", "CURVES", "POINTCLOUD", "VOLUME")
 
 
-def has_specgen(scene: bpy.types.Scene) -> bool:
-    """Whether a render-visible object of ``scene`` uses a SpecGen material."""
-    return bool(specgen_materials(scene))
+def has_specgen(scene: bpy.types.Scene, warn: Callable[[str], None] = print) -> bool:
+    """Whether a render-visible object of ``scene`` uses a SpecGen material and the exact lookups
+    can light it (no more sun and point lights than the exact shader takes; else a warning)."""
+    if not specgen_materials(scene):
+        return False
+    lights = [o.name for o in scene.objects
+              if o.type == "LIGHT" and not o.hide_render and o.data.type in EXACT_LIGHTS]
+    if len(lights) > bake.MAX_LIGHTS:
+        warn(f"SpecGen: {len(lights)} sun and point lights, the exact lookups take "
+             f"{bake.MAX_LIGHTS}: SpecGen surfaces show their native closures only")
+        return False
+    return True
 
 
 def _holds_specgen(obj: bpy.types.Object) -> bool:
@@ -52,14 +63,17 @@ def _holds_specgen(obj: bpy.types.Object) -> bool:
 class DirectOnlySettings(SavedAttributes):
     """Scene settings of the closures' direct-light render of SpecGen surfaces; restored on exit."""
 
-    def __init__(self, scene: bpy.types.Scene):
+    def __init__(self, scene: bpy.types.Scene, world: bool = True):
         self.scene = scene
+        self.world = world
         self.saved: list[tuple[object, str, object]] = []
 
     def __enter__(self) -> "DirectOnlySettings":
         sc = self.scene
         self._set(sc.cycles, "max_bounces", 0)          # camera hit + light sampling only
         self._set(sc.render, "film_transparent", True)  # the world lights but is not drawn
+        if not self.world:                                # ... or not even that (see world_light)
+            self._set(sc, "world", None)
         for obj in sc.objects:
             if obj.type == "LIGHT" and obj.data.type not in EXACT_LIGHTS and not obj.hide_render:
                 self._set(obj, "hide_render", True)
@@ -80,8 +94,23 @@ def _resample(spectral: np.ndarray, from_nm: np.ndarray, to_nm: np.ndarray) -> n
     return spectral @ interpolation_matrix(from_nm, to_nm)
 
 
+def world_light(scene: bpy.types.Scene, warn: Callable[[str], None] = print) -> bool:
+    """Whether the exact lookups can take the world's light (one Background node: a colour, or an
+    equirect Environment Texture rotated about Z); if not, a warning says why and the world's
+    direct light on SpecGen surfaces stays with the closures (both direct terms leave it out)."""
+    from .render import world_environment
+
+    try:
+        world_environment(scene)
+    except SpecGenError as exc:
+        warn(f"SpecGen: {str(exc).split(';')[0]}: the world's light on SpecGen surfaces comes from "
+             "their native closures; suns and point lights from the exact lookups")
+        return False
+    return True
+
+
 def render_exact_direct(scene: bpy.types.Scene, wavelengths_nm: np.ndarray, shape: tuple[int, int],
-                 warn: Callable[[str], None] = print) -> np.ndarray | None:
+                        warn: Callable[[str], None] = print, world: bool = True) -> np.ndarray | None:
     """The exact mode's direct light on SpecGen surfaces (H, W, Λ) at ``wavelengths_nm``, other
     objects held out; None (with a warning saying why) when the exact mode cannot render the scene."""
     r = scene.render
@@ -92,14 +121,27 @@ def render_exact_direct(scene: bpy.types.Scene, wavelengths_nm: np.ndarray, shap
              "closure stack only (no exact direct light)")
         return None
     samples = max(1, min(int(scene.cycles.samples), EXACT_SAMPLES_CAP))
-    job = SpectralRenderJob(scene, None, samples=samples, resolution=size, warn=warn,
-                            holdout_others=True)
+
+    def relay(msg: str) -> None:  # spot/area lights and emitters: the closures carry them here
+        if "ignored by the exact mode" not in msg and "does not light the exact mode" not in msg:
+            warn(msg)
+
+    job = SpectralRenderJob(scene, None, samples=samples, resolution=size, warn=relay,
+                            holdout_others=True, world=world)
+    # the exact job leaves its lights on the shader's sockets: put back what the file had
+    sockets = [(sock, sock.default_value if isinstance(sock.default_value, (int, float, str))
+                else tuple(sock.default_value))
+               for mat in specgen_materials(scene) if script_node(mat) is not None
+               for sock in script_node(mat).inputs if hasattr(sock, "default_value")]
     try:
         spectral = job.run()
     except SpecGenError as exc:
         warn(f"SpecGen: exact direct light unavailable ({exc}); SpecGen surfaces show the native "
              "closure stack only")
         return None
+    finally:
+        for sock, value in sockets:
+            sock.default_value = value
     return _resample(spectral, job.wavelengths_nm, np.asarray(wavelengths_nm, np.float64))
 
 

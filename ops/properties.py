@@ -22,7 +22,8 @@ LOOKUP_RESOLUTIONS = (
 RENDER_MODES = (
     ("FULL_SCENE", "Full Scene",
      "Cycles path-traces every object, light and the world (global illumination), three bands per "
-     "render; the SpecGen BRDF as its fitted native closures"),
+     "render; direct light on SpecGen surfaces from the exact lookups, their bounces through the "
+     "fitted native closures"),
     ("EXACT", "Exact (SpecGen Objects, Direct Light)",
      "The tabulated BRDF evaluated exactly in OSL, direct light from up to four sun/point lights "
      "and the world, on SpecGen objects only (for validation)"),

@@ -352,7 +352,8 @@ def _light_strength(light: bake.Light, targets: list) -> float:
     return y / max(d2, 1e-6)
 
 
-def scene_lights(scene: bpy.types.Scene, warn: Callable[[str], None] = print) -> bake.SceneLights:
+def scene_lights(scene: bpy.types.Scene, warn: Callable[[str], None] = print,
+                 world: bool = True) -> bake.SceneLights:
     """Sun and point lights plus the world environment of ``scene``, in linear sRGB, for the exact mode.
 
     Spectra follow from the RGB with the environment's uplift basis (Mallett & Yuksel 2019 × D65),
@@ -414,7 +415,7 @@ def scene_lights(scene: bpy.types.Scene, warn: Callable[[str], None] = print) ->
         warn(f"SpecGen: the exact mode takes {bake.MAX_LIGHTS} lights; dropped the weakest: "
              + ", ".join(repr(n) for n in dropped))
         lights = [lights[i] for i in keep]
-    env_rgb = world_environment(scene)
+    env_rgb = world_environment(scene) if world else None   # world=False: suns and points only
     return bake.SceneLights(lights, None if env_rgb is None else bake.EnvironmentLight(env_rgb))
 
 
@@ -612,6 +613,8 @@ class SpectralRenderJob(RenderJobOutputs):
     #: other objects as holdouts (hide what they cover) rather than invisible to the camera: the
     #: full-scene mode's exact direct light (:mod:`.exact_direct`)
     holdout_others: bool = False
+    #: light from the world too (False: only suns and point lights, see :mod:`.exact_direct`)
+    world: bool = True
     spectral: np.ndarray | None = field(default=None, init=False)
     wavelengths_nm: np.ndarray | None = field(default=None, init=False)
     basis: np.ndarray | None = field(default=None, init=False)
@@ -656,7 +659,7 @@ class SpectralRenderJob(RenderJobOutputs):
         ensure_oslquery()
         work = Path(tempfile.mkdtemp(prefix="specgen_render_"))
         try:
-            lights = scene_lights(self.scene, self.warn)
+            lights = scene_lights(self.scene, self.warn, world=self.world)
             if not lights.lights and lights.environment is None:
                 raise SpecGenError("the scene has no sun, point light or world lighting")
             slots = (lights.lights + [None] * bake.MAX_LIGHTS)[:bake.MAX_LIGHTS]

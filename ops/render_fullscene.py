@@ -30,12 +30,12 @@ import numpy as np
 
 from specgen_addon import uplift
 from specgen_addon.errors import SpecGenError
-from .exact_direct import DirectOnlySettings, compose, has_specgen, render_exact_direct, report_fit
+from .exact_direct import (DirectOnlySettings, compose, has_specgen, render_exact_direct, report_fit,
+                           world_light)
 from .render import RenderJobOutputs, SavedAttributes
 from .render_settings import band_render
 from .result_view import preview_transform, show_result
 from .scene_convert import SceneConversion
-
 
 
 def _render_layer(scene: bpy.types.Scene) -> bpy.types.ViewLayer:
@@ -139,7 +139,8 @@ class FullSceneRenderJob(RenderJobOutputs):
         work = Path(tempfile.mkdtemp(prefix="specgen_fullscene_"))
         conversion = SceneConversion(self.scene, wl, self.warn)
         images, direct = [], []
-        exact = self.exact_direct and has_specgen(self.scene)
+        exact = self.exact_direct and has_specgen(self.scene, self.warn)
+        world = exact and world_light(self.scene, self.warn)
         try:
             with _RenderSettings(self.scene):
                 conversion.prepare()
@@ -151,7 +152,7 @@ class FullSceneRenderJob(RenderJobOutputs):
                 passes = [("group", images)] + ([("direct", direct)] if exact else [])
                 n_renders, done = len(passes) * len(groups), 0
                 for tag, out in passes:  # the whole scene, then the closures' direct light
-                    with DirectOnlySettings(self.scene) if tag == "direct" else nullcontext():
+                    with DirectOnlySettings(self.scene, world) if tag == "direct" else nullcontext():
                         for g, group in enumerate(groups):
                             self._check()
                             conversion.set_group(group)
@@ -173,7 +174,7 @@ class FullSceneRenderJob(RenderJobOutputs):
         self.spectral = uplift.unpack_groups(stack[..., :3], wl.size)
         if exact:
             t = time.perf_counter()
-            exact_light = render_exact_direct(self.scene, wl, self.spectral.shape[:2], self.warn)
+            exact_light = render_exact_direct(self.scene, wl, self.spectral.shape[:2], self.warn, world)
             self.timings["exact_s"] = time.perf_counter() - t
             self._check()
             if exact_light is not None:

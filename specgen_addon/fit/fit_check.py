@@ -21,7 +21,7 @@ CHECK_RESOLUTION = 64
 WARN_DELTA_E = 2.0
 
 
-class _FitBRDF:
+class FitBRDF:
     """A :class:`~.closures.ClosureFit` as a spectral BRDF of the reference renderer."""
 
     def __init__(self, fit):
@@ -46,7 +46,7 @@ def rendered_fit_error(fit, table, resolution: int = CHECK_RESOLUTION) -> float:
         d = np.asarray(direction, np.float64)
         lights = [DistantLight(tuple(d / np.linalg.norm(d)), np.pi)]
         ref = render_spectral(table, geo, lights=lights, wavelengths_nm=wl).spectral
-        got = render_spectral(_FitBRDF(fit), geo, lights=lights, wavelengths_nm=wl).spectral
+        got = render_spectral(FitBRDF(fit), geo, lights=lights, wavelengths_nm=wl).spectral
         mask = ref.sum(-1) > 0
         if not mask.any():
             continue
