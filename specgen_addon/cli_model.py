@@ -143,13 +143,73 @@ def add_refine_arguments(p: argparse.ArgumentParser) -> None:
                    help="input map brightness relative to the canonical level (default 1)")
     g.add_argument("--input-key-light", action=argparse.BooleanOptionalAction, default=None,
                    help="add the canonical D65 key light to a map (default: only for canonical)")
+    g.add_argument("--input-env-calibrated", action="store_true",
+                   help="the --input-env panorama holds radiance as photographed: use its values as "
+                        "they are (no normalisation to unit mean; --input-exposure still multiplies)")
+    g.add_argument("--light", action="append", default=[], metavar="AZ,EL[,POWER[,COLOUR]]",
+                   help="a distant light (or the sun) of the room, by azimuth and elevation in degrees "
+                        "in the camera's frame (azimuth 0 faces the camera, +90 is to the right; "
+                        "elevation +90 is up), power (1: the canonical key light) and colour (a CIE "
+                        "illuminant such as D65 or A, or a temperature such as 3200K); repeatable. "
+                        "Without --input-env the lights (and --ambient) alone light the photo")
+    g.add_argument("--light-vector", action="append", default=[], metavar="X,Y,Z[,POWER[,COLOUR]]",
+                   help="a distant light by its direction in the camera's frame (x right, y up, z "
+                        "towards the camera), as --light; repeatable")
+    g.add_argument("--ambient", type=float, default=0.0, metavar="L",
+                   help="uniform ambient radiance of the room (1: the radiance of a white surface "
+                        "facing the canonical key light; default 0)")
+    g.add_argument("--linear", action="store_true",
+                   help="the photo's 8/16-bit values are linear light (a linear export of a RAW, a "
+                        "scientific camera); default: sRGB-encoded. EXR/HDR are always linear and "
+                        "camera RAW files are developed linearly")
+    g.add_argument("--white-level", type=float, default=None, metavar="V",
+                   help="values at or above V count as saturated and are left out of every fit (for "
+                        "EXR/HDR; 8/16-bit files and RAW are checked at their own full scale)")
+    g.add_argument("--circle", default=None, metavar="X,Y,R",
+                   help="the sphere's centre and radius in the photo's pixels (x right, y down from the "
+                        "top-left corner) instead of finding it")
+    g.add_argument("--mask", type=Path, default=None, metavar="FILE",
+                   help="a mask image of the photo's size, the sphere white (or opaque): its circle is used")
+    g.add_argument("--circle-preview", type=Path, default=None, metavar="PNG",
+                   help="write the photo with the circle used drawn on it (8-bit sRGB PNG)")
 
 
 def input_lighting_from_args(args: argparse.Namespace):
     """The validated :class:`InputLighting` of :func:`add_refine_arguments`' options."""
-    from .input_lighting import parse_lighting
+    from .input_lighting import parse_light, parse_lighting
 
-    return parse_lighting(args.input_env, args.input_rotation, args.input_exposure, args.input_key_light)
+    lights = tuple(parse_light(t) for t in getattr(args, "light", None) or []) + \
+        tuple(parse_light(t, vector=True) for t in getattr(args, "light_vector", None) or [])
+    return parse_lighting(args.input_env, args.input_rotation, args.input_exposure, args.input_key_light,
+                          lights=lights, ambient=float(getattr(args, "ambient", 0.0) or 0.0),
+                          calibrated=bool(getattr(args, "input_env_calibrated", False)))
+
+
+def photo_source_from_args(args: argparse.Namespace, image: Path):
+    """The :class:`~specgen_addon.input_image.PhotoSource` of a photo and the photo options."""
+    from .input_image import PhotoSource, parse_circle
+
+    circle = getattr(args, "circle", None)
+    return PhotoSource(Path(image), encoding="linear" if getattr(args, "linear", False) else "auto",
+                       white_level=getattr(args, "white_level", None),
+                       circle=parse_circle(circle) if circle else None, mask=getattr(args, "mask", None))
+
+
+def print_photo_report(generated, args: argparse.Namespace, source) -> None:
+    """The circle used (and the preview with it drawn), and the network's self-reproduction when
+    there was no refinement to report it."""
+    crop = generated.crop
+    if crop is not None:
+        print(crop.describe())
+        preview = getattr(args, "circle_preview", None)
+        if preview is not None and crop.circle is not None:
+            from .input_image import write_circle_preview
+
+            write_circle_preview(preview, source, crop.circle, overwrite=getattr(args, "overwrite", False))
+            print(f"{preview}: the photo with the circle used")
+    if generated.network_reproduction is not None:
+        print(f"self-reproduction of the network alone under {generated.table.metadata.get('input_lighting', 'the input lighting')}: "
+              f"{generated.network_reproduction.text()} (no refinement)")
 
 
 def film_fit_summary(fit, lighting_label: str) -> str:
@@ -259,7 +319,8 @@ def run_infer(args: argparse.Namespace) -> int:
     lighting = input_lighting_from_args(args)
     t0 = time.perf_counter()
     with progress_bar("infer", enabled=not args.quiet) as update:
-        generated = generate(args.image, lighting, refine=args.refine, weights=args.weights,
+        source = photo_source_from_args(args, args.image)
+        generated = generate(source, lighting, refine=args.refine, weights=args.weights,
                              wavelengths_nm=wl, backend=args.backend, progress=update, model=args.model,
                              latent_fit=args.latent_fit)
     table = generated.table
@@ -268,6 +329,7 @@ def run_infer(args: argparse.Namespace) -> int:
     print(f"{out}: spectral BRDF {table.values.shape} ({wl[0]:g}–{wl[-1]:g} nm) in {dt:.1f} s")
     if "input_sphere" in table.metadata:  # which network: the sphere was copied, or resampled from a photo
         print(f"network: {table.metadata['weights']} (sphere {table.metadata['input_sphere']})")
+    print_photo_report(generated, args, source)
     if generated.latent_fit is not None:
         print(generated.latent_fit.summary())
     print_refinement(generated)

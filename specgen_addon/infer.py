@@ -58,6 +58,8 @@ def sphere_crop(image) -> SphereCrop:
 
     if isinstance(image, input_image.SphereCrop):
         return image
+    if isinstance(image, input_image.PhotoSource):
+        return image.crop()
     if isinstance(image, (str, Path)):
         return input_image.load_sphere_crop(image)
     return input_image.crop_sphere(np.asarray(image))

@@ -349,6 +349,24 @@ def load_sphere_crop(path: str | Path, size: int = CANONICAL_SIZE, encoding: str
         raise ImageInputError(f"{path}: {exc}") from None
 
 
+def write_circle_preview(path: str | Path, source: PhotoSource, circle: tuple[float, float, float],
+                         overwrite: bool = False) -> Path:
+    """The photo (sRGB, 8-bit) with ``circle`` (in the read photo's pixels) drawn in red, a line
+    about a two-hundredth of the radius wide (at least a pixel), and its centre marked."""
+    from .image_io import write_png8
+    from .photo_read import read_photo
+
+    rgb = read_photo(source.path, encoding=source.encoding).rgb[..., :3]
+    top = float(np.percentile(rgb, 99.9)) or 1.0
+    img = np.round(spectra.srgb_encode(np.clip(rgb / top, 0.0, 1.0)) * 255.0).astype(np.uint8)
+    cx, cy, r = circle
+    yy, xx = np.mgrid[0:img.shape[0], 0:img.shape[1]]
+    dist = np.hypot(xx + 0.5 - cx, yy + 0.5 - cy)
+    line = max(0.6, r / 200.0)
+    img[(np.abs(dist - r) < line) | (dist < 2 * line)] = (255, 40, 40)
+    return write_png8(path, img, overwrite=overwrite)
+
+
 def _raw_suffixes() -> tuple[str, ...]:
     from .photo_read import RAW_SUFFIXES
 

@@ -49,6 +49,8 @@ class Generated:
     refinement: object | None = None   # specgen_addon.refine.RefineResult
     latent_fit: object | None = None   # specgen_addon.latent_fit.LatentFitResult (latent_fit=True)
     film_fit: object | None = None     # specgen_addon.fit.thin_film.ThinFilmFit (model="thin-film")
+    crop: object | None = None         # specgen_addon.input_image.SphereCrop: the circle used, saturation
+    network_reproduction: object | None = None   # refine.report.Reproduction of the network alone (no refinement)
 
     @property
     def warnings(self) -> list[str]:
@@ -67,7 +69,10 @@ def load_photo_crop(image) -> tuple[SphereCrop, bool]:
     """:func:`load_photo` as a :class:`~specgen_addon.input_image.SphereCrop` (which also says
     whether the sphere was copied or resampled, and so which shipped network it gets)."""
     from .infer import sphere_crop
+    from .input_image import PhotoSource
 
+    if isinstance(image, PhotoSource):
+        return sphere_crop(image), image.linear
     linear = not isinstance(image, (str, Path)) or Path(image).suffix.lower() == ".exr"
     return sphere_crop(image), linear
 
@@ -98,7 +103,7 @@ def generate(image, lighting=None, refine: bool = True, weights=None, wavelength
     lighting = lighting or InputLighting()
     crop, linear = load_photo_crop(image)
     photo = crop.image.astype(np.float64)
-    src = str(image) if isinstance(image, (str, Path)) else "image"
+    src = str(image.path) if hasattr(image, "path") else str(image) if isinstance(image, (str, Path)) else "image"
 
     def sub(lo: float, hi: float) -> ProgressFn | None:
         return None if progress is None else (lambda f: progress(lo + (hi - lo) * f))
@@ -137,9 +142,32 @@ def generate(image, lighting=None, refine: bool = True, weights=None, wavelength
         table = fitted.table
     table.metadata = {**table.metadata, "input_image": src, "input_lighting": lighting.label}
     if not refine:
-        return Generated(table, latent_fit=fitted)
+        return Generated(table, latent_fit=fitted, crop=crop,
+                         network_reproduction=network_reproduction(table, photo, lighting, clip_level, crop.saturated))
     from .refine import RefineOptions, refine_brdf
 
-    options = RefineOptions(clip_level=clip_level)
+    options = RefineOptions(clip_level=clip_level, exclude=crop.saturated)
     result = refine_brdf(table, photo, lighting, options, progress=sub(ends[1], 1.0), cancel=cancel)
-    return Generated(result.table, result, latent_fit=fitted)
+    return Generated(result.table, result, latent_fit=fitted, crop=crop)
+
+
+def network_reproduction(table: BRDFTable, photo: np.ndarray, lighting, clip_level: float | None,
+                         exclude: np.ndarray | None = None):
+    """How well a table alone reproduces the photo under its lighting (RGB PSNR, ΔE2000 over the
+    sphere's unsaturated pixels): the figure a run without refinement reports."""
+    from .refine import render_under
+    from .refine.report import reproduction
+
+    scene = lighting.scene(photo.shape[0])
+    img = render_under(table, scene, lighting.image_exposure)
+    if clip_level is not None:
+        img = np.minimum(img, 1.0)
+    inside = np.any(photo > 0, axis=-1) | np.any(img > 0, axis=-1)
+    from .render import sphere_geometry
+
+    inside &= sphere_geometry(photo.shape[0]).mask
+    if exclude is not None:
+        inside &= ~exclude
+    if clip_level is not None:
+        inside &= ~np.any(photo >= clip_level, axis=-1)
+    return reproduction(photo[inside], img[inside])
