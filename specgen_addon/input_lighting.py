@@ -306,7 +306,9 @@ def check_map_header(path: str | Path) -> tuple[int, int] | None:
 def read_map_bounded(path: str | Path, max_width: int = MAP_WORK_WIDTH) -> np.ndarray | None:
     """(H, W, 3) float32 linear RGB of an equirect map, read a strip of rows at a time and
     box-averaged by the power of two that brings it to ``max_width`` (what the renderer's
-    halving does), so a 100-megapixel map never exists in memory at full size. NaN/Inf texels are
+    halving does; a size it cannot halve far enough, one box of ``ceil(width / max_width)``
+    texels), so a 100-megapixel map never exists in memory at full size, nor reaches the
+    renderer at more than ``max_width``. NaN/Inf texels are
     refused and negative ones reported (they are clamped to 0), each with its count, as for
     photos. None when OpenImageIO is not importable (the renderer's reader is used instead)."""
     import warnings
@@ -332,9 +334,11 @@ def read_map_bounded(path: str | Path, max_width: int = MAP_WORK_WIDTH) -> np.nd
         f = 1
         while w // f > max_width and (h // f) % 2 == 0 and (w // f) % 2 == 0:
             f *= 2
+        if w // f > max_width:  # a size halving cannot bring down (odd): one coarser box, so the
+            f = math.ceil(w / max_width)  # renderer never gets a map of millions of texels
         out = np.empty((h // f, w // f, 3), np.float32)
         tile = spec.tile_height if spec.tile_width > 0 else 0
-        step = max(f, tile)  # whole tiles (OpenImageIO's scanline reads crash on tiled files)
+        step = math.lcm(f, tile) if tile else f  # whole tiles (scanline reads crash on tiled files)
         rows = max(step, ((1 << 21) // max(w, 1)) // step * step)  # about 2 M texels per strip
         negative = bad = 0
         for y in range(0, h, rows):
@@ -343,7 +347,7 @@ def read_map_bounded(path: str | Path, max_width: int = MAP_WORK_WIDTH) -> np.nd
                   inp.read_scanlines(0, 0, y, y1, 0, 0, spec.nchannels, oiio.FLOAT))
             if px is None:
                 raise LightingError(f"{path}: not a readable HDRI ({oiio.geterror().strip() or 'truncated'})")
-            rgb = np.asarray(px, np.float32).reshape(-1, w, spec.nchannels)[..., idx]
+            rgb = np.asarray(px, np.float32).reshape(-1, w, spec.nchannels)[:, :w // f * f, idx]
             bad += int(rgb.size - np.isfinite(rgb).sum())
             negative += int((rgb < 0).sum())
             n = rgb.shape[0] // f

@@ -198,3 +198,26 @@ def test_after_kill_9_of_the_main_process_a_rerun_does_every_item_exactly_once(t
                {k: v for k, v in published.items() if k != "status"}
     assert not (out / ".work").exists()
     assert sum(r["status"] == "skipped" for r in report["items"]) == len(done_before)
+
+
+def test_a_full_disk_while_publishing_is_the_item_s_one_sentence_error(tmp_path, monkeypatch):
+    import errno
+
+    script = _script(tmp_path)
+    [src] = _inputs(tmp_path / "in", "oak.png")
+    out = tmp_path / "out"
+    out.mkdir()
+    [it] = items_mod.make_items([src])
+    real = Path.write_text
+
+    def full(self, text, *a, **k):
+        if self.name == RECORD_NAME:
+            raise OSError(errno.ENOSPC, os.strerror(errno.ENOSPC), str(self))
+        return real(self, text, *a, **k)
+
+    monkeypatch.setattr(Path, "write_text", full)
+    rec = run_item(it.to_dict(), str(out), "r1", [PYTHON, str(script)], [], str(REPO), it.fingerprint([]))
+    assert rec["status"] == "failed"
+    assert rec["error"].endswith(f"{RECORD_NAME}: cannot be written (No space left on device); "
+                                 "nothing partial was left"), rec["error"]
+    assert not (out / "oak").exists() and not any((out / ".work").glob("oak.r1"))

@@ -385,3 +385,87 @@ def test_a_map_is_read_in_strips_as_the_renderer_reads_it_and_negative_texels_ar
     want = _box_downsample(read_exr_rgb(path), 512)
     assert got.shape == want.shape == (256, 512, 3)
     np.testing.assert_allclose(got, want, rtol=1e-5, atol=1e-6)
+
+
+# ---------------------------------------------------------------- two real processes, one output
+def _wait_for_lock(proc: subprocess.Popen, lock: Path, timeout: float = 120) -> None:
+    deadline = time.monotonic() + timeout
+    while not lock.exists():
+        assert proc.poll() is None and time.monotonic() < deadline, "the first command never took its lock"
+        time.sleep(0.05)
+
+
+@pytest.mark.slow
+def test_two_infer_on_one_npz_the_second_is_refused_and_the_first_keeps_its_file(tmp_path):
+    out = tmp_path / "b.npz"
+    cmd = [sys.executable, "-m", "specgen_addon", "infer", str(EXAMPLE), "-o", str(out), "--quiet", "--no-refine"]
+    first = subprocess.Popen(cmd, cwd=REPO, stdout=subprocess.PIPE, stderr=subprocess.STDOUT, text=True)
+    try:
+        _wait_for_lock(first, lock_path(out))
+        t0 = time.perf_counter()
+        second = subprocess.run(cmd, cwd=REPO, capture_output=True, text=True, timeout=120)
+        assert second.returncode == 2 and f"SpecGen process {first.pid}" in second.stderr, second.stderr
+        assert "Traceback" not in second.stderr and time.perf_counter() - t0 < 30
+        text, _ = first.communicate(timeout=900)
+    finally:
+        if first.poll() is None:
+            first.kill()
+    assert first.returncode == 0, text
+    from specgen_addon.table import BRDFTable
+
+    assert BRDFTable.load(out).is_spectral
+    assert sorted(p.name for p in tmp_path.iterdir()) == ["b.npz"]
+
+
+def _batch_cmd(out: Path, *extra: str) -> list[str]:
+    return [sys.executable, str(REPO / "batch.py"), "--image", str(EXAMPLE), "--out", str(out),
+            "--resolution", "16", "--samples", "1", "--bands", "4", *extra]
+
+
+@pytest.mark.slow
+@pytest.mark.blender
+def test_two_batch_py_into_one_folder_the_second_is_refused_before_any_work(tmp_path):
+    pytest.importorskip("bpy")
+    out = tmp_path / "out"
+    first = subprocess.Popen(_batch_cmd(out), cwd=REPO, stdout=subprocess.PIPE, stderr=subprocess.STDOUT,
+                             text=True)
+    try:
+        _wait_for_lock(first, lock_path(out))
+        second = subprocess.run(_batch_cmd(out, "--mesh", "suzanne"), cwd=REPO, capture_output=True,
+                                text=True, timeout=300)
+        assert second.returncode == 2 and "is writing it" in second.stderr, second.stderr
+        assert "generate:" not in second.stdout
+        text, _ = first.communicate(timeout=900)
+    finally:
+        if first.poll() is None:
+            first.kill()
+    assert first.returncode == 0, text
+    assert (out / "sphere_sphere_studio.exr").is_file() and not lock_path(out).exists()
+
+
+@pytest.mark.slow
+@pytest.mark.blender
+def test_a_stopped_batch_py_removes_its_own_files_and_keeps_a_neighbours(tmp_path):
+    import signal
+
+    pytest.importorskip("bpy")
+    out = tmp_path / "out"
+    out.mkdir()
+    proc = subprocess.Popen(_batch_cmd(out), cwd=REPO, stdout=subprocess.PIPE, stderr=subprocess.STDOUT,
+                            text=True)
+    try:
+        deadline = time.monotonic() + 300
+        while not (out / "lookup").is_dir():  # batch.py is generating into its folder
+            assert proc.poll() is None and time.monotonic() < deadline
+            time.sleep(0.05)
+        (out / "neighbour_render.exr").write_text("another program's finished render")
+        (out / "lookup" / "neighbour.npz").write_text("another program's table")
+        proc.send_signal(signal.SIGINT)
+        text, _ = proc.communicate(timeout=120)
+    finally:
+        if proc.poll() is None:
+            proc.kill()
+    assert proc.returncode == 130, text
+    assert "nothing partial was left" in text, text
+    left = sorted(str(p.relative_to(out)) for p in out.rglob("*"))
+    assert left == ["lookup", "lookup/neighbour.npz", "neighbour_render.exr"], left

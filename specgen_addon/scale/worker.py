@@ -110,8 +110,12 @@ def run_item(item: dict, out: str, run: str, batch_cmd: list[str], batch_args: l
     cpu = [0.0]
 
     def fail(message: str, retry: bool) -> dict:
-        failed_log.parent.mkdir(exist_ok=True)
-        shutil.copyfile(log, failed_log)
+        try:
+            failed_log.parent.mkdir(exist_ok=True)
+            shutil.copyfile(log, failed_log)
+        except OSError as exc:  # a full disk: the record still says what failed
+            message += f" (its log could not be kept: {exc.strerror})"
+            failed_log.unlink(missing_ok=True)
         shutil.rmtree(work, ignore_errors=True)
         if retry:
             raise RuntimeError(f"{item_id}: {message}")
@@ -141,8 +145,12 @@ def run_item(item: dict, out: str, run: str, batch_cmd: list[str], batch_args: l
         outputs = sorted(str(p.relative_to(work)) for p in work.rglob("*") if p.is_file())
         record.update(status="done", error=None, outputs=outputs, seconds=round(time.perf_counter() - t0, 2),
                       cpu_seconds=round(cpu[0], 2), fingerprint=fingerprint, run=run)
-        (work / RECORD_NAME).write_text(json.dumps(record, indent=1))
-        _publish(work, out_dir / item_id, staging / f"{item_id}.old.{run}")
+        try:
+            (work / RECORD_NAME).write_text(json.dumps(record, indent=1))
+            _publish(work, out_dir / item_id, staging / f"{item_id}.old.{run}")
+        except OSError as exc:  # disk full, quota: one sentence naming what could not be written
+            return fail(f"{exc.filename or work / RECORD_NAME}: cannot be written ({exc.strerror}); "
+                        "nothing partial was left", retry=False)
     except BaseException:
         shutil.rmtree(work, ignore_errors=True)
         raise
