@@ -263,7 +263,9 @@ def _run_on_cluster(opts: BatchManyOptions, todo: list[items_mod.Item], run: str
         client.close()
         if cluster is not None:
             cluster.close()
-        for p in staging.glob(f"*.{run}*"):  # this run's unfinished items (Ctrl-C, lost workers)
+        # this run's unfinished items (Ctrl-C, lost workers), and the lock of a batch.py killed
+        # by a timeout
+        for p in [*staging.glob(f"*.{run}*"), *staging.glob(f".*.{run}*")]:
             if p.is_dir():
                 shutil.rmtree(p, ignore_errors=True)
             else:
