@@ -10,10 +10,9 @@ import torch
 from specgen_addon.model import Config, SpecGen
 from specgen_addon.model.activity import unit_census
 from specgen_addon.model.recycle import recycle_dormant, revive_at_boundary, unsupported
+from tiny_model import TINY_MODEL
 
-SMALL = dict(image_size=32, encoder_channels=(8, 16), latent_dim=32, decoder_seed_hw=(4, 4),
-             decoder_channels=(16, 8), head_channels=8, res_theta_h=8, res_theta_d=8, res_phi_d=12,
-             res_lambda=6, feature_dim=16, aff_map_hw=(4, 4), mlp_hidden=(16, 16), spectral_code_knots=3)
+SMALL = {**TINY_MODEL, "spectral_code_knots": 3}
 
 KILLED = {"encoder conv 1": [0, 3], "encoder conv 2": [5], "latent": [1, 2, 7, 30]}
 

@@ -20,10 +20,9 @@ from specgen_addon.refine import diffuse_floor_of, render_under
 from specgen_addon.refine.operator import PhotoOperator
 from specgen_addon.refine.report import rgb_psnr
 from specgen_addon.table import BRDFTable, grid_angles
+from tiny_model import TINY_MODEL
 
-SMALL = dict(image_size=32, encoder_channels=(8, 16), latent_dim=32, decoder_seed_hw=(4, 4),
-             decoder_channels=(16, 8), head_channels=8, res_theta_h=8, res_theta_d=8, res_phi_d=12,
-             res_lambda=6, feature_dim=16, aff_map_hw=(4, 4), mlp_hidden=(16, 16), spectral_code_knots=2)
+SMALL = {**TINY_MODEL, "spectral_code_knots": 2}
 BANDS = np.array([420.0, 500.0, 580.0, 660.0, 740.0])
 SIZE = 32                                               # photo size: a 32² sphere keeps the fit quick
 FAST = dict(steps=24, refresh_every=12, batch_pixels=128, fit_wavelengths_nm=tuple(BANDS))

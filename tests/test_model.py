@@ -13,10 +13,9 @@ from specgen_addon.model import Config, SpecGen, count_parameters, load_weights,
 from specgen_addon.model.fusion import AFF
 from specgen_addon.model.planes import PLANE_NAMES, normalized_coords, project, sample_plane
 from specgen_addon.table import mu_law_decode, mu_law_encode
+from tiny_model import TINY_MODEL
 
-SMALL = dict(image_size=32, encoder_channels=(8, 16), latent_dim=32, decoder_seed_hw=(4, 4),
-             decoder_channels=(16, 8), head_channels=8, res_theta_h=8, res_theta_d=8, res_phi_d=12,
-             res_lambda=6, feature_dim=16, aff_map_hw=(4, 4), mlp_hidden=(16, 16))
+SMALL = TINY_MODEL
 
 
 def small_model(**kw) -> SpecGen:

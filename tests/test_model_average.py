@@ -9,10 +9,9 @@ from specgen_addon.cli import main as cli_main
 from specgen_addon.errors import WeightsError
 from specgen_addon.model import Config, SpecGen, load_weights, save_weights
 from specgen_addon.model.average import average_models
+from tiny_model import TINY_MODEL
 
-SMALL = dict(image_size=32, encoder_channels=(8, 16), latent_dim=32, decoder_seed_hw=(4, 4),
-             decoder_channels=(16, 8), head_channels=8, res_theta_h=8, res_theta_d=8, res_phi_d=12,
-             res_lambda=6, feature_dim=16, aff_map_hw=(4, 4), mlp_hidden=(16, 16))
+SMALL = TINY_MODEL
 
 
 def two_files(tmp_path):

@@ -11,10 +11,9 @@ import torch
 from specgen_addon.errors import SpecGenError
 from specgen_addon.model import Config, SpecGen, load_weights, save_weights
 from specgen_addon.model.grow import can_grow, grow_state_dict
+from tiny_model import TINY_MODEL
 
-SMALL = dict(image_size=32, encoder_channels=(8, 16), latent_dim=32, decoder_seed_hw=(4, 4),
-             decoder_channels=(16, 8), head_channels=8, res_theta_h=8, res_theta_d=8, res_phi_d=12,
-             res_lambda=6, feature_dim=16, aff_map_hw=(4, 4), mlp_hidden=(16, 16))
+SMALL = TINY_MODEL
 
 
 def queries(n: int = 300, seed: int = 0):

@@ -17,11 +17,10 @@ from specgen_addon.rusinkiewicz import io_from_half_diff
 from specgen_addon.table import mu_law_encode
 from specgen_addon.train.data import TrainingMaterial, make_batch, material_targets, sample_angles
 from specgen_addon.train.loop import MaterialSet, TrainConfig, load_config, lr_at, train
+from tiny_model import TINY_MODEL
 from specgen_standins import RampMaterial
 
-SMALL = dict(image_size=32, encoder_channels=(8, 16), latent_dim=32, decoder_seed_hw=(4, 4),
-             decoder_channels=(16, 16), head_channels=8, res_theta_h=12, res_theta_d=12, res_phi_d=12,
-             res_lambda=6, feature_dim=16, aff_map_hw=(4, 4), mlp_hidden=(16, 16))
+SMALL = {**TINY_MODEL, "decoder_channels": (16, 16), "res_theta_h": 12, "res_theta_d": 12}
 FAST = dict(angles_per_material=128, wavelengths_per_angle=4, spectral_materials_per_step=2,
             rgb_materials_per_step=1, val_every=5, checkpoint_every=3, threads=1, tv_weight=0.1)
 
