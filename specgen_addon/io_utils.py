@@ -36,6 +36,8 @@ from .limits import check_output_file, name_max
 #: Files and folders this process created: absolute path -> (identity, sequence number).
 _LEDGER: dict[str, tuple[tuple, int]] = {}
 _SEQ = itertools.count(1)
+#: Staging files being written: absolute staging path -> absolute target path.
+_STAGING: dict[str, str] = {}
 
 
 def _current_umask() -> int:
@@ -69,17 +71,28 @@ def ledger_mark() -> int:
 
 
 def is_ours(path: str | os.PathLike) -> bool:
-    """Whether ``path`` is still the very file or folder this process created."""
-    entry = _LEDGER.get(os.path.abspath(path))
-    return entry is not None and _identity(Path(path)) == entry[0]
+    """Whether ``path`` is still the very file or folder this process created (a staging file,
+    still being written, by its device and inode alone: its name is private and unique)."""
+    key = os.path.abspath(path)
+    entry = _LEDGER.get(key)
+    if entry is None:
+        return False
+    ident = _identity(Path(path))
+    if key in _STAGING:
+        return ident is not None and ident[:2] == entry[0][:2]
+    return ident == entry[0]
 
 
 def created_since(mark: int, under: Iterable[str | os.PathLike] = ()) -> list[Path]:
     """Ledger entries made after ``mark`` (:func:`ledger_mark`), inside ``under`` if given
     (each a folder or a file), deepest first."""
     roots = [os.path.abspath(u) for u in under]
-    found = [p for p, (_, t) in _LEDGER.items() if t > mark and
-             (not roots or any(p == r or p.startswith(r.rstrip(os.sep) + os.sep) for r in roots))]
+    def inside(p: str) -> bool:
+        return any(p == r or p.startswith(r.rstrip(os.sep) + os.sep) for r in roots)
+
+    # a staging file counts as its target's (a hard stop may come while it is being written)
+    found = [p for p, (_, t) in _LEDGER.items()
+             if t > mark and (not roots or inside(p) or (p in _STAGING and inside(_STAGING[p])))]
     return [Path(p) for p in sorted(found, key=lambda p: -p.count(os.sep))]
 
 
@@ -186,6 +199,8 @@ def atomic_write(path: str | os.PathLike, overwrite: bool = False) -> Iterator[P
     except OSError as exc:
         raise write_error(target, exc) or exc from None
     os.close(fd)
+    record_created(tmp)  # so that a hard stop's clean-up removes it
+    _STAGING[os.path.abspath(tmp)] = os.path.abspath(target)
     try:
         try:
             yield tmp
@@ -201,6 +216,8 @@ def atomic_write(path: str | os.PathLike, overwrite: bool = False) -> Iterator[P
     finally:
         with contextlib.suppress(FileNotFoundError):
             tmp.unlink()
+        _STAGING.pop(os.path.abspath(tmp), None)
+        _LEDGER.pop(os.path.abspath(tmp), None)
 
 
 def _publish(tmp: Path, target: Path, overwrite: bool) -> None:
@@ -210,8 +227,9 @@ def _publish(tmp: Path, target: Path, overwrite: bool) -> None:
     key = os.path.abspath(target)
     ours = not os.path.lexists(target) or is_ours(target)
     if ours:
-        record_created(tmp)
+        record_created(tmp)  # its full identity now that it is complete
         _LEDGER[key] = _LEDGER.pop(os.path.abspath(tmp))
+        _STAGING.pop(os.path.abspath(tmp), None)
     try:
         if overwrite:
             os.replace(tmp, target)

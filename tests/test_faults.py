@@ -469,3 +469,53 @@ def test_a_stopped_batch_py_removes_its_own_files_and_keeps_a_neighbours(tmp_pat
     assert "nothing partial was left" in text, text
     left = sorted(str(p.relative_to(out)) for p in out.rglob("*"))
     assert left == ["lookup", "lookup/neighbour.npz", "neighbour_render.exr"], left
+
+
+HARD_STOP_SCRIPT = r"""
+import sys
+from pathlib import Path
+sys.path.insert(0, {repo!r})
+sys.path.insert(0, {blender!r})
+import fake_blender
+from specgen_addon.cli import run_guarded
+from specgen_addon.io_utils import atomic_write
+
+out = Path({out!r})
+
+def work():
+    with atomic_write(out) as tmp:
+        tmp.write_bytes(b"half of a table")
+        print("READY", flush=True)
+        fake_blender.stuck_in_a_c_call(30.0)   # a long C call: the watcher's hard stop ends it
+
+sys.exit(run_guarded("infer", work, ([], [out])))
+"""
+
+
+@pytest.mark.skipif(sys.platform == "win32", reason="POSIX signals")
+def test_a_hard_stop_while_an_output_is_staged_removes_the_staging_file(tmp_path):
+    """SIGINT during a long C call inside a write: the watcher ends the process itself, and the
+    half-written staging file beside the single output goes too."""
+    import signal
+
+    from test_interrupts import FAKE_BLENDER
+
+    blender = tmp_path / "blender" / "5.0" / "scripts" / "modules"  # a path Blender's own code has
+    blender.mkdir(parents=True)
+    (blender / "fake_blender.py").write_text(FAKE_BLENDER)
+    work = tmp_path / "work"
+    work.mkdir()
+    script = tmp_path / "s.py"
+    script.write_text(HARD_STOP_SCRIPT.format(repo=str(REPO), blender=str(blender), out=str(work / "b.npz")))
+    proc = subprocess.Popen([sys.executable, str(script)], stdout=subprocess.PIPE, stderr=subprocess.STDOUT,
+                            text=True)
+    try:
+        assert proc.stdout.readline().strip() == "READY"
+        time.sleep(0.3)
+        proc.send_signal(signal.SIGINT)
+        text, _ = proc.communicate(timeout=60)
+    finally:
+        if proc.poll() is None:
+            proc.kill()
+    assert proc.returncode == 130, text
+    assert sorted(p.name for p in work.iterdir()) == [], text
