@@ -77,10 +77,11 @@ def run_guarded(what: str | Callable[[], str], work, outputs=([], []), verbose: 
     from .interrupts import (EXIT_ERROR, OutputGuard, as_interrupted, on_hard_stop, print_traceback_if,
                              raise_if_stopped, stop_on_signals)
 
-    from .io_utils import OutputLock, created_since, ledger_mark, remove_created
+    from .io_utils import OutputLock, created_since, ledger_mark, make_lock_folders, remove_created
 
     folders, files = outputs
     guard = OutputGuard(folders, keep=keep)
+    made = make_lock_folders(folders)  # a new output folder's parents: its lock goes beside it
     lock = OutputLock([*folders, *files])  # a second command on these outputs is refused
     mark = ledger_mark()
 
@@ -131,6 +132,8 @@ def run_guarded(what: str | Callable[[], str], work, outputs=([], []), verbose: 
         print(f"{prog}: internal error in {what}: {type(exc).__name__}: {exc} "
               "(rerun with --verbose for the traceback)", file=sys.stderr)
         return EXIT_ERROR
+    finally:
+        remove_created(made)  # the folders made to hold a lock, when nothing else went in
 
 
 if __name__ == "__main__":  # pragma: no cover

@@ -130,6 +130,23 @@ def make_dirs(path: str | os.PathLike) -> Path:
     return path
 
 
+def make_lock_folders(folders: Iterable[str | os.PathLike]) -> list[Path]:
+    """Make the missing parents of new output folders (entered in the ledger), so that their
+    locks have a place beside them; returns those made, deepest first, for
+    :func:`remove_created` (which removes them only while empty). A file in the way is left for
+    the command's own checks to name."""
+    made: list[Path] = []
+    for f in folders:
+        parent = Path(os.path.abspath(f)).parent
+        missing = [p for p in [parent, *parent.parents] if not p.exists()]
+        try:
+            make_dirs(parent)
+        except OSError:
+            continue
+        made += missing
+    return made
+
+
 def _temp_name(target: Path) -> str:
     """A hidden staging name beside ``target`` that keeps its suffixes and fits the file
     system's name limit however long the target's name is."""

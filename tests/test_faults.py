@@ -519,3 +519,19 @@ def test_a_hard_stop_while_an_output_is_staged_removes_the_staging_file(tmp_path
             proc.kill()
     assert proc.returncode == 130, text
     assert sorted(p.name for p in work.iterdir()) == [], text
+
+
+def test_a_new_output_folder_in_new_parents_is_locked_too_and_they_go_when_it_fails(tmp_path):
+    """batch.py --out new/deep/out: the lock needs a folder beside the output to live in."""
+    from specgen_addon.cli import run_guarded
+
+    out = tmp_path / "new" / "deep" / "out"
+    seen = []
+
+    def work():
+        seen.append(lock_path(out).is_file())
+        raise SpecGenError("refused later")
+
+    assert run_guarded("batch.py", work, ([out], [])) == 2
+    assert seen == [True]
+    assert sorted(p.name for p in tmp_path.iterdir()) == []
