@@ -93,8 +93,8 @@ def run_guarded(what: str | Callable[[], str], work, outputs=([], []), verbose: 
                f"{guard.left_behind()}"
 
     try:
-        with stop_on_signals(stopped), lock, on_hard_stop(lock.release), \
-                on_hard_stop(remove_new_files), one_line_warnings(verbose):
+        with stop_on_signals(stopped), on_hard_stop(lambda: remove_created(made)), lock, \
+                on_hard_stop(lock.release), on_hard_stop(remove_new_files), one_line_warnings(verbose):
             try:
                 with guard:
                     code = int(work() or 0)
