@@ -30,7 +30,7 @@ PREVIEW_SAMPLES = 16
 TEST_PIXELS = 16384
 TEST_SAMPLES = (1, 8)
 #: Seconds the adaptive-sampling test render may take at most (with all samples taken).
-ADAPTIVE_TEST_S = 1.5
+ADAPTIVE_TEST_S = 12.0
 #: Polls (timer ticks) a started render job may take to show up as running.
 START_POLLS = 50
 
