@@ -4,7 +4,8 @@ estimate before a render, and band renders that Esc stops inside the render.
 * :class:`QuickPreview`: 25 % resolution, at most 16 samples, no denoising, for one spectral render
   only (everything is put back afterwards).
 * :func:`measure_cost` / :func:`estimate`: two tiny test renders of the scene as it is give the
-  cost per render and per pixel-sample on this machine (:mod:`specgen_addon.render_estimate`).
+  cost per render and per pixel-sample on this machine, and with adaptive sampling a third one the
+  share of samples it takes (:mod:`specgen_addon.render_estimate`).
 * :func:`band_render`: one Cycles render of a band group. From the panel it is started as Blender's
   own render job (``INVOKE_DEFAULT``), so the interface keeps running and Esc (or the status bar's
   cancel button) stops Cycles mid-render; Blender's ``render_cancel`` handler then tells the job,
