@@ -23,6 +23,7 @@ import bpy
 from specgen_addon import uplift
 from specgen_addon.errors import Cancelled, SpecGenError
 from specgen_addon.render_estimate import RenderCost, fit_cost, format_duration
+
 from .render import SavedAttributes, specgen_materials
 
 PREVIEW_PERCENT = 25

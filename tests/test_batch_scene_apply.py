@@ -12,8 +12,9 @@ import pytest
 
 bpy = pytest.importorskip("bpy")
 
-import batch  # after the bpy skip
 from addon_modules import addon_module
+
+import batch  # after the bpy skip
 
 demo = addon_module("ops.demo_scenes")
 REPO = Path(batch.__file__).resolve().parent
