@@ -23,7 +23,10 @@ def add_parser(sub: argparse._SubParsersAction) -> None:
 
     p = sub.add_parser("tabulate", help="tabulate an RGL or MERL file onto the MERL grid (.npz table)")
     p.add_argument("file", type=Path)
-    p.add_argument("-o", "--out", type=Path, required=True, help="output table (.npz)")
+    p.add_argument("-o", "--out", type=Path, required=True,
+                   help="output: .npz (compact material; full table with --full-table), .bsdf or .binary")
+    p.add_argument("--full-table", action="store_true",
+                   help="write the full float32 table instead of the compact material file")
     p.add_argument("--wl-min", type=float, default=DEFAULT_RANGE_NM[0], help="first wavelength, nm")
     p.add_argument("--wl-max", type=float, default=DEFAULT_RANGE_NM[1], help="last wavelength, nm")
     p.add_argument("--bands", type=int, default=DEFAULT_BAND_COUNT,
@@ -69,14 +72,14 @@ def tabulate_file(path: Path, wavelengths_nm: np.ndarray, progress=None) -> BRDF
 
 
 def run_tabulate(args: argparse.Namespace) -> int:
-    if args.out.suffix != ".npz":
-        raise SpecGenError(f"{args.out}: output must end in .npz")
+    from .formats.export import check_output, write_output
+
+    check_output(args.out)
     if args.out.exists() and not args.overwrite:
         raise SpecGenError(f"{args.out}: already exists (use --overwrite)")
     wavelengths = wavelength_grid(args.wl_min, args.wl_max, args.bands)
     with progress_bar(f"tabulating {args.file.name}", enabled=not args.quiet) as update:
         table = tabulate_file(args.file, wavelengths, progress=update)
-    table.save(args.out, overwrite=args.overwrite)
-    print(f"wrote {args.out} ({'spectral' if table.is_spectral else 'RGB'}, "
-          f"{table.n_channels} channels)")
+    print(write_output(table, args.out, overwrite=args.overwrite, full_table=args.full_table)
+          + f": {'spectral' if table.is_spectral else 'RGB'}, {table.n_channels} channels")
     return 0

@@ -37,9 +37,14 @@ def add_parser(sub: argparse._SubParsersAction) -> argparse.ArgumentParser:
     p.set_defaults(func=run_train)
 
     p = sub.add_parser("infer", help="generate the spectral BRDF of the material in a sphere image",
-                       description="Writes the full tabulated spectral BRDF (90×90×180×Λ, .npz).")
+                       description="Writes the spectral BRDF (90×90×180×Λ on the MERL grid): a compact "
+                                   "material file (.npz, a few MB) by default, the full float32 table with "
+                                   "--full-table, or an RGL .bsdf (spectral) or MERL .binary (RGB) export.")
     p.add_argument("image", type=Path, help="image of a material sphere (EXR, PNG, JPEG)")
-    p.add_argument("-o", "--output", type=Path, required=True, help="output table (.npz)")
+    p.add_argument("-o", "--output", type=Path, required=True,
+                   help="output: .npz (compact material; full table with --full-table), .bsdf or .binary")
+    p.add_argument("--full-table", action="store_true",
+                   help="write the full float32 table (122 MB at 21 bands) instead of the compact file")
     p.add_argument("--weights", type=Path, default=None,
                    help="weights (.pt); default: the shipped network for how the sphere was cut "
                         "(copied from a canonical frame, or resampled from a photo)")
@@ -308,9 +313,10 @@ def run_infer(args: argparse.Namespace) -> int:
     from .pipeline import generate
     from .spectra import wavelength_grid
 
+    from .formats.export import check_output, write_output
+
     out: Path = args.output
-    if out.suffix != ".npz":
-        raise SpecGenError(f"{out}: the output table uses the .npz suffix")
+    check_output(out)
     rgb_out = out.with_name(out.stem + "_rgb.npz")
     for p in [out] + ([rgb_out] if args.rgb else []):
         if p.exists() and not args.overwrite:
@@ -325,8 +331,8 @@ def run_infer(args: argparse.Namespace) -> int:
                              latent_fit=args.latent_fit)
     table = generated.table
     dt = time.perf_counter() - t0
-    table.save(out, overwrite=args.overwrite)
     print(f"{out}: spectral BRDF {table.values.shape} ({wl[0]:g}–{wl[-1]:g} nm) in {dt:.1f} s")
+    print(write_output(table, out, overwrite=args.overwrite, full_table=args.full_table))
     if "input_sphere" in table.metadata:  # which network: the sphere was copied, or resampled from a photo
         print(f"network: {table.metadata['weights']} (sphere {table.metadata['input_sphere']})")
     print_photo_report(generated, args, source)
@@ -336,8 +342,8 @@ def run_infer(args: argparse.Namespace) -> int:
     if generated.film_fit is not None:
         print(film_fit_summary(generated.film_fit, lighting.label))
     if args.rgb:
-        table.to_rgb().save(rgb_out, overwrite=args.overwrite)
-        print(f"{rgb_out}: RGB projection (D65, linear sRGB)")
+        print(write_output(table.to_rgb(), rgb_out, overwrite=args.overwrite, full_table=args.full_table)
+              + ": RGB projection (D65, linear sRGB)")
     return 0
 
 

@@ -51,10 +51,14 @@ def _info(a) -> None:
     check_brdf_file(a.file)
 
 
+#: What ``tabulate`` and ``infer`` write (:mod:`.formats.export`): a SpecGen table, RGL, MERL.
+BRDF_OUTPUT_SUFFIXES = (".npz", ".bsdf", ".binary")
+
+
 def _tabulate(a) -> None:
     check_brdf_file(a.file)
     limits.check_wavelength_range(a.wl_min, a.wl_max, a.bands)
-    limits.check_output_file(a.out, a.overwrite, suffixes=(".npz",))
+    limits.check_output_file(a.out, a.overwrite, suffixes=BRDF_OUTPUT_SUFFIXES)
 
 
 def _corpus(a) -> None:
@@ -122,7 +126,7 @@ def _infer(a) -> None:
     check_weights_file(a.weights)
     lo, hi = a.range
     limits.check_wavelength_range(lo, hi, a.bands)
-    out = limits.check_output_file(a.output, a.overwrite, suffixes=(".npz",))
+    out = limits.check_output_file(a.output, a.overwrite, suffixes=BRDF_OUTPUT_SUFFIXES)
     if a.rgb:
         limits.check_output_file(out.with_name(out.stem + "_rgb.npz"), a.overwrite)
 

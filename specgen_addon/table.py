@@ -28,6 +28,8 @@ N_PHI_D = 180
 GRID_SHAPE = (N_THETA_H, N_THETA_D, N_PHI_D)
 TABLE_FORMAT = "specgen-brdf-table"
 TABLE_FORMAT_VERSION = 1
+#: Header format of the compact material file (:mod:`specgen_addon.material_file`).
+COMPACT_FORMAT = "specgen-brdf-compact"
 MU_LAW_MU = 255.0
 
 ProgressFn = Callable[[float], None]
@@ -222,11 +224,17 @@ class BRDFTable:
         return BRDFTable(rgb.astype(np.float32), None, ("R", "G", "B"), meta)
 
     # ------------------------------------------------------------------ I/O
-    def save(self, path: str | Path, overwrite: bool = False) -> Path:
-        """Write an ``.npz`` (values float32, wavelengths, channels, metadata JSON), atomically."""
+    def save(self, path: str | Path, overwrite: bool = False, compact: bool = False) -> Path:
+        """Write an ``.npz`` (values float32, wavelengths, channels, metadata JSON), atomically;
+        ``compact``: the compact material file instead (:mod:`specgen_addon.material_file`, a few MB,
+        values kept to ±0.2 %), which :meth:`load` reads the same way."""
         path = Path(path)
         if path.suffix != ".npz":
             raise SpecGenError(f"{path}: table files use the .npz suffix")
+        if compact:
+            from .material_file import save_compact
+
+            return save_compact(self, path, overwrite=overwrite)
         header = {"format": TABLE_FORMAT, "version": TABLE_FORMAT_VERSION,
                   "channels": list(self.channels), "metadata": self.metadata}
         with atomic_write(path, overwrite=overwrite) as tmp:
@@ -246,8 +254,14 @@ class BRDFTable:
         try:
             with np.load(path, allow_pickle=False) as z:
                 header = json.loads(bytes(z["header"]).decode())
-                values = z["values"]
-                wavelengths = z["wavelengths"]
+                if isinstance(header, dict) and header.get("format") == COMPACT_FORMAT:
+                    from .material_file import load_compact
+
+                    values, wavelengths = load_compact(path, header, z)
+                    header = {**header, "format": TABLE_FORMAT, "version": TABLE_FORMAT_VERSION}
+                else:
+                    values = z["values"]
+                    wavelengths = z["wavelengths"]
         except PermissionError:
             raise BRDFFormatError(path, "cannot read file (permission denied)") from None
         except (OSError, ValueError, KeyError, EOFError, zipfile.BadZipFile, AttributeError) as exc:
