@@ -546,7 +546,8 @@ def _circle_of_mask(mask: np.ndarray, fit_outline: bool) -> tuple[float, float, 
         if len(pts) >= 10:
             with warnings.catch_warnings():  # degenerate triples (collinear edge points) warn
                 warnings.simplefilter("ignore")
-                model, inliers = _ransac_circle(pts, residual_threshold=1.5, max_trials=200)
+                # tolerances relative to the radius: an upscaled photo's outline steps by the factor
+                model, inliers = _ransac_circle(pts, residual_threshold=max(1.5, 0.02 * r), max_trials=200)
         if model is None or inliers is None or inliers.mean() <= 0.5:
             raise ImageInputError("no sphere found (the foreground's outline is not a circle; "
                                   "give the image an alpha channel masking the sphere)")
@@ -571,7 +572,8 @@ def _refined_circle(contrast: np.ndarray, rough: tuple[float, float, float]) -> 
 
     cx, cy, r = rough
     refined = refine_circle(np.asarray(contrast, np.float64), cx, cy, r)
-    if refined is None or abs(refined[2] - r) > 1.5 or np.hypot(refined[0] - cx, refined[1] - cy) > 1.5:
+    tol = max(1.5, 0.015 * r)   # relative to the radius: the same at 512 px and at 8000 px
+    if refined is None or abs(refined[2] - r) > tol or np.hypot(refined[0] - cx, refined[1] - cy) > tol:
         return rough
     return refined
 
