@@ -10,7 +10,8 @@ Runs inside Blender or on the ``bpy`` module, with the same arguments::
     blender --background FILE.blend --python batch.py -- --scene --out DIR
 
 Writes ``DIR/<image>_<mesh>_<env>.exr`` (Fichet et al. 2021 spectral layout with an RGB preview)
-and ``…_preview.png``, plus the generated BRDF table and its baked lookups under ``DIR/lookup/``.
+and ``…_preview.png``; with ``--keep-lookups`` also the generated BRDF (compact material file) and
+its baked lookups under ``DIR/lookup/``, which are otherwise removed after the render.
 With ``--scene``: ``DIR/<scene>_<camera>_f<frame>.exr`` per frame (preview through the scene's
 view transform), after ``--apply`` has given each photo's material to its object.
 Bad input (missing file, image without a sphere, unknown environment, unwritable output) exits
@@ -80,6 +81,9 @@ def build_parser() -> argparse.ArgumentParser:
     ap.add_argument("--backend", choices=("onnx", "torch"), default=None,
                     help="inference backend (default: onnx if onnxruntime is installed)")
     ap.add_argument("--overwrite", action="store_true", help="replace existing output files")
+    ap.add_argument("--keep-lookups", action="store_true",
+                    help="keep the generated BRDF (compact material, a few MB) and its baked lookups "
+                         "(about 47 MB a material) in OUT/lookup/; by default only the renders stay")
     sc = ap.add_argument_group("whole scene (--scene)")
     sc.add_argument("--apply", nargs="+", metavar="IMG:OBJECT[:OPTS]",
                     help="before rendering, generate each photo's material and give it to that "
@@ -167,11 +171,12 @@ def run(args) -> Path:
         last[0] = pct
 
     PHASE[0] = "BRDF generation"
+    before = _files_in(out / "lookup")
     if args.image:
         info = bake.generate_lookup(str(source), out / "lookup", wavelengths, weights=args.weights,
                                     backend=args.backend, name=source.stem, progress=progress,
                                     lighting=photo_lighting, refine=args.refine,
-                                    save_table=True, model=args.model)
+                                    save_table=args.keep_lookups, model=args.model)
         if info.film_fit is not None:
             print(cli_model.film_fit_summary(info.film_fit, photo_lighting.label), flush=True)
             for w in info.film_fit.warnings:
@@ -220,8 +225,8 @@ def run(args) -> Path:
         job.run(lambda f: interrupts.raise_if_stopped())  # between band renders
     print(f"spectral render ({args.bands} bands, {args.resolution}², {args.samples} spp) in "
           f"{time.perf_counter() - t0:.1f} s", flush=True)
-    print(f"wrote {target}")
-    print(f"wrote {target.with_name(target.stem + '_preview.png')}")
+    _report_outputs([target, target.with_name(target.stem + "_preview.png")], out / "lookup", before,
+                    args.keep_lookups)
     return target
 
 
@@ -267,6 +272,7 @@ def run_scene(args) -> Path:
     scene_args.check_objects(applies, {o.name: o.type for o in scene.objects}, scene.name)
     targets = _scene_targets(scene, frames or [scene.frame_current], out, args.overwrite)
     stems = _lookup_stems(applies, out / "lookup", args.overwrite)
+    before = _files_in(out / "lookup")
 
     interrupts = core("interrupts")
     render = import_module(f"{pkg.__name__}.ops.render")
@@ -298,9 +304,36 @@ def run_scene(args) -> Path:
         print(f"full-scene spectral render of {blend.name}, frame {frame} ({args.bands} bands, "
               f"{w}x{h}, {spp} spp, {len(job.timings['render_s'])} Cycles renders) in "
               f"{time.perf_counter() - t0:.1f} s", flush=True)
-        print(f"wrote {target}")
-        print(f"wrote {target.with_name(target.stem + '_preview.png')}")
+        _report_outputs([target, target.with_name(target.stem + "_preview.png")])
+    _report_outputs([], out / "lookup", before, args.keep_lookups)
     return targets[-1][1]
+
+
+def _files_in(folder: Path) -> set[Path]:
+    """The files in ``folder`` now (none when it does not exist)."""
+    return {p for p in folder.iterdir() if p.is_file()} if folder.is_dir() else set()
+
+
+def _report_outputs(files: list[Path], lookup: Path | None = None, before: set[Path] = frozenset(),
+                    keep: bool = True) -> None:
+    """Print each output written with its size; then either report the lookups this run made in
+    ``lookup`` (``keep``) or remove them (and the folder, left empty), so only the renders stay."""
+    from importlib import import_module
+
+    size_text = import_module("specgen_addon.formats.export").size_text
+    for f in files:
+        print(f"wrote {f} ({size_text(f.stat().st_size)})")
+    if lookup is None:
+        return
+    made = sorted(_files_in(lookup) - set(before))
+    if keep:
+        total = sum(p.stat().st_size for p in made)
+        print(f"kept {len(made)} lookup files in {lookup} ({size_text(total)})")
+        return
+    for p in made:
+        p.unlink(missing_ok=True)
+    if lookup.is_dir() and not any(lookup.iterdir()):
+        lookup.rmdir()
 
 
 def _check_photos(applies, args) -> list:

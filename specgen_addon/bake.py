@@ -526,8 +526,8 @@ def generate_lookup(image, out_dir: str | os.PathLike, wavelengths_nm: np.ndarra
 
     Runs without bpy (the Generate operator calls it on a worker thread). Progress: 0–0.8 network
     and refinement (:func:`specgen_addon.pipeline.generate`), 0.8–1 bake. The refinement's report
-    is ``info.refinement``. ``save_table`` also exports the full table as ``<name>.npz`` (122 MB at
-    21 bands, so only on request); ``preview`` writes ``<name>_preview.png``
+    is ``info.refinement``. ``save_table`` also writes the BRDF as ``<name>.npz`` (the compact
+    material file, a few MB: :mod:`specgen_addon.material_file`); ``preview`` writes ``<name>_preview.png``
     (:mod:`specgen_addon.preview`). Without ``overwrite`` existing outputs of ``name`` are refused
     up front; whatever fails or is cancelled leaves nothing new in ``out_dir``.
     """
@@ -575,7 +575,7 @@ def _generate_lookup(image, out: Path, wavelengths_nm, weights, n_phi_d, toleran
         generated = generate(image, backend="torch", **kwargs)
     table = generated.table
     if save_table:
-        table.save(out / f"{name}.npz", overwrite=True)
+        table.save(out / f"{name}.npz", overwrite=True, compact=True)
     if preview:
         from .preview import write_preview
 
