@@ -79,10 +79,44 @@ class DirectOnlySettings(SavedAttributes):
                 self._set(obj, "hide_render", True)
             elif obj.type in SURFACES and not _holds_specgen(obj) and not obj.is_holdout:
                 self._set(obj, "is_holdout", True)       # occludes, shadows, draws nothing
+        self.slots = HeldOutSlots(sc).__enter__()
         return self
 
     def __exit__(self, *exc) -> None:
+        self.slots.__exit__(*exc)
         self._restore_attributes()
+
+
+class HeldOutSlots(SavedAttributes):
+    """The other material slots of objects that hold a SpecGen material, as holdouts (the two
+    direct-light renders must both leave them out; the Exact mode would read their albedo)."""
+
+    def __init__(self, scene: bpy.types.Scene):
+        self.scene = scene
+        self.saved: list[tuple[object, str, object]] = []
+        self.holdout: bpy.types.Material | None = None
+
+    def __enter__(self) -> "HeldOutSlots":
+        for obj in self.scene.objects:
+            if obj.type in SURFACES and _holds_specgen(obj):
+                for slot in obj.material_slots:
+                    if slot.material is not None and not is_specgen_material(slot.material):
+                        self._set(slot, "material", self._material())
+        return self
+
+    def _material(self) -> bpy.types.Material:
+        if self.holdout is None:
+            self.holdout = bpy.data.materials.new("SpecGen holdout")
+            tree = self.holdout.node_tree
+            tree.nodes.clear()
+            out = tree.nodes.new("ShaderNodeOutputMaterial")
+            tree.links.new(tree.nodes.new("ShaderNodeHoldout").outputs[0], out.inputs["Surface"])
+        return self.holdout
+
+    def __exit__(self, *exc) -> None:
+        self._restore_attributes()
+        if self.holdout is not None:
+            bpy.data.materials.remove(self.holdout)
 
 
 def _resample(spectral: np.ndarray, from_nm: np.ndarray, to_nm: np.ndarray) -> np.ndarray:
@@ -134,7 +168,8 @@ def render_exact_direct(scene: bpy.types.Scene, wavelengths_nm: np.ndarray, shap
                for mat in specgen_materials(scene) if script_node(mat) is not None
                for sock in script_node(mat).inputs if hasattr(sock, "default_value")]
     try:
-        spectral = job.run()
+        with HeldOutSlots(scene):
+            spectral = job.run()
     except SpecGenError as exc:
         warn(f"SpecGen: exact direct light unavailable ({exc}); SpecGen surfaces show the native "
              "closure stack only")
