@@ -83,6 +83,17 @@ def _compressed(lum: np.ndarray) -> np.ndarray:
     return np.log(np.maximum(lum, 0.0) + floor)
 
 
+def _smooth_votes(acc: np.ndarray) -> np.ndarray:
+    """Votes (radius, y, x) spread over neighbouring radii (1, 2, 1) and a 3×3 box of centres, so a
+    circle whose votes straddle cells still peaks."""
+    out = 2.0 * acc
+    out[1:] += acc[:-1]
+    out[:-1] += acc[1:]
+    p = np.pad(out, ((0, 0), (1, 1), (1, 1)))
+    out = p[:, :-2] + p[:, 1:-1] + p[:, 2:]
+    return out[:, :, :-2] + out[:, :, 1:-1] + out[:, :, 2:]
+
+
 def vote_circle(lum: np.ndarray, min_radius: float | None = None,
                 max_radius: float | None = None) -> tuple[float, float, float, float]:
     """(cx, cy, r, score) of the best circle of the luminance image ``lum`` (full-resolution
@@ -114,8 +125,7 @@ def vote_circle(lum: np.ndarray, min_radius: float | None = None,
             cy = np.floor(py + sign * uy * r).astype(int)
             ok = (cx >= 0) & (cx < sw) & (cy >= 0) & (cy < sh)
             acc[k] = np.bincount(cy[ok] * sw + cx[ok], weights=weight[ok], minlength=sh * sw).reshape(sh, sw)
-        acc = gaussian_filter(acc, (0.7, 1.0, 1.0), mode="constant")
-        acc /= (2 * np.pi * radii)[:, None, None]
+        acc = _smooth_votes(acc) / (2 * np.pi * radii)[:, None, None]
         k, iy, ix = np.unravel_index(int(np.argmax(acc)), acc.shape)
         if acc[k, iy, ix] > best[3]:
             best = ((ix + 0.5) * factor, (iy + 0.5) * factor, float(radii[k]) * factor, float(acc[k, iy, ix]))
@@ -167,7 +177,8 @@ def model_edges(lum: np.ndarray, cx: float, cy: float, r: float, rays: int = RAY
         coef = np.empty((cands.size, 3, rays))
         for k, rk in enumerate(cands):
             basis = _limb_basis(rho, rk, sigma)
-            c, *_ = np.linalg.lstsq(basis, prof, rcond=None)
+            gram = basis.T @ basis + 1e-12 * np.eye(3)     # normal equations: 3 unknowns per ray
+            c = np.linalg.solve(gram, basis.T @ prof)
             coef[k] = c
             res[k] = np.sum((basis @ c - prof) ** 2, axis=0)
         k = np.argmin(res, axis=0)
