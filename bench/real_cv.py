@@ -96,10 +96,13 @@ def folds_of(files: list[Path], k: int, seed: int) -> list[list[Path]]:
 
 
 def fine_tune(config: Path, out: Path, steps: int, max_minutes: float | None, exclude: list[str],
-              real: bool) -> Path:
+              real: bool, wait: bool = False) -> Path:
     """Fine-tune per ``config`` into ``out`` (reused when done): the joint arm trains on the real
-    files less ``exclude``, the control arm on none."""
+    files less ``exclude``, the control arm on none. ``wait``: train nothing, wait for another
+    process (``--stage train``) to write the weights."""
     weights = out / "specgen.pt"
+    while wait and not weights.is_file():
+        time.sleep(20)
     if weights.is_file():
         return weights
     from specgen_addon.evaluation.cache import cache_root
@@ -158,20 +161,27 @@ def run_cv(args: argparse.Namespace) -> int:
     labels = [lab for lab, _ in scenes()]
     t0 = time.perf_counter()
     print("control arm (no real files)", flush=True)
-    control_w = fine_tune(args.config, args.out / "control", args.steps, args.max_minutes, [], real=False)
+    wait = args.stage == "score"
+    control_w = fine_tune(args.config, args.out / "control", args.steps, args.max_minutes, [], real=False,
+                          wait=wait)
     joint_rows, fold_info = [], []
     for k, held in enumerate(folds):
         names = [p.stem for p in held]
         print(f"fold {k}: held out {', '.join(names)}", flush=True)
-        w = fine_tune(args.config, args.out / f"fold{k}", args.steps, args.max_minutes, names, real=True)
+        w = fine_tune(args.config, args.out / f"fold{k}", args.steps, args.max_minutes, names, real=True,
+                      wait=wait)
+        if args.stage == "train":
+            continue
         meta = _weights_meta(w)
         fold_info.append({"fold": k, "held_out": names, "weights": str(w), "steps": meta.get("steps"),
                           "wall_seconds": meta.get("wall_seconds")})
         joint_rows += [r | {"fold": k} for r in score_files(held, w, args.out / f"fold{k}" / "scores",
                                                              not args.no_refine, args.resolution)]
+    if args.stage == "train":
+        return 0
     print("control arm scores", flush=True)
-    control_rows = score_files(files, control_w, args.out / "control" / "scores", not args.no_refine,
-                               args.resolution)
+    control_rows = score_files(files, control_w, args.out / "control" / "scores",
+                               not (args.no_refine or args.control_without_refine), args.resolution)
     synth = {}
     if args.synthetic_per_family:
         print("synthetic split subset", flush=True)
@@ -236,6 +246,11 @@ def main() -> int:
     cv.add_argument("--steps", type=int, default=150)
     cv.add_argument("--max-minutes", type=float, default=None)
     cv.add_argument("--synthetic-per-family", type=int, default=2)
+    cv.add_argument("--control-without-refine", action="store_true",
+                    help="score the control arm network alone only (refinement is the slow part)")
+    cv.add_argument("--stage", choices=("all", "train", "score"), default="all",
+                    help="train: the fine-tunes only; score: wait for each fine-tune's weights and score "
+                         "(two processes, one training while the other scores)")
     args = ap.parse_args()
     if not args.rgl.is_dir():
         ap.error(f"{args.rgl}: real RGB folder not found")
