@@ -1,0 +1,102 @@
+"""The room's light given by the user: distant lights by direction, power and colour, an ambient
+term, a calibrated panorama; clear errors for a light without a direction and a panorama of the
+wrong aspect (specgen_addon.input_lighting)."""
+
+from __future__ import annotations
+
+import math
+
+import numpy as np
+import pytest
+
+from specgen_addon.input_lighting import InputLighting, Light, LightingError, parse_light, parse_lighting
+
+
+def test_azimuth_and_elevation_follow_the_camera_frame():
+    np.testing.assert_allclose(parse_light("0,0").direction, (0, 0, 1), atol=1e-12)     # faces the camera
+    np.testing.assert_allclose(parse_light("90,0").direction, (1, 0, 0), atol=1e-12)    # to the right
+    np.testing.assert_allclose(parse_light("0,90").direction, (0, 1, 0), atol=1e-12)    # up
+    light = parse_light("1,2,2,3,A", vector=True)
+    np.testing.assert_allclose(light.direction, np.array([1, 2, 2]) / 3.0)
+    assert light.power == 3 and light.colour == "A"
+
+
+@pytest.mark.parametrize("text,vector", [("5", False), (",,2", False), ("a,b", False), ("1,2", True),
+                                         ("0,0,0", True)])
+def test_a_light_without_a_direction_is_refused_in_one_sentence(text, vector):
+    with pytest.raises(LightingError, match="needs a direction"):
+        parse_light(text, vector=vector)
+
+
+def test_power_and_colour_are_checked():
+    with pytest.raises(LightingError, match="power must be a positive number"):
+        parse_light("0,0,-1")
+    with pytest.raises(LightingError, match="light colour"):
+        parse_light("0,0,1,nosuchlight")
+    with pytest.raises(LightingError, match="outside 1000–40000 K"):
+        parse_light("0,0,1,50K")
+
+
+def test_a_colour_temperature_is_plancks_law():
+    colour = pytest.importorskip("colour")
+    from specgen_addon.colour_tables import blackbody
+
+    wl, spd = blackbody(3200.0)
+    sd = colour.sd_blackbody(3200.0, colour.SpectralShape(360, 830, 1))
+    np.testing.assert_allclose(spd, sd.values / sd.values[200], rtol=1e-3)
+
+
+def test_lights_alone_light_a_white_sphere_as_irradiance_over_pi():
+    """One frontal light of power 1 (irradiance π): the white Lambertian photo's mean is the mean
+    cosine over the disc (2/3) × the canonical exposure, in every channel (D65)."""
+    light = parse_lighting(None, lights=(parse_light("0,0"),))
+    assert light.env == "none" and light.environment() is None and "light az 0° el 0°" in light.label
+    from specgen_addon import input_image
+    from specgen_addon.render import sphere_geometry
+
+    geo = sphere_geometry(64)
+    expect = float(np.mean(geo.normals[geo.mask][:, 2])) * input_image.EXPOSURE
+    np.testing.assert_allclose(light.white_sphere_rgb(64), expect, rtol=1e-3)
+    brighter = parse_lighting(None, lights=(parse_light("0,0"),), ambient=0.5)
+    np.testing.assert_allclose(brighter.white_sphere_rgb(64), expect + 0.5 * input_image.EXPOSURE, rtol=2e-2)
+
+
+def test_two_lights_add():
+    a, b = parse_light("-40,10"), parse_light("40,10,2")
+    both = parse_lighting(None, lights=(a, b)).white_sphere_rgb(48)
+    one = parse_lighting(None, lights=(a,)).white_sphere_rgb(48)
+    two = parse_lighting(None, lights=(b,)).white_sphere_rgb(48)
+    np.testing.assert_allclose(both, one + two, rtol=1e-9)
+    assert parse_lighting(None, lights=(a, b)).scene(32).lights.__len__() == 2
+
+
+def _equirect(path, w: int, h: int, value: float = 2.0) -> None:
+    from specgen_addon.image_io import write_exr
+
+    plane = np.full((h, w), value, np.float32)
+    write_exr(path, {"R": plane, "G": plane, "B": plane})
+
+
+def test_a_panorama_of_the_wrong_aspect_is_refused(tmp_path):
+    _equirect(tmp_path / "square.exr", 32, 32)
+    with pytest.raises(LightingError, match="twice as wide as it is high; this one is 32×32"):
+        parse_lighting(str(tmp_path / "square.exr"))
+
+
+def test_a_calibrated_panorama_keeps_its_power(tmp_path):
+    _equirect(tmp_path / "room.exr", 64, 32, value=2.0)
+    normalised = parse_lighting(str(tmp_path / "room.exr")).environment()
+    calibrated = parse_lighting(str(tmp_path / "room.exr"), calibrated=True).environment()
+    assert normalised.mean_luminance() == pytest.approx(1.0, rel=1e-3)
+    assert calibrated.mean_luminance() == pytest.approx(2.0, rel=1e-3)
+    assert "calibrated" in parse_lighting(str(tmp_path / "room.exr"), calibrated=True).label
+    with pytest.raises(LightingError, match="only a panorama file can be calibrated"):
+        InputLighting("forest", calibrated=True)
+
+
+def test_lights_do_not_mix_with_the_canonical_studio():
+    with pytest.raises(LightingError, match="canonical studio"):
+        InputLighting("canonical", lights=(Light((0.0, 0.0, 1.0)),))
+    with pytest.raises(LightingError, match="at least one light"):
+        InputLighting("none")
+    assert math.isclose(Light.from_angles(0, 0).direction[2], 1.0)
