@@ -107,7 +107,9 @@ class SPECGEN_OT_generate_brdf(_Modal, bpy.types.Operator):
 
     bl_idname = "specgen.generate_brdf"
     bl_label = "Generate BRDF"
-    bl_options = {"REGISTER"}
+    # one undo step: Ctrl-Z removes what Generate made (material, node group, preview image), and
+    # nothing the user did before it
+    bl_options = {"REGISTER", "UNDO"}
     label = "Generating BRDF"
 
     def _job_args(self, context) -> dict:
