@@ -29,3 +29,12 @@ def rgl_files(shared_dir: Path) -> dict[str, Path]:
     """The real RGL RGB files by short name: ``felt`` and ``metallic``."""
     d = shared_dir / "data" / "rgl"
     return {"felt": d / "acrylic_felt_green_rgb.bsdf", "metallic": d / "ilm_l3_37_metallic_rgb.bsdf"}
+
+
+@pytest.fixture
+def blank_scene():
+    """The scene of an empty .blend (Blender's factory settings, no objects), so no object, panel
+    value or handler of an earlier test is left; skips without the bpy module."""
+    bpy = pytest.importorskip("bpy")
+    bpy.ops.wm.read_factory_settings(use_empty=True)
+    return bpy.context.scene

@@ -46,8 +46,7 @@ def _state(obj_name: str) -> tuple:
             sorted(t.name for t in bpy.data.texts))
 
 
-def test_undo_after_apply_restores_the_previous_material(lookup_json):
-    bpy.ops.wm.read_factory_settings(use_empty=True)
+def test_undo_after_apply_restores_the_previous_material(blank_scene, lookup_json):
     PKG.register()
     try:
         sc = bpy.context.scene

@@ -96,8 +96,7 @@ def _sphere_scene(atlas, resolution_filter: float = 0.01):
 
 
 # ------------------------------------------------------------------------- register / compile
-def test_register_unregister_leaves_nothing_behind():
-    bpy.ops.wm.read_factory_settings(use_empty=True)  # no panel values left by earlier tests
+def test_register_unregister_leaves_nothing_behind(blank_scene):
     before_types = set(dir(bpy.types))
     before_ops = set(dir(bpy.ops.specgen)) if hasattr(bpy.ops, "specgen") else set()
     PKG.register()
@@ -117,8 +116,7 @@ def test_register_unregister_leaves_nothing_behind():
     PKG.unregister()
 
 
-def test_osl_shader_compiles_with_expected_sockets():
-    bpy.ops.wm.read_factory_settings(use_empty=True)
+def test_osl_shader_compiles_with_expected_sockets(blank_scene):
     mat = bpy.data.materials.new("osl")
     node = mat.node_tree.nodes.new("ShaderNodeScript")
     render.compile_script_node(node)

@@ -128,8 +128,7 @@ def test_light_blackbody_follows_planck_like_blenders_own_colour():
     bpy.data.lights.remove(light)
 
 
-def test_blackbody_light_and_emission_render_like_cycles():
-    bpy.ops.wm.read_factory_settings(use_empty=True)
+def test_blackbody_light_and_emission_render_like_cycles(blank_scene):
     sc = bpy.context.scene
     sc.render.engine = "CYCLES"
     sc.render.resolution_x = sc.render.resolution_y = 24
@@ -267,8 +266,7 @@ def test_batch_renders_a_blend_file_in_full_scene_mode(white_atlas, tmp_path):
     assert bad.returncode == 2 and bad.stderr.strip().count("\n") == 0 and "no such .blend" in bad.stderr
 
 
-def test_f12_after_apply_shows_the_rgb_standin_and_exact_mode_leaves_no_temp_paths(white_atlas):
-    bpy.ops.wm.read_factory_settings(use_empty=True)
+def test_f12_after_apply_shows_the_rgb_standin_and_exact_mode_leaves_no_temp_paths(blank_scene, white_atlas):
     sc = bpy.context.scene
     sc.render.engine = "CYCLES"
     scene_mod.add_camera(sc)

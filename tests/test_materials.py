@@ -130,8 +130,7 @@ def test_two_generates_make_two_material_sets_and_apply_assigns_the_chosen_one(t
 
 
 @pytest.mark.slow
-def test_two_materials_with_different_bases_render_side_by_side_keeping_their_colours(tmp_path):
-    bpy.ops.wm.read_factory_settings(use_empty=True)
+def test_two_materials_with_different_bases_render_side_by_side_keeping_their_colours(blank_scene, tmp_path):
     sc = bpy.context.scene
     scene_mod.add_camera(sc, scale=4.4)
     mats = {}

@@ -79,8 +79,7 @@ def test_time_estimate_is_told_before_the_render_and_is_of_the_right_size(tmp_pa
         PKG.unregister()
 
 
-def test_render_job_waits_for_blenders_handlers_and_a_cancel_becomes_cancelled():
-    bpy.ops.wm.read_factory_settings(use_empty=True)
+def test_render_job_waits_for_blenders_handlers_and_a_cancel_becomes_cancelled(blank_scene):
     sc = bpy.context.scene
     sc.render.engine = "CYCLES"
     scene_mod.add_camera(sc)

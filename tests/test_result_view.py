@@ -57,8 +57,7 @@ def _save_as_render(image, scene, path: Path) -> np.ndarray:
                                                       ("Standard", "None", 0.0, 1.0),
                                                       ("AgX", "AgX - Punchy", 0.5, 1.2),
                                                       ("Filmic", "None", -0.5, 1.0)])
-def test_view_transform_matches_blenders_own_colour_management(tmp_path, view, look, exposure, gamma):
-    bpy.ops.wm.read_factory_settings(use_empty=True)
+def test_view_transform_matches_blenders_own_colour_management(blank_scene, tmp_path, view, look, exposure, gamma):
     sc = bpy.context.scene
     vs = sc.view_settings
     vs.view_transform, vs.look, vs.exposure, vs.gamma = view, look, exposure, gamma
@@ -105,9 +104,8 @@ def _object_mask(sc, obj, shape) -> np.ndarray:
 
 
 @pytest.mark.slow
-def test_preview_png_is_the_shown_result_and_matches_f12_in_the_scenes_view_transform(
+def test_preview_png_is_the_shown_result_and_matches_f12_in_the_scenes_view_transform(blank_scene, 
         white_material_info, tmp_path):
-    bpy.ops.wm.read_factory_settings(use_empty=True)
     mat = render.make_material("SpecGen white", white_material_info)
     sc = demo.ordinary_scene(samples=128, size=(60, 40), specgen_material=mat)
     assert sc.view_settings.view_transform == "AgX"           # Blender's default
