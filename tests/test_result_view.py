@@ -104,7 +104,7 @@ def _object_mask(sc, obj, shape) -> np.ndarray:
 
 
 @pytest.mark.slow
-def test_preview_png_is_the_shown_result_and_matches_f12_in_the_scenes_view_transform(blank_scene, 
+def test_preview_png_is_the_shown_result_and_matches_f12_in_the_scenes_view_transform(blank_scene,
         white_material_info, tmp_path):
     mat = render.make_material("SpecGen white", white_material_info)
     sc = demo.ordinary_scene(samples=128, size=(60, 40), specgen_material=mat)
