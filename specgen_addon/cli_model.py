@@ -163,6 +163,17 @@ def add_refine_arguments(p: argparse.ArgumentParser) -> None:
     g.add_argument("--ambient", type=float, default=0.0, metavar="L",
                    help="uniform ambient radiance of the room (1: the radiance of a white surface "
                         "facing the canonical key light; default 0)")
+    g.add_argument("--light-probe", type=Path, default=None, metavar="CHROME",
+                   help="a photo of a chrome (mirror) ball from the same place under the same light, "
+                        "taken like the photo: unwrapped into the room's environment in the camera's frame "
+                        "(Debevec 1998; written beside the output as OUTPUT_probe.exr), its clipped "
+                        "light sources made distant lights with their power fitted to the photo")
+    g.add_argument("--probe-mask", type=Path, default=None, metavar="FILE",
+                   help="mask of the chrome ball in --light-probe (the ball white)")
+    g.add_argument("--probe-circle", default=None, metavar="X,Y,R",
+                   help="the chrome ball's centre and radius in --light-probe's pixels")
+    g.add_argument("--probe-reflectance", type=float, default=None, metavar="R",
+                   help="the chrome ball's reflectance (default 0.75)")
     g.add_argument("--linear", action="store_true",
                    help="the photo's 8/16-bit values are linear light (a linear export of a RAW, a "
                         "scientific camera); default: sRGB-encoded. EXR/HDR are always linear and "
@@ -198,6 +209,27 @@ def photo_source_from_args(args: argparse.Namespace, image: Path):
     return PhotoSource(Path(image), encoding="linear" if getattr(args, "linear", False) else "auto",
                        white_level=getattr(args, "white_level", None),
                        circle=parse_circle(circle) if circle else None, mask=getattr(args, "mask", None))
+
+
+def probe_lighting_from_args(args: argparse.Namespace, source, env_path: Path):
+    """The lighting unwrapped from ``--light-probe`` (:mod:`specgen_addon.light_probe`), its
+    environment written to ``env_path``; the run's notes about it printed."""
+    from .input_image import parse_circle
+    from .light_probe import CHROME_REFLECTANCE, probe_lighting, read_probe
+
+    if env_path.exists() and not args.overwrite:
+        raise OutputExistsError(f"{env_path}: already exists (pass --overwrite to replace it)")
+    if args.light or args.light_vector or args.input_env not in (None, "", "canonical"):
+        raise SpecGenError("--light-probe gives the room's light: leave out --light, --light-vector and --input-env")
+    probe = read_probe(args.light_probe, circle=parse_circle(args.probe_circle) if args.probe_circle else None,
+                       mask=args.probe_mask, encoding=source.encoding,
+                       reflectance=args.probe_reflectance or CHROME_REFLECTANCE)
+    photo = source.crop().image.astype("float64")
+    lighting = probe_lighting(probe, env_path, photo, overwrite=args.overwrite)
+    for note in probe.notes:
+        print(f"light probe: {note}")
+    print(f"{env_path}: the room's environment unwrapped from the chrome ball (camera frame)")
+    return lighting
 
 
 def print_photo_report(generated, args: argparse.Namespace, source) -> None:
@@ -310,10 +342,9 @@ def train_summary(res, parameters: int) -> str:
 
 
 def run_infer(args: argparse.Namespace) -> int:
+    from .formats.export import check_output, write_output
     from .pipeline import generate
     from .spectra import wavelength_grid
-
-    from .formats.export import check_output, write_output
 
     out: Path = args.output
     check_output(out)
@@ -322,10 +353,12 @@ def run_infer(args: argparse.Namespace) -> int:
         if p.exists() and not args.overwrite:
             raise OutputExistsError(f"{p}: already exists (pass --overwrite to replace it)")
     wl = wavelength_grid(args.range[0], args.range[1], args.bands)
+    source = photo_source_from_args(args, args.image)
     lighting = input_lighting_from_args(args)
+    if getattr(args, "light_probe", None) is not None:
+        lighting = probe_lighting_from_args(args, source, out.with_name(out.stem + "_probe.exr"))
     t0 = time.perf_counter()
     with progress_bar("infer", enabled=not args.quiet) as update:
-        source = photo_source_from_args(args, args.image)
         generated = generate(source, lighting, refine=args.refine, weights=args.weights,
                              wavelengths_nm=wl, backend=args.backend, progress=update, model=args.model,
                              latent_fit=args.latent_fit)
