@@ -8,7 +8,7 @@ and the core package.
 
 from __future__ import annotations
 
-_MODULES = ("properties", "operators", "panel")
+_MODULES = ("properties", "operators", "panel", "travel")
 
 
 def _modules():

@@ -645,14 +645,17 @@ class SpectralRenderJob(RenderJobOutputs):
         self.groups = [(np.asarray(b, np.float64).reshape(-1, self.wavelengths_nm.size),
                         np.asarray(o, np.float64), ms) for (b, o), ms in groups.items()]
         self.basis, self.offsets = self.groups[0][0], self.groups[0][1]
-        for m in mats:
-            for p in m["specgen_atlas_groups"]:
-                if not Path(p).is_file():
-                    raise SpecGenError(f"material {m.name!r}: baked lookup {p} is missing (Apply again)")
+        from .travel import missing_lookups
+
+        missing = missing_lookups(mats)
+        if missing:
+            raise SpecGenError(missing[0])
         return mats
 
     def steps(self) -> Iterator[float]:
         """Generator: bake lighting, one Cycles render per four coefficient slots, assemble, write."""
+        from .travel import atlas_groups
+
         t0 = time.perf_counter()
         mats = self._preflight()
         wl = self.wavelengths_nm
@@ -694,7 +697,7 @@ class SpectralRenderJob(RenderJobOutputs):
                     for mat in group_mats:
                         # other bases' materials are muted (an empty Atlas shades black)
                         script_node(mat).inputs["Atlas"].default_value = \
-                            list(mat["specgen_atlas_groups"])[r] if other == g else ""
+                            atlas_groups(mat)[r] if other == g else ""
                         touch(mat)
                 t = time.perf_counter()
                 with _SceneState(self.scene, self.samples, self.resolution, out_dir, self.holdout_others):
@@ -736,7 +739,7 @@ class SpectralRenderJob(RenderJobOutputs):
                     node.inputs["EnvList"].default_value = ""
             shutil.rmtree(work, ignore_errors=True)
             for mat in mats:  # unmute: every material shows its own first lookup again
-                script_node(mat).inputs["Atlas"].default_value = list(mat["specgen_atlas_groups"])[0]
+                script_node(mat).inputs["Atlas"].default_value = atlas_groups(mat)[0]
                 touch(mat)
 
     def run(self, progress: Callable[[float], None] | None = None) -> np.ndarray:

@@ -11,13 +11,14 @@ import pytest
 
 bpy = pytest.importorskip("bpy")
 
-from addon_modules import PKG, addon_module  # noqa: E402  (after the bpy skip)
+from addon_modules import PKG, addon_module
+
 scene_mod = addon_module("ops.scene")
 
-from specgen_addon.render import sphere_geometry  # noqa: E402
-from specgen_addon.render.analytic import Lambertian  # noqa: E402
-from specgen_addon.render.lights import DistantLight  # noqa: E402
-from specgen_addon.render.renderer import render_spectral  # noqa: E402
+from specgen_addon.render import sphere_geometry
+from specgen_addon.render.analytic import Lambertian
+from specgen_addon.render.lights import DistantLight
+from specgen_addon.render.renderer import render_spectral
 
 
 def _state() -> tuple:
