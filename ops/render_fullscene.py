@@ -111,7 +111,7 @@ class FullSceneRenderJob(RenderJobOutputs):
     log: Callable[[str], None] = print
     #: direct light on SpecGen surfaces from the exact lookups (:mod:`.exact_direct`)
     exact_direct: bool = True
-    show_result: bool = True   # the result's linear sRGB as the image "SpecGen Result"
+    show_result: bool = True   # a render to a file also fills the image "SpecGen Result"
     interactive: bool = False  # band renders as Blender render jobs that Esc stops (the panel)
     result_image: object = field(default=None, init=False)
     spectral: np.ndarray | None = field(default=None, init=False)
@@ -198,7 +198,7 @@ class FullSceneRenderJob(RenderJobOutputs):
                                attributes=attrs, alpha=self.alpha)
             if self.preview_png:
                 write_preview_png(outs[1], rgb, overwrite=self.overwrite, view=view)
-        if self.show_result:
+        if self.show_result and outs is not None:   # a render to a file: the user's
             self.result_image = show_result(rgb, self.alpha)
         self.timings["total_s"] = time.perf_counter() - t0
         yield 1.0
