@@ -78,3 +78,15 @@ def test_batch_applies_a_photo_to_an_object_and_renders_each_frame(blend, tmp_pa
     # the same run again: outputs and lookups exist, refused up front unless --overwrite
     again = subprocess.run(cmd, capture_output=True, text=True, timeout=600)
     assert again.returncode == 2 and "already exists" in again.stderr
+
+
+def test_preview_renders_a_quarter_size_frame_and_leaves_the_file_settings(blend, tmp_path):
+    from specgen_addon.spectral_exr import read_spectral_exr
+
+    out = tmp_path / "out"
+    assert batch.main(["--scene", str(blend), "--out", str(out), "--bands", "4", "--preview",
+                       "--frames", "2"]) == 0
+    image = read_spectral_exr(out / "Scene_Camera_f0002.exr")
+    assert image.values.shape == (3, 5, 4)                      # 25 % of 20×14
+    sc = bpy.context.scene
+    assert (sc.render.resolution_percentage, sc.cycles.samples) == (100, 2)
