@@ -74,8 +74,8 @@ def test_batch_applies_a_photo_to_an_object_and_renders_each_frame(blend, tmp_pa
         assert image.values.shape == (14, 20, 5) and image.header["specgenFrame"] == str(frame)
         assert exr.with_name(exr.stem + "_preview.png").is_file()
     assert not (out / "Scene_Camera_f0002.exr").exists()
-    assert (out / "lookup" / "sphere_lookup.json").is_file()
-    # the same run again: outputs and lookups exist, refused up front unless --overwrite
+    assert not (out / "lookup").exists()            # only the renders stay without --keep-lookups
+    # the same run again: the outputs exist, refused up front unless --overwrite
     again = subprocess.run(cmd, capture_output=True, text=True, timeout=600)
     assert again.returncode == 2 and "already exists" in again.stderr
 
