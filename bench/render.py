@@ -167,6 +167,9 @@ def bench_fullscene(args) -> int:
     print(f"full-scene spectral, Cycles renders only:  {cyc:.3f} s  -> ratio {cyc / rgb:.2f}x")
     print(f"full-scene spectral, whole job (+EXR/PNG): {full:.3f} s  -> ratio {full / rgb:.2f}x  "
           f"(target <= bands/3 + 1 = {args.bands / 3 + 1:.1f}x)")
+    t = job.timings["render_s"]  # the last job: band renders, then the closures' direct light
+    print(f"  of which (last run): {groups} band renders {sum(t[:groups]):.3f} s, {len(t) - groups} "
+          f"direct-light renders {sum(t[groups:]):.3f} s, exact direct light {job.timings.get('exact_s', 0):.3f} s")
     return 0
 
 

@@ -64,6 +64,15 @@ def test_rendered_fit_error_is_small_inside_the_model_and_flags_a_material_outsi
     assert outside.rendered_error == pytest.approx(rendered_fit_error(outside, outside_table))
 
 
+def test_the_checked_fit_keeps_the_weighting_that_renders_closer(outside_table):
+    from specgen_addon.fit.closures import WEIGHTINGS
+
+    errors = [rendered_fit_error(fit_closures(outside_table, weighting=w), outside_table) for w in WEIGHTINGS]
+    assert fit_closures(outside_table, check=True).rendered_error == pytest.approx(min(errors))
+    with pytest.raises(Exception, match="unknown weighting"):
+        fit_closures(outside_table, weighting="uniform")
+
+
 # ------------------------------------------------------------------------- Cycles
 def _sphere_render(table: BRDFTable, tmp_path: Path, res: int = 40, samples: int = 8):
     """(reference, Full Scene, closures alone, warnings) for ``table`` on the bench's sphere."""

@@ -459,7 +459,13 @@ def cell_volumes(stride_h: int = 1, stride_d: int = 1) -> tuple[np.ndarray, np.n
     return np.cos(th[:-1]) - np.cos(th[1:]), 0.5 * (np.sin(td[1:]) ** 2 - np.sin(td[:-1]) ** 2)
 
 
-def _samples(table, wl: np.ndarray, resample: bool, ior: float) -> _Samples:
+#: Residual weightings: ``"measure"`` (each entry by the direction pairs it stands for, × cos θo)
+#: and ``"entries"`` (every entry alike, × cos θo; the fit's weighting before the measure one,
+#: which suits some retro-reflective measured materials better, docs/blender.md).
+WEIGHTINGS = ("measure", "entries")
+
+
+def _samples(table, wl: np.ndarray, resample: bool, ior: float, weighting: str = "measure") -> _Samples:
     sh, sd, sp = FIT_STRIDE
     th, td, pd = grid_angles()
     values = table.values[::sh, ::sd, ::sp]
@@ -469,8 +475,9 @@ def _samples(table, wl: np.ndarray, resample: bool, ior: float) -> _Samples:
     TH, TD, PD = np.meshgrid(th[::sh], td[::sd], pd[::sp], indexing="ij")
     wi, wo = io_from_half_diff(TH.ravel(), TD.ravel(), PD.ravel())
     volume = np.multiply.outer(*cell_volumes(sh, sd))[:, :, None]        # (θh, θd, 1)
-    weight = (np.clip(wi[:, 2], 0, None) ** 2 * np.clip(wo[:, 2], 0, None)
-              * np.broadcast_to(volume, TH.shape).ravel())
+    weight = np.clip(wi[:, 2], 0, None) ** 2 * np.clip(wo[:, 2], 0, None)
+    weight = weight * (np.broadcast_to(volume, TH.shape).ravel() if weighting == "measure"
+                       else np.clip(wo[:, 2], 0, None))
     keep = weight > 0
     wi, wo, weight, target = wi[keep], wo[keep], weight[keep], target[keep]
     return _Samples(wi, wo, weight, target, fresnel_dielectric(wo[:, 2], ior),
@@ -673,21 +680,35 @@ def _as_good(s: _Samples, simpler: np.ndarray, obj: np.ndarray) -> bool:
 
 def fit_closures(table, wavelengths_nm: np.ndarray | None = None, max_lobes: int = 2,
                  roughness_grid: np.ndarray = ROUGHNESS_GRID, ior: float = DEFAULT_IOR,
-                 per_band: bool = True, smoothness: float = SMOOTHNESS, check: bool = False) -> ClosureFit:
+                 per_band: bool = True, smoothness: float = SMOOTHNESS, check: bool = False,
+                 weighting: str = "measure") -> ClosureFit:
     """Fit Lambert + up to ``max_lobes`` GGX lobes, each also Fresnel-weighted, to a spectral
     :class:`~specgen_addon.table.BRDFTable` (see :class:`ClosureFit` for the model).
 
     ``wavelengths_nm`` defaults to the table's bands (else the table is interpolated linearly in λ).
     With ``per_band`` a lobe's roughness may vary with λ (smoothness weight ``smoothness``, module
-    docstring); else it is shared by all bands. With ``check`` the fit's rendered colour error
-    is measured too (:attr:`ClosureFit.rendered_error`, about 0.2–2 s).
+    docstring); else it is shared by all bands. ``weighting`` is one of :data:`WEIGHTINGS`. With
+    ``check`` the fit's rendered colour error is measured too (:attr:`ClosureFit.rendered_error`),
+    the fit is made with each weighting and the one that renders closer is kept (about twice the
+    time, plus 0.2–2 s).
     """
     if not getattr(table, "is_spectral", False):
         raise SpecGenError("the closure fit needs a spectral BRDF table (wavelengths in nm)")
     if max_lobes not in (0, 1, 2):
         raise SpecGenError(f"max_lobes must be 0, 1 or 2, got {max_lobes}")
+    if weighting not in WEIGHTINGS:
+        raise SpecGenError(f"unknown weighting {weighting!r}; choose one of {', '.join(WEIGHTINGS)}")
+    if check:
+        from .fit_check import rendered_fit_error
+
+        fits = []
+        for w in WEIGHTINGS:
+            fits.append(fit_closures(table, wavelengths_nm, max_lobes, roughness_grid, ior, per_band,
+                                     smoothness, weighting=w))
+            fits[-1].rendered_error = rendered_fit_error(fits[-1], table)
+        return min(fits, key=lambda f: f.rendered_error)
     wl = np.asarray(table.wavelengths if wavelengths_nm is None else wavelengths_nm, np.float64)
-    s = _samples(table, wl, wavelengths_nm is not None, ior)
+    s = _samples(table, wl, wavelengths_nm is not None, ior, weighting)
     rs, x, obj = _fit_shared(s, max_lobes, roughness_grid)
     rough = np.repeat(np.asarray(rs, np.float64)[:, None], wl.size, axis=1)
     if per_band:
@@ -699,10 +720,5 @@ def fit_closures(table, wavelengths_nm: np.ndarray | None = None, max_lobes: int
                 rough, x, obj = one
     spec, spec_f = x[2::2], x[3::2]
     used = [i for i in range(rough.shape[0]) if np.any(spec[i] > 0) or np.any(spec_f[i] > 0)]
-    fit = ClosureFit(wl, x[0], rough[used], spec[used], np.sqrt(s.score(obj)), x[1],
-                     spec_f[used], float(ior))
-    if check:
-        from .fit_check import rendered_fit_error
-
-        fit.rendered_error = rendered_fit_error(fit, table)
-    return fit
+    return ClosureFit(wl, x[0], rough[used], spec[used], np.sqrt(s.score(obj)), x[1],
+                      spec_f[used], float(ior))
