@@ -169,7 +169,8 @@ def bench_fullscene(args) -> int:
           f"(target <= bands/3 + 1 = {args.bands / 3 + 1:.1f}x)")
     t = job.timings["render_s"]  # the last job: band renders, then the closures' direct light
     print(f"  of which (last run): {groups} band renders {sum(t[:groups]):.3f} s, {len(t) - groups} "
-          f"direct-light renders {sum(t[groups:]):.3f} s, exact direct light {job.timings.get('exact_s', 0):.3f} s")
+          f"direct-light renders {sum(t[groups:]):.3f} s, "
+          f"exact direct light {job.timings.get('exact_s', 0):.3f} s")
     return 0
 
 
