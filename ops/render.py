@@ -174,6 +174,9 @@ def make_material(name: str, atlas: bake.AtlasInfo) -> bpy.types.Material:
     if atlas.closures is not None:  # F12/viewport and the full-scene mode use the native stack
         from .closures import build_closure_stack
 
+        from .principled import build_principled  # EEVEE, viewport and exporters
+
+        build_principled(mat, atlas.closures, out)  # first: USD's preview surface takes the first BSDF node
         build_closure_stack(mat, atlas.closures, out)
     mat.cycles.emission_sampling = "NONE"  # the emission is reflected light, not a light source
     mat[MATERIAL_TAG] = True
