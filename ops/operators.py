@@ -145,6 +145,7 @@ class SPECGEN_OT_generate_brdf(_Modal, bpy.types.Operator):
             else:
                 img.filepath = str(png)
                 img.reload()
+            img.use_fake_user = True   # only the material names it: kept when the .blend is saved
             mat["specgen_preview"] = img.name
         s.material = mat
         ref, fit = info.refinement, info.film_fit

@@ -65,5 +65,10 @@ def test_one_undo_after_generate_removes_only_what_generate_made(tmp_path):
         assert _state() == before                 # Generate's datablocks gone, the sphere kept
         assert bpy.ops.ed.redo() == {"FINISHED"}
         assert _state() == after
+        previews = [i.name for i in bpy.data.images if i.name.startswith("SpecGen ")]
+        assert previews
+        bpy.ops.wm.save_as_mainfile(filepath=str(tmp_path / "saved.blend"))
+        bpy.ops.wm.open_mainfile(filepath=str(tmp_path / "saved.blend"))
+        assert all(name in bpy.data.images for name in previews)   # the thumbnail survives the save
     finally:
         PKG.unregister()

@@ -72,7 +72,7 @@ def test_gltf_usd_and_materialx_exports_carry_the_principled_stand_in(atlas, tmp
     assert pbr.get("metallicFactor", 1.0) == pytest.approx(p["metallic"], abs=1e-4)
     assert pbr["roughnessFactor"] == pytest.approx(p["roughness"], abs=1e-4)
 
-    from pxr import Usd, UsdShade   # bundled with Blender; importable once its exporter has run
+    from pxr import Usd, UsdShade  # bundled with Blender; importable once its exporter has run
 
     stage = Usd.Stage.Open(str(tmp_path / "ball.usda"))
     shaders = {}
