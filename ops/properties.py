@@ -118,9 +118,10 @@ class SpecGenSettings(bpy.types.PropertyGroup):
                                   description="Brightness of the photo's HDRI relative to the canonical level")
     input_key_light: BoolProperty(name="Key Light", default=False,
                                   description="Add the canonical D65 key light to the photo's HDRI")
-    export_table: BoolProperty(name="Export Table", default=False,
-                               description="Also write the full BRDF table (<name>.npz, ~120 MB at "
-                               "21 bands) beside the lookups")
+    export_table: BoolProperty(name="Export Table", default=True,
+                               description="Also write the BRDF as a compact material file (<name>.npz, "
+                               "a few MB) beside the lookups; lookups that go missing are baked again "
+                               "from it when the .blend is opened")
     material: PointerProperty(name="Material", type=bpy.types.Material, poll=_is_specgen_material,
                               description="SpecGen material that Apply assigns (each Generate "
                               "makes a new one unless Replace Materials is on)")

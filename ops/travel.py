@@ -10,8 +10,10 @@ take them). On every save (``save_pre``, with the file's new path):
 
 On every load (``load_post``) the Script node gets the absolute path of the lookups again, so a
 .blend moved together with its ``specgen/`` folder (to another folder or machine) renders the
-same. A lookup that is missing is reported by material and file name (and the spectral render
-refuses to start with the same sentence), never rendered black without a word.
+same. Missing lookups are baked again from the material's compact file (``<stem>.npz``, which
+Generate writes beside them) when it is there; otherwise they are reported by material and file
+name (and the spectral render refuses to start with the same sentence), never rendered black
+without a word.
 """
 
 from __future__ import annotations
@@ -118,16 +120,53 @@ def missing_lookups(materials=None) -> list[str]:
     return out
 
 
+def rebuild(mat) -> str | None:
+    """Bake a material's missing lookups again from its compact material file (``<stem>.npz``
+    beside them, which Generate writes) and rebuild the material; what was done, or None."""
+    import numpy as np
+
+    from specgen_addon import bake
+    from specgen_addon.table import BRDFTable
+
+    from .render import make_material, script_node
+
+    atlas = Path(_absolute(str(mat["specgen_atlas"])))
+    stem = atlas.name.removesuffix("_lookup.exr")
+    source = atlas.parent / f"{stem}.npz"
+    node = script_node(mat)
+    if not source.is_file() or node is None:
+        return None
+    info = bake.bake_atlas(BRDFTable.load(source), atlas, wavelengths_nm=np.asarray(mat["specgen_wavelengths_nm"]),
+                           n_phi_d=int(node.inputs["PhiD"].default_value))
+    bake.save_atlas_info(info, naming.lookup_json(atlas.parent, stem))
+    make_material(mat.name, info)
+    if bpy.data.filepath:
+        blend_dir = os.path.dirname(bpy.data.filepath)
+        mat["specgen_atlas_groups"] = [_relative(str(p), blend_dir) for p in info.group_paths]
+        mat["specgen_atlas"] = _relative(str(atlas), blend_dir)
+    return f"the lookups of {mat.name!r} were missing and were baked again from {source}"
+
+
 def reconnect() -> list[str]:
-    """What ``load_post`` does: point every Script node at its lookups' absolute path; warnings."""
+    """What ``load_post`` does: point every Script node at its lookups' absolute path, bake missing
+    lookups again from the compact material where it is there; warnings for what is still missing."""
     from .render import script_node
 
+    notes = []
     for mat in _specgen_materials():
+        if missing_lookups([mat]):
+            try:
+                done = rebuild(mat)
+            except Exception as exc:  # a damaged material file: reported below as missing
+                done = None
+                notes.append(f"material {mat.name!r}: cannot bake its lookups again ({exc})")
+            if done:
+                notes.append(done)
         node = script_node(mat)
         groups = atlas_groups(mat)
         if node is not None and groups:
             node.inputs["Atlas"].default_value = groups[0]
-    return missing_lookups()
+    return notes + missing_lookups()
 
 
 @persistent

@@ -84,6 +84,7 @@ def test_lookups_move_beside_the_saved_blend_and_a_moved_blend_renders_the_same(
         unsaved.mkdir(parents=True)
         info = bake.bake_atlas(_table(), unsaved / "ball_lookup.exr")
         bake.save_atlas_info(info, unsaved / "ball_lookup.json")
+        _table().save(unsaved / "ball.npz", compact=True)            # what Generate writes beside them
         mat = render.make_material("SpecGen ball", info)
         obj.data.materials.append(mat)
         before = render.SpectralRenderJob(sc, None, samples=1, resolution=(16, 16)).run()
@@ -107,7 +108,14 @@ def test_lookups_move_beside_the_saved_blend_and_a_moved_blend_renders_the_same(
     np.testing.assert_allclose(np.load(tmp_path / "after.npy"), before, rtol=1e-5, atol=1e-7)
 
     gone = next((elsewhere / "specgen").glob("ball_lookup.g*.exr"))
+    gone.unlink()                                                      # rebuilt from the compact file
+    out = _reopen(elsewhere / "scene.blend", tmp_path / "rebuilt.npy")
+    assert "were missing and were baked again from" in out and "RENDERED" in out, out
+    rebuilt = np.load(tmp_path / "rebuilt.npy")
+    assert 10 * np.log10(before.max() ** 2 / np.mean((rebuilt - before) ** 2)) >= 60.0
+
     gone.unlink()
+    (elsewhere / "specgen" / "ball.npz").unlink()                      # nothing to rebuild from
     out = _reopen(elsewhere / "scene.blend", tmp_path / "never.npy")
     assert f"material 'SpecGen ball': baked lookup {gone} is missing" in out, out
     assert "REFUSED" in out and not (tmp_path / "never.npy").exists()
