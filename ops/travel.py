@@ -26,6 +26,8 @@ from pathlib import Path
 import bpy
 from bpy.app.handlers import persistent
 
+from specgen_addon.errors import SpecGenError
+
 from . import naming
 
 #: The folder beside the .blend that takes the lookups of an unsaved file on its first save.
@@ -157,7 +159,7 @@ def reconnect() -> list[str]:
         if missing_lookups([mat]):
             try:
                 done = rebuild(mat)
-            except Exception as exc:  # a damaged material file: reported below as missing
+            except (SpecGenError, OSError) as exc:  # a damaged material file: reported below as missing
                 done = None
                 notes.append(f"material {mat.name!r}: cannot bake its lookups again ({exc})")
             if done:
