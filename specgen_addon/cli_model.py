@@ -141,7 +141,8 @@ def add_refine_arguments(p: argparse.ArgumentParser) -> None:
                    help="refine the network's BRDF so it reproduces the photo (default: on)")
     g.add_argument("--input-env", default="canonical", metavar="NAME|FILE",
                    help="lighting of the photo: 'canonical' (studio map + key light, default), a "
-                        "bundled map name (forest, courtyard, ...) or an .exr/.hdr file")
+                        "bundled map name (forest, courtyard, ...), an .exr/.hdr file, or 'estimate': "
+                        "a few distant lights + ambient estimated from the ball's own shading")
     g.add_argument("--input-rotation", type=float, default=0.0, metavar="DEG",
                    help="rotation of the input map about the up axis, degrees (default 0)")
     g.add_argument("--input-exposure", type=float, default=1.0,
@@ -209,6 +210,23 @@ def photo_source_from_args(args: argparse.Namespace, image: Path):
     return PhotoSource(Path(image), encoding="linear" if getattr(args, "linear", False) else "auto",
                        white_level=getattr(args, "white_level", None),
                        circle=parse_circle(circle) if circle else None, mask=getattr(args, "mask", None))
+
+
+def estimated_lighting(args: argparse.Namespace, source):
+    """``--input-env estimate``: distant lights + ambient estimated from the ball itself
+    (:mod:`specgen_addon.light_estimate`); the run says so, with the model's residual."""
+    from .light_estimate import estimate_lights
+
+    if args.light or args.light_vector or getattr(args, "light_probe", None) is not None:
+        raise SpecGenError("--input-env estimate finds the light itself: leave out --light, --light-vector "
+                           "and --light-probe")
+    crop = source.crop()
+    estimate = estimate_lights(crop.image.astype("float64"), crop.saturated)
+    if not estimate.directions:
+        raise SpecGenError("no light could be estimated from the ball (its shading shows no direction); "
+                           "give --light or --light-probe")
+    print(f"input lighting {estimate.text()}")
+    return estimate.lighting()
 
 
 def probe_lighting_from_args(args: argparse.Namespace, source, env_path: Path):
@@ -354,7 +372,10 @@ def run_infer(args: argparse.Namespace) -> int:
             raise OutputExistsError(f"{p}: already exists (pass --overwrite to replace it)")
     wl = wavelength_grid(args.range[0], args.range[1], args.bands)
     source = photo_source_from_args(args, args.image)
-    lighting = input_lighting_from_args(args)
+    if args.input_env == "estimate":
+        lighting = estimated_lighting(args, source)
+    else:
+        lighting = input_lighting_from_args(args)
     if getattr(args, "light_probe", None) is not None:
         lighting = probe_lighting_from_args(args, source, out.with_name(out.stem + "_probe.exr"))
     t0 = time.perf_counter()
