@@ -28,6 +28,8 @@ GRID_DEG = 6.0
 ASSUMED_ALBEDO = 0.8
 #: A further light must lower the residual's rms by this fraction.
 MIN_GAIN = 0.15
+#: A residual rms below this fraction of the photo's peak needs no further light (8-bit precision).
+EXPLAINED = 0.004
 #: Most lights estimated.
 MAX_LIGHTS = 3
 
@@ -96,7 +98,10 @@ def estimate_lights(photo: np.ndarray, exclude: np.ndarray | None = None,
     ones = np.ones_like(y)
     chosen: list[np.ndarray] = []
     coef, rms = _fit([ones], y)
+    peak = float(np.percentile(y, 99.9)) or 1.0
     for _ in range(max_lights):
+        if chosen and rms <= EXPLAINED * peak:   # already explained to the photo's own precision
+            break
         cols = [ones] + [np.maximum(nn @ d, 0.0) for d in chosen]
         base = np.stack(cols, -1)
         # for each candidate: least squares on [base, candidate]; scored by the residual
@@ -117,7 +122,6 @@ def estimate_lights(photo: np.ndarray, exclude: np.ndarray | None = None,
             break
         chosen.append(best)
         coef, rms = _fit([ones] + [np.maximum(nn @ d, 0.0) for d in chosen], y)
-    peak = float(np.percentile(y, 99.9)) or 1.0
     residual_db = 20.0 * math.log10(peak / max(rms, 1e-12))
     scale = 1.0 / (EXPOSURE * ASSUMED_ALBEDO)   # photo units → power (1: the key light)
     return Estimate(tuple(tuple(float(v) for v in d) for d in chosen),
