@@ -79,10 +79,7 @@ def read_photo(path: str | Path, encoding: str = "auto", white_level: float | No
             photo = _read_integer(path, encoding == "linear")
     if white_level is not None:
         photo.saturated |= np.any(photo.rgb[..., :3] >= white_level * (1.0 - 1e-6), axis=-1)
-    if photo.saturated.any():
-        photo.notes.append(f"{photo.saturated_count:,} saturated pixels "
-                           f"({100 * photo.saturated.mean():.2g} % of the image) left out of every fit")
-    return photo
+    return photo   # the saturated share is reported with the circle (SphereCrop.describe)
 
 
 def _read_float(path: Path) -> Photo:
