@@ -164,6 +164,16 @@ def run_cv(args: argparse.Namespace) -> int:
     wait = args.stage == "score"
     control_w = fine_tune(args.config, args.out / "control", args.steps, args.max_minutes, [], real=False,
                           wait=wait)
+    control_rows, synth = [], {}
+    if args.stage != "train":  # the control and the initial weights first, while the folds train
+        print("control arm scores", flush=True)
+        control_rows = score_files(files, control_w, args.out / "control" / "scores",
+                                   not (args.no_refine or args.control_without_refine), args.resolution)
+        if args.synthetic_per_family:
+            print("synthetic split subset: initial weights, control", flush=True)
+            synth = {"initial": synthetic(None, args.out / "synthetic_initial.json", args.synthetic_per_family),
+                     "control": synthetic(control_w, args.out / "synthetic_control.json",
+                                          args.synthetic_per_family)}
     joint_rows, fold_info = [], []
     for k, held in enumerate(folds):
         names = [p.stem for p in held]
@@ -177,18 +187,11 @@ def run_cv(args: argparse.Namespace) -> int:
                           "wall_seconds": meta.get("wall_seconds")})
         joint_rows += [r | {"fold": k} for r in score_files(held, w, args.out / f"fold{k}" / "scores",
                                                              not args.no_refine, args.resolution)]
+        if k == 0 and args.synthetic_per_family:  # while the next fold trains
+            print("synthetic split subset: fold 0", flush=True)
+            synth["fold0"] = synthetic(w, args.out / "synthetic_fold0.json", args.synthetic_per_family)
     if args.stage == "train":
         return 0
-    print("control arm scores", flush=True)
-    control_rows = score_files(files, control_w, args.out / "control" / "scores",
-                               not (args.no_refine or args.control_without_refine), args.resolution)
-    synth = {}
-    if args.synthetic_per_family:
-        print("synthetic split subset", flush=True)
-        synth = {"initial": synthetic(None, args.out / "synthetic_initial.json", args.synthetic_per_family),
-                 "control": synthetic(control_w, args.out / "synthetic_control.json", args.synthetic_per_family),
-                 "fold0": synthetic(args.out / "fold0" / "specgen.pt", args.out / "synthetic_fold0.json",
-                                    args.synthetic_per_family)}
     report = {"what": f"{args.folds}-fold cross-validation over the real RGL RGB files", "config": str(args.config),
               "steps": args.steps, "max_minutes": args.max_minutes, "resolution": args.resolution,
               "scenes": labels, "folds": fold_info, "joint": joint_rows, "control": control_rows,
@@ -204,13 +207,20 @@ def run_cv(args: argparse.Namespace) -> int:
             report["synthetic"][arm]["paired_vs_initial"] = {"mean": float(d.mean()),
                                                              "se": float(d.std(ddof=1) / np.sqrt(d.size))}
     _save(args.out / "report.json", report)
+    base = _json(args.baseline / "report.json") if args.baseline else None
+    base_rows = {r["material"]: r for r in (base or {}).get("rows", [])}
     by_name = {r["material"]: r for r in control_rows}
     merged = [r | {f"control_{k}": by_name[r["material"]][k] for k in by_name[r["material"]] if k.startswith("psnr_")}
+              | {f"shipped_{k}": v for k, v in base_rows.get(r["material"], {}).items() if k.startswith("psnr_")}
               for r in sorted(joint_rows, key=lambda r: r["material"])]
     cols = [(f"joint {lab}", f"psnr_{lab}") for lab in labels] + \
            [(f"control {lab}", f"control_psnr_{lab}") for lab in labels]
+    if base_rows:
+        cols += [(f"shipped {lab}", f"shipped_psnr_{lab}") for lab in labels]
     if not args.no_refine:
         cols += [(f"joint refined {lab}", f"psnr_refined_{lab}") for lab in labels]
+        if base_rows:
+            cols += [(f"shipped refined {lab}", f"shipped_psnr_refined_{lab}") for lab in labels]
     md = [(f"{report['what']}: {args.steps} steps per fine-tune ({args.config}), {args.resolution}² renders, "
           f"PSNR dB, every file scored by the fold that did not train on it; {report['machine']}"), ""]
     md += table_md(merged, cols)
@@ -246,6 +256,8 @@ def main() -> int:
     cv.add_argument("--steps", type=int, default=150)
     cv.add_argument("--max-minutes", type=float, default=None)
     cv.add_argument("--synthetic-per-family", type=int, default=2)
+    cv.add_argument("--baseline", type=Path, default=None,
+                    help="a baseline run's --out folder: its figures are set beside the folds'")
     cv.add_argument("--control-without-refine", action="store_true",
                     help="score the control arm network alone only (refinement is the slow part)")
     cv.add_argument("--stage", choices=("all", "train", "score"), default="all",
