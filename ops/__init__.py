@@ -8,7 +8,7 @@ and the core package.
 
 from __future__ import annotations
 
-_MODULES = ("properties", "operators", "panel", "travel")
+_MODULES = ("properties", "operators", "export_brdf", "panel", "travel")
 
 
 def _modules():

@@ -69,6 +69,7 @@ class SPECGEN_PT_main(bpy.types.Panel):
             preview = bpy.data.images.get(s.material.get("specgen_preview", ""))
             if preview is not None:
                 _thumbnail(col, preview)
+            col.operator("specgen.export_brdf", icon="EXPORT")   # .bsdf / .binary for other renderers
         if s.refine_residual >= 0.0:
             col.label(text=f"Refinement residual: {s.refine_residual:.4g}", icon="GRAPH")
         others = [m.name for m in bpy.data.materials if m.get("specgen") and m != s.material]
