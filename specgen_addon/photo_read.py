@@ -198,6 +198,8 @@ def _read_oiio_uint16(path: Path, linear: bool) -> Photo | None:
     finally:
         inp.close()
     photo = Photo(out, sat, "linear" if linear else "sRGB-decoded", 16)
+    if c in (1, 2):
+        photo.notes.append("16-bit grayscale" + ("+alpha image converted to RGBA" if c == 2 else " image converted to RGB"))
     if factor > 1:
         photo.notes.append(f"16-bit {w}×{h} downsampled {factor}× to {ow}×{oh} (all 16 bits kept)")
     return photo
