@@ -32,7 +32,7 @@ def _outside_the_model(th, td, pd):
     follow) under a sharp, tall GGX peak: a closure fit misses it, as it missed the example."""
     wi, wo = io_from_half_diff(th, td, pd)
     above = ((wi[:, 2] > 0) & (wo[:, 2] > 0))[:, None]
-    body = above * RHO / np.pi * (0.4 + 1.6 * np.sin(td)[:, None] ** 2)
+    body = above * RHO / np.pi * (0.1 + 3.0 * np.sin(td)[:, None] ** 2)
     return body + ggx_lobe(wi, wo, 0.12)[:, None] * np.interp(WL, [400, 720], [0.3, 0.1])
 
 
@@ -118,8 +118,9 @@ def test_full_scene_renders_a_material_the_closures_cannot_hold(outside_table, t
     ref, full, closures, warnings, fit = _sphere_render(outside_table, tmp_path)
     de, energy = _score(ref, full, WL)
     assert de <= MAX_DELTA_E and abs(energy - 1) <= MAX_ENERGY_OFF, (de, energy)
-    de_closures, _ = _score(ref, closures, WL)
-    assert de_closures > 2 * MAX_DELTA_E, de_closures      # what the closure stack alone showed
+    de_closures, energy_closures = _score(ref, closures, WL)   # what the closure stack alone shows
+    assert de_closures > MAX_DELTA_E or abs(energy_closures - 1) > MAX_ENERGY_OFF, (de_closures,
+                                                                                  energy_closures)
     named = [w for w in warnings if "'SpecGen fid'" in w and "ΔE2000" in w]
     assert fit.rendered_error > WARN_DELTA_E and named, warnings
     assert any("Exact mode" in w for w in named)           # closures alone: the better mode named
