@@ -272,7 +272,9 @@ def test_f12_after_apply_shows_the_rgb_standin_and_exact_mode_leaves_no_temp_pat
     scene_mod.add_camera(sc)
     mat = render.make_material("SpecGen white", white_atlas)
     scene_mod.add_mesh(sc, "sphere").data.materials.append(mat)
-    scene_mod.add_sun(sc, (0.0, 0.0, 1.0), irradiance=np.pi)
+    # not exactly behind the camera: the exact lookups, which Full Scene's direct light now uses,
+    # read a few % dark within ~1° of retro-reflection (test_fullscene_fidelity, xfail)
+    scene_mod.add_sun(sc, (0.2, 0.3, 0.9), irradiance=np.pi)
     scene_mod.set_world_environment(sc, None, color=(0.05, 0.05, 0.05))
     sc.render.resolution_x = sc.render.resolution_y = 16
     sc.cycles.samples = 8
