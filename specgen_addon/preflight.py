@@ -271,6 +271,11 @@ def output_folders(args: argparse.Namespace) -> tuple[list[Path], list[Path]]:
     if cmd == "infer" and getattr(args, "rgb", False):
         out = Path(args.output)
         files.append(out.with_name(out.stem + "_rgb.npz"))
+    if cmd == "infer" and getattr(args, "light_probe", None) is not None:   # the unwrapped probe
+        out = Path(args.output)
+        files.append(out.with_name(out.stem + "_probe.exr"))
+    if cmd == "infer" and getattr(args, "circle_preview", None) is not None:
+        files.append(Path(args.circle_preview))
     if cmd == "render-input":
         out = Path(args.out)
         files = [out.with_suffix(".exr"), out.with_suffix(".png")]
