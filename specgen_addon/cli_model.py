@@ -367,7 +367,8 @@ def run_infer(args: argparse.Namespace) -> int:
     out: Path = args.output
     check_output(out)
     rgb_out = out.with_name(out.stem + "_rgb.npz")
-    for p in [out] + ([rgb_out] if args.rgb else []):
+    extra = [p for p in (args.circle_preview,) if p is not None]
+    for p in [out] + ([rgb_out] if args.rgb else []) + extra:
         if p.exists() and not args.overwrite:
             raise OutputExistsError(f"{p}: already exists (pass --overwrite to replace it)")
     wl = wavelength_grid(args.range[0], args.range[1], args.bands)
