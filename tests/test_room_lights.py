@@ -100,3 +100,31 @@ def test_lights_do_not_mix_with_the_canonical_studio():
     with pytest.raises(LightingError, match="at least one light"):
         InputLighting("none")
     assert math.isclose(Light.from_angles(0, 0).direction[2], 1.0)
+
+
+@pytest.mark.parametrize("args,message", [
+    (["--light", "5"], "a light needs a direction"),
+    (["--light-vector", "0,0,0"], "a light needs a direction"),
+    (["--circle", "1,2"], "--circle takes X,Y,R"),
+])
+def test_the_command_line_refuses_a_bad_light_or_circle_in_one_line(tmp_path, capsys, args, message):
+    from specgen_addon.cli import main
+
+    from conftest import REPO
+
+    code = main(["infer", str(REPO / "examples" / "sphere.png"), "-o", str(tmp_path / "t.npz"), "--quiet", *args])
+    err = capsys.readouterr().err.strip().splitlines()
+    assert code == 2 and len(err) == 1 and message in err[0], err
+    assert not (tmp_path / "t.npz").exists()
+
+
+def test_the_command_line_refuses_a_panorama_of_the_wrong_aspect(tmp_path, capsys):
+    from specgen_addon.cli import main
+
+    from conftest import REPO
+
+    _equirect(tmp_path / "square.exr", 16, 16)
+    code = main(["infer", str(REPO / "examples" / "sphere.png"), "-o", str(tmp_path / "t.npz"), "--quiet",
+                 "--input-env", str(tmp_path / "square.exr")])
+    err = capsys.readouterr().err.strip().splitlines()
+    assert code == 2 and len(err) == 1 and "twice as wide as it is high" in err[0], err
