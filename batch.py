@@ -145,6 +145,12 @@ def run(args) -> Path:
             input_image.load_sphere_image(source)  # no sphere / unreadable -> ImageInputError, early
     env = lighting.load_environment(args.env)  # unknown name -> LightingAssetError with the list
     cli_model = import_module("specgen_addon.cli_model")
+    for flag, given in (("--light-probe", getattr(args, "light_probe", None) is not None),
+                        ("--input-env estimate", args.input_env == "estimate"),
+                        ("--circle-preview", getattr(args, "circle_preview", None) is not None)):
+        if given:
+            raise errors.SpecGenError(f"{flag} is an option of `python -m specgen_addon infer`; batch.py "
+                                      "does not take it yet")
     photo_lighting = cli_model.input_lighting_from_args(args)  # bad map/file/value -> LightingError
     out = Path(args.out)
     try:
@@ -410,7 +416,8 @@ def _generate(spec, lighting, stem: str, lookup: Path, wavelengths, args):
     bake = import_module("specgen_addon.bake")
     cli_model = import_module("specgen_addon.cli_model")
     t0 = time.perf_counter()
-    info = bake.generate_lookup(str(spec.image), lookup, wavelengths, weights=args.weights,
+    source = cli_model.photo_source_from_args(args, spec.image)   # --linear, --circle, --mask, --white-level
+    info = bake.generate_lookup(source, lookup, wavelengths, weights=args.weights,
                                 backend=args.backend, name=stem, lighting=lighting,
                                 refine=args.refine, model=args.model, overwrite=args.overwrite)
     if info.film_fit is not None:
