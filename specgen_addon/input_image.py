@@ -42,7 +42,7 @@ from pathlib import Path
 
 import numpy as np
 
-from . import image_checks, spectra
+from . import spectra
 from .errors import ImageInputError, SpecGenError
 from .io_utils import atomic_write
 
@@ -331,11 +331,9 @@ def load_sphere_crop(path: str | Path, size: int = CANONICAL_SIZE, encoding: str
     photo = read_photo(path, encoding=encoding, white_level=white_level)
     warn_notes(photo, path)
     arr = photo.rgb
-    scale = 1.0
     try:
         if circle is not None or mask is not None:
-            full = image_checks.image_size(path) if path.suffix.lower() not in _raw_suffixes() else None
-            scale = arr.shape[1] / full[0] if full else 1.0   # a photo downsampled on reading
+            scale = photo.scale   # a photo downsampled on reading: the user's circle is in the file's pixels
             if mask is not None:
                 cov = read_mask(mask, arr.shape[:2])
                 c = mask_circle(cov)
@@ -365,12 +363,6 @@ def write_circle_preview(path: str | Path, source: PhotoSource, circle: tuple[fl
     line = max(0.6, r / 200.0)
     img[(np.abs(dist - r) < line) | (dist < 2 * line)] = (255, 40, 40)
     return write_png8(path, img, overwrite=overwrite)
-
-
-def _raw_suffixes() -> tuple[str, ...]:
-    from .photo_read import RAW_SUFFIXES
-
-    return RAW_SUFFIXES
 
 
 def _crop_at(arr: np.ndarray, circle: tuple[float, float, float], size: int, source: str, photo) -> SphereCrop:

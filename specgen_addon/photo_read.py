@@ -47,6 +47,7 @@ class Photo:
     encoding: str                   # "sRGB-decoded", "linear", "linear (float)", "RAW, developed linearly"
     bits: int                       # bits per channel of the file (32 for float)
     notes: list[str] = field(default_factory=list)
+    scale: float = 1.0              # width read / the file's width (< 1 where downsampled on reading)
 
     @property
     def saturated_count(self) -> int:
@@ -97,8 +98,9 @@ def _read_float(path: Path) -> Photo:
         arr = np.stack([np.asarray(channels[n], np.float32) for n in names], -1)
     else:
         arr = _read_oiio_float(path)
+    width = arr.shape[1]
     arr = image_checks.clean_exr_pixels(image_checks.downsample_linear(arr), path)
-    return Photo(arr, np.zeros(arr.shape[:2], bool), "linear (float)", 32)
+    return Photo(arr, np.zeros(arr.shape[:2], bool), "linear (float)", 32, scale=arr.shape[1] / width)
 
 
 def _read_oiio_float(path: Path) -> np.ndarray:
@@ -139,21 +141,24 @@ def _read_integer(path: Path, linear: bool) -> Photo:
         from PIL import Image, UnidentifiedImageError
     except ImportError:   # a stock Blender: its bundled OpenImageIO decodes the file
         arr = _read_oiio_float(path)
+        width = arr.shape[1]
         saturated = np.any(arr[..., :3] >= 1.0 - 0.5 / 65535, axis=-1)
         arr = image_checks.downsample_linear(arr)
         saturated = _reduce_any(saturated, arr.shape[:2])
         if not linear:
             arr[..., :3] = spectra.srgb_decode(arr[..., :3]).astype(np.float32)
-        return Photo(arr, saturated, encoding, 8)
+        return Photo(arr, saturated, encoding, 8, scale=arr.shape[1] / width)
     sat: list = []
     try:
         with image_checks._unlimited_pil():   # our own pixel limit was checked from the header
             with Image.open(path) as im:
                 bits = 16 if im.mode.startswith("I") else 8
+                width = im.size[0]
                 arr = image_checks.pil_to_linear(im, path, linear=linear, saturated=sat)
     except (UnidentifiedImageError, OSError) as exc:
         raise ImageInputError(f"{path}: cannot read image ({exc})") from None
-    return Photo(arr, sat[0] if sat else np.zeros(arr.shape[:2], bool), encoding, bits)
+    return Photo(arr, sat[0] if sat else np.zeros(arr.shape[:2], bool), encoding, bits,
+                 scale=arr.shape[1] / width)
 
 
 def _reduce_any(mask: np.ndarray, shape: tuple[int, int]) -> np.ndarray:
@@ -197,7 +202,7 @@ def _read_oiio_uint16(path: Path, linear: bool) -> Photo | None:
             sat[y0 // factor:y1 // factor] = parts[0][:, :ow]
     finally:
         inp.close()
-    photo = Photo(out, sat, "linear" if linear else "sRGB-decoded", 16)
+    photo = Photo(out, sat, "linear" if linear else "sRGB-decoded", 16, scale=ow / w)
     if c in (1, 2):
         photo.notes.append("16-bit grayscale" + ("+alpha image converted to RGBA" if c == 2 else " image converted to RGB"))
     if factor > 1:
@@ -228,9 +233,11 @@ def _read_raw(path: Path) -> Photo:
         from .ndimage_np import binary_dilation
 
         saturated |= binary_dilation(sensor_sat, iterations=1)   # demosaicking spreads a clipped photosite
+    width = arr.shape[1]
     arr = image_checks.downsample_linear(arr)
     saturated = _reduce_any(saturated, arr.shape[:2])
-    return Photo(arr, saturated, "RAW, developed linearly (as shot white balance, no tone curve)", 16)
+    return Photo(arr, saturated, "RAW, developed linearly (as shot white balance, no tone curve)", 16,
+                 scale=arr.shape[1] / width)
 
 
 def warn_notes(photo: Photo, path: str | Path) -> None:

@@ -126,3 +126,15 @@ def test_an_unknown_encoding_and_a_missing_file_are_refused(tmp_path):
         photo_read.read_photo(tmp_path / "x.png", encoding="gamma")
     with pytest.raises(ImageInputError, match="no such image file"):
         photo_read.read_photo(tmp_path / "x.png")
+
+
+def test_a_circle_given_in_the_files_pixels_follows_a_downsampled_read(tmp_path):
+    """A 4200-px-wide photo is read at half size: the user's circle (full-size pixels) is halved."""
+    from PIL import Image
+    from specgen_addon import input_image
+
+    img = np.zeros((300, 4200, 3), np.uint8)
+    img[100:200, 2000:2100] = 150
+    Image.fromarray(img).save(tmp_path / "wide.png")
+    crop = input_image.PhotoSource(tmp_path / "wide.png", circle=(2050.0, 150.0, 50.0)).crop()
+    np.testing.assert_allclose(crop.circle, (1025.0, 75.0, 25.0))
