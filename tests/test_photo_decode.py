@@ -129,7 +129,8 @@ def test_an_unknown_encoding_and_a_missing_file_are_refused(tmp_path):
 
 
 def test_a_circle_given_in_the_files_pixels_follows_a_downsampled_read(tmp_path):
-    """A 4200-px-wide photo is read at half size: the user's circle (full-size pixels) is halved."""
+    """A 4200-px-wide photo is read at a third of its size (the longer side ≤ 2048): so is the
+    user's circle, given in the file's pixels."""
     from PIL import Image
     from specgen_addon import input_image
 
@@ -137,4 +138,4 @@ def test_a_circle_given_in_the_files_pixels_follows_a_downsampled_read(tmp_path)
     img[100:200, 2000:2100] = 150
     Image.fromarray(img).save(tmp_path / "wide.png")
     crop = input_image.PhotoSource(tmp_path / "wide.png", circle=(2050.0, 150.0, 50.0)).crop()
-    np.testing.assert_allclose(crop.circle, (1025.0, 75.0, 25.0))
+    np.testing.assert_allclose(crop.circle, (2050.0 / 3, 50.0, 50.0 / 3))
