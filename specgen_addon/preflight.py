@@ -15,6 +15,7 @@ from typing import Callable
 
 from . import limits
 from .errors import ImageInputError, OutputExistsError, SpecGenError
+from .formats.export import OUTPUT_SUFFIXES as BRDF_OUTPUT_SUFFIXES
 
 #: Corpus materials ``render-input`` accepts by name or index without a manifest (standard corpus).
 STANDARD_CORPUS_SIZE = 200
@@ -51,8 +52,6 @@ def _info(a) -> None:
     check_brdf_file(a.file)
 
 
-#: What ``tabulate`` and ``infer`` write (:mod:`.formats.export`): a SpecGen table, RGL, MERL.
-BRDF_OUTPUT_SUFFIXES = (".npz", ".bsdf", ".binary")
 
 
 def _tabulate(a) -> None:

@@ -15,8 +15,10 @@ from pathlib import Path
 import numpy as np
 
 from ..errors import SpecGenError
-from ..preflight import BRDF_OUTPUT_SUFFIXES as OUTPUT_SUFFIXES  # what infer and tabulate accept
 from ..table import BRDFTable
+
+#: What ``tabulate`` and ``infer`` write: a SpecGen table, RGL, MERL.
+OUTPUT_SUFFIXES = (".npz", ".bsdf", ".binary")
 
 #: The RGL layout of an exported file: incident-elevation slices and the square grid's size.
 RGL_SLICES = 24
