@@ -150,11 +150,10 @@ def _read_integer(path: Path, linear: bool) -> Photo:
         return Photo(arr, saturated, encoding, 8, scale=arr.shape[1] / width)
     sat: list = []
     try:
-        with image_checks._unlimited_pil():   # our own pixel limit was checked from the header
-            with Image.open(path) as im:
-                bits = 16 if im.mode.startswith("I") else 8
-                width = im.size[0]
-                arr = image_checks.pil_to_linear(im, path, linear=linear, saturated=sat)
+        with image_checks._unlimited_pil(), Image.open(path) as im:   # our pixel limit: from the header
+            bits = 16 if im.mode.startswith("I") else 8
+            width = im.size[0]
+            arr = image_checks.pil_to_linear(im, path, linear=linear, saturated=sat)
     except (UnidentifiedImageError, OSError) as exc:
         raise ImageInputError(f"{path}: cannot read image ({exc})") from None
     return Photo(arr, sat[0] if sat else np.zeros(arr.shape[:2], bool), encoding, bits,

@@ -71,6 +71,7 @@ def test_an_exr_is_unclipped_unless_a_white_level_is_given(tmp_path):
 
 def test_saturated_pixels_reach_the_crop_that_refinement_excludes(tmp_path):
     from PIL import Image
+
     from specgen_addon import input_image
 
     img = np.zeros((96, 96, 3), np.uint8)
@@ -86,7 +87,13 @@ def test_saturated_pixels_reach_the_crop_that_refinement_excludes(tmp_path):
 
 def _dng(path, raw: np.ndarray, white: int) -> None:
     pidng = pytest.importorskip("pidng.core", reason="pidng writes the test DNG")
-    from pidng.defs import CalibrationIlluminant, CFAPattern, DNGVersion, Orientation, PhotometricInterpretation
+    from pidng.defs import (
+        CalibrationIlluminant,
+        CFAPattern,
+        DNGVersion,
+        Orientation,
+        PhotometricInterpretation,
+    )
 
     Tag = pidng.Tag
     h, w = raw.shape
@@ -132,6 +139,7 @@ def test_a_circle_given_in_the_files_pixels_follows_a_downsampled_read(tmp_path)
     """A 4200-px-wide photo is read at a third of its size (the longer side ≤ 2048): so is the
     user's circle, given in the file's pixels."""
     from PIL import Image
+
     from specgen_addon import input_image
 
     img = np.zeros((300, 4200, 3), np.uint8)

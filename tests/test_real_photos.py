@@ -9,11 +9,10 @@ from __future__ import annotations
 
 import numpy as np
 import pytest
+from conftest import REPO, SHARED
 
 from specgen_addon import input_image
 from specgen_addon.sphere_detect import find_ball
-
-from conftest import REPO, SHARED
 
 PHOTOS = SHARED / "data" / "photos" / "psm_gray_chrome"
 

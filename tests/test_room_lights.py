@@ -41,7 +41,7 @@ def test_a_colour_temperature_is_plancks_law():
     colour = pytest.importorskip("colour")
     from specgen_addon.colour_tables import blackbody
 
-    wl, spd = blackbody(3200.0)
+    _, spd = blackbody(3200.0)
     sd = colour.sd_blackbody(3200.0, colour.SpectralShape(360, 830, 1))
     np.testing.assert_allclose(spd, sd.values / sd.values[200], rtol=1e-3)
 
@@ -108,9 +108,9 @@ def test_lights_do_not_mix_with_the_canonical_studio():
     (["--circle", "1,2"], "--circle takes X,Y,R"),
 ])
 def test_the_command_line_refuses_a_bad_light_or_circle_in_one_line(tmp_path, capsys, args, message):
-    from specgen_addon.cli import main
-
     from conftest import REPO
+
+    from specgen_addon.cli import main
 
     code = main(["infer", str(REPO / "examples" / "sphere.png"), "-o", str(tmp_path / "t.npz"), "--quiet", *args])
     err = capsys.readouterr().err.strip().splitlines()
@@ -119,9 +119,9 @@ def test_the_command_line_refuses_a_bad_light_or_circle_in_one_line(tmp_path, ca
 
 
 def test_the_command_line_refuses_a_panorama_of_the_wrong_aspect(tmp_path, capsys):
-    from specgen_addon.cli import main
-
     from conftest import REPO
+
+    from specgen_addon.cli import main
 
     _equirect(tmp_path / "square.exr", 16, 16)
     code = main(["infer", str(REPO / "examples" / "sphere.png"), "-o", str(tmp_path / "t.npz"), "--quiet",
