@@ -240,6 +240,7 @@ def fit_outline(lum: np.ndarray, cx: float, cy: float, r: float,
     keep_share = 0.0
     for _ in range(iterations):
         edge, contrast, fit_rms, phi, _ = model_edges(lum, cx, cy, r)
+        contrast = np.abs(contrast)   # a bright rim on a dark ground, or a dark ball on a brighter one
         good = np.isfinite(edge) & (contrast > 0)
         if good.sum() >= 3:
             good &= contrast > 0.2 * float(np.percentile(contrast[good], 90))
