@@ -265,7 +265,8 @@ def find_ball(rgb: np.ndarray) -> FoundCircle:
     lum = luminance(rgb)
     cx, cy, r, _ = vote_circle(lum)
     found = fit_outline(lum, cx, cy, r)
-    if found is None or found.r < 4:
+    smallest = 0.9 * MIN_RADIUS_FRACTION * min(lum.shape)
+    if found is None or found.r < max(4.0, smallest):   # smaller than any ball searched: a screw, a spot
         raise ImageInputError(f"no sphere found (the best circular outline, centre ({cx:.0f}, {cy:.0f}), "
                               f"radius {r:.0f} px, shows a clear edge on less than {MIN_ARC:.0%} of "
                               "its length; give --circle X,Y,R or --mask)")
