@@ -28,6 +28,7 @@ from __future__ import annotations
 
 import argparse
 import dataclasses
+import json
 import sys
 import time
 from pathlib import Path
@@ -96,7 +97,7 @@ def folds_of(files: list[Path], k: int, seed: int) -> list[list[Path]]:
 
 
 def fine_tune(config: Path, out: Path, steps: int, max_minutes: float | None, exclude: list[str],
-              real: bool, wait: bool = False) -> Path:
+              real: bool, wait: bool = False, seed: int | None = None) -> Path:
     """Fine-tune per ``config`` into ``out`` (reused when done): the joint arm trains on the real
     files less ``exclude``, the control arm on none. ``wait``: train nothing, wait for another
     process (``--stage train``) to write the weights."""
@@ -111,7 +112,8 @@ def fine_tune(config: Path, out: Path, steps: int, max_minutes: float | None, ex
 
     mcfg, tcfg = load_config(config)
     tcfg = dataclasses.replace(tcfg, steps=steps, max_minutes=max_minutes, real_exclude=list(exclude),
-                               **({} if real else {"real_materials_per_step": 0}))
+                               **({} if real else {"real_materials_per_step": 0}),
+                               **({} if seed is None else {"seed": seed}))
     tcfg.validate()
     spectral, rgb, val = build_material_sets(mcfg, tcfg, cache_root() / "train-data")
     res = train(mcfg, tcfg, spectral, rgb, val, out, show_progress=False,
@@ -233,6 +235,36 @@ def run_cv(args: argparse.Namespace) -> int:
     return 0
 
 
+def run_seeds(args: argparse.Namespace) -> int:
+    """Joint against control on one fold's held-out files, paired per seed (network alone, the
+    mean of the scenes over the fold's files): the sign of the real files' share, with its spread
+    over training randomness."""
+    from specgen_addon.evaluation.real_files import scenes
+
+    files = sorted(args.rgl.glob("*.bsdf"))
+    held = folds_of(files, args.folds, args.fold_seed)[args.fold]
+    names = [p.stem for p in held]
+    labels = [lab for lab, _ in scenes()]
+    rows = []
+    for seed in args.seeds:
+        score = {}
+        for arm, real in (("joint", True), ("control", False)):
+            out = args.out / f"seed{seed}" / arm
+            w = fine_tune(args.config, out, args.steps, None, names if real else [], real=real, seed=seed)
+            got = score_files(held, w, out / "scores", False, args.resolution)
+            score[arm] = float(np.mean([[r[f"psnr_{lab}"] for lab in labels] for r in got]))
+        rows.append({"seed": seed, **score, "difference": score["joint"] - score["control"]})
+        print(f"seed {seed}: joint {score['joint']:.2f}, control {score['control']:.2f} dB", flush=True)
+    d = np.array([r["difference"] for r in rows])
+    report = {"what": f"joint vs control over seeds, fold {args.fold} ({', '.join(names)})",
+              "config": str(args.config), "steps": args.steps, "rows": rows,
+              "difference": {"mean": float(d.mean()), "sd": float(d.std(ddof=1)) if d.size > 1 else None,
+                             "n": int(d.size)}, "machine": describe_machine()}
+    _save(args.out / "seeds.json", report)
+    print(json.dumps(report["difference"]))
+    return 0
+
+
 def _weights_meta(path: Path) -> dict[str, Any]:
     import torch
 
@@ -242,7 +274,7 @@ def _weights_meta(path: Path) -> dict[str, Any]:
 def main() -> int:
     ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     sub = ap.add_subparsers(dest="mode", required=True)
-    for name in ("baseline", "cv"):
+    for name in ("baseline", "cv", "seeds"):
         p = sub.add_parser(name)
         p.add_argument("--out", type=Path, required=True)
         p.add_argument("--rgl", type=Path, default=REPO.parent / "shared" / "data" / "rgl")
@@ -263,11 +295,18 @@ def main() -> int:
     cv.add_argument("--stage", choices=("all", "train", "score"), default="all",
                     help="train: the fine-tunes only; score: wait for each fine-tune's weights and score "
                          "(two processes, one training while the other scores)")
+    sd = sub.choices["seeds"]
+    sd.add_argument("--config", type=Path, required=True)
+    sd.add_argument("--folds", type=int, default=4)
+    sd.add_argument("--fold-seed", type=int, default=0)
+    sd.add_argument("--fold", type=int, default=0)
+    sd.add_argument("--steps", type=int, default=50)
+    sd.add_argument("--seeds", type=int, nargs="+", default=[1, 2, 3, 4, 5])
     args = ap.parse_args()
     if not args.rgl.is_dir():
         ap.error(f"{args.rgl}: real RGB folder not found")
     args.out.mkdir(parents=True, exist_ok=True)
-    return run_baseline(args) if args.mode == "baseline" else run_cv(args)
+    return {"baseline": run_baseline, "cv": run_cv, "seeds": run_seeds}[args.mode](args)
 
 
 if __name__ == "__main__":
