@@ -14,11 +14,11 @@ import pytest
 from specgen_addon.evaluation import ablation as abl
 from specgen_addon.evaluation.ablation_study import study_settings
 
-REPO = Path(__file__).resolve().parents[1]
+REPO = Path(__file__).resolve().parents[2]
 
 
 def _gpu_ablate():
-    spec = importlib.util.spec_from_file_location("gpu_ablate", REPO / "bench" / "gpu_ablate.py")
+    spec = importlib.util.spec_from_file_location("gpu_ablate", REPO / "lab" / "gpu" / "gpu_ablate.py")
     mod = importlib.util.module_from_spec(spec)
     spec.loader.exec_module(mod)
     return mod

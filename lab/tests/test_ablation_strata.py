@@ -1,4 +1,4 @@
-"""bench/ablation_strata.py: strata from the short study, paired differences from the long ones."""
+"""lab/studies/ablation_strata.py: strata from the short study, paired differences from the long ones."""
 
 from __future__ import annotations
 
@@ -9,8 +9,8 @@ from pathlib import Path
 
 import pytest
 
-REPO = Path(__file__).resolve().parents[1]
-SCRIPT = REPO / "bench" / "ablation_strata.py"
+REPO = Path(__file__).resolve().parents[2]
+SCRIPT = REPO / "lab" / "studies" / "ablation_strata.py"
 
 
 def _study(path: Path, steps: int, scores: dict[int, tuple[float, float]]) -> Path:
