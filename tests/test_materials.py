@@ -84,7 +84,9 @@ def test_two_generates_make_two_material_sets_and_apply_assigns_the_chosen_one(t
         second = s.material
         assert second.name == "SpecGen sphere.001" and second != first
         assert (tmp_path / "sphere_lookup.json").is_file() and (tmp_path / "sphere.001_lookup.json").is_file()
-        assert not list(tmp_path.glob("*.npz"))                       # the table only on request
+        compact = sorted(tmp_path.glob("*.npz"))                      # the compact material of each
+        assert [q.name for q in compact] == ["sphere.001.npz", "sphere.npz"]
+        assert all(q.stat().st_size <= 10 * 2**20 for q in compact)
         assert first["specgen_atlas_groups"][0] != second["specgen_atlas_groups"][0]
         groups = {m.name: _group_of(m) for m in (first, second)}       # one node group per set
         assert [g.name for g in groups.values()] == ["SpecGen sphere", "SpecGen sphere.001"]
