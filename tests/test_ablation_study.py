@@ -189,14 +189,14 @@ def test_ablate_refuses_bad_records_files_before_any_work(content, needle, tmp_p
 def test_arms_cached_before_newer_config_fields_keep_their_keys():
     """Fields added to the configs later, at their defaults, leave an arm's cache key unchanged.
 
-    The keys are those a recorded study holds (docs/ablation_3000_six_knots.json), so the
+    The keys are those a recorded study holds (lab/runs/ablation_3000_six_knots.json), so the
     documented command still finds its trained arms instead of training them again."""
     import json
     from pathlib import Path
 
     from specgen_addon.evaluation.ablation import ARMS_BY_NAME, ablation_settings
 
-    doc = Path(__file__).resolve().parents[1] / "docs" / "ablation_3000_six_knots.json"
+    doc = Path(__file__).resolve().parents[1] / "lab" / "runs" / "ablation_3000_six_knots.json"
     records = json.loads(doc.read_text())["records"]
     settings = ablation_settings(steps=3000, log=lambda m: None)
     for r in (records[0], records[-1]):

@@ -212,7 +212,7 @@ def compose(h: tables.Harness, mats: Sequence[Any], specgen_arm: str, weights: P
     if not arms:
         add("Not run here (`--no-ablation`). The seeded study (several seeds per arm, mean ± standard "
             "deviation, paired effects with their uncertainty) is `python -m specgen_addon ablate`; "
-            "its results are in [ablations.md](ablations.md).")
+            "every seed of the shipped study is in lab/notebook/fusion-ablations.md.")
     else:
         add(abl_settings.describe_markdown(arms))
         add("")
