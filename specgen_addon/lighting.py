@@ -55,9 +55,12 @@ def wheel_datafiles_dir() -> Path | None:
     if spec is None or not spec.submodule_search_locations:
         return None
     for root in spec.submodule_search_locations:
-        for candidate in sorted(Path(root).glob(f"*/{_RELATIVE.as_posix()}"), reverse=True):
-            if candidate.is_dir():
-                return candidate
+        # Once bpy is imported anywhere, its ``bpy/<version>/scripts/modules`` sits on sys.path (and a
+        # spawned worker inherits it), so the spec may be that inner package: look up from it too.
+        for base in (Path(root), *list(Path(root).parents)[:4]):
+            for candidate in sorted(base.glob(f"*/{_RELATIVE.as_posix()}"), reverse=True):
+                if candidate.is_dir():
+                    return candidate
     return None
 
 
