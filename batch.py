@@ -99,7 +99,7 @@ def build_parser() -> argparse.ArgumentParser:
                          "(e.g. 'Saved: ...') through to stdout")
     from importlib import import_module
 
-    import_module("specgen_addon.cli_model").add_refine_arguments(ap)
+    import_module("specgen_addon.cli.model").add_refine_arguments(ap)
     return ap
 
 
@@ -119,19 +119,19 @@ def run(args) -> Path:
         if value:
             from importlib import import_module
 
-            errors = import_module("specgen_addon.errors")
+            errors = import_module("specgen_addon.common.errors")
             raise errors.SpecGenError(f"{flag} needs --scene")
     args.samples = 16 if args.samples is None else args.samples
     args.resolution = 256 if args.resolution is None else args.resolution
     pkg = load_package()
     from importlib import import_module
 
-    errors = import_module("specgen_addon.errors")
-    lighting = import_module("specgen_addon.lighting")
-    spectra = import_module("specgen_addon.spectra")
-    interrupts = import_module("specgen_addon.interrupts")
+    errors = import_module("specgen_addon.common.errors")
+    lighting = import_module("specgen_addon.render.environment_maps")
+    spectra = import_module("specgen_addon.spectral.spectra")
+    interrupts = import_module("specgen_addon.common.interrupts")
 
-    import_module("specgen_addon.preflight").check_batch(args)  # all checks, up front
+    import_module("specgen_addon.scale.preflight").check_batch(args)  # all checks, up front
     source = Path(args.image or args.brdf)
     if not source.is_file():
         kind = "input image" if args.image else "BRDF table"
@@ -139,12 +139,12 @@ def run(args) -> Path:
     if args.mesh not in ("sphere", "suzanne") and not Path(args.mesh).is_file():
         raise errors.SpecGenError(f"{args.mesh}: mesh file not found (use sphere, suzanne or an .obj path)")
     if args.image:
-        input_image = import_module("specgen_addon.input_image")
+        input_image = import_module("specgen_addon.photo.sphere_image")
         with warnings.catch_warnings():  # keep a bad image to the one error line
             warnings.simplefilter("ignore")
             input_image.load_sphere_image(source)  # no sphere / unreadable -> ImageInputError, early
     env = lighting.load_environment(args.env)  # unknown name -> LightingAssetError with the list
-    cli_model = import_module("specgen_addon.cli_model")
+    cli_model = import_module("specgen_addon.cli.model")
     for flag, given in (("--light-probe", getattr(args, "light_probe", None) is not None),
                         ("--input-env estimate", args.input_env == "estimate"),
                         ("--circle-preview", getattr(args, "circle_preview", None) is not None)):
@@ -154,7 +154,7 @@ def run(args) -> Path:
     photo_lighting = cli_model.input_lighting_from_args(args)  # bad map/file/value -> LightingError
     out = Path(args.out)
     try:
-        import_module("specgen_addon.io_utils").make_dirs(out)  # removed if the run fails
+        import_module("specgen_addon.common.atomic_io").make_dirs(out)  # removed if the run fails
     except OSError as exc:
         raise errors.SpecGenError(f"{out}: cannot create the output folder ({exc.strerror})") from None
     if not os.access(out, os.W_OK):
@@ -166,7 +166,7 @@ def run(args) -> Path:
             raise errors.OutputExistsError(f"{p}: already exists (pass --overwrite to replace it)")
     wavelengths = spectra.wavelength_grid(args.wl_min, args.wl_max, args.bands)
 
-    bake = import_module("specgen_addon.bake")
+    bake = import_module("specgen_addon.generate.lookup")
     t0 = time.perf_counter()
     last = [-1]
 
@@ -192,7 +192,7 @@ def run(args) -> Path:
             for w in info.refinement.warnings:
                 print(f"warning: {w}", file=sys.stderr)
     else:
-        table_mod = import_module("specgen_addon.table")
+        table_mod = import_module("specgen_addon.brdf.table")
         table = table_mod.BRDFTable.load(source)
         info = bake.bake_atlas(table, out / "lookup" / f"{source.stem}_lookup.exr",
                                wavelengths_nm=wavelengths, progress=progress)
@@ -226,7 +226,7 @@ def run(args) -> Path:
                                    attributes={"specgenSource": str(source), "specgenMesh": args.mesh,
                                                "specgenEnvironment": args.env},
                                    warn=lambda m: print(m, file=sys.stderr))
-    quiet = import_module("specgen_addon.quiet")
+    quiet = import_module("specgen_addon.common.quiet")
     with quiet.native_stdout_silenced(not args.verbose):  # Cycles' "Saved: ..." lines
         job.run(lambda f: interrupts.raise_if_stopped())  # between band renders
     print(f"spectral render ({args.bands} bands, {args.resolution}², {args.samples} spp) in "
@@ -245,7 +245,7 @@ def run_scene(args) -> Path:
     def core(name: str):
         return import_module(f"specgen_addon.{name}")
 
-    errors, spectra, scene_args = core("errors"), core("spectra"), core("scene_args")
+    errors, spectra, scene_args = core("common.errors"), core("spectral.spectra"), core("cli.scene_args")
     import bpy
 
     # everything that can be checked without the scene, before opening it
@@ -267,7 +267,7 @@ def run_scene(args) -> Path:
     except OSError as exc:
         raise errors.SpecGenError(f"{out}: cannot create the output folder ({exc.strerror})") from None
     if Path(bpy.data.filepath or "").resolve() != blend:
-        quiet = core("quiet")
+        quiet = core("common.quiet")
         try:
             with quiet.native_stdout_silenced(not args.verbose):  # Blender's "Read blend: ..." lines
                 bpy.ops.wm.open_mainfile(filepath=str(blend), load_ui=False)
@@ -280,7 +280,7 @@ def run_scene(args) -> Path:
     stems = _lookup_stems(applies, out / "lookup", args.overwrite)
     before = _files_in(out / "lookup")
 
-    interrupts = core("interrupts")
+    interrupts = core("common.interrupts")
     render = import_module(f"{pkg.__name__}.ops.render")
     for spec, lighting, stem in zip(applies, lightings, stems):
         PHASE[0] = f"BRDF generation for {spec.object_name!r}"
@@ -326,7 +326,7 @@ def _report_outputs(files: list[Path], lookup: Path | None = None, before: set[P
     ``lookup`` (``keep``) or remove them (and the folder, left empty), so only the renders stay."""
     from importlib import import_module
 
-    size_text = import_module("specgen_addon.formats.export").size_text
+    size_text = import_module("specgen_addon.brdf.formats.export").size_text
     for f in files:
         print(f"wrote {f} ({size_text(f.stat().st_size)})")
     if lookup is None:
@@ -346,9 +346,9 @@ def _check_photos(applies, args) -> list:
     """Each ``--apply`` photo: readable, holds a sphere, and its lighting options are valid."""
     from importlib import import_module
 
-    preflight = import_module("specgen_addon.preflight")
-    input_image = import_module("specgen_addon.input_image")
-    parse_lighting = import_module("specgen_addon.input_lighting").parse_lighting
+    preflight = import_module("specgen_addon.scale.preflight")
+    input_image = import_module("specgen_addon.photo.sphere_image")
+    parse_lighting = import_module("specgen_addon.photo.photo_lighting").parse_lighting
     preflight.check_weights_file(args.weights)
     defaults = {"env": args.input_env, "rotation_deg": args.input_rotation,
                 "exposure": args.input_exposure, "key_light": args.input_key_light}
@@ -368,9 +368,9 @@ def _scene_targets(scene, frames: list[int], out: Path, overwrite: bool) -> list
     from importlib import import_module
 
     pkg = load_package()
-    errors = import_module("specgen_addon.errors")
+    errors = import_module("specgen_addon.common.errors")
     naming = import_module(f"{pkg.__name__}.ops.naming")
-    limits = import_module("specgen_addon.limits")
+    limits = import_module("specgen_addon.common.limits")
     targets = []
     current = scene.frame_current
     try:
@@ -397,7 +397,7 @@ def _lookup_stems(applies, lookup: Path, overwrite: bool) -> list[str]:
 
     pkg = load_package()
     naming = import_module(f"{pkg.__name__}.ops.naming")
-    errors = import_module("specgen_addon.errors")
+    errors = import_module("specgen_addon.common.errors")
     stems: list[str] = []
     for spec in applies:
         stem = naming.unique_stem(naming.clean_stem(spec.image.name), lambda s: s in stems)
@@ -413,8 +413,8 @@ def _generate(spec, lighting, stem: str, lookup: Path, wavelengths, args):
     """Generate and bake one ``--apply`` photo's BRDF (printing what refinement reached)."""
     from importlib import import_module
 
-    bake = import_module("specgen_addon.bake")
-    cli_model = import_module("specgen_addon.cli_model")
+    bake = import_module("specgen_addon.generate.lookup")
+    cli_model = import_module("specgen_addon.cli.model")
     t0 = time.perf_counter()
     source = cli_model.photo_source_from_args(args, spec.image)   # --linear, --circle, --mask, --white-level
     info = bake.generate_lookup(source, lookup, wavelengths, weights=args.weights,
@@ -443,7 +443,7 @@ def _assign(obj, material) -> None:
 def _write_rgb_exr(path: Path, rgb) -> None:
     from importlib import import_module
 
-    image_io = import_module("specgen_addon.image_io")  # OpenEXR or OIIO
+    image_io = import_module("specgen_addon.common.image_io")  # OpenEXR or OIIO
     image_io.write_exr(path, {c: rgb[..., i] for i, c in enumerate("RGB")}, overwrite=True)
 
 
@@ -457,8 +457,8 @@ def main(argv: list[str] | None = None) -> int:
     args = build_parser().parse_args(_script_argv(argv))
     from importlib import import_module
 
-    cli = import_module("specgen_addon.cli")
-    interrupts = import_module("specgen_addon.interrupts")
+    cli = import_module("specgen_addon.cli.app")
+    interrupts = import_module("specgen_addon.common.interrupts")
     PHASE[0] = "input checks"
     with interrupts.private_tempdir("specgen_batch_"):
         return cli.run_guarded(lambda: f"batch.py {PHASE[0]}", lambda: run(args) and 0,

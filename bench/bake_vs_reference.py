@@ -36,13 +36,13 @@ def main() -> int:
     import bpy
 
     import batch
-    from specgen_addon.refine.report import delta_e2000, photo_scale
+    from specgen_addon.render.photo_reproduction import delta_e2000, photo_scale
     from specgen_addon.render import DistantLight, render_spectral, sphere_geometry
-    from specgen_addon.spectral_exr import linear_srgb_preview
-    from specgen_addon.table import BRDFTable
+    from specgen_addon.render.spectral_exr import linear_srgb_preview
+    from specgen_addon.brdf.table import BRDFTable
 
     pkg = batch.load_package()
-    bake = import_module("specgen_addon.bake")
+    bake = import_module("specgen_addon.generate.lookup")
     render = import_module(f"{pkg.__name__}.ops.render")
     scene_mod = import_module(f"{pkg.__name__}.ops.scene")
     print(describe_machine())

@@ -25,7 +25,6 @@ from pathlib import Path
 from machine import describe_machine  # bench/machine.py, beside this script
 
 REPO = Path(__file__).resolve().parents[1]
-sys.path.insert(0, str(REPO))
 
 
 def main(argv: list[str] | None = None) -> int:

@@ -1,5 +1,5 @@
 """How well the native closure stack (Lambert + GGX lobes) fits spectral BRDF tables, with a
-lobe roughness shared by all bands and with per-band roughness r_l(λ) (specgen_addon.fit.closures).
+lobe roughness shared by all bands and with per-band roughness r_l(λ) (specgen_addon.bake.closure_fit.closures).
 
 Per material: the fit error (relative RMS of ``f cos θi cos θo``, worst band), the seconds the fit
 takes, how many lobes vary per band, and a sphere under a sun, fit vs table, with the numpy
@@ -16,27 +16,26 @@ from __future__ import annotations
 import argparse
 import sys
 import time
-from pathlib import Path
 
 import numpy as np
 from machine import describe_machine  # bench/machine.py, beside this script
 
-sys.path.insert(0, str(Path(__file__).resolve().parents[1]))
 
-from specgen_addon import metrics, spectra  # noqa: E402
+from specgen_addon.render import metrics  # noqa: E402
+from specgen_addon.spectral import spectra  # noqa: E402
 from specgen_addon.corpus import generate_corpus  # noqa: E402
 from specgen_addon.corpus.generate import generate_mixed_corpus  # noqa: E402
-from specgen_addon.fit import fit_closures, ggx_lobe  # noqa: E402
+from specgen_addon.bake.closure_fit import fit_closures, ggx_lobe  # noqa: E402
 from specgen_addon.render import DistantLight, render_spectral, sphere_geometry  # noqa: E402
-from specgen_addon.rusinkiewicz import io_from_half_diff  # noqa: E402
-from specgen_addon.table import BRDFTable  # noqa: E402
+from specgen_addon.brdf.rusinkiewicz import io_from_half_diff  # noqa: E402
+from specgen_addon.brdf.table import BRDFTable  # noqa: E402
 
 WL = spectra.DEFAULT_WAVELENGTHS_NM
 SUNS = [(0.3, 0.4, 1.0), (1.0, 0.2, 0.35)]  # near the camera, and grazing from the side
 
 
 class _FitBRDF:
-    """A :class:`~specgen_addon.fit.ClosureFit` as the renderer's spectral BRDF."""
+    """A :class:`~specgen_addon.bake.closure_fit.ClosureFit` as the renderer's spectral BRDF."""
 
     def __init__(self, fit):
         self.fit = fit

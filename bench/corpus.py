@@ -36,11 +36,10 @@ import numpy as np
 from machine import describe_machine  # bench/machine.py, beside this script
 
 REPO = Path(__file__).resolve().parents[1]
-sys.path.insert(0, str(REPO))
 
 from specgen_addon.corpus import generate_corpus, save_manifest  # noqa: E402
 from specgen_addon.corpus.microfacet import _albedo_table  # noqa: E402
-from specgen_addon.spectra import DEFAULT_WAVELENGTHS_NM  # noqa: E402
+from specgen_addon.spectral.spectra import DEFAULT_WAVELENGTHS_NM  # noqa: E402
 
 COLD_SCRIPT = """
 import sys, time
@@ -76,7 +75,7 @@ def sphere_swatch(material, size: int = 40) -> np.ndarray:
     wi, wo = to_local(light), to_local(view)
     rgb = material.eval_rgb(wi, wo) * np.clip(wi[:, 2], 0, None)[:, None] * np.pi * 0.8
     img = np.ones((size, size, 3))
-    from specgen_addon.spectra import srgb_encode
+    from specgen_addon.spectral.spectra import srgb_encode
 
     img[inside] = srgb_encode(np.clip(rgb, 0, 1))
     return img

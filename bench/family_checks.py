@@ -1,7 +1,7 @@
 """The two family checks, truth against the prediction: the network alone, the network
-refined to its input photo (:func:`specgen_addon.refine.refine_brdf`, the product's default) and,
+refined to its input photo (:func:`specgen_addon.generate.refine.refine_brdf`, the product's default) and,
 for the thin films, the thin-film family's fit to the photo (``infer --model thin-film``,
-:func:`specgen_addon.fit.thin_film.fit_thin_film`):
+:func:`specgen_addon.generate.thin_film.fit_thin_film`):
 
 * thin film: hue (CIELAB h°, D65) of the specular direction (θh = 0) over θd for two held-out
   thin-film test materials, drawn as a figure;
@@ -12,9 +12,9 @@ for the thin films, the thin-film family's fit to the photo (``infer --model thi
 
 Each prediction comes from the material's sphere under the canonical lighting, by default rendered
 with other environment samples than the refinement's operator
-(:func:`specgen_addon.input_image.render_independent_input`), as a real photo shares none;
+(:func:`specgen_addon.photo.sphere_image.render_independent_input`), as a real photo shares none;
 ``--input-photo canonical`` gives it the canonical input render itself
-(:func:`specgen_addon.input_image.render_input`, the best case for the refinement and the fit:
+(:func:`specgen_addon.photo.sphere_image.render_input`, the best case for the refinement and the fit:
 an inverse crime).
 
 Usage: ``.venv/bin/python bench/family_checks.py [--weights W.pt] [--figure docs/img/thin_film_hue.png]``
@@ -24,14 +24,12 @@ from __future__ import annotations
 
 import argparse
 import json
-import sys
 from pathlib import Path
 
 import numpy as np
 from machine import describe_machine  # bench/machine.py
 
 REPO = Path(__file__).resolve().parents[1]
-sys.path.insert(0, str(REPO))
 
 WL = np.linspace(380.0, 780.0, 41)
 THETA_D = np.radians(np.linspace(0.0, 80.0, 33))
@@ -42,7 +40,7 @@ PEAK_THETA_H_DEG = (0.5, 1.0, 2.0)
 def _lab(spectra_rows: np.ndarray, normalise_y: float | None = None, wavelengths: np.ndarray = WL) -> np.ndarray:
     import colour
 
-    from specgen_addon.spectra import reflectance_to_linear_srgb
+    from specgen_addon.spectral.spectra import reflectance_to_linear_srgb
 
     rgb = reflectance_to_linear_srgb(spectra_rows, wavelengths)
     xyz = colour.RGB_to_XYZ(rgb, colour.RGB_COLOURSPACES["sRGB"], apply_cctf_decoding=False)
@@ -55,7 +53,7 @@ def _specular(brdf, theta_d: np.ndarray, wavelengths: np.ndarray = WL,
               theta_h: np.ndarray | None = None) -> np.ndarray:
     """Spectra (N, Λ) of ``brdf`` at half angle ``theta_h`` (default 0: the specular direction) and
     difference angles ``theta_d`` (radians), φd = 0."""
-    from specgen_addon.rusinkiewicz import io_from_half_diff
+    from specgen_addon.brdf.rusinkiewicz import io_from_half_diff
 
     th = np.zeros_like(theta_d) if theta_h is None else np.asarray(theta_h, dtype=np.float64)
     wi, wo = io_from_half_diff(th, theta_d, np.zeros_like(theta_d))
@@ -70,9 +68,9 @@ def _hue_error(hue_true_deg: np.ndarray, hue_pred_deg: np.ndarray) -> np.ndarray
 def main() -> None:
     import colour
 
-    from specgen_addon import input_image
-    from specgen_addon.infer import generate_brdf
-    from specgen_addon.train.evaluate import mixed_test_materials
+    from specgen_addon.photo import sphere_image as input_image
+    from specgen_addon.model.runtime.inference import generate_brdf
+    from specgen_addon.evaluation.trained_network import mixed_test_materials
 
     p = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     p.add_argument("--weights", type=Path, default=None)
@@ -93,9 +91,9 @@ def main() -> None:
     out: dict = {"weights": str(args.weights or "shipped"), "input_photo": args.input_photo}
     render_photo = (input_image.render_independent_input if args.input_photo == "independent"
                     else input_image.render_input)
-    from specgen_addon.refine import RefineOptions, refine_brdf
+    from specgen_addon.generate.refine import RefineOptions, refine_brdf
 
-    from specgen_addon.fit.thin_film import fit_thin_film
+    from specgen_addon.generate.thin_film import fit_thin_film
 
     def predict(m, fit: bool = False):
         image = render_photo(m)

@@ -16,7 +16,7 @@ camera and sun as ``bench/bake_vs_reference.py``), render it with the Full Scene
 closure stack alone, and with the Exact mode; print per renderer the mean CIEDE2000 of the sRGB
 projections and the energy ratio (sum of all bands over the sphere) against the reference
 renderer (``specgen_addon.render``), plus the closure fit's rendered error under the three check
-lights (``specgen_addon.fit.fit_check``) that the panel shows, and Cycles' closure stack against the
+lights (``specgen_addon.bake.closure_fit.fit_check``) that the panel shows, and Cycles' closure stack against the
 same fitted model rendered by the reference renderer (how exactly Cycles draws the fit).
 """
 
@@ -41,10 +41,11 @@ RGL_DIR = REPO.parent / "shared" / "data" / "rgl"
 
 def check_tables(cache: Path) -> list[tuple[str, Path]]:
     """(name, table path) of the whole check, generating the missing tables into ``cache``."""
-    from specgen_addon import input_image, pipeline
+    from specgen_addon.photo import sphere_image as input_image
+    from specgen_addon.generate import pipeline
     from specgen_addon.corpus.generate import material_family
-    from specgen_addon.formats import load_brdf
-    from specgen_addon.train.evaluate import mixed_test_materials
+    from specgen_addon.brdf.formats import load_brdf
+    from specgen_addon.evaluation.trained_network import mixed_test_materials
 
     cache.mkdir(parents=True, exist_ok=True)
     sources: list[tuple[str, object]] = [("example sphere.png", REPO / "examples" / "sphere.png")]
@@ -88,8 +89,8 @@ def body_energy(ref: np.ndarray, got: np.ndarray) -> float:
 
 def compare(ref: np.ndarray, got: np.ndarray, wl: np.ndarray) -> tuple[float, float]:
     """(mean ΔE2000 of the sRGB projections, energy ratio) over the reference's covered pixels."""
-    from specgen_addon.refine.report import delta_e2000, photo_scale
-    from specgen_addon.spectral_exr import linear_srgb_preview
+    from specgen_addon.render.photo_reproduction import delta_e2000, photo_scale
+    from specgen_addon.render.spectral_exr import linear_srgb_preview
 
     mask = ref.sum(-1) > 0
     a, b = linear_srgb_preview(ref, wl)[mask], linear_srgb_preview(got, wl)[mask]
@@ -100,10 +101,10 @@ def before_after(named: list[tuple[str, Path]], res: int) -> None:
     """The closure fit with every table entry weighed alike (``weighting="entries"``, the fit of
     earlier versions, and its reported residual) against the fit a bake now keeps
     (``check=True``), both rendered by the reference renderer against the table. No Blender."""
-    from specgen_addon.fit import fit_closures
-    from specgen_addon.fit.fit_check import FitBRDF
+    from specgen_addon.bake.closure_fit import fit_closures
+    from specgen_addon.bake.closure_fit.fit_check import FitBRDF
     from specgen_addon.render import DistantLight, render_spectral, sphere_geometry
-    from specgen_addon.table import BRDFTable
+    from specgen_addon.brdf.table import BRDFTable
 
     print("| material | before: reported fit error | before: ΔE2000 | before: energy | after: ΔE2000 "
           "| after: energy | after: worst of 3 lights |")
@@ -142,12 +143,12 @@ def main() -> int:
     import bpy
 
     import batch
-    from specgen_addon.fit.fit_check import FitBRDF, rendered_fit_error
+    from specgen_addon.bake.closure_fit.fit_check import FitBRDF, rendered_fit_error
     from specgen_addon.render import DistantLight, render_spectral, sphere_geometry
-    from specgen_addon.table import BRDFTable
+    from specgen_addon.brdf.table import BRDFTable
 
     pkg = batch.load_package()
-    bake = import_module("specgen_addon.bake")
+    bake = import_module("specgen_addon.generate.lookup")
     render = import_module(f"{pkg.__name__}.ops.render")
     fullscene = import_module(f"{pkg.__name__}.ops.render_fullscene")
     scene_mod = import_module(f"{pkg.__name__}.ops.scene")

@@ -4,7 +4,7 @@ Usage: ``python bench/generate.py [IMAGE] [--bands 21] [--lookup 180] [--repeat 
 
 Registers the add-on as Blender does, then times ``bpy.ops.specgen.generate_brdf()`` (what the
 button runs: image → network → spectral basis → lookup textures, then the material and its
-preview) with the backend a stock Blender uses (onnxruntime), and :func:`specgen_addon.bake.generate_lookup`
+preview) with the backend a stock Blender uses (onnxruntime), and :func:`specgen_addon.generate.lookup.generate_lookup`
 alone (inference + bake, target ≤ 5 s) for onnx and torch. Runs are interleaved
 so a busy machine slows all alike; the load average is printed with the machine, and the
 process CPU time (all threads) beside the wall time, which a shared machine inflates less.
@@ -39,8 +39,8 @@ def main() -> int:
     import batch
 
     pkg = batch.load_package()
-    bake = import_module("specgen_addon.bake")
-    from specgen_addon.spectra import wavelength_grid
+    bake = import_module("specgen_addon.generate.lookup")
+    from specgen_addon.spectral.spectra import wavelength_grid
 
     wl = wavelength_grid(380.0, 780.0, args.bands)
     out = Path(tempfile.mkdtemp(prefix="specgen_bench_"))

@@ -31,7 +31,7 @@ CHILD = r"""
 import resource, sys, time, warnings
 sys.path.insert(0, {repo!r})
 warnings.simplefilter("ignore")
-from specgen_addon.input_image import load_sphere_image
+from specgen_addon.photo.sphere_image import load_sphere_image
 t0 = time.perf_counter()
 img = load_sphere_image({path!r})
 dt = time.perf_counter() - t0

@@ -4,7 +4,7 @@ Usage: ``python bench/infer.py [IMAGE] [--weights W] [--backend both|torch|onnx]
 [--bands 21] [--repeat 3]``
 
 Prints the machine and, per backend (both by default, runs interleaved so a busy machine slows
-both alike), the wall time of :func:`specgen_addon.infer.generate_brdf` for the full
+both alike), the wall time of :func:`specgen_addon.model.runtime.inference.generate_brdf` for the full
 90 × 90 × 180 × Λ table (1.458 M angle points × Λ bands), and the process' peak resident memory
 (``getrusage`` ru_maxrss) above the level after the weights were loaded. ``--torch-ops`` adds the
 torch backend with its gather head on torch ops alone (``SPECGEN_KERNELS=torch``, no numba loops),
@@ -22,7 +22,6 @@ from pathlib import Path
 from machine import copy_bandwidth_gbs, describe_machine  # bench/machine.py, beside this script
 
 REPO = Path(__file__).resolve().parents[1]
-sys.path.insert(0, str(REPO))
 
 
 def rss_mb() -> float:
@@ -44,9 +43,10 @@ def main() -> int:
 
     import numpy as np
 
-    from specgen_addon import infer
-    from specgen_addon.model import count_parameters, gather_kernels, load_weights
-    from specgen_addon.spectra import wavelength_grid
+    from specgen_addon.model.runtime import inference as infer
+    from specgen_addon.model import count_parameters, load_weights
+    from specgen_addon.model.runtime import gather_kernels
+    from specgen_addon.spectral.spectra import wavelength_grid
 
     wl = wavelength_grid(380.0, 780.0, args.bands)
     backends = ("onnx", "torch") if args.backend == "both" else (args.backend,)

@@ -20,17 +20,16 @@ from pathlib import Path
 from machine import describe_machine  # bench/machine.py, beside this script
 
 REPO = Path(__file__).resolve().parents[1]
-sys.path.insert(0, str(REPO))
 
-from specgen_addon import metrics
+from specgen_addon.render import metrics
 from specgen_addon.evaluation.protocol import DISTANT_LIGHTS, load_environment
 from specgen_addon.render import Scene, sphere_geometry
-from specgen_addon.table import BRDFTable
+from specgen_addon.brdf.table import BRDFTable
 
 
 def _tables(tmp: Path) -> list[tuple[str, BRDFTable]]:
-    from specgen_addon.formats.rgl import read_rgl, tabulate_rgl
-    from specgen_addon.pipeline import generate
+    from specgen_addon.brdf.formats.rgl import read_rgl, tabulate_rgl
+    from specgen_addon.generate.pipeline import generate
 
     out = [("examples/sphere.png (network, refined)", generate(str(REPO / "examples" / "sphere.png")).table)]
     rgl = sorted((REPO.parent / "shared" / "data" / "rgl").glob("*.bsdf"))[:3]

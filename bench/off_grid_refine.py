@@ -2,7 +2,7 @@
 
 For each of N held-out materials per family (the mixed corpus's test split), the canonical input
 is scored as it is and moved by ``--shift`` pixels inside a black border
-(:func:`specgen_addon.train.evaluate.displaced_input`, as ``evaluate --input-shift``). Each version
+(:func:`specgen_addon.evaluation.trained_network.displaced_input`, as ``evaluate --input-shift``). Each version
 goes through the user's pipeline: the sphere is found and cropped, the network runs, and refinement
 (the default) fits the photo. The table is rendered under the protocol's distant lights and
 compared with the truth (spectral PSNR, as ``evaluate --families``).
@@ -19,12 +19,10 @@ from __future__ import annotations
 
 import argparse
 import json
-import sys
 from pathlib import Path
 
 import numpy as np
 
-sys.path.insert(0, str(Path(__file__).resolve().parents[1]))
 
 
 def main(argv: list[str] | None = None) -> int:
@@ -40,12 +38,13 @@ def main(argv: list[str] | None = None) -> int:
     if a.per_family < 1 or not (np.isfinite(a.shift) and abs(a.shift) <= 8):
         ap.error("--per-family must be ≥ 1 and --shift a number of pixels in [-8, 8]")
 
-    from specgen_addon import input_image, metrics
+    from specgen_addon.photo import sphere_image as input_image
+    from specgen_addon.render import metrics
     from specgen_addon.corpus.generate import material_family
     from specgen_addon.evaluation.protocol import DISTANT_LIGHTS, WAVELENGTHS_NM
-    from specgen_addon.pipeline import generate
+    from specgen_addon.generate.pipeline import generate
     from specgen_addon.render import render_spectral, sphere_geometry
-    from specgen_addon.train.evaluate import displaced_input, mixed_test_materials
+    from specgen_addon.evaluation.trained_network import displaced_input, mixed_test_materials
 
     geo = sphere_geometry(64)
     rows = []
@@ -90,10 +89,10 @@ def main(argv: list[str] | None = None) -> int:
 def independent_photo(material, sampling=None) -> np.ndarray:
     """The canonical photo of ``material`` rendered with other environment samples than the
     refinement's operator: ``sampling``, by default
-    :func:`specgen_addon.input_image.independent_sampling` (seed 1, twice the input renders'
+    :func:`specgen_addon.photo.sphere_image.independent_sampling` (seed 1, twice the input renders'
     directions)."""
-    from specgen_addon import input_image
-    from specgen_addon.input_lighting import InputLighting
+    from specgen_addon.photo import sphere_image as input_image
+    from specgen_addon.photo.photo_lighting import InputLighting
 
     if sampling is None:
         return input_image.render_independent_input(material)
@@ -105,7 +104,7 @@ def truth_scorer(material, resolution: int = 64):
     """The protocol's score of a predicted table against ``material``: spectral PSNR (dB, mean
     over the 20 bands) over a ``resolution``² sphere under the distant lights, the truth rendered
     once. Returns ``score(table) -> float``."""
-    from specgen_addon import metrics
+    from specgen_addon.render import metrics
     from specgen_addon.evaluation.protocol import DISTANT_LIGHTS, WAVELENGTHS_NM
     from specgen_addon.render import render_spectral, sphere_geometry
 

@@ -5,10 +5,10 @@ under the same 12 distant lights; 8-bit values that behave as linear). For each 
 way of knowing its light:
 
 * ``file``: the dataset's light direction (lights.txt), power 1;
-* ``chrome``: unwrapped from the chrome ball under the same light (:mod:`specgen_addon.light_probe`:
+* ``chrome``: unwrapped from the chrome ball under the same light (:mod:`specgen_addon.photo.light_probe`:
   environment + the clipped highlight as a distant light, its power fitted to the input photo);
 * ``estimated``: nothing given, distant lights + ambient estimated from the input ball's shading
-  (:mod:`specgen_addon.light_estimate`); the held-out photos are predicted under the file's
+  (:mod:`specgen_addon.photo.light_estimate`); the held-out photos are predicted under the file's
   lights, as for ``file`` (so the estimate is judged by the table it leads to);
 * ``canonical``: nothing given, the default canonical studio (how a user who gives no light runs);
 
@@ -34,7 +34,6 @@ from pathlib import Path
 import numpy as np
 
 REPO = Path(__file__).resolve().parents[1]
-sys.path.insert(0, str(REPO))
 
 DATA = REPO.parent / "shared" / "data" / "photos" / "psm_gray_chrome"
 SIZE = 128
@@ -46,14 +45,14 @@ def load_lights(path: Path) -> np.ndarray:
 
 def crop(kind: str, i: int):
     """The photo's canonical crop about its mask's circle (the same circle for every photo)."""
-    from specgen_addon.input_image import PhotoSource
+    from specgen_addon.photo.sphere_image import PhotoSource
 
     return PhotoSource(DATA / kind / f"{kind}.{i}.tga", encoding="linear",
                        mask=DATA / kind / f"{kind}.mask.tga").crop(SIZE)
 
 
 def file_lighting(direction: np.ndarray):
-    from specgen_addon.input_lighting import Light, parse_lighting
+    from specgen_addon.photo.photo_lighting import Light, parse_lighting
 
     return parse_lighting(None, lights=(Light(tuple(direction)),))
 
@@ -61,8 +60,8 @@ def file_lighting(direction: np.ndarray):
 def chrome_lighting(i: int, photo: np.ndarray | None, power: float | None, tmp: Path):
     """The lighting of chrome photo ``i``; its highlight's power fitted to ``photo`` (the input) or
     set to ``power`` (a held-out photo: the input's power, so nothing is fitted to what is predicted)."""
-    from specgen_addon.input_lighting import Light, parse_lighting
-    from specgen_addon.light_probe import probe_lighting, read_probe
+    from specgen_addon.photo.photo_lighting import Light, parse_lighting
+    from specgen_addon.photo.light_probe import probe_lighting, read_probe
 
     probe = read_probe(DATA / "chrome" / f"chrome.{i}.tga", mask=DATA / "chrome" / "chrome.mask.tga",
                        encoding="linear")
@@ -75,7 +74,7 @@ def chrome_lighting(i: int, photo: np.ndarray | None, power: float | None, tmp: 
 
 def white_render(lighting) -> np.ndarray:
     """Photo (S, S, 3) of a white Lambertian ball under ``lighting`` (exact irradiance / π)."""
-    from specgen_addon.input_image import EXPOSURE, _key_light
+    from specgen_addon.photo.sphere_image import EXPOSURE, _key_light
     from specgen_addon.render import sphere_geometry
 
     geo = sphere_geometry(SIZE)
@@ -109,10 +108,10 @@ def score(preds: list[np.ndarray], photos: list[np.ndarray], masks: list[np.ndar
 
 
 def run(inputs: list[int], modes: list[str], tmp: Path) -> dict:
-    from specgen_addon.infer import generate_brdf
-    from specgen_addon.input_image import EXPOSURE, SphereCrop
-    from specgen_addon.input_lighting import InputLighting
-    from specgen_addon.refine import CLIP_LEVEL, RefineOptions, refine_brdf, render_under
+    from specgen_addon.model.runtime.inference import generate_brdf
+    from specgen_addon.photo.sphere_image import EXPOSURE, SphereCrop
+    from specgen_addon.photo.photo_lighting import InputLighting
+    from specgen_addon.generate.refine import CLIP_LEVEL, RefineOptions, refine_brdf, render_under
     from specgen_addon.render import sphere_geometry
 
     lights = load_lights(DATA / "lights.txt")
@@ -129,7 +128,7 @@ def run(inputs: list[int], modes: list[str], tmp: Path) -> dict:
             elif mode == "chrome":
                 lighting = chrome_lighting(i, photo, None, tmp)
             elif mode == "estimated":
-                from specgen_addon.light_estimate import estimate_lights
+                from specgen_addon.photo.light_estimate import estimate_lights
 
                 lighting = estimate_lights(photo, crops[i].saturated).lighting()
             else:

@@ -37,20 +37,19 @@ from typing import Any
 import numpy as np
 
 REPO = Path(__file__).resolve().parents[1]
-sys.path.insert(0, str(REPO))
 sys.path.insert(0, str(Path(__file__).resolve().parent))
 
 from machine import describe_machine
 
 
 def _json(path: Path) -> Any | None:
-    from specgen_addon.evaluation.cache import read_json
+    from specgen_addon.common.cache import read_json
 
     return read_json(path)
 
 
 def _save(path: Path, data: Any) -> None:
-    from specgen_addon.evaluation.cache import write_json
+    from specgen_addon.common.cache import write_json
 
     write_json(path, data)
 
@@ -80,7 +79,7 @@ def synthetic(weights: Path | None, out: Path, per_family: int) -> dict[str, Any
     done = _json(out)
     if done is not None:
         return done
-    from specgen_addon.train.evaluate import evaluate_families
+    from specgen_addon.evaluation.trained_network import evaluate_families
 
     res = evaluate_families(weights=weights, per_family=per_family, envs=False, resolution=64,
                             self_reproduction=False)
@@ -106,7 +105,7 @@ def fine_tune(config: Path, out: Path, steps: int, max_minutes: float | None, ex
         time.sleep(20)
     if weights.is_file():
         return weights
-    from specgen_addon.evaluation.cache import cache_root
+    from specgen_addon.common.cache import cache_root
     from specgen_addon.train import build_material_sets
     from specgen_addon.train.loop import load_config, train
 

@@ -2,7 +2,7 @@
 
     python bench/refine.py [--image examples/sphere.png] [--input-env canonical] [--repeat 3]
 
-Generates the network's table once (not timed), then times :func:`specgen_addon.refine.refine_brdf`
+Generates the network's table once (not timed), then times :func:`specgen_addon.generate.refine.refine_brdf`
 (operator, design, solve, apply, and the two verification renders) ``--repeat`` times, each with a
 fresh lighting operator, in wall and CPU seconds. Peak memory is the largest traced allocation
 (``tracemalloc``; numpy reports its buffers) during one refinement, above what was held before it.
@@ -12,13 +12,11 @@ Target: ≤ 15 s on 2 cores.
 from __future__ import annotations
 
 import argparse
-import sys
 import time
 import tracemalloc
 from pathlib import Path
 
 REPO = Path(__file__).resolve().parents[1]
-sys.path.insert(0, str(REPO))
 
 from bench.machine import describe_machine  # noqa: E402
 
@@ -30,10 +28,10 @@ def main() -> int:
     ap.add_argument("--repeat", type=int, default=3)
     args = ap.parse_args()
 
-    from specgen_addon import input_lighting
-    from specgen_addon.infer import generate_brdf
-    from specgen_addon.pipeline import load_photo
-    from specgen_addon.refine import CLIP_LEVEL, RefineOptions, refine_brdf
+    from specgen_addon.photo import photo_lighting as input_lighting
+    from specgen_addon.model.runtime.inference import generate_brdf
+    from specgen_addon.generate.pipeline import load_photo
+    from specgen_addon.generate.refine import CLIP_LEVEL, RefineOptions, refine_brdf
 
     light = input_lighting.parse_lighting(args.input_env)
     photo, linear = load_photo(args.image)
@@ -44,7 +42,7 @@ def main() -> int:
     walls, cpus = [], []
     for i in range(args.repeat):
         input_lighting._scene.cache_clear()          # a fresh lighting operator each time
-        from specgen_addon import input_image
+        from specgen_addon.photo import sphere_image as input_image
         input_image._scene.cache_clear()
         tracemalloc.start()
         base = tracemalloc.get_traced_memory()[0]

@@ -23,13 +23,11 @@ from __future__ import annotations
 
 import argparse
 import json
-import sys
 import time
 from pathlib import Path
 
 import numpy as np
 
-sys.path.insert(0, str(Path(__file__).resolve().parents[1]))
 
 #: candidate settings: label → RefineOptions fields ("shipped": the defaults; "block smoothness":
 #: one smoothness weight per block of knots, the earlier default)
@@ -80,12 +78,12 @@ def main(argv: list[str] | None = None) -> int:
         ap.error("--per-family must be in 1..20 and --skip ≥ 0")
 
     from off_grid_refine import independent_photo, truth_scorer
-    from specgen_addon import input_image
+    from specgen_addon.photo import sphere_image as input_image
     from specgen_addon.corpus.generate import material_family
     from specgen_addon.evaluation.protocol import WAVELENGTHS_NM
-    from specgen_addon.pipeline import generate, load_photo_crop
-    from specgen_addon.refine import CLIP_LEVEL, CorrectionBasis, RefineOptions, refine_brdf
-    from specgen_addon.train.evaluate import displaced_input, mixed_split_materials
+    from specgen_addon.generate.pipeline import generate, load_photo_crop
+    from specgen_addon.generate.refine import CLIP_LEVEL, CorrectionBasis, RefineOptions, refine_brdf
+    from specgen_addon.evaluation.trained_network import displaced_input, mixed_split_materials
 
     rows = []
     for mat in mixed_split_materials(a.per_family, None, a.split, skip=a.skip):

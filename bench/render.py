@@ -48,7 +48,7 @@ def main(argv: list[str] | None = None) -> int:
     from importlib import import_module
 
     render = import_module(f"{pkg.__name__}.ops.render")
-    bake = import_module("specgen_addon.bake")
+    bake = import_module("specgen_addon.generate.lookup")
     scene_mod = import_module(f"{pkg.__name__}.ops.scene")
     from specgen_addon.corpus import generate_corpus
 
@@ -67,7 +67,7 @@ def main(argv: list[str] | None = None) -> int:
     scene_mod.add_camera(sc)
     obj = scene_mod.add_mesh(sc, "sphere")
     if args.env:
-        from specgen_addon.lighting import load_environment
+        from specgen_addon.render.environment_maps import load_environment
 
         env_file = work / "env.exr"
         batch._write_rgb_exr(env_file, load_environment(args.env).rgb)
@@ -126,7 +126,7 @@ def bench_fullscene(args) -> int:
     import numpy as np
     from importlib import import_module
 
-    bake = import_module("specgen_addon.bake")
+    bake = import_module("specgen_addon.generate.lookup")
     render = import_module(f"{pkg.__name__}.ops.render")
     fullscene = import_module(f"{pkg.__name__}.ops.render_fullscene")
     demo = import_module(f"{pkg.__name__}.ops.demo_scenes")

@@ -25,9 +25,11 @@ from pathlib import Path
 import numpy as np
 from machine import describe_machine  # bench/machine.py, beside this script
 
-sys.path.insert(0, str(Path(__file__).resolve().parents[1]))
 
-from specgen_addon import input_image, lighting, metrics, spectra  # noqa: E402
+from specgen_addon.photo import sphere_image as input_image  # noqa: E402
+from specgen_addon.render import environment_maps as lighting  # noqa: E402
+from specgen_addon.render import metrics  # noqa: E402
+from specgen_addon.spectral import spectra  # noqa: E402
 from specgen_addon.corpus import Reflectance, generate_corpus  # noqa: E402
 from specgen_addon.render import EnvSampling, Scene, sphere_geometry  # noqa: E402
 
@@ -116,7 +118,7 @@ def doubling(materials, resolution: int, envs: list[str]) -> None:
     base = EnvSampling()
     print(f"\n### Doubling the environment samples ({resolution}², {WL.size} bands, "
           f"S = {base.total} directions/pixel)\n")
-    print("PSNR (dB, `specgen_addon.metrics`) of GT vs prediction (roughness ×1.3, diffuse ×0.9), "
+    print("PSNR (dB, `specgen_addon.render.metrics`) of GT vs prediction (roughness ×1.3, diffuse ×0.9), "
           "and each GT render's own PSNR against an 8S reference.\n")
     print("| env | material | kind | GT vs pred, S | 2S | Δ | 8S | GT(S) vs 8S | GT(2S) vs 8S |")
     print("| --- | --- | --- | ---: | ---: | ---: | ---: | ---: | ---: |")

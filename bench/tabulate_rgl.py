@@ -20,10 +20,9 @@ import numpy as np
 from machine import describe_machine  # bench/machine.py, beside this script
 
 REPO = Path(__file__).resolve().parents[1]
-sys.path.insert(0, str(REPO))
 
-from specgen_addon.formats.rgl import read_rgl, read_tensor_file, tabulate_rgl, write_rgl  # noqa: E402
-from specgen_addon.spectra import DEFAULT_WAVELENGTHS_NM  # noqa: E402
+from specgen_addon.brdf.formats.rgl import read_rgl, read_tensor_file, tabulate_rgl, write_rgl  # noqa: E402
+from specgen_addon.spectral.spectra import DEFAULT_WAVELENGTHS_NM  # noqa: E402
 
 TARGET_SECONDS = 5.0
 

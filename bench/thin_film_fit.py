@@ -18,7 +18,6 @@ from __future__ import annotations
 
 import argparse
 import json
-import sys
 import time
 from pathlib import Path
 
@@ -27,7 +26,6 @@ from family_checks import THETA_D, _hue_error, _lab, _specular  # bench/family_c
 from machine import describe_machine  # bench/machine.py
 
 REPO = Path(__file__).resolve().parents[1]
-sys.path.insert(0, str(REPO))
 
 
 def hue_errors(truth, brdf, wavelengths: np.ndarray) -> tuple[float, float]:
@@ -41,13 +39,14 @@ def hue_errors(truth, brdf, wavelengths: np.ndarray) -> tuple[float, float]:
 
 
 def main() -> None:
-    from specgen_addon import input_image, metrics
+    from specgen_addon.photo import sphere_image as input_image
+    from specgen_addon.render import metrics
     from specgen_addon.evaluation.protocol import DISTANT_LIGHTS, WAVELENGTHS_NM
-    from specgen_addon.fit.thin_film import fit_thin_film
-    from specgen_addon.infer import generate_brdf
-    from specgen_addon.refine import RefineOptions, refine_brdf
+    from specgen_addon.generate.thin_film import fit_thin_film
+    from specgen_addon.model.runtime.inference import generate_brdf
+    from specgen_addon.generate.refine import RefineOptions, refine_brdf
     from specgen_addon.render import render_spectral, sphere_geometry
-    from specgen_addon.train.evaluate import RESOLUTION, mixed_test_materials
+    from specgen_addon.evaluation.trained_network import RESOLUTION, mixed_test_materials
 
     p = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     p.add_argument("--films", type=int, default=8, help="held-out thin films to score (default 8)")

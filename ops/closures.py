@@ -1,7 +1,7 @@
 """Node building for the SpecGen material's native closure stack (Lambert + GGX lobes, each
 optionally weighted by the view-dependent dielectric Fresnel of a Fresnel node).
 
-The numbers and the layout come from :mod:`specgen_addon.fit.closures`; this module only builds
+The numbers and the layout come from :mod:`specgen_addon.bake.closure_fit.closures`; this module only builds
 and sets nodes. A SpecGen material holds two surfaces: the exact OSL shader (used by the exact
 render mode) and this stack, which is what the Output node shows: F12 and the viewport render the
 stack with the fit's RGB colours (an RGB stand-in), and the full-scene spectral render sets it per
@@ -13,8 +13,8 @@ from __future__ import annotations
 
 import bpy
 
-from specgen_addon.errors import SpecGenError
-from specgen_addon.fit import ClosureFit, StackClosure, stack_layout, standin_closures
+from specgen_addon.common.errors import SpecGenError
+from specgen_addon.bake.closure_fit import ClosureFit, StackClosure, stack_layout, standin_closures
 
 FIT_PROP = "specgen_closures"
 PREFIX = "SpecGen "
@@ -92,7 +92,7 @@ def material_fit(mat: bpy.types.Material) -> ClosureFit:
 
 def set_stack(mat: bpy.types.Material, values: dict[str, tuple]) -> None:
     """Colour (three values: RGB, or a render's three bands) and roughness (None for a diffuse
-    closure) of each closure by name, as :func:`~specgen_addon.fit.group_closures` gives them."""
+    closure) of each closure by name, as :func:`~specgen_addon.bake.closure_fit.group_closures` gives them."""
     nodes = mat.node_tree.nodes
     for name, (colour, roughness) in values.items():
         node = nodes.get(PREFIX + name)

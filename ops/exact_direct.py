@@ -1,7 +1,7 @@
 """Full Scene mode: direct light on SpecGen surfaces from the exact lookups, bounces from closures.
 
 The full-scene render draws SpecGen materials with their fitted native closure stack (Lambert +
-GGX lobes, :mod:`specgen_addon.fit.closures`), so Cycles can bounce light off them like any other
+GGX lobes, :mod:`specgen_addon.bake.closure_fit.closures`), so Cycles can bounce light off them like any other
 material. A stack of a few lobes cannot hold every generated table (docs/blender.md, "Full Scene
 fidelity"), and what a viewer sees first is the direct light on the SpecGen surface itself. So the
 job composes each pixel as
@@ -29,8 +29,8 @@ from typing import Callable
 import bpy
 import numpy as np
 
-from specgen_addon import bake
-from specgen_addon.errors import SpecGenError
+from specgen_addon.generate import lookup as bake
+from specgen_addon.common.errors import SpecGenError
 from .render import (SavedAttributes, SpectralRenderJob, is_specgen_material, script_node,
                      specgen_materials)
 
@@ -121,7 +121,7 @@ class HeldOutSlots(SavedAttributes):
 
 def _resample(spectral: np.ndarray, from_nm: np.ndarray, to_nm: np.ndarray) -> np.ndarray:
     """(H, W, Λ_from) → (H, W, Λ_to), linear in λ (held beyond the ends)."""
-    from specgen_addon.spectra import interpolation_matrix
+    from specgen_addon.spectral.spectra import interpolation_matrix
 
     if from_nm.size == to_nm.size and np.allclose(from_nm, to_nm):
         return spectral
@@ -188,12 +188,12 @@ def compose(full: np.ndarray, closure_direct: np.ndarray, exact: np.ndarray) -> 
 def report_fit(name: str, fit, exact: bool, warn: Callable[[str], None] = print,
                log: Callable[[str], None] = print) -> float | None:
     """Say how far material ``name``'s closure stack renders from its table (the fit's rendered
-    ΔE2000, :mod:`specgen_addon.fit.fit_check`) and what that touches in this render: with
+    ΔE2000, :mod:`specgen_addon.bake.closure_fit.fit_check`) and what that touches in this render: with
     ``exact`` direct light only the bounces and F12/viewport; without it, everything the Full Scene
-    render shows of the material. Above :data:`~specgen_addon.fit.fit_check.WARN_DELTA_E` a
+    render shows of the material. Above :data:`~specgen_addon.bake.closure_fit.fit_check.WARN_DELTA_E` a
     warning names the material and the faithful alternative. Returns the ΔE2000 (None for a
     material baked before it was measured)."""
-    from specgen_addon.fit.fit_check import CHECK_LIGHTS, WARN_DELTA_E
+    from specgen_addon.bake.closure_fit.fit_check import CHECK_LIGHTS, WARN_DELTA_E
 
     de = fit.rendered_error
     if de is None:

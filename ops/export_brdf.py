@@ -1,6 +1,6 @@
 """*Export BRDF*: the panel's material written as RGL ``.bsdf`` (spectral), MERL ``.binary`` (RGB)
 or SpecGen ``.npz``, from the compact material file Generate keeps beside its lookups
-(:mod:`specgen_addon.formats.export`, as ``infer -o FILE`` writes them)."""
+(:mod:`specgen_addon.brdf.formats.export`, as ``infer -o FILE`` writes them)."""
 
 from __future__ import annotations
 
@@ -10,7 +10,7 @@ import bpy
 from bpy.props import StringProperty
 from bpy_extras.io_utils import ExportHelper
 
-from specgen_addon.errors import SpecGenError
+from specgen_addon.common.errors import SpecGenError
 
 from .reporting import report_exception
 
@@ -43,8 +43,8 @@ class SPECGEN_OT_export_brdf(bpy.types.Operator, ExportHelper):
         return context.scene.specgen.material is not None
 
     def execute(self, context):
-        from specgen_addon.formats.export import check_output, write_output
-        from specgen_addon.table import BRDFTable
+        from specgen_addon.brdf.formats.export import check_output, write_output
+        from specgen_addon.brdf.table import BRDFTable
 
         try:
             out = Path(bpy.path.abspath(self.filepath))

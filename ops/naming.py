@@ -4,7 +4,7 @@ Each Generate makes one *set*, found from its stem ``<stem>`` (e.g. ``sphere``, 
 
 * material ``SpecGen <stem>`` (its custom properties hold the spectral basis) and a shader node
   group of the same name (:func:`group_name`) whose OSL Script node reads the lookups;
-* preview image ``SpecGen <stem> preview`` (the numpy-rendered sphere, :mod:`specgen_addon.preview`);
+* preview image ``SpecGen <stem> preview`` (the numpy-rendered sphere, :mod:`specgen_addon.bake.preview`);
 * files in the output folder: ``<stem>_lookup.gNN.exr`` (lookups), ``<stem>_lookup.json`` (basis
   and layout), ``<stem>_preview.png``, and ``<stem>.npz`` only when the table is exported.
 

@@ -21,11 +21,11 @@ from pathlib import Path
 import bpy
 import numpy as np
 
-from specgen_addon.errors import OutputExistsError, SpecGenError
-from specgen_addon.spectra import wavelength_grid
-from specgen_addon import bake
-from specgen_addon.image_checks import check_pixel_count
-from specgen_addon.render_estimate import format_duration
+from specgen_addon.common.errors import OutputExistsError, SpecGenError
+from specgen_addon.spectral.spectra import wavelength_grid
+from specgen_addon.generate import lookup as bake
+from specgen_addon.photo.image_checks import check_pixel_count
+from specgen_addon.render.cycles_time_estimate import format_duration
 from . import naming
 from .properties import input_lighting, output_dir
 from .render_settings import PREVIEW_PERCENT, PREVIEW_SAMPLES
@@ -47,7 +47,7 @@ def _image_input(settings):
         img.pixels.foreach_get(px)
         rgb = px.reshape(h, w, 4)[::-1, :, :3].astype(np.float64)
         if not img.is_float and img.colorspace_settings.name.lower().startswith("srgb"):
-            from specgen_addon.spectra import srgb_decode
+            from specgen_addon.spectral.spectra import srgb_decode
 
             rgb = srgb_decode(rgb)
         return rgb
@@ -264,7 +264,7 @@ class SPECGEN_OT_render_stack(_Modal, bpy.types.Operator):
     def _job(self, context):
         from .render import SpectralRenderJob
 
-        from specgen_addon.limits import check_output_dir
+        from specgen_addon.common.limits import check_output_dir
 
         s, sc = context.scene.specgen, context.scene
         name = self.filename or naming.render_output_name(

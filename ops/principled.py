@@ -1,4 +1,4 @@
-"""The SpecGen material's Principled BSDF stand-in (numbers from :mod:`specgen_addon.fit.principled`).
+"""The SpecGen material's Principled BSDF stand-in (numbers from :mod:`specgen_addon.bake.closure_fit.principled`).
 
 A SpecGen material then has two outputs: the Cycles output shows the native closure stack (F12,
 the full-scene render, the exact mode's group), and an EEVEE output, the active one, shows a
@@ -10,8 +10,8 @@ from __future__ import annotations
 
 import bpy
 
-from specgen_addon.fit import ClosureFit
-from specgen_addon.fit.principled import principled_from_closures
+from specgen_addon.bake.closure_fit import ClosureFit
+from specgen_addon.bake.closure_fit.principled import principled_from_closures
 
 PRINCIPLED_NODE = "SpecGen Principled"
 EEVEE_OUTPUT = "SpecGen EEVEE Output"

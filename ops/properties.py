@@ -9,8 +9,8 @@ import bpy
 from bpy.props import (BoolProperty, EnumProperty, FloatProperty, IntProperty, PointerProperty,
                        StringProperty)
 
-from specgen_addon.bake import DEFAULT_TOLERANCE
-from specgen_addon.spectra import DEFAULT_BAND_COUNT, DEFAULT_RANGE_NM
+from specgen_addon.generate.lookup import DEFAULT_TOLERANCE
+from specgen_addon.spectral.spectra import DEFAULT_BAND_COUNT, DEFAULT_RANGE_NM
 
 LOOKUP_RESOLUTIONS = (
     ("180", "Full (180 φd)", "The whole MERL grid: 90 θh × 90 θd × 180 φd"),
@@ -38,7 +38,7 @@ def _input_env_items(self, context):
     """'Canonical', Blender's bundled HDRIs (found at run time) and 'File…'."""
     items = [("canonical", "Canonical Studio", "The studio lighting the network's inputs are rendered with")]
     try:
-        from specgen_addon.lighting import available_envs
+        from specgen_addon.render.environment_maps import available_envs
 
         names = available_envs()
     except Exception:  # no studio lights found: canonical and file still work
@@ -137,8 +137,8 @@ class SpecGenSettings(bpy.types.PropertyGroup):
 
 
 def input_lighting(settings: SpecGenSettings):
-    """The validated :class:`~specgen_addon.input_lighting.InputLighting` of the panel."""
-    from specgen_addon.input_lighting import parse_lighting
+    """The validated :class:`~specgen_addon.photo.photo_lighting.InputLighting` of the panel."""
+    from specgen_addon.photo.photo_lighting import parse_lighting
 
     if settings.input_env == "canonical":
         return parse_lighting(None)

@@ -3,7 +3,7 @@
 The exact mode evaluates the tabulated BRDF itself (direct light, SpecGen objects only; the
 full-scene mode is :mod:`.render_fullscene`). This module also builds the SpecGen material.
 
-Cycles (CPU, OSL) renders images of spectral-basis coefficients, not bands (see :mod:`specgen_addon.bake`):
+Cycles (CPU, OSL) renders images of spectral-basis coefficients, not bands (see :mod:`specgen_addon.generate.lookup`):
 each render carries four coefficient slots × RGB lighting, which the shader
 (``ops/osl/specgen_brdf.osl``) writes as closure weights and Cycles stores in the Emission,
 Diffuse Color, Glossy Color and Transmission Color passes; one compositor File Output node per pass
@@ -33,9 +33,9 @@ from typing import Callable, Iterator
 import bpy
 import numpy as np
 
-from specgen_addon.errors import Cancelled, OutputExistsError, SpecGenError
-from specgen_addon import bake
-from specgen_addon.interrupts import private_tempdir
+from specgen_addon.common.errors import Cancelled, OutputExistsError, SpecGenError
+from specgen_addon.generate import lookup as bake
+from specgen_addon.common.interrupts import private_tempdir
 
 SHADER_PATH = Path(__file__).resolve().parent / "osl" / "specgen_brdf.osl"
 SHADER_TEXT_NAME = "specgen_brdf.osl"
@@ -544,7 +544,7 @@ class _SceneState(SavedAttributes):
 
 
 def _read_pass(path: Path) -> np.ndarray:
-    from specgen_addon.image_io import read_exr
+    from specgen_addon.common.image_io import read_exr
 
     ch, _ = read_exr(path)
     names = sorted(ch)
@@ -717,7 +717,7 @@ class SpectralRenderJob(RenderJobOutputs):
                                 for g, (basis, offsets, _) in enumerate(self.groups))
             outs = self._outputs()
             if outs is not None:
-                from specgen_addon.spectral_exr import (linear_srgb_preview, write_preview_png,
+                from specgen_addon.render.spectral_exr import (linear_srgb_preview, write_preview_png,
                                                           write_spectral_exr)
 
                 rgb = linear_srgb_preview(self.spectral, wl)

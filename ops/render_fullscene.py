@@ -28,8 +28,8 @@ from typing import Callable, Iterator
 import bpy
 import numpy as np
 
-from specgen_addon import uplift
-from specgen_addon.errors import SpecGenError
+from specgen_addon.bake import scene_uplift as uplift
+from specgen_addon.common.errors import SpecGenError
 from .exact_direct import (DirectOnlySettings, compose, has_specgen, render_exact_direct, report_fit,
                            world_light)
 from .render import RenderJobOutputs, SavedAttributes
@@ -51,7 +51,7 @@ def _render_layer(scene: bpy.types.Scene) -> bpy.types.ViewLayer:
 def _read_combined(path: Path) -> np.ndarray:
     """RGBA (H, W, 4) float32 of an EXR written by ``save_render``, row 0 on top (OpenEXR, or
     Blender's bundled OpenImageIO in a stock Blender)."""
-    from specgen_addon.image_io import read_exr
+    from specgen_addon.common.image_io import read_exr
 
     ch, _ = read_exr(path)
     names = sorted(ch)
@@ -181,7 +181,7 @@ class FullSceneRenderJob(RenderJobOutputs):
                 closure_light = uplift.unpack_groups(np.stack(direct)[..., :3], wl.size)
                 self.spectral = compose(self.spectral, closure_light, exact_light)
             yield 0.95
-        from specgen_addon.spectral_exr import (linear_srgb_preview, write_preview_png,
+        from specgen_addon.render.spectral_exr import (linear_srgb_preview, write_preview_png,
                                                 write_spectral_exr)
 
         rgb = linear_srgb_preview(self.spectral, wl)

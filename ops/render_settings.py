@@ -5,7 +5,7 @@ estimate before a render, and band renders that Esc stops inside the render.
   only (everything is put back afterwards).
 * :func:`measure_cost` / :func:`estimate`: two tiny test renders of the scene as it is give the
   cost per render and per pixel-sample on this machine, and with adaptive sampling a third one the
-  share of samples it takes (:mod:`specgen_addon.render_estimate`).
+  share of samples it takes (:mod:`specgen_addon.render.cycles_time_estimate`).
 * :func:`band_render`: one Cycles render of a band group. From the panel it is started as Blender's
   own render job (``INVOKE_DEFAULT``), so the interface keeps running and Esc (or the status bar's
   cancel button) stops Cycles mid-render; Blender's ``render_cancel`` handler then tells the job,
@@ -20,9 +20,9 @@ from collections.abc import Callable, Iterator
 
 import bpy
 
-from specgen_addon import uplift
-from specgen_addon.errors import Cancelled, SpecGenError
-from specgen_addon.render_estimate import RenderCost, fit_cost, format_duration
+from specgen_addon.bake import scene_uplift as uplift
+from specgen_addon.common.errors import Cancelled, SpecGenError
+from specgen_addon.render.cycles_time_estimate import RenderCost, fit_cost, format_duration
 
 from .render import SavedAttributes, specgen_materials
 

@@ -1,7 +1,7 @@
 """How the operators tell the user about errors: one sentence in the report, the traceback only on
 the console and only when asked (Blender's ``--debug`` / ``bpy.app.debug``, or SPECGEN_VERBOSE=1).
 
-Also the up-front checks of the panel's settings (bounds from :mod:`specgen_addon.limits`), so an
+Also the up-front checks of the panel's settings (bounds from :mod:`specgen_addon.common.limits`), so an
 operator refuses bad settings before it starts a network run or a render.
 """
 
@@ -13,9 +13,9 @@ import traceback
 
 import bpy
 
-from specgen_addon import limits
-from specgen_addon.errors import Cancelled, SpecGenError
-from specgen_addon.interrupts import Interrupted
+from specgen_addon.common import limits
+from specgen_addon.common.errors import Cancelled, SpecGenError
+from specgen_addon.common.interrupts import Interrupted
 
 
 def debug_enabled() -> bool:

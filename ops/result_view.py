@@ -2,7 +2,7 @@
 
 The spectral EXR's RGB channels are linear sRGB (Blender's scene-linear space). For the preview
 PNG they go through the scene's own colour management (view transform, look, exposure, gamma) with
-Blender's bundled OpenColorIO config (:mod:`specgen_addon.view_transform`), so the PNG shows what
+Blender's bundled OpenColorIO config (:mod:`specgen_addon.render.view_transform`), so the PNG shows what
 F12 would show for the same pixels. In Blender the same linear pixels become a float image
 datablock (:data:`RESULT_IMAGE`), which the Image Editor draws through that same transform.
 """
@@ -16,7 +16,7 @@ from collections.abc import Callable
 import bpy
 import numpy as np
 
-from specgen_addon.view_transform import (
+from specgen_addon.render.view_transform import (
     SCENE_LINEAR,
     ViewSettings,
     ViewTransform,

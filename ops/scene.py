@@ -16,7 +16,7 @@ import bpy
 import numpy as np
 from mathutils import Vector
 
-from specgen_addon.errors import SpecGenError
+from specgen_addon.common.errors import SpecGenError
 
 MESHES = ("sphere", "suzanne")
 

@@ -2,7 +2,7 @@
 
 The full-scene render (:mod:`.render_fullscene`) path-traces the user's scene with Cycles, three
 bands per render in R, G, B. Before each render every RGB quantity is replaced by its values at
-the group's three wavelengths (maths in :mod:`specgen_addon.uplift`):
+the group's three wavelengths (maths in :mod:`specgen_addon.bake.scene_uplift`):
 
 * unlinked colour inputs of shader nodes (BSDFs, Emission, Background, volumes) in every material,
   the world and light node trees: set to ``M @ rgb`` (reflectance basis) or ``U @ rgb`` (emission
@@ -27,8 +27,8 @@ from typing import Callable
 import bpy
 import numpy as np
 
-from specgen_addon import uplift
-from specgen_addon.fit import group_closures, stack_layout
+from specgen_addon.bake import scene_uplift as uplift
+from specgen_addon.bake.closure_fit import group_closures, stack_layout
 from .closures import material_fit, set_stack
 from .render import is_specgen_material
 
@@ -176,7 +176,7 @@ class SceneConversion:
         return self
 
     def specgen_fits(self) -> list[tuple[bpy.types.Material, object]]:
-        """(material, :class:`~specgen_addon.fit.ClosureFit` at the render's bands) per SpecGen material."""
+        """(material, :class:`~specgen_addon.bake.closure_fit.ClosureFit` at the render's bands) per SpecGen material."""
         return [(mat, fit) for mat, fit, _ in self._specgen]
 
     # ---------------------------------------------------------------- per group

@@ -26,7 +26,7 @@ from pathlib import Path
 import bpy
 from bpy.app.handlers import persistent
 
-from specgen_addon.errors import SpecGenError
+from specgen_addon.common.errors import SpecGenError
 
 from . import naming
 
@@ -127,8 +127,8 @@ def rebuild(mat) -> str | None:
     beside them, which Generate writes) and rebuild the material; what was done, or None."""
     import numpy as np
 
-    from specgen_addon import bake
-    from specgen_addon.table import BRDFTable
+    from specgen_addon.generate import lookup as bake
+    from specgen_addon.brdf.table import BRDFTable
 
     from .render import make_material, script_node
 

@@ -21,7 +21,6 @@ from pathlib import Path
 import numpy as np
 
 REPO = Path(__file__).resolve().parents[1]
-sys.path.insert(0, str(REPO))
 
 EXAMPLE = REPO / "examples" / "sphere.png"
 EXAMPLE_MATERIAL = "mat0093"
@@ -36,9 +35,9 @@ def _batch(args: list[str]) -> None:
 
 def _truth_table(path: Path) -> None:
     from specgen_addon.evaluation.protocol import test_materials
-    from specgen_addon.rusinkiewicz import io_from_half_diff
-    from specgen_addon.spectra import DEFAULT_WAVELENGTHS_NM
-    from specgen_addon.table import BRDFTable
+    from specgen_addon.brdf.rusinkiewicz import io_from_half_diff
+    from specgen_addon.spectral.spectra import DEFAULT_WAVELENGTHS_NM
+    from specgen_addon.brdf.table import BRDFTable
 
     mat = test_materials(names=[EXAMPLE_MATERIAL])[0]
     wl = DEFAULT_WAVELENGTHS_NM
@@ -51,7 +50,7 @@ def _truth_table(path: Path) -> None:
 
 
 def _srgb_and_alpha(exr: Path) -> tuple[np.ndarray, np.ndarray]:
-    from specgen_addon.spectral_exr import linear_srgb_preview, read_spectral_exr
+    from specgen_addon.render.spectral_exr import linear_srgb_preview, read_spectral_exr
 
     img = read_spectral_exr(exr)
     rgb = linear_srgb_preview(img.values, img.wavelengths_nm)
@@ -80,7 +79,7 @@ def main() -> int:
     matplotlib.use("Agg")
     import matplotlib.pyplot as plt
 
-    from specgen_addon.refine.report import delta_e2000, photo_scale
+    from specgen_addon.render.photo_reproduction import delta_e2000, photo_scale
 
     exrs = {k: next(d.glob("*.exr")) for k, d in runs.items()}
     truth_rgb, mask = _srgb_and_alpha(exrs["truth"])

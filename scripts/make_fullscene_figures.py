@@ -28,7 +28,7 @@ sys.path.insert(0, str(REPO))
 
 
 def _srgb8(linear: np.ndarray) -> np.ndarray:
-    from specgen_addon.spectra import srgb_encode
+    from specgen_addon.spectral.spectra import srgb_encode
 
     return (np.clip(srgb_encode(np.clip(linear, 0, 1)), 0, 1) * 255 + 0.5).astype(np.uint8)
 
@@ -39,9 +39,9 @@ def _psnr(a, ref) -> float:
 
 def white_table(wl: np.ndarray):
     """A white dielectric-like spectral BRDF: flat 0.8 Lambert + a faint GGX lobe."""
-    from specgen_addon.fit import ggx_lobe
-    from specgen_addon.rusinkiewicz import io_from_half_diff
-    from specgen_addon.table import BRDFTable
+    from specgen_addon.bake.closure_fit import ggx_lobe
+    from specgen_addon.brdf.rusinkiewicz import io_from_half_diff
+    from specgen_addon.brdf.table import BRDFTable
 
     def fn(th, td, pd):
         wi, wo = io_from_half_diff(th, td, pd)
@@ -67,11 +67,11 @@ def main(argv=None) -> int:
     import matplotlib.pyplot as plt
     from bpy_extras.object_utils import world_to_camera_view
 
-    bake = import_module("specgen_addon.bake")
+    bake = import_module("specgen_addon.generate.lookup")
     render = import_module(f"{pkg.__name__}.ops.render")
     fullscene = import_module(f"{pkg.__name__}.ops.render_fullscene")
     demo = import_module(f"{pkg.__name__}.ops.demo_scenes")
-    from specgen_addon import spectra
+    from specgen_addon.spectral import spectra
     from specgen_addon.corpus import generate_corpus
 
     wl = spectra.wavelength_grid(380.0, 780.0, 21)

@@ -13,13 +13,11 @@ pipeline picks for this input. Each caption carries the spectral PSNR against th
 from __future__ import annotations
 
 import argparse
-import sys
 from pathlib import Path
 
 import numpy as np
 
 REPO = Path(__file__).resolve().parents[1]
-sys.path.insert(0, str(REPO))
 
 FAMILIES = ("sheen", "lobes", "car_paint")
 
@@ -32,14 +30,16 @@ def main(argv: list[str] | None = None) -> int:
     if not 32 <= a.resolution <= 512:
         ap.error("--resolution must be 32–512")
 
-    from specgen_addon import input_image, metrics, spectra
+    from specgen_addon.photo import sphere_image as input_image
+    from specgen_addon.render import metrics
+    from specgen_addon.spectral import spectra
     from specgen_addon.corpus.generate import material_family
     from specgen_addon.evaluation.plots import _plt, _save
     from specgen_addon.evaluation.protocol import DISTANT_LIGHTS, WAVELENGTHS_NM
-    from specgen_addon.infer import generate_brdf
+    from specgen_addon.model.runtime.inference import generate_brdf
     from specgen_addon.model import DEFAULT_WEIGHTS, RESAMPLED_WEIGHTS
     from specgen_addon.render import render_spectral, sphere_geometry
-    from specgen_addon.train.evaluate import antialiased_input, mixed_test_materials
+    from specgen_addon.evaluation.trained_network import antialiased_input, mixed_test_materials
 
     geo = sphere_geometry(a.resolution)
     plt = _plt()

@@ -10,13 +10,11 @@ the sets the shipped sampling settings use are stored in ``specgen_addon/render/
 
 from __future__ import annotations
 
-import sys
 from pathlib import Path
 
 import numpy as np
 
 REPO = Path(__file__).resolve().parents[1]
-sys.path.insert(0, str(REPO))
 
 from specgen_addon.render.sampling import SOBOL_TABLE, SOBOL_TABLE_COUNTS, SOBOL_TABLE_SEEDS, sobol_scipy  # noqa: E402
 

@@ -2,7 +2,7 @@
 
 The repository is loaded as one package (:func:`batch.load_package`) for ``ops``, as an installed
 extension is imported as ``bl_ext.<repo>.specgen``; the core is the top-level ``specgen_addon`` in
-both cases, so ``addon_module("specgen_addon.errors")`` is ``specgen_addon.errors`` itself.
+both cases, so ``addon_module("specgen_addon.common.errors")`` is ``specgen_addon.common.errors`` itself.
 Import this module after ``pytest.importorskip("bpy")``.
 """
 

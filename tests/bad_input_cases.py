@@ -46,7 +46,7 @@ THIRD_PARTY_TEMP = "tmp/.ses"
 API_PRELUDE = textwrap.dedent("""
     import sys, numpy as np
     sys.path.insert(0, {repo!r})
-    from specgen_addon.errors import SpecGenError
+    from specgen_addon.common.errors import SpecGenError
     def main():
     {body}
     try:
@@ -114,10 +114,10 @@ def make_fixtures(fx: Path, big: bool) -> None:
     from PIL import Image
 
     sys.path.insert(0, str(REPO))
-    from specgen_addon.formats.merl import MERLData, write_merl
-    from specgen_addon.formats.rgl import read_tensor_file, write_tensor_file
-    from specgen_addon.image_io import read_exr, write_exr
-    from specgen_addon.table import GRID_SHAPE, BRDFTable
+    from specgen_addon.brdf.formats.merl import MERLData, write_merl
+    from specgen_addon.brdf.formats.rgl import read_tensor_file, write_tensor_file
+    from specgen_addon.common.image_io import read_exr, write_exr
+    from specgen_addon.brdf.table import GRID_SHAPE, BRDFTable
 
     fx.mkdir(parents=True)
     good_png = REPO / "examples" / "sphere.png"
@@ -631,110 +631,110 @@ def cases(have_rgl: bool, big: bool) -> list[Case]:
 
     # ---- Python API
     add(C("api generate_brdf missing path", api("""
-        from specgen_addon.infer import generate_brdf
+        from specgen_addon.model.runtime.inference import generate_brdf
         generate_brdf('/nonexistent/x.png')""")))
     add(C("api generate_brdf NaN array", api("""
-        from specgen_addon.infer import generate_brdf
+        from specgen_addon.model.runtime.inference import generate_brdf
         generate_brdf(np.full((128, 128, 3), np.nan))""")))
     add(C("api generate_brdf 1-d array", api("""
-        from specgen_addon.infer import generate_brdf
+        from specgen_addon.model.runtime.inference import generate_brdf
         generate_brdf(np.ones(5))""")))
     add(C("api generate_brdf empty array", api("""
-        from specgen_addon.infer import generate_brdf
+        from specgen_addon.model.runtime.inference import generate_brdf
         generate_brdf(np.zeros((0, 0, 3)))""")))
     add(C("api generate_brdf string array", api("""
-        from specgen_addon.infer import generate_brdf
+        from specgen_addon.model.runtime.inference import generate_brdf
         generate_brdf(np.array([['a']]))""")))
     add(C("api generate_brdf wavelengths []", api("""
-        from specgen_addon.infer import generate_brdf
+        from specgen_addon.model.runtime.inference import generate_brdf
         generate_brdf(%r, wavelengths_nm=[])""" % str(REPO / "examples/sphere.png"))))
     add(C("api generate_brdf wavelengths decreasing", api("""
-        from specgen_addon.infer import generate_brdf
+        from specgen_addon.model.runtime.inference import generate_brdf
         generate_brdf(%r, wavelengths_nm=[700, 400])""" % str(REPO / "examples/sphere.png"))))
     add(C("api generate_brdf wavelengths NaN", api("""
-        from specgen_addon.infer import generate_brdf
+        from specgen_addon.model.runtime.inference import generate_brdf
         generate_brdf(%r, wavelengths_nm=[np.nan])""" % str(REPO / "examples/sphere.png"))))
     add(C("api generate_brdf wavelengths 100 nm", api("""
-        from specgen_addon.infer import generate_brdf
+        from specgen_addon.model.runtime.inference import generate_brdf
         generate_brdf(%r, wavelengths_nm=[100.0])""" % str(REPO / "examples/sphere.png"))))
     add(C("api generate_brdf backend foo", api("""
-        from specgen_addon.infer import generate_brdf
+        from specgen_addon.model.runtime.inference import generate_brdf
         generate_brdf(%r, backend='foo')""" % str(REPO / "examples/sphere.png"))))
     add(C("api generate_brdf weights missing", api("""
-        from specgen_addon.infer import generate_brdf
+        from specgen_addon.model.runtime.inference import generate_brdf
         generate_brdf(%r, weights='/nonexistent.pt')""" % str(REPO / "examples/sphere.png"))))
     add(C("api BRDFTable.load missing", api("""
-        from specgen_addon.table import BRDFTable
+        from specgen_addon.brdf.table import BRDFTable
         BRDFTable.load('/nonexistent.npz')""")))
     for f in ("trunc.npz", "nan.npz", "pickle.npz", "shape.npz", "empty.npz", "overflow.npz"):
         add(C(f"api BRDFTable.load {f}", api(f"""
-            from specgen_addon.table import BRDFTable
+            from specgen_addon.brdf.table import BRDFTable
             BRDFTable.load('{{fx}}/{f}')""")))
     add(C("api BRDFTable.load folder", api("""
-        from specgen_addon.table import BRDFTable
+        from specgen_addon.brdf.table import BRDFTable
         BRDFTable.load('{fx}')""")))
     for f in ("unknown.xyz", "trunc.binary", "dims_huge.binary", "empty.bsdf", "nope.npz"):
         add(C(f"api load_brdf {f}", api(f"""
-            from specgen_addon.formats import load_brdf
+            from specgen_addon.brdf.formats import load_brdf
             load_brdf('{{fx}}/{f}')""")))
     add(C("api refine_brdf RGB table", api("""
-        from specgen_addon.table import BRDFTable, GRID_SHAPE
-        from specgen_addon.refine import refine_brdf
+        from specgen_addon.brdf.table import BRDFTable, GRID_SHAPE
+        from specgen_addon.generate.refine import refine_brdf
         t = BRDFTable(np.full(GRID_SHAPE + (3,), 0.1, np.float32), None)
         refine_brdf(t, np.full((128, 128, 3), 0.1))""")))
     add(C("api refine_brdf photo shape", api("""
-        from specgen_addon.table import BRDFTable
-        from specgen_addon.refine import refine_brdf
+        from specgen_addon.brdf.table import BRDFTable
+        from specgen_addon.generate.refine import refine_brdf
         refine_brdf(BRDFTable.load('{fx}/good.npz'), np.full((5, 7), 0.1))""")))
     add(C("api refine_brdf photo NaN", api("""
-        from specgen_addon.table import BRDFTable
-        from specgen_addon.refine import refine_brdf
+        from specgen_addon.brdf.table import BRDFTable
+        from specgen_addon.generate.refine import refine_brdf
         refine_brdf(BRDFTable.load('{fx}/good.npz'), np.full((128, 128, 3), np.nan))""")))
     add(C("api refine_brdf not a table", api("""
-        from specgen_addon.refine import refine_brdf
+        from specgen_addon.generate.refine import refine_brdf
         refine_brdf('table.npz', np.full((128, 128, 3), 0.1))""")))
     add(C("api bake_atlas not a table", api("""
-        from specgen_addon.bake import bake_atlas
+        from specgen_addon.generate.lookup import bake_atlas
         bake_atlas(np.ones(3), '{out}/a.exr')""")))
     add(C("api bake_atlas path under a file", api("""
-        from specgen_addon.table import BRDFTable
-        from specgen_addon.bake import bake_atlas
+        from specgen_addon.brdf.table import BRDFTable
+        from specgen_addon.generate.lookup import bake_atlas
         bake_atlas(BRDFTable.load('{fx}/good.npz'), '{fx}/a_file/a.exr')""")))
     add(C("api bake_atlas max_coeffs 0", api("""
-        from specgen_addon.table import BRDFTable
-        from specgen_addon.bake import bake_atlas
+        from specgen_addon.brdf.table import BRDFTable
+        from specgen_addon.generate.lookup import bake_atlas
         bake_atlas(BRDFTable.load('{fx}/good.npz'), '{out}/a.exr', max_coeffs=0)""")))
     add(C("api bake_atlas n_phi_d 0", api("""
-        from specgen_addon.table import BRDFTable
-        from specgen_addon.bake import bake_atlas
+        from specgen_addon.brdf.table import BRDFTable
+        from specgen_addon.generate.lookup import bake_atlas
         bake_atlas(BRDFTable.load('{fx}/good.npz'), '{out}/a.exr', n_phi_d=0)""")))
     add(C("api bake_atlas tolerance -1", api("""
-        from specgen_addon.table import BRDFTable
-        from specgen_addon.bake import bake_atlas
+        from specgen_addon.brdf.table import BRDFTable
+        from specgen_addon.generate.lookup import bake_atlas
         bake_atlas(BRDFTable.load('{fx}/good.npz'), '{out}/a.exr', tolerance=-1)""")))
     add(C("api bake_atlas wavelengths 2000 nm", api("""
-        from specgen_addon.table import BRDFTable
-        from specgen_addon.bake import bake_atlas
+        from specgen_addon.brdf.table import BRDFTable
+        from specgen_addon.generate.lookup import bake_atlas
         bake_atlas(BRDFTable.load('{fx}/good.npz'), '{out}/a.exr', wavelengths_nm=np.array([2000.0]))""")))
     add(C("api bake_atlas wavelengths NaN", api("""
-        from specgen_addon.table import BRDFTable
-        from specgen_addon.bake import bake_atlas
+        from specgen_addon.brdf.table import BRDFTable
+        from specgen_addon.generate.lookup import bake_atlas
         bake_atlas(BRDFTable.load('{fx}/good.npz'), '{out}/a.exr', wavelengths_nm=np.array([np.nan, 500.0]))""")))
     add(C("api bake_atlas existing no overwrite", api("""
-        from specgen_addon.table import BRDFTable
-        from specgen_addon.bake import bake_atlas
+        from specgen_addon.brdf.table import BRDFTable
+        from specgen_addon.generate.lookup import bake_atlas
         bake_atlas(BRDFTable.load('{fx}/good.npz'), '{out}/a.exr', overwrite=False)"""),
         prepare="a_file->a.exr", expect="either"))
     # ordinary photos: must be accepted (converted, with a note)
     for f in ("gray.png", "gray_alpha.png", "palette.png", "gray16.png", "rgba.png", "q95.jpg", "cmyk.jpg",
               "png_named.jpg", "neg.exr"):
         add(C(f"api load_sphere_image {f}", api(f"""
-            from specgen_addon.input_image import load_sphere_image
+            from specgen_addon.photo.sphere_image import load_sphere_image
             img = load_sphere_image('{{fx}}/{f}')
             assert img.shape[-1] == 3 and np.isfinite(img).all(), img.shape"""), expect="accept"))
     for f in ("sphere.bmp", "sphere.tif", "sphere.gif"):   # other formats: read, or refused in one line
         add(C(f"api load_sphere_image {f}", api(f"""
-            from specgen_addon.input_image import load_sphere_image
+            from specgen_addon.photo.sphere_image import load_sphere_image
             load_sphere_image('{{fx}}/{f}')"""), expect="either"))
     add(C("infer gray.png", inf("--no-refine", src="{fx}/gray.png"), expect="accept", timeout=300))
     if big:

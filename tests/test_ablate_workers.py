@@ -10,7 +10,7 @@ import pytest
 
 from specgen_addon.evaluation import ablation as abl
 from specgen_addon.evaluation import ablation_study as study
-from specgen_addon.processes import ENV_START_METHOD
+from specgen_addon.common.processes import ENV_START_METHOD
 
 START_METHODS = [m for m in ("fork", "spawn") if m in mp.get_all_start_methods()]
 

@@ -160,7 +160,7 @@ def test_pooled_records_keep_every_seed_and_recompute_the_paired_effect(tmp_path
 
 
 def test_pooling_refuses_a_retrained_arm_that_disagrees_with_its_earlier_score(tmp_path):
-    from specgen_addon.errors import SpecGenError
+    from specgen_addon.common.errors import SpecGenError
     from specgen_addon.evaluation.ablation_study import pool_records
 
     with pytest.raises(SpecGenError, match="joint-aff seed 0 scores 28.300 dB now but 28.270"):

@@ -15,13 +15,13 @@ import pytest
 bpy = pytest.importorskip("bpy")
 
 from addon_modules import PKG, addon_module  # noqa: E402  (after the bpy skip)
-bake = addon_module("specgen_addon.bake")
+bake = addon_module("specgen_addon.generate.lookup")
 render = addon_module("ops.render")
 scene_mod = addon_module("ops.scene")
 
-from specgen_addon.fit import ggx_lobe  # noqa: E402
-from specgen_addon.rusinkiewicz import io_from_half_diff  # noqa: E402
-from specgen_addon.table import BRDFTable  # noqa: E402
+from specgen_addon.bake.closure_fit import ggx_lobe  # noqa: E402
+from specgen_addon.brdf.rusinkiewicz import io_from_half_diff  # noqa: E402
+from specgen_addon.brdf.table import BRDFTable  # noqa: E402
 
 WL = np.array([450.0, 550.0, 650.0])
 

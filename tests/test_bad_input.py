@@ -26,10 +26,10 @@ from pathlib import Path
 import numpy as np
 import pytest
 
-from specgen_addon import cli
-from specgen_addon.errors import BRDFFormatError, ImageInputError, SpecGenError, WeightsError
-from specgen_addon.formats.merl import MERLData, write_merl
-from specgen_addon.table import GRID_SHAPE, BRDFTable
+from specgen_addon.cli import app as cli
+from specgen_addon.common.errors import BRDFFormatError, ImageInputError, SpecGenError, WeightsError
+from specgen_addon.brdf.formats.merl import MERLData, write_merl
+from specgen_addon.brdf.table import GRID_SHAPE, BRDFTable
 
 REPO = Path(__file__).resolve().parents[1]
 EXAMPLE = REPO / "examples" / "sphere.png"
@@ -85,7 +85,7 @@ def _sphere_rgb(size: int = 64) -> np.ndarray:
 
 
 def _rgl_fields():
-    from specgen_addon.formats.rgl import read_tensor_file, write_rgl
+    from specgen_addon.brdf.formats.rgl import read_tensor_file, write_rgl
 
     m, s = 8, 3
     path = write_rgl(Path(os.environ["SPECGEN_TEST_TMP"]) / "good.bsdf", description="synthetic",
@@ -99,7 +99,7 @@ def _rgl_fields():
 
 
 def _rgl(path: Path, **changes) -> Path:
-    from specgen_addon.formats.rgl import write_tensor_file
+    from specgen_addon.brdf.formats.rgl import write_tensor_file
 
     fields = _rgl_fields()
     for key, value in changes.items():
@@ -555,25 +555,25 @@ def test_batch_refuses_bad_input_before_any_work(name, ws, capsys, batch_module)
 
 # ------------------------------------------------------------------------------------ Python API
 API_CASES = {
-    "load-brdf-folder": (lambda w: __import__("specgen_addon.formats", fromlist=["x"]).load_brdf(w.out), BRDFFormatError, "is a folder"),
+    "load-brdf-folder": (lambda w: __import__("specgen_addon.brdf.formats", fromlist=["x"]).load_brdf(w.out), BRDFFormatError, "is a folder"),
     "table-load-nan": (lambda w: BRDFTable.load(w.npz_nan), BRDFFormatError, "NaN"),
     "table-load-inf": (lambda w: BRDFTable.load(w.npz_inf), BRDFFormatError, "infinite"),
-    "merl-read-overflow": (lambda w: __import__("specgen_addon.formats.merl", fromlist=["x"]).read_merl(w.merl_inf), BRDFFormatError, "overflowing"),
-    "rgl-read-luminance-nan": (lambda w: __import__("specgen_addon.formats.rgl", fromlist=["x"]).read_rgl(w.rgl_lum_nan), BRDFFormatError, "luminance"),
-    "image-over-limit": (lambda w: __import__("specgen_addon.input_image", fromlist=["x"]).load_sphere_image(w.png_huge), ImageInputError, "megapixels"),
-    "image-exr-nan": (lambda w: __import__("specgen_addon.input_image", fromlist=["x"]).load_sphere_image(w.exr_nan), ImageInputError, "NaN"),
-    "obj-out-of-range": (lambda w: __import__("specgen_addon.mesh_checks", fromlist=["x"]).check_obj(w.obj_out_of_range), SpecGenError, "out of range"),
-    "safe-name-dotdot": (lambda w: __import__("specgen_addon.limits", fromlist=["x"]).safe_name("../x.exr"), SpecGenError, "plain file name"),
-    "safe-name-absolute": (lambda w: __import__("specgen_addon.limits", fromlist=["x"]).safe_name("/tmp/x.exr"), SpecGenError, "plain file name"),
+    "merl-read-overflow": (lambda w: __import__("specgen_addon.brdf.formats.merl", fromlist=["x"]).read_merl(w.merl_inf), BRDFFormatError, "overflowing"),
+    "rgl-read-luminance-nan": (lambda w: __import__("specgen_addon.brdf.formats.rgl", fromlist=["x"]).read_rgl(w.rgl_lum_nan), BRDFFormatError, "luminance"),
+    "image-over-limit": (lambda w: __import__("specgen_addon.photo.sphere_image", fromlist=["x"]).load_sphere_image(w.png_huge), ImageInputError, "megapixels"),
+    "image-exr-nan": (lambda w: __import__("specgen_addon.photo.sphere_image", fromlist=["x"]).load_sphere_image(w.exr_nan), ImageInputError, "NaN"),
+    "obj-out-of-range": (lambda w: __import__("specgen_addon.render.mesh_checks", fromlist=["x"]).check_obj(w.obj_out_of_range), SpecGenError, "out of range"),
+    "safe-name-dotdot": (lambda w: __import__("specgen_addon.common.limits", fromlist=["x"]).safe_name("../x.exr"), SpecGenError, "plain file name"),
+    "safe-name-absolute": (lambda w: __import__("specgen_addon.common.limits", fromlist=["x"]).safe_name("/tmp/x.exr"), SpecGenError, "plain file name"),
     "config-lr-nan": (lambda w: __import__("specgen_addon.train.loop", fromlist=["x"]).validate_train_config(w.cfg_lr_nan), SpecGenError, "finite"),
     # found by the campaign (tests/bad_input_cases.py)
     "table-load-nan-wavelengths": (lambda w: BRDFTable.load(w.npz_wl_nan), SpecGenError, "finite"),
-    "refine-not-a-table": (lambda w: _api("refine").refine_brdf("t.npz", np.full((64, 64, 3), 0.1)), SpecGenError, "BRDFTable"),
-    "bake-negative-tolerance": (lambda w: _api("bake").bake_atlas(BRDFTable.load(w.npz_good), w.out / "a.exr", tolerance=-1), SpecGenError, "tolerance"),
-    "bake-nan-wavelengths": (lambda w: _api("bake").bake_atlas(BRDFTable.load(w.npz_good), w.out / "a.exr", wavelengths_nm=np.array([np.nan, 500.0])), SpecGenError, "finite"),
-    "bake-path-under-file": (lambda w: _api("bake").bake_atlas(BRDFTable.load(w.npz_good), w.blocker / "a.exr"), SpecGenError, "is a file"),
-    "sphere-array-empty": (lambda w: _api("input_image").prepare_sphere_array(np.zeros((0, 0, 3))), ImageInputError, "too small"),
-    "sphere-array-strings": (lambda w: _api("input_image").prepare_sphere_array(np.array([["a"]])), ImageInputError, "array of numbers"),
+    "refine-not-a-table": (lambda w: _api("generate.refine").refine_brdf("t.npz", np.full((64, 64, 3), 0.1)), SpecGenError, "BRDFTable"),
+    "bake-negative-tolerance": (lambda w: _api("generate.lookup").bake_atlas(BRDFTable.load(w.npz_good), w.out / "a.exr", tolerance=-1), SpecGenError, "tolerance"),
+    "bake-nan-wavelengths": (lambda w: _api("generate.lookup").bake_atlas(BRDFTable.load(w.npz_good), w.out / "a.exr", wavelengths_nm=np.array([np.nan, 500.0])), SpecGenError, "finite"),
+    "bake-path-under-file": (lambda w: _api("generate.lookup").bake_atlas(BRDFTable.load(w.npz_good), w.blocker / "a.exr"), SpecGenError, "is a file"),
+    "sphere-array-empty": (lambda w: _api("photo.sphere_image").prepare_sphere_array(np.zeros((0, 0, 3))), ImageInputError, "too small"),
+    "sphere-array-strings": (lambda w: _api("photo.sphere_image").prepare_sphere_array(np.array([["a"]])), ImageInputError, "array of numbers"),
 }
 
 
@@ -595,7 +595,7 @@ def test_python_api_raises_one_named_error(name, ws):
 
 @NEEDS_WEIGHTS
 def test_generate_brdf_refuses_nan_weights_in_the_api(ws):
-    from specgen_addon.infer import generate_brdf
+    from specgen_addon.model.runtime.inference import generate_brdf
 
     with pytest.raises(WeightsError, match="NaN or infinite"):
         generate_brdf(str(EXAMPLE), weights=ws.weights_nan, wavelengths_nm=np.linspace(400, 700, 4))
@@ -621,7 +621,7 @@ def _photo_variants(root: Path) -> dict[str, Path]:
 
 @pytest.mark.parametrize("mode", ["L", "LA", "P", "CMYK", "RGBA", "I;16", "JPEG q95"])
 def test_ordinary_photos_are_read_and_their_sphere_found(mode, tmp_path):
-    from specgen_addon import input_image
+    from specgen_addon.photo import sphere_image as input_image
 
     path = _photo_variants(tmp_path)[mode]
     with warnings.catch_warnings(record=True) as caught:
@@ -636,8 +636,8 @@ def test_ordinary_photos_are_read_and_their_sphere_found(mode, tmp_path):
 
 
 def test_conversion_notes_print_as_one_warning_line(tmp_path, capsys):
-    from specgen_addon import input_image
-    from specgen_addon.errors import one_line_warnings
+    from specgen_addon.photo import sphere_image as input_image
+    from specgen_addon.common.errors import one_line_warnings
 
     path = _photo_variants(tmp_path)["L"]
     with warnings.catch_warnings(), one_line_warnings():
@@ -649,7 +649,7 @@ def test_conversion_notes_print_as_one_warning_line(tmp_path, capsys):
 
 
 def test_negative_exr_pixels_are_clamped_with_a_count(tmp_path):
-    from specgen_addon import input_image
+    from specgen_addon.photo import sphere_image as input_image
 
     rgb = _sphere_rgb()
     rgb[0, :5] = -0.5
@@ -659,8 +659,8 @@ def test_negative_exr_pixels_are_clamped_with_a_count(tmp_path):
 
 def test_large_photos_are_downsampled_while_decoding(tmp_path):
     from PIL import Image
-    from specgen_addon import input_image
-    from specgen_addon.limits import MAX_WORK_SIDE
+    from specgen_addon.photo import sphere_image as input_image
+    from specgen_addon.common.limits import MAX_WORK_SIDE
 
     big = Image.open(EXAMPLE).convert("RGB").resize((MAX_WORK_SIDE * 2 + 8,) * 2, Image.NEAREST)
     big.save(tmp_path / "big.png")
@@ -718,7 +718,7 @@ def test_an_image_datablock_over_the_pixel_limit_is_refused_before_its_pixels_ar
     """A photo already loaded in Blender (no file to read a header from): its size is checked
     against the same limit before the operator copies its pixels."""
     bpy, s = addon
-    limits_mod = import_module("specgen_addon.limits")
+    limits_mod = import_module("specgen_addon.common.limits")
     monkeypatch.setattr(limits_mod, "MAX_IMAGE_PIXELS", 1000)
     s.image = bpy.data.images.new("big photo", 64, 64)      # 4096 pixels, no file behind it
     with pytest.raises(RuntimeError) as info:
@@ -784,7 +784,7 @@ sys.path.insert(0, {repo!r})
 import bpy, batch
 pkg = batch.load_package()
 from importlib import import_module
-interrupts = import_module("specgen_addon.interrupts")
+interrupts = import_module("specgen_addon.common.interrupts")
 pkg.register()
 s = bpy.context.scene.specgen
 s.image_path = {image!r}
@@ -836,8 +836,8 @@ def test_cli_infer_stops_cleanly_on_sigint(tmp_path):
 def test_output_guard_removes_what_it_made_keeps_what_it_is_told_and_never_a_neighbours_file(tmp_path):
     """Ownership is by identity: the files this process published and the folders it made go;
     a file another process wrote into the same folders meanwhile stays, as does ``keep``."""
-    from specgen_addon.interrupts import OutputGuard
-    from specgen_addon.io_utils import atomic_write, make_dirs
+    from specgen_addon.common.interrupts import OutputGuard
+    from specgen_addon.common.atomic_io import atomic_write, make_dirs
 
     out = tmp_path / "run"
     out.mkdir()
@@ -868,8 +868,8 @@ def test_cancelled_generate_leaves_nothing_in_the_lookup_folder(after_calls, sta
     pytest.importorskip("bpy")
     from importlib import import_module
 
-    bake = import_module("specgen_addon.bake")
-    errors = import_module("specgen_addon.errors")
+    bake = import_module("specgen_addon.generate.lookup")
+    errors = import_module("specgen_addon.common.errors")
     out = tmp_path / "lookup"
     calls = []
 

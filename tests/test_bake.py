@@ -1,4 +1,4 @@
-"""Bake numerics in the core (specgen_addon.bake): spectral basis, lookup atlas, environment
+"""Bake numerics in the core (specgen_addon.generate.lookup): spectral basis, lookup atlas, environment
 sampling density, closure fit stored with the atlas. No bpy."""
 
 from __future__ import annotations
@@ -6,10 +6,10 @@ from __future__ import annotations
 import numpy as np
 import pytest
 
-from specgen_addon import bake
+from specgen_addon.generate import lookup as bake
 from specgen_addon.render.environment import srgb_luminance_weights
-from specgen_addon.rusinkiewicz import io_from_half_diff
-from specgen_addon.table import BRDFTable
+from specgen_addon.brdf.rusinkiewicz import io_from_half_diff
+from specgen_addon.brdf.table import BRDFTable
 
 WL = np.array([410.0, 480.0, 540.0, 600.0, 660.0, 720.0])
 

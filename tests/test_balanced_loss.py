@@ -5,7 +5,7 @@ from __future__ import annotations
 import pytest
 import torch
 
-from specgen_addon.errors import SpecGenError
+from specgen_addon.common.errors import SpecGenError
 from specgen_addon.train.loop import TrainConfig, _masked_mse, balanced_mse
 
 

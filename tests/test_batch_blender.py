@@ -25,8 +25,8 @@ RUN_AS_BLENDER = (
 
 
 def _table(path: Path) -> Path:
-    from specgen_addon.rusinkiewicz import io_from_half_diff
-    from specgen_addon.table import BRDFTable
+    from specgen_addon.brdf.rusinkiewicz import io_from_half_diff
+    from specgen_addon.brdf.table import BRDFTable
 
     rho = np.array([0.2, 0.5, 0.7])
 

@@ -18,7 +18,7 @@ from pathlib import Path
 import numpy as np
 import pytest
 
-from specgen_addon.errors import SpecGenError
+from specgen_addon.common.errors import SpecGenError
 from specgen_addon.scale import items as items_mod
 from specgen_addon.scale.batch_many import DEFAULT_BATCH_SCRIPT, check_batch_args
 from specgen_addon.scale.worker import PYTHON, run_item
@@ -123,8 +123,8 @@ def test_worker_publishes_an_item_whole_or_not_at_all(tmp_path):
 
 
 def _spectral_npz(path: Path) -> Path:
-    from specgen_addon.rusinkiewicz import io_from_half_diff
-    from specgen_addon.table import BRDFTable
+    from specgen_addon.brdf.rusinkiewicz import io_from_half_diff
+    from specgen_addon.brdf.table import BRDFTable
     from specgen_standins import RampMaterial
 
     wl = np.linspace(380.0, 780.0, 4)  # batch.py's default range
@@ -272,7 +272,7 @@ def test_ctrl_c_stops_batch_many_cleanly_with_exit_130(tmp_path):
 
 @pytest.mark.slow
 def test_prepare_renders_rgb_brdfs_to_their_photo_and_passes_spectral_tables(tmp_path, rgl_files, capsys):
-    from specgen_addon.input_image import load_sphere_image
+    from specgen_addon.photo.sphere_image import load_sphere_image
     from specgen_addon.scale import prepare
 
     kind, path = prepare.prepare(rgl_files["felt"], tmp_path / "w")  # real RGL RGB measurement

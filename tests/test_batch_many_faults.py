@@ -14,8 +14,8 @@ from pathlib import Path
 
 import pytest
 
-from specgen_addon.errors import OutputBusyError
-from specgen_addon.io_utils import lock_path
+from specgen_addon.common.errors import OutputBusyError
+from specgen_addon.common.atomic_io import lock_path
 from specgen_addon.scale import items as items_mod
 from specgen_addon.scale.batch_many import BatchManyOptions, run_batch_many
 from specgen_addon.scale.worker import PYTHON, RECORD_NAME, run_item
@@ -134,7 +134,7 @@ def test_stale_staging_of_a_killed_run_is_removed_by_the_next_run(tmp_path):
 # ------------------------------------------------------------------------------- dashboard
 def test_the_dashboard_listens_on_loopback_unless_an_address_is_given(monkeypatch):
     distributed = pytest.importorskip("distributed")
-    from specgen_addon.cli import build_parser
+    from specgen_addon.cli.app import build_parser
     from specgen_addon.scale import batch_many
 
     seen = {}

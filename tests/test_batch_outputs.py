@@ -15,8 +15,8 @@ REPO = Path(__file__).resolve().parents[1]
 
 
 def _lambert(path: Path) -> Path:
-    from specgen_addon.rusinkiewicz import io_from_half_diff
-    from specgen_addon.table import BRDFTable
+    from specgen_addon.brdf.rusinkiewicz import io_from_half_diff
+    from specgen_addon.brdf.table import BRDFTable
 
     rho = np.array([0.2, 0.5, 0.7])
 

@@ -59,7 +59,7 @@ def test_scene_only_options_need_a_scene(tmp_path, capsys):
 
 @pytest.mark.slow
 def test_batch_applies_a_photo_to_an_object_and_renders_each_frame(blend, tmp_path):
-    from specgen_addon.spectral_exr import read_spectral_exr
+    from specgen_addon.render.spectral_exr import read_spectral_exr
 
     out = tmp_path / "out"
     cmd = [sys.executable, str(REPO / "batch.py"), "--scene", str(blend), "--out", str(out),
@@ -81,7 +81,7 @@ def test_batch_applies_a_photo_to_an_object_and_renders_each_frame(blend, tmp_pa
 
 
 def test_preview_renders_a_quarter_size_frame_and_leaves_the_file_settings(blend, tmp_path):
-    from specgen_addon.spectral_exr import read_spectral_exr
+    from specgen_addon.render.spectral_exr import read_spectral_exr
 
     out = tmp_path / "out"
     assert batch.main(["--scene", str(blend), "--out", str(out), "--bands", "4", "--preview",

@@ -21,14 +21,14 @@ bpy = pytest.importorskip("bpy")
 
 from addon_modules import PKG, addon_module
 
-bake = addon_module("specgen_addon.bake")
+bake = addon_module("specgen_addon.generate.lookup")
 render = addon_module("ops.render")
 scene_mod = addon_module("ops.scene")
 properties = addon_module("ops.properties")
 
-from specgen_addon.fit import ggx_lobe
-from specgen_addon.rusinkiewicz import io_from_half_diff
-from specgen_addon.table import BRDFTable
+from specgen_addon.bake.closure_fit import ggx_lobe
+from specgen_addon.brdf.rusinkiewicz import io_from_half_diff
+from specgen_addon.brdf.table import BRDFTable
 
 REPO = Path(__file__).resolve().parents[1]
 WL = np.array([450.0, 550.0, 650.0])

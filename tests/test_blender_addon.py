@@ -20,14 +20,14 @@ bpy = pytest.importorskip("bpy")
 
 import batch  # noqa: E402
 from addon_modules import PKG, addon_module, psnr as _psnr  # noqa: E402  (after the bpy skip)
-bake = addon_module("specgen_addon.bake")
+bake = addon_module("specgen_addon.generate.lookup")
 render = addon_module("ops.render")
 scene_mod = addon_module("ops.scene")
-core_errors = addon_module("specgen_addon.errors")
+core_errors = addon_module("specgen_addon.common.errors")
 
 from specgen_addon.render import DistantLight, Environment, EnvSampling, render_spectral, sphere_geometry  # noqa: E402
-from specgen_addon.rusinkiewicz import io_from_half_diff  # noqa: E402
-from specgen_addon.table import BRDFTable  # noqa: E402
+from specgen_addon.brdf.rusinkiewicz import io_from_half_diff  # noqa: E402
+from specgen_addon.brdf.table import BRDFTable  # noqa: E402
 
 REPO = Path(__file__).resolve().parents[1]
 WL = np.array([410.0, 480.0, 540.0, 600.0, 660.0, 720.0])
@@ -161,7 +161,7 @@ def test_cycles_sphere_matches_reference_under_a_sun(rich_table, tmp_path):
 
 @pytest.mark.slow
 def test_cycles_sphere_matches_reference_under_an_environment_map(table, tmp_path):
-    from specgen_addon.lighting import env_path
+    from specgen_addon.render.environment_maps import env_path
 
     env = Environment.from_file(env_path("forest"), max_width=8)  # the reference's texels …
     env_file = tmp_path / "env.exr"
@@ -184,7 +184,7 @@ def test_cycles_sphere_matches_reference_under_an_environment_map(table, tmp_pat
 
 # ------------------------------------------------------------------------- outputs
 def test_spectral_exr_and_preview_are_written_and_cancel_writes_nothing(table, tmp_path):
-    from specgen_addon.spectral_exr import read_spectral_exr
+    from specgen_addon.render.spectral_exr import read_spectral_exr
 
     info = bake.bake_atlas(table, tmp_path / "lookup" / "a.exr")
     sc = _sphere_scene(info)
@@ -240,11 +240,11 @@ def test_extension_zip_installs_and_registers(tmp_path):
         "import bl_ext.user_default.specgen as ext\n"
         "assert 'bl_ext.user_default.specgen.ops.render' not in sys.modules or True\n"
         "assert hasattr(bpy.types, 'SPECGEN_PT_main') and hasattr(bpy.types.Scene, 'specgen')\n"
-        "from specgen_addon import bake\n"
+        "from specgen_addon.generate import lookup as bake\n"
         "assert bake.__file__.startswith(ext.__file__.rsplit('__init__', 1)[0]), bake.__file__\n"
         "from bl_ext.user_default.specgen.ops import reporting\n"
-        "from specgen_addon import errors\n"
-        "from specgen_addon.cli import run_guarded\n"
+        "from specgen_addon.common import errors\n"
+        "from specgen_addon.cli.app import run_guarded\n"
         "assert reporting.Cancelled is errors.Cancelled  # one core for the extension and the CLI\n"
         "def work():\n"
         "    raise reporting.Cancelled('stopped in the extension')\n"
@@ -361,7 +361,7 @@ def test_operators_apply_and_render_headless_and_report_errors(table, tmp_path):
         s.render_mode = "FULL_SCENE"                 # the scene's resolution and samples
         sc.render.resolution_x, sc.render.resolution_y, sc.cycles.samples = 12, 8, 1
         assert bpy.ops.specgen.render_stack(filename="full.exr") == {"FINISHED"}
-        from specgen_addon.spectral_exr import read_spectral_exr
+        from specgen_addon.render.spectral_exr import read_spectral_exr
 
         assert read_spectral_exr(tmp_path / "out" / "full.exr").values.shape == (8, 12, s.bands)
         assert "specgen_fit_error" in obj.active_material

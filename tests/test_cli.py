@@ -4,7 +4,7 @@ from pathlib import Path
 
 import numpy as np
 
-from specgen_addon.formats.merl import MERLData, write_merl
+from specgen_addon.brdf.formats.merl import MERLData, write_merl
 
 REPO = Path(__file__).resolve().parents[1]
 

@@ -5,7 +5,8 @@ from __future__ import annotations
 import numpy as np
 import pytest
 
-from specgen_addon import colour_tables, spectra
+from specgen_addon.spectral import colour_tables
+from specgen_addon.spectral import spectra
 from specgen_addon.render.environment import srgb_luminance_weights, uplift_basis
 
 colour = pytest.importorskip("colour")

@@ -9,9 +9,9 @@ from pathlib import Path
 
 import pytest
 
-from specgen_addon.config_schema import read_config_dict
+from specgen_addon.train.config_schema import read_config_dict
 from specgen_addon.train.loop import validate_train_config
-from specgen_addon.errors import SpecGenError
+from specgen_addon.common.errors import SpecGenError
 from specgen_addon.train.loop import load_config
 
 BASE = {"model": {"spectral_code_knots": 6},

@@ -8,7 +8,7 @@ import numpy as np
 import pytest
 from scipy.stats import qmc
 
-from specgen_addon.cli import main as cli_main
+from specgen_addon.cli.app import main as cli_main
 from specgen_addon.corpus import (SPLITS, ClearCoat, Conductor, Dielectric, Material, Reflectance,
                                   generate_corpus, load_manifest, make_material, metal_ior,
                                   save_manifest)
@@ -16,10 +16,10 @@ from specgen_addon.corpus.fresnel import cauchy_ior, fresnel_conductor, fresnel_
 from specgen_addon.corpus.microfacet import ggx_d, smith_lambda
 from specgen_addon.corpus.spectra_sources import (DUPLICATE_RMS, REFLECTANCE_GRID_NM,
                                                   measured_spectra, rms_distance)
-from specgen_addon.errors import OutputExistsError, SpecGenError
-from specgen_addon.rusinkiewicz import io_from_half_diff
-from specgen_addon.spectra import DEFAULT_WAVELENGTHS_NM as WL
-from specgen_addon.table import grid_angles
+from specgen_addon.common.errors import OutputExistsError, SpecGenError
+from specgen_addon.brdf.rusinkiewicz import io_from_half_diff
+from specgen_addon.spectral.spectra import DEFAULT_WAVELENGTHS_NM as WL
+from specgen_addon.brdf.table import grid_angles
 
 FLAT_WHITE = Reflectance("flat white", (1.0,) * REFLECTANCE_GRID_NM.size)
 
@@ -332,7 +332,7 @@ def test_corpus_cli_writes_manifest_and_a_table(tmp_path, capsys):
     # Re-running with the same arguments is fine; other materials need --overwrite.
     assert cli_main(["corpus", "--n", "6", "--seed", "4", "--out", str(out), "--quiet",
                      "--tabulate", "mat0002", "--bands", "3"]) == 0
-    from specgen_addon.table import BRDFTable
+    from specgen_addon.brdf.table import BRDFTable
 
     table = BRDFTable.load(out / "mat0002.npz")
     assert table.values.shape == (90, 90, 180, 3)

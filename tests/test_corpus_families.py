@@ -16,7 +16,7 @@ from specgen_addon.corpus.fresnel import fresnel_conductor, fresnel_dielectric
 from specgen_addon.corpus.generate import FAMILY_MIX, check_mix, generate_mixed_corpus, material_family
 from specgen_addon.corpus.microfacet import ggx_d
 from specgen_addon.corpus.spectra_sources import REFLECTANCE_GRID_NM, measured_groups
-from specgen_addon.errors import SpecGenError
+from specgen_addon.common.errors import SpecGenError
 
 WL = np.array([400.0, 450.0, 500.0, 550.0, 600.0, 650.0, 700.0])
 WHITE = Reflectance("flat white", (1.0,) * REFLECTANCE_GRID_NM.size)
@@ -84,7 +84,7 @@ def test_family_material_round_trips_through_its_dict(material):
 
 
 def test_family_eval_hd_and_rgb_agree_with_eval():
-    from specgen_addon.rusinkiewicz import io_from_half_diff
+    from specgen_addon.brdf.rusinkiewicz import io_from_half_diff
 
     m = _examples()[0]
     rng = np.random.default_rng(3)
@@ -226,7 +226,7 @@ def test_family_mix_is_checked_before_any_work():
     (["--n", "5", "--bands", "0"], "--bands must be"),
 ])
 def test_corpus_command_refuses_bad_sizes_seeds_and_families(tmp_path, capsys, argv, message):
-    from specgen_addon.cli import main as cli_main
+    from specgen_addon.cli.app import main as cli_main
 
     out = tmp_path / "c"
     assert cli_main(["corpus", "--out", str(out), "--quiet", *argv]) == 2
@@ -235,7 +235,7 @@ def test_corpus_command_refuses_bad_sizes_seeds_and_families(tmp_path, capsys, a
 
 
 def test_corpus_command_writes_a_mixed_manifest_that_loads_back(tmp_path):
-    from specgen_addon.cli import main as cli_main
+    from specgen_addon.cli.app import main as cli_main
     from specgen_addon.corpus import load_manifest
 
     out = tmp_path / "c"

@@ -6,8 +6,8 @@ import numpy as np
 import pytest
 
 from specgen_addon.corpus.generate import material_family
-from specgen_addon.errors import SpecGenError
-from specgen_addon.train.evaluate import (evaluate_families, format_family_results, mixed_split_materials,
+from specgen_addon.common.errors import SpecGenError
+from specgen_addon.evaluation.trained_network import (evaluate_families, format_family_results, mixed_split_materials,
                                          mixed_test_materials)
 
 
@@ -77,8 +77,8 @@ def test_input_env_photographs_the_input_under_that_map(shared_dir):
 
 def test_evaluate_family_option_scores_only_that_family_and_skips_rgl(monkeypatch, tmp_path):
     """``evaluate --families N --family sheen`` hands the family list on and leaves out the RGL rows."""
-    import specgen_addon.train.evaluate as ev
-    from specgen_addon.cli import main as cli_main
+    import specgen_addon.evaluation.trained_network as ev
+    from specgen_addon.cli.app import main as cli_main
 
     seen = {}
 
@@ -108,10 +108,10 @@ def test_evaluate_family_option_scores_only_that_family_and_skips_rgl(monkeypatc
 def test_a_material_reproduces_its_own_photo_and_another_material_does_not(input_env):
     """The self-reproduction scores a BRDF in the very scene its input photo was taken in: the true
     material gives its photo back (to float32 rounding), another material does not."""
-    from specgen_addon import input_image
+    from specgen_addon.photo import sphere_image as input_image
     from specgen_addon.evaluation.protocol import input_lighting_under, input_under_environment, test_materials
     from specgen_addon.evaluation.self_reproduction import self_reproduction
-    from specgen_addon.input_lighting import InputLighting
+    from specgen_addon.photo.photo_lighting import InputLighting
 
     truth, other = test_materials(2)
     if input_env is None:

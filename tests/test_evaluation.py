@@ -5,7 +5,7 @@ from __future__ import annotations
 import numpy as np
 import pytest
 
-from specgen_addon import spectra
+from specgen_addon.spectral import spectra
 from specgen_addon.evaluation import baselines, report
 
 WL = spectra.wavelength_grid(400.0, 780.0, 20)
@@ -154,7 +154,7 @@ def test_paper_tables_smoke_run_writes_every_table_and_resumes(tmp_path, monkeyp
     """
     import torch
 
-    from specgen_addon.cli import main
+    from specgen_addon.cli.app import main
     from specgen_addon.model import Config, SpecGen, save_weights
 
     monkeypatch.setenv("SPECGEN_CACHE_DIR", str(tmp_path / "cache"))
@@ -218,11 +218,11 @@ def test_network_brdf_equals_the_generated_table_at_grid_points(tmp_path):
     """Direct queries (ablation scoring) and generate_brdf's table agree where the grid is sampled."""
     import torch
 
-    from specgen_addon import infer
+    from specgen_addon.model.runtime import inference as infer
     from specgen_addon.evaluation.network_brdf import NetworkBRDF
     from specgen_addon.model import Config, SpecGen, save_weights
-    from specgen_addon.rusinkiewicz import io_from_half_diff
-    from specgen_addon.table import grid_angles
+    from specgen_addon.brdf.rusinkiewicz import io_from_half_diff
+    from specgen_addon.brdf.table import grid_angles
 
     torch.manual_seed(3)
     model = SpecGen(Config())
@@ -261,7 +261,7 @@ def test_recorded_arms_round_trip(tmp_path):
 
 
 def test_paper_tables_settings_refuse_an_unknown_input_photo_and_key_the_cache_by_it():
-    from specgen_addon.errors import SpecGenError
+    from specgen_addon.common.errors import SpecGenError
     from specgen_addon.evaluation import tables
 
     with pytest.raises(SpecGenError, match="input photo"):
@@ -276,7 +276,7 @@ def test_paper_tables_settings_refuse_an_unknown_input_photo_and_key_the_cache_b
 def test_harness_gives_every_method_the_photo_its_settings_name(tmp_path):
     """The network, its refinement and the photo fits all read Harness.input_photo: the canonical
     render for 'canonical', the independently sampled one (also under a map) for 'independent'."""
-    from specgen_addon import input_image
+    from specgen_addon.photo import sphere_image as input_image
     from specgen_addon.evaluation import protocol, tables
     from specgen_addon.render.analytic import GGXReflector
 

@@ -11,10 +11,10 @@ import pytest
 bpy = pytest.importorskip("bpy")
 
 from addon_modules import addon_module  # noqa: E402  (after the bpy skip)
-bake = addon_module("specgen_addon.bake")
+bake = addon_module("specgen_addon.generate.lookup")
 render = addon_module("ops.render")
 scene_mod = addon_module("ops.scene")
-core_errors = addon_module("specgen_addon.errors")
+core_errors = addon_module("specgen_addon.common.errors")
 
 
 def _light(sc, name, kind, energy, location=(0.0, 0.0, 5.0), collection=None, **props):

@@ -10,12 +10,12 @@ bpy = pytest.importorskip("bpy")
 
 from addon_modules import PKG, addon_module
 
-bake = addon_module("specgen_addon.bake")
+bake = addon_module("specgen_addon.generate.lookup")
 render = addon_module("ops.render")
 
-from specgen_addon.formats import load_brdf
-from specgen_addon.rusinkiewicz import io_from_half_diff
-from specgen_addon.table import BRDFTable
+from specgen_addon.brdf.formats import load_brdf
+from specgen_addon.brdf.rusinkiewicz import io_from_half_diff
+from specgen_addon.brdf.table import BRDFTable
 
 WL = np.array([450.0, 550.0, 650.0])
 

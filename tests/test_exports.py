@@ -11,16 +11,16 @@ from pathlib import Path
 import numpy as np
 import pytest
 
-from specgen_addon import metrics
-from specgen_addon.errors import SpecGenError
+from specgen_addon.render import metrics
+from specgen_addon.common.errors import SpecGenError
 from specgen_addon.evaluation.protocol import DISTANT_LIGHTS
-from specgen_addon.formats import load_brdf
-from specgen_addon.formats.export import table_to_rgl, write_output
-from specgen_addon.formats.merl import read_merl
+from specgen_addon.brdf.formats import load_brdf
+from specgen_addon.brdf.formats.export import table_to_rgl, write_output
+from specgen_addon.brdf.formats.merl import read_merl
 from specgen_addon.render import Scene, sphere_geometry
 from specgen_addon.render.analytic import GGXReflector
-from specgen_addon.rusinkiewicz import io_from_half_diff
-from specgen_addon.table import BRDFTable
+from specgen_addon.brdf.rusinkiewicz import io_from_half_diff
+from specgen_addon.brdf.table import BRDFTable
 
 REPO = Path(__file__).resolve().parents[1]
 MIN_DB = 35.0

@@ -19,8 +19,8 @@ from pathlib import Path
 import numpy as np
 import pytest
 
-from specgen_addon.errors import OutputBusyError, OutputExistsError, OutputWriteError, SpecGenError
-from specgen_addon.io_utils import OutputLock, atomic_write, lock_path
+from specgen_addon.common.errors import OutputBusyError, OutputExistsError, OutputWriteError, SpecGenError
+from specgen_addon.common.atomic_io import OutputLock, atomic_write, lock_path
 
 REPO = Path(__file__).resolve().parents[1]
 EXAMPLE = REPO / "examples" / "sphere.png"
@@ -30,7 +30,7 @@ WEIGHTS = REPO / "weights" / "specgen_default.pt"
 # ------------------------------------------------------------------------ owning what it made
 def test_a_failed_command_never_removes_a_file_another_process_published(tmp_path):
     """The loser of a race on one output used to delete the winner's file on its way out."""
-    from specgen_addon.cli import run_guarded
+    from specgen_addon.cli.app import run_guarded
 
     out = tmp_path / "b.npz"
 
@@ -56,7 +56,7 @@ def test_a_write_without_overwrite_never_replaces_a_file_that_appeared_meanwhile
 
 def test_a_stopped_command_keeps_a_neighbours_outputs_in_its_folder(tmp_path):
     """Two batch.py runs into one folder: the stopped one removes only what it made."""
-    from specgen_addon.interrupts import OutputGuard
+    from specgen_addon.common.interrupts import OutputGuard
 
     out = tmp_path / "out"
     out.mkdir()
@@ -70,7 +70,7 @@ def test_a_stopped_command_keeps_a_neighbours_outputs_in_its_folder(tmp_path):
 
 
 def test_cleanup_spares_a_file_replaced_by_another_process_after_we_wrote_it(tmp_path):
-    from specgen_addon.interrupts import OutputGuard
+    from specgen_addon.common.interrupts import OutputGuard
 
     out = tmp_path / "out"
     out.mkdir()
@@ -140,7 +140,7 @@ def test_names_up_to_the_file_system_limit_are_written_despite_the_staging_name(
 
 
 def test_a_name_over_the_limit_is_one_sentence_before_any_work(tmp_path):
-    from specgen_addon.limits import check_output_file
+    from specgen_addon.common.limits import check_output_file
 
     with pytest.raises(SpecGenError, match="256 bytes long"):
         check_output_file(tmp_path / ("n" * 252 + ".npz"))
@@ -166,14 +166,15 @@ def full_dir(tmp_path):
 
 
 def _big_table():
-    from specgen_addon.table import GRID_SHAPE, BRDFTable
+    from specgen_addon.brdf.table import GRID_SHAPE, BRDFTable
 
     return BRDFTable(np.full(GRID_SHAPE + (2,), 0.1, np.float32), np.array([500.0, 600.0]),
                      ("500", "600"), {})
 
 
 def _writers(folder: Path) -> dict:
-    from specgen_addon import image_io, spectral_exr
+    from specgen_addon.common import image_io
+    from specgen_addon.render import spectral_exr
 
     def big_json():
         with atomic_write(folder / "report.json") as tmp:
@@ -242,8 +243,8 @@ def test_a_full_disk_under_the_cli_prints_one_line_without_a_traceback(full_dir)
     """numpy's zip writer used to leave its archive open after ENOSPC: one line of error, then
     "Exception ignored … ValueError: seek of closed file" at exit."""
     code = ("import sys, numpy as np; sys.path.insert(0, %r)\n"
-            "from specgen_addon.cli import run_guarded\n"
-            "from specgen_addon.table import GRID_SHAPE, BRDFTable\n"
+            "from specgen_addon.cli.app import run_guarded\n"
+            "from specgen_addon.brdf.table import GRID_SHAPE, BRDFTable\n"
             "t = BRDFTable(np.full(GRID_SHAPE + (2,), 0.1, np.float32), np.array([500.0, 600.0]), ('a', 'b'), {})\n"
             "sys.exit(run_guarded('infer', lambda: t.save(%r), ([], [%r])))\n"
             % (str(REPO), str(full_dir / "b.npz"), str(full_dir / "b.npz")))
@@ -290,7 +291,7 @@ def test_flipped_bytes_in_shipped_weights_are_refused_with_the_file_named(tmp_pa
 def test_a_truncated_shipped_graph_is_refused_not_replaced_by_torch(tmp_path):
     """batch.py's onnx→torch fallback used to take a damaged graph silently."""
     pytest.importorskip("onnxruntime")
-    from specgen_addon import bake
+    from specgen_addon.generate import lookup as bake
     from specgen_addon.model.checksums import DamagedWeightsError
 
     pt = _copy_shipped(tmp_path)
@@ -306,8 +307,9 @@ def test_a_fallback_to_torch_is_said(tmp_path, monkeypatch):
     """Graphs missing beside the user's own weights: the torch backend runs, with a warning."""
     pytest.importorskip("onnxruntime")
     pytest.importorskip("torch")
-    from specgen_addon import bake, pipeline
-    from specgen_addon.errors import WeightsError
+    from specgen_addon.generate import lookup as bake
+    from specgen_addon.generate import pipeline
+    from specgen_addon.common.errors import WeightsError
 
     calls = []
 
@@ -339,8 +341,8 @@ def _tiled_exr(path: Path, rgb: np.ndarray, tile: int = 16) -> Path:
 def test_a_20000_by_10000_map_is_refused_from_its_header_in_under_a_second(tmp_path):
     import struct
 
-    from specgen_addon import image_io
-    from specgen_addon.input_lighting import LightingError, parse_lighting
+    from specgen_addon.common import image_io
+    from specgen_addon.photo.photo_lighting import LightingError, parse_lighting
 
     path = tmp_path / "huge.exr"
     image_io.write_exr(path, {c: np.full((1, 2), 0.5, np.float32) for c in "RGB"})
@@ -357,8 +359,8 @@ def test_a_20000_by_10000_map_is_refused_from_its_header_in_under_a_second(tmp_p
 
 @pytest.mark.parametrize("shape", [(64, 64), (8, 512), (512, 8)])
 def test_a_map_that_is_not_2_to_1_is_refused(tmp_path, shape):
-    from specgen_addon import image_io
-    from specgen_addon.input_lighting import LightingError, parse_lighting
+    from specgen_addon.common import image_io
+    from specgen_addon.photo.photo_lighting import LightingError, parse_lighting
 
     path = tmp_path / "map.exr"
     image_io.write_exr(path, {c: np.full(shape, 0.5, np.float32) for c in "RGB"})
@@ -368,9 +370,9 @@ def test_a_map_that_is_not_2_to_1_is_refused(tmp_path, shape):
 
 @pytest.mark.parametrize("tiled", [False, True])
 def test_a_map_is_read_in_strips_as_the_renderer_reads_it_and_negative_texels_are_said(tmp_path, tiled):
-    from specgen_addon import image_io
-    from specgen_addon.image_checks import ImageNote
-    from specgen_addon.input_lighting import read_map_bounded
+    from specgen_addon.common import image_io
+    from specgen_addon.photo.image_checks import ImageNote
+    from specgen_addon.photo.photo_lighting import read_map_bounded
     from specgen_addon.render.environment import _box_downsample, read_exr_rgb
 
     rgb = np.random.default_rng(1).random((1024, 2048, 3)).astype(np.float32)
@@ -411,7 +413,7 @@ def test_two_infer_on_one_npz_the_second_is_refused_and_the_first_keeps_its_file
         if first.poll() is None:
             first.kill()
     assert first.returncode == 0, text
-    from specgen_addon.table import BRDFTable
+    from specgen_addon.brdf.table import BRDFTable
 
     assert BRDFTable.load(out).is_spectral
     assert sorted(p.name for p in tmp_path.iterdir()) == ["b.npz"]
@@ -477,8 +479,8 @@ from pathlib import Path
 sys.path.insert(0, {repo!r})
 sys.path.insert(0, {blender!r})
 import fake_blender
-from specgen_addon.cli import run_guarded
-from specgen_addon.io_utils import atomic_write
+from specgen_addon.cli.app import run_guarded
+from specgen_addon.common.atomic_io import atomic_write
 
 out = Path({out!r})
 
@@ -523,7 +525,7 @@ def test_a_hard_stop_while_an_output_is_staged_removes_the_staging_file(tmp_path
 
 def test_a_new_output_folder_in_new_parents_is_locked_too_and_they_go_when_it_fails(tmp_path):
     """batch.py --out new/deep/out: the lock needs a folder beside the output to live in."""
-    from specgen_addon.cli import run_guarded
+    from specgen_addon.cli.app import run_guarded
 
     out = tmp_path / "new" / "deep" / "out"
     seen = []

@@ -1,16 +1,16 @@
-"""Native closure fit (specgen_addon.fit.closures): model, recovery, reported error. No bpy."""
+"""Native closure fit (specgen_addon.bake.closure_fit.closures): model, recovery, reported error. No bpy."""
 
 from __future__ import annotations
 
 import numpy as np
 import pytest
 
-from specgen_addon.errors import SpecGenError
-from specgen_addon.fit import ClosureFit, fit_closures, ggx_lobe, rgb_standin
-from specgen_addon.fit.closures import (StackClosure, fresnel_dielectric, group_closures, stack_layout,
+from specgen_addon.common.errors import SpecGenError
+from specgen_addon.bake.closure_fit import ClosureFit, fit_closures, ggx_lobe, rgb_standin
+from specgen_addon.bake.closure_fit.closures import (StackClosure, fresnel_dielectric, group_closures, stack_layout,
                                        standin_closures)
-from specgen_addon.rusinkiewicz import io_from_half_diff
-from specgen_addon.table import BRDFTable
+from specgen_addon.brdf.rusinkiewicz import io_from_half_diff
+from specgen_addon.brdf.table import BRDFTable
 
 WL = np.array([420.0, 500.0, 580.0, 660.0])
 RHO = np.array([0.1, 0.5, 0.3, 0.2])
@@ -101,7 +101,7 @@ def test_fit_recovers_a_fresnel_weighted_plastic():
     assert {"Diffuse Fresnel", "Lobe 1 Fresnel"} <= {t[0] for t in fit.terms()}
     np.testing.assert_allclose(fit.diffuse_fresnel, RHO, rtol=0.01)
     wi, wo = _dirs(500, seed=5)
-    np.testing.assert_allclose(fit.eval(wi, wo), plastic(*__import__("specgen_addon.rusinkiewicz",
+    np.testing.assert_allclose(fit.eval(wi, wo), plastic(*__import__("specgen_addon.brdf.rusinkiewicz",
                                fromlist=["half_diff_from_io"]).half_diff_from_io(wi, wo)),
                                rtol=0.03, atol=1e-3)
 

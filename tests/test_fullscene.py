@@ -18,18 +18,19 @@ bpy = pytest.importorskip("bpy")
 
 import batch  # noqa: E402
 from addon_modules import addon_module, psnr as _psnr  # noqa: E402  (after the bpy skip)
-bake = addon_module("specgen_addon.bake")
+bake = addon_module("specgen_addon.generate.lookup")
 render = addon_module("ops.render")
 fullscene = addon_module("ops.render_fullscene")
 convert = addon_module("ops.scene_convert")
 scene_mod = addon_module("ops.scene")
 demo = addon_module("ops.demo_scenes")
-core_errors = addon_module("specgen_addon.errors")
+core_errors = addon_module("specgen_addon.common.errors")
 
-from specgen_addon import spectra, uplift  # noqa: E402
-from specgen_addon.fit import ggx_lobe  # noqa: E402
-from specgen_addon.rusinkiewicz import io_from_half_diff  # noqa: E402
-from specgen_addon.table import BRDFTable  # noqa: E402
+from specgen_addon.spectral import spectra  # noqa: E402
+from specgen_addon.bake import scene_uplift as uplift  # noqa: E402
+from specgen_addon.bake.closure_fit import ggx_lobe  # noqa: E402
+from specgen_addon.brdf.rusinkiewicz import io_from_half_diff  # noqa: E402
+from specgen_addon.brdf.table import BRDFTable  # noqa: E402
 
 WL = np.array([410.0, 480.0, 540.0, 600.0, 660.0, 720.0])
 RGB_WL = spectra.wavelength_grid(380.0, 780.0, 21)
@@ -80,7 +81,7 @@ def test_spectral_stack_projected_to_rgb_matches_a_plain_rgb_cycles_render():
 
 @pytest.mark.parametrize("kind", ["lambert+ggx", "fresnel-plastic", "per-band-roughness"])
 def test_full_scene_mode_matches_the_exact_mode_on_a_specgen_only_scene(tmp_path, kind):
-    from specgen_addon.fit.closures import fresnel_dielectric
+    from specgen_addon.bake.closure_fit.closures import fresnel_dielectric
 
     rho = np.interp(WL, [400, 550, 720], [0.15, 0.7, 0.35])
     spec = np.interp(WL, [400, 720], [0.9, 0.2])
@@ -157,7 +158,7 @@ def test_blackbody_light_and_emission_render_like_cycles(blank_scene):
 
 # ------------------------------------------------------------------------- scene settings
 def test_output_follows_resolution_border_transparency_and_writes_alpha(tmp_path):
-    from specgen_addon.spectral_exr import read_spectral_exr
+    from specgen_addon.render.spectral_exr import read_spectral_exr
 
     sc = _ordinary_scene(samples=2, size=(40, 30))
     sc.render.resolution_percentage = 50                          # 20 × 15
@@ -237,7 +238,7 @@ def test_batch_renders_a_blend_file_in_full_scene_mode(white_atlas, tmp_path):
     import subprocess
     import sys
 
-    from specgen_addon.spectral_exr import read_spectral_exr
+    from specgen_addon.render.spectral_exr import read_spectral_exr
 
     bpy.ops.wm.read_factory_settings(use_empty=True)
     mat = render.make_material("SpecGen white", white_atlas)

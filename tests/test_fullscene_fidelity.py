@@ -3,7 +3,7 @@
 The Full Scene render draws a SpecGen material's direct light from the exact lookups and leaves
 only the bounces to the fitted closure stack (ops/exact_direct.py); the closure fit weighs table
 entries by the direction pairs they stand for and reports its rendered colour error
-(specgen_addon/fit/fit_check.py). Truth: the NumPy reference renderer (specgen_addon.render) on
+(specgen_addon/bake/closure_fit/fit_check.py). Truth: the NumPy reference renderer (specgen_addon.render) on
 the same sphere under the same D65 sun (as bench/fullscene_vs_reference.py).
 """
 
@@ -14,11 +14,11 @@ from pathlib import Path
 import numpy as np
 import pytest
 
-from specgen_addon.fit import fit_closures, ggx_lobe
-from specgen_addon.fit.closures import cell_volumes
-from specgen_addon.fit.fit_check import WARN_DELTA_E, rendered_fit_error
-from specgen_addon.rusinkiewicz import io_from_half_diff
-from specgen_addon.table import BRDFTable
+from specgen_addon.bake.closure_fit import fit_closures, ggx_lobe
+from specgen_addon.bake.closure_fit.closures import cell_volumes
+from specgen_addon.bake.closure_fit.fit_check import WARN_DELTA_E, rendered_fit_error
+from specgen_addon.brdf.rusinkiewicz import io_from_half_diff
+from specgen_addon.brdf.table import BRDFTable
 
 WL = np.array([420.0, 480.0, 540.0, 600.0, 660.0, 720.0])
 RHO = np.interp(WL, [400, 550, 720], [0.1, 0.45, 0.6])
@@ -65,7 +65,7 @@ def test_rendered_fit_error_is_small_inside_the_model_and_flags_a_material_outsi
 
 
 def test_the_checked_fit_keeps_the_weighting_that_renders_closer(outside_table):
-    from specgen_addon.fit.closures import WEIGHTINGS
+    from specgen_addon.bake.closure_fit.closures import WEIGHTINGS
 
     errors = [rendered_fit_error(fit_closures(outside_table, weighting=w), outside_table) for w in WEIGHTINGS]
     assert fit_closures(outside_table, check=True).rendered_error == pytest.approx(min(errors))
@@ -81,7 +81,7 @@ def _sphere_render(table: BRDFTable, tmp_path: Path, res: int = 40, samples: int
 
     from specgen_addon.render import DistantLight, render_spectral, sphere_geometry
 
-    bake = addon_module("specgen_addon.bake")
+    bake = addon_module("specgen_addon.generate.lookup")
     render = addon_module("ops.render")
     fullscene = addon_module("ops.render_fullscene")
     scene_mod = addon_module("ops.scene")
@@ -105,8 +105,8 @@ def _sphere_render(table: BRDFTable, tmp_path: Path, res: int = 40, samples: int
 
 
 def _score(ref: np.ndarray, got: np.ndarray, wl: np.ndarray) -> tuple[float, float]:
-    from specgen_addon.refine.report import delta_e2000, photo_scale
-    from specgen_addon.spectral_exr import linear_srgb_preview
+    from specgen_addon.render.photo_reproduction import delta_e2000, photo_scale
+    from specgen_addon.render.spectral_exr import linear_srgb_preview
 
     mask = ref.sum(-1) > 0
     a, b = linear_srgb_preview(ref, wl)[mask], linear_srgb_preview(got, wl)[mask]
@@ -129,7 +129,7 @@ def test_full_scene_renders_a_material_the_closures_cannot_hold(outside_table, t
 @pytest.mark.blender
 @pytest.mark.slow
 def test_full_scene_renders_the_example_photos_material_as_the_reference(repo_dir, tmp_path):
-    from specgen_addon import pipeline
+    from specgen_addon.generate import pipeline
 
     table = pipeline.generate(repo_dir / "examples" / "sphere.png").table   # network + refinement
     ref, full, _, warnings, fit = _sphere_render(table, tmp_path, res=48)
@@ -145,7 +145,7 @@ def test_exact_direct_light_changes_only_the_specgen_surface_of_an_ordinary_scen
     from bpy_extras.object_utils import world_to_camera_view
     from mathutils import Vector
 
-    bake = addon_module("specgen_addon.bake")
+    bake = addon_module("specgen_addon.generate.lookup")
     render = addon_module("ops.render")
     fullscene = addon_module("ops.render_fullscene")
     convert = addon_module("ops.scene_convert")
@@ -183,7 +183,7 @@ def test_exact_mode_matches_the_reference_with_the_sun_behind_the_camera(tmp_pat
 
     from specgen_addon.render import DistantLight, render_spectral, sphere_geometry
 
-    bake = addon_module("specgen_addon.bake")
+    bake = addon_module("specgen_addon.generate.lookup")
     render = addon_module("ops.render")
     scene_mod = addon_module("ops.scene")
     table = BRDFTable.tabulate(_inside_the_model, WL)
@@ -205,7 +205,7 @@ def test_other_materials_of_a_specgen_object_keep_their_own_light(outside_table,
     bpy = pytest.importorskip("bpy")
     from addon_modules import addon_module
 
-    bake = addon_module("specgen_addon.bake")
+    bake = addon_module("specgen_addon.generate.lookup")
     render = addon_module("ops.render")
     fullscene = addon_module("ops.render_fullscene")
     scene_mod = addon_module("ops.scene")

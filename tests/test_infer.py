@@ -6,12 +6,12 @@ import numpy as np
 import pytest
 import torch
 
-from specgen_addon import infer
-from specgen_addon.errors import Cancelled, ImageInputError, SpecGenError, WeightsError
+from specgen_addon.model.runtime import inference as infer
+from specgen_addon.common.errors import Cancelled, ImageInputError, SpecGenError, WeightsError
 from specgen_addon.model import Config, SpecGen, save_weights
-from specgen_addon.model.fast import GridHead, GridTables, lambda_coords
-from specgen_addon.lookup_reach import phi_d_reach
-from specgen_addon.table import grid_angles
+from specgen_addon.model.runtime.fast import GridHead, GridTables, lambda_coords
+from specgen_addon.brdf.lookup_reach import phi_d_reach
+from specgen_addon.brdf.table import grid_angles
 from tiny_model import TINY_MODEL
 
 SMALL = TINY_MODEL
@@ -21,7 +21,7 @@ BANDS = np.array([400.0, 515.0, 690.0])
 @pytest.fixture(scope="module")
 def sphere_image() -> np.ndarray:
     """A canonical input render (64², linear sRGB) of a closed-form spectral material."""
-    from specgen_addon.input_image import render_input
+    from specgen_addon.photo.sphere_image import render_input
     from specgen_standins import RampMaterial
 
     return render_input(RampMaterial(), size=64)
@@ -67,7 +67,7 @@ def test_fast_grid_equals_naive_per_query_evaluation(tmp_path, fusion, knots):
 
 
 def test_shifted_logit_segments_give_the_logits_minus_their_maximum(tmp_path):
-    from specgen_addon.model.gather import shifted_logit_segments
+    from specgen_addon.model.runtime.gather import shifted_logit_segments
 
     _, model = small_weights(tmp_path)
     torch.nn.init.normal_(model.fusion.heads.weight, std=3.0)      # many arg-max changes
@@ -85,7 +85,7 @@ def test_shifted_logit_segments_give_the_logits_minus_their_maximum(tmp_path):
 @pytest.fixture(params=["numba loops", "torch ops"])
 def gather_path(request, monkeypatch) -> str:
     """Run a gather-head test on both of its paths: with the numba loops, and on torch ops alone."""
-    from specgen_addon.model import gather_kernels
+    from specgen_addon.model.runtime import gather_kernels
 
     if request.param == "torch ops":
         monkeypatch.setenv(gather_kernels.ENV_VAR, "torch")
@@ -97,7 +97,7 @@ def gather_path(request, monkeypatch) -> str:
 
 
 def test_gather_head_equals_the_exportable_head(tmp_path, gather_path):
-    from specgen_addon.model.gather import GatherGridHead
+    from specgen_addon.model.runtime.gather import GatherGridHead
 
     _, model = small_weights(tmp_path)
     with torch.no_grad():
@@ -118,7 +118,7 @@ def test_gather_head_equals_the_exportable_head(tmp_path, gather_path):
 
 
 def test_gather_head_drops_units_that_are_dead_everywhere_and_gives_the_same_values(tmp_path, gather_path):
-    from specgen_addon.model.gather import GatherGridHead
+    from specgen_addon.model.runtime.gather import GatherGridHead
 
     _, model = small_weights(tmp_path)
     with torch.no_grad():
@@ -142,8 +142,8 @@ def _reached(i: int, j: int, nd: int) -> np.ndarray:
 
 
 def test_gather_head_computes_only_the_lookups_reach_and_decodes_it(tmp_path, gather_path):
-    from specgen_addon.model.gather import GatherGridHead
-    from specgen_addon.table import mu_law_decode
+    from specgen_addon.model.runtime.gather import GatherGridHead
+    from specgen_addon.brdf.table import mu_law_decode
 
     _, model = small_weights(tmp_path)
     with torch.no_grad():
@@ -159,8 +159,8 @@ def test_gather_head_computes_only_the_lookups_reach_and_decodes_it(tmp_path, ga
 
 
 def test_numba_logit_loop_equals_bucketize_and_the_segment_rows(tmp_path):
-    from specgen_addon.model import gather_kernels
-    from specgen_addon.model.gather import shifted_logit_segments
+    from specgen_addon.model.runtime import gather_kernels
+    from specgen_addon.model.runtime.gather import shifted_logit_segments
 
     kernels = gather_kernels.load()
     if kernels is None:
@@ -189,7 +189,7 @@ def test_numba_logit_loop_equals_bucketize_and_the_segment_rows(tmp_path):
 
 
 def test_numba_gather_and_output_loops_equal_embedding_bag_and_the_last_layer():
-    from specgen_addon.model import gather_kernels
+    from specgen_addon.model.runtime import gather_kernels
 
     kernels = gather_kernels.load()
     if kernels is None:
@@ -263,7 +263,7 @@ def test_numba_cache_written_under_the_add_on_package_serves_the_command_line(tm
     import sys
     from pathlib import Path
 
-    from specgen_addon.model import gather_kernels
+    from specgen_addon.model.runtime import gather_kernels
 
     if gather_kernels.load() is None:
         pytest.skip("numba is not installed (requirements.txt lists it), or SPECGEN_KERNELS=torch")
@@ -277,14 +277,14 @@ def test_numba_cache_written_under_the_add_on_package_serves_the_command_line(tm
 
 
 def test_kernels_switch_off_with_the_environment_variable(monkeypatch):
-    from specgen_addon.model import gather_kernels
+    from specgen_addon.model.runtime import gather_kernels
 
     monkeypatch.setenv(gather_kernels.ENV_VAR, "torch")
     assert gather_kernels.load() is None
 
 
 def test_grid_decoded_on_the_workers_equals_the_decoded_grid(tmp_path):
-    from specgen_addon.table import mu_law_decode
+    from specgen_addon.brdf.table import mu_law_decode
 
     path, model = small_weights(tmp_path)
     be = infer.get_backend(path, "torch")

@@ -18,12 +18,12 @@ class BlockTorch:
         return None
 sys.meta_path.insert(0, BlockTorch())
 import numpy as np
-from specgen_addon.infer import generate_brdf
+from specgen_addon.model.runtime.inference import generate_brdf
 t = generate_brdf("examples/sphere.png", wavelengths_nm=np.array([450.0, 650.0]), backend="onnx")
 assert t.values.shape == (90, 90, 180, 2), t.values.shape
 assert np.isfinite(t.values).all() and t.values.min() >= 0
 # a photo's sphere (half a pixel off the grid) takes the resampled-input network's graphs
-from specgen_addon.input_image import load_sphere_image
+from specgen_addon.photo.sphere_image import load_sphere_image
 img = np.pad(load_sphere_image("examples/sphere.png"), ((8, 8), (8, 9), (0, 0)))
 off = 0.5 * (img[:, :-1] + img[:, 1:])
 r = generate_brdf(off, wavelengths_nm=np.array([550.0]), backend="onnx")
@@ -43,7 +43,7 @@ def test_onnx_backend_generates_a_table_with_torch_blocked():
 
 def test_numpy_resample_matches_torch_antialiased_bilinear():
     torch = pytest.importorskip("torch")
-    from specgen_addon.infer import resample_square
+    from specgen_addon.model.runtime.inference import resample_square
 
     rng = np.random.default_rng(0)
     for size_in in (50, 64, 97, 128, 256):

@@ -8,8 +8,9 @@ from pathlib import Path
 import numpy as np
 import pytest
 
-from specgen_addon import input_image, spectra
-from specgen_addon.errors import ImageInputError, OutputExistsError
+from specgen_addon.photo import sphere_image as input_image
+from specgen_addon.spectral import spectra
+from specgen_addon.common.errors import ImageInputError, OutputExistsError
 from specgen_addon.render.analytic import GGXReflector, Lambertian
 
 SIZE = input_image.CANONICAL_SIZE
@@ -192,7 +193,7 @@ def test_saved_exr_and_png_round_trip_through_the_loader(tmp_path):
 
 @needs_bpy
 def test_render_input_cli_writes_both_files(tmp_path):
-    from specgen_addon.cli import main
+    from specgen_addon.cli.app import main
 
     assert main(["render-input", "mat0002", "-o", str(tmp_path / "s.png"), "--quiet"]) == 0
     assert (tmp_path / "s.png").is_file() and (tmp_path / "s.exr").is_file()

@@ -8,10 +8,10 @@ import numpy as np
 import pytest
 import torch
 
-from specgen_addon.errors import SpecGenError
-from specgen_addon.input_image import prepare_sphere_array
+from specgen_addon.common.errors import SpecGenError
+from specgen_addon.photo.sphere_image import prepare_sphere_array
 from specgen_addon.train.augment import jitter_framing, offgrid_photo_crop, reframe
-from specgen_addon.train.evaluate import displaced_input
+from specgen_addon.evaluation.trained_network import displaced_input
 from specgen_addon.train.loop import TrainConfig
 from test_train import twice_and_without
 
@@ -123,9 +123,9 @@ def test_bad_offgrid_settings_are_refused(key, value):
 def test_an_antialiased_input_is_area_sampled_and_found_where_it_was_put():
     """4× rendered and box-filtered, moved a quarter pixel: the outline pixels are partly covered,
     and the pipeline's finder puts the sphere within a tenth of a pixel of where it is."""
-    from specgen_addon import input_image
+    from specgen_addon.photo import sphere_image as input_image
     from specgen_addon.render.analytic import Lambertian
-    from specgen_addon.train.evaluate import antialiased_input
+    from specgen_addon.evaluation.trained_network import antialiased_input
 
     img = antialiased_input(Lambertian(0.6), shift_px=0.25, border_px=4, size=64)
     assert img.shape == (72, 72, 3)

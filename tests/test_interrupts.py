@@ -1,4 +1,4 @@
-"""Signal handling of :mod:`specgen_addon.interrupts`: forked workers, imports, Blender's own code
+"""Signal handling of :mod:`specgen_addon.common.interrupts`: forked workers, imports, Blender's own code
 and C calls, and the watcher's hard stop."""
 
 from __future__ import annotations
@@ -11,7 +11,7 @@ import time
 
 import pytest
 
-from specgen_addon.interrupts import HARD_STOP_GRACE_S, stop_on_signals
+from specgen_addon.common.interrupts import HARD_STOP_GRACE_S, stop_on_signals
 
 pytestmark = pytest.mark.skipif(sys.platform == "win32", reason="fork and POSIX signals")
 
@@ -53,7 +53,7 @@ SLOW_IMPORT_SCRIPT = r"""
 import sys, time
 sys.path.insert(0, {repo!r})
 sys.path.insert(0, {mods!r})
-from specgen_addon.interrupts import Interrupted, stop_on_signals
+from specgen_addon.common.interrupts import Interrupted, stop_on_signals
 try:
     with stop_on_signals():
         print("READY", flush=True)
@@ -97,7 +97,7 @@ def test_a_signal_inside_a_slow_import_is_raised_in_the_code_after_it(tmp_path):
 
 FAKE_BLENDER = r"""
 import os, time
-from specgen_addon import io_utils
+from specgen_addon.common import atomic_io as io_utils
 
 
 def busy_writing(folder, seconds):
@@ -136,7 +136,7 @@ def stuck_in_a_c_call(seconds):
 
 #: A hard-stop clean-up step that takes a second (a large temporary folder), run before the
 #: output folder's own clean-up: the main thread comes back from its C call meanwhile.
-SLOW_CLEAN_UP = "from specgen_addon import interrupts; interrupts._cleanups.append(lambda: time.sleep(1.0))"
+SLOW_CLEAN_UP = "from specgen_addon.common import interrupts; interrupts._cleanups.append(lambda: time.sleep(1.0))"
 
 GUARDED_SCRIPT = r"""
 import sys, time
@@ -144,11 +144,11 @@ from pathlib import Path
 sys.path.insert(0, {repo!r})
 sys.path.insert(0, {blender!r})
 import fake_blender
-from specgen_addon import cli
+from specgen_addon.cli import app as cli
 
 out = Path({out!r})
 
-from specgen_addon.io_utils import atomic_write, make_dirs
+from specgen_addon.common.atomic_io import atomic_write, make_dirs
 
 def write(path):
     with atomic_write(path, overwrite=True) as tmp:
@@ -230,7 +230,7 @@ def test_a_signal_handler_frame_is_looked_through_to_the_import_it_interrupted()
     """A second signal (one the watcher delivers again) can land while the first one's handler
     runs: the frame it interrupts is the handler's own, in our code. Raising there, inside an
     import, crashed bpy's start-up (exit -11); the handler's frames must be looked through."""
-    from specgen_addon import interrupts
+    from specgen_addon.common import interrupts
 
     in_handler = compile("import sys\ndef handler_frame():\n    return sys._getframe()\n",
                          interrupts._THIS_FILE, "exec")

@@ -3,8 +3,8 @@ import stat
 
 import pytest
 
-from specgen_addon.errors import OutputExistsError, SpecGenError
-from specgen_addon.io_utils import atomic_write
+from specgen_addon.common.errors import OutputExistsError, SpecGenError
+from specgen_addon.common.atomic_io import atomic_write
 
 
 def test_failed_write_leaves_nothing_behind(tmp_path):

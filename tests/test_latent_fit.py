@@ -7,19 +7,19 @@ import numpy as np
 import pytest
 import torch
 
-from specgen_addon import infer
-from specgen_addon.errors import Cancelled, SpecGenError
-from specgen_addon.input_image import SphereCrop
-from specgen_addon.input_lighting import InputLighting
-from specgen_addon.latent_fit import (CheapRender, LatentFitOptions, OperatorSamples, decode_table,
+from specgen_addon.model.runtime import inference as infer
+from specgen_addon.common.errors import Cancelled, SpecGenError
+from specgen_addon.photo.sphere_image import SphereCrop
+from specgen_addon.photo.photo_lighting import InputLighting
+from specgen_addon.generate.latent_fit import (CheapRender, LatentFitOptions, OperatorSamples, decode_table,
                                       fit_latent, unresolved_theta_h_nodes)
 from specgen_addon.model import Config, SpecGen, save_weights
-from specgen_addon.model.fast import head_at_nodes, lambda_coords
-from specgen_addon.lookup_reach import phi_d_reach
-from specgen_addon.refine import diffuse_floor_of, render_under
-from specgen_addon.refine.operator import PhotoOperator
-from specgen_addon.refine.report import rgb_psnr
-from specgen_addon.table import BRDFTable, grid_angles
+from specgen_addon.model.runtime.fast import head_at_nodes, lambda_coords
+from specgen_addon.brdf.lookup_reach import phi_d_reach
+from specgen_addon.generate.refine import diffuse_floor_of, render_under
+from specgen_addon.generate.refine.operator import PhotoOperator
+from specgen_addon.render.photo_reproduction import rgb_psnr
+from specgen_addon.brdf.table import BRDFTable, grid_angles
 from tiny_model import TINY_MODEL
 
 SMALL = {**TINY_MODEL, "spectral_code_knots": 2}
@@ -171,7 +171,7 @@ def test_a_fit_that_reproduces_the_photo_worse_keeps_the_networks_table(small):
 
 
 def test_the_pipeline_refuses_the_fit_without_torch_before_any_work(small):
-    from specgen_addon.pipeline import generate
+    from specgen_addon.generate.pipeline import generate
 
     path, image = small
     with pytest.raises(SpecGenError, match="torch backend"):

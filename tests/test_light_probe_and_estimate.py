@@ -6,7 +6,8 @@ from __future__ import annotations
 import numpy as np
 import pytest
 
-from specgen_addon import light_estimate, light_probe
+from specgen_addon.photo import light_estimate
+from specgen_addon.photo import light_probe
 
 
 def _lambert_ball(size: int, direction, ambient: float = 0.05, albedo: float = 0.6) -> np.ndarray:

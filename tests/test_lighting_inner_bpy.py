@@ -8,7 +8,7 @@ from pathlib import Path
 
 import pytest
 
-from specgen_addon import lighting
+from specgen_addon.render import environment_maps as lighting
 
 
 def test_maps_are_found_from_bpys_inner_scripts_package(monkeypatch):

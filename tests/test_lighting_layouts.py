@@ -9,7 +9,7 @@ from pathlib import Path
 
 import pytest
 
-from specgen_addon import lighting
+from specgen_addon.render import environment_maps as lighting
 
 
 def _installed_blender(tmp_path: Path) -> tuple[types.ModuleType, Path]:

@@ -4,9 +4,9 @@ from __future__ import annotations
 
 import numpy as np
 
-from specgen_addon.lookup_reach import extend_beyond_reach, phi_d_reach, reached_fraction
-from specgen_addon.rusinkiewicz import half_diff_from_io, io_from_half_diff
-from specgen_addon.table import (N_PHI_D, BRDFTable, _linear_weights, grid_angles, phi_d_index,
+from specgen_addon.brdf.lookup_reach import extend_beyond_reach, phi_d_reach, reached_fraction
+from specgen_addon.brdf.rusinkiewicz import half_diff_from_io, io_from_half_diff
+from specgen_addon.brdf.table import (N_PHI_D, BRDFTable, _linear_weights, grid_angles, phi_d_index,
                                  theta_d_index, theta_h_index)
 
 

@@ -11,12 +11,12 @@ from pathlib import Path
 import numpy as np
 import pytest
 
-from specgen_addon import metrics
-from specgen_addon.errors import BRDFFormatError
+from specgen_addon.render import metrics
+from specgen_addon.common.errors import BRDFFormatError
 from specgen_addon.evaluation.protocol import DISTANT_LIGHTS
-from specgen_addon.material_file import LOG_STEP
+from specgen_addon.brdf.material_file import LOG_STEP
 from specgen_addon.render import Scene, sphere_geometry
-from specgen_addon.table import GRID_SHAPE, BRDFTable
+from specgen_addon.brdf.table import GRID_SHAPE, BRDFTable
 
 REPO = Path(__file__).resolve().parents[1]
 #: The targets a material file is held to: size on disk, rebuild time, rendered difference.

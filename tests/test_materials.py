@@ -11,13 +11,13 @@ import pytest
 bpy = pytest.importorskip("bpy")
 
 from addon_modules import PKG, addon_module  # noqa: E402  (after the bpy skip)
-bake = addon_module("specgen_addon.bake")
+bake = addon_module("specgen_addon.generate.lookup")
 naming = addon_module("ops.naming")
 render = addon_module("ops.render")
 scene_mod = addon_module("ops.scene")
 
-from specgen_addon.rusinkiewicz import io_from_half_diff  # noqa: E402
-from specgen_addon.table import BRDFTable  # noqa: E402
+from specgen_addon.brdf.rusinkiewicz import io_from_half_diff  # noqa: E402
+from specgen_addon.brdf.table import BRDFTable  # noqa: E402
 
 REPO = Path(__file__).resolve().parents[1]
 WL = np.array([420.0, 480.0, 540.0, 600.0, 660.0])
@@ -170,7 +170,7 @@ def test_two_materials_with_different_bases_render_side_by_side_keeping_their_co
 def test_cancelled_generate_leaves_no_files_of_its_set(tmp_path):
     from specgen_addon.model import DEFAULT_WEIGHTS
 
-    Cancelled = addon_module("specgen_addon.errors").Cancelled
+    Cancelled = addon_module("specgen_addon.common.errors").Cancelled
 
     if not Path(DEFAULT_WEIGHTS).is_file():
         pytest.skip(f"no shipped weights at {DEFAULT_WEIGHTS}")

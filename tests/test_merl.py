@@ -1,10 +1,10 @@
 import numpy as np
 import pytest
 
-from specgen_addon.errors import BRDFFormatError
-from specgen_addon.formats import detect_format, load_brdf
-from specgen_addon.formats.merl import MERL_SCALE, MERLData, read_merl, write_merl
-from specgen_addon.table import BRDFTable
+from specgen_addon.common.errors import BRDFFormatError
+from specgen_addon.brdf.formats import detect_format, load_brdf
+from specgen_addon.brdf.formats.merl import MERL_SCALE, MERLData, read_merl, write_merl
+from specgen_addon.brdf.table import BRDFTable
 
 
 @pytest.fixture(scope="module")

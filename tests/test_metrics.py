@@ -5,8 +5,8 @@ from __future__ import annotations
 import numpy as np
 import pytest
 
-from specgen_addon import metrics
-from specgen_addon.errors import SpecGenError
+from specgen_addon.render import metrics
+from specgen_addon.common.errors import SpecGenError
 
 
 def test_identical_images_give_infinite_psnr_and_unit_ssim():
@@ -76,7 +76,7 @@ def test_bad_inputs_raise():
 
 
 def test_brightness_fit_removes_an_exposure_error_and_nothing_else():
-    from specgen_addon.metrics import brightness_fitted_psnr, mean_psnr
+    from specgen_addon.render.metrics import brightness_fitted_psnr, mean_psnr
 
     rng = np.random.default_rng(3)
     gt = rng.random((16, 16, 4)) + 0.1
@@ -90,8 +90,8 @@ def test_brightness_fit_removes_an_exposure_error_and_nothing_else():
 
 
 def test_colour_fit_removes_a_smooth_white_balance_error_and_not_a_shape_error():
-    from specgen_addon.colour_tables import tables
-    from specgen_addon.metrics import brightness_fitted_psnr, colour_fitted_psnr, mean_psnr
+    from specgen_addon.spectral.colour_tables import tables
+    from specgen_addon.render.metrics import brightness_fitted_psnr, colour_fitted_psnr, mean_psnr
 
     rng = np.random.default_rng(4)
     w = np.linspace(400.0, 780.0, 20)
@@ -119,7 +119,7 @@ def test_fitted_oracles_never_score_below_the_prediction_they_correct():
     fit, so network ≤ brightness fitted ≤ colour fitted. A least-squares gain over all bands weighs a
     bright band above a dark one and can score *below* the unfitted prediction (it does on some of
     these draws); the fitted gain cannot."""
-    from specgen_addon.metrics import brightness_fitted_psnr, colour_fitted_psnr, mean_psnr
+    from specgen_addon.render.metrics import brightness_fitted_psnr, colour_fitted_psnr, mean_psnr
 
     rng = np.random.default_rng(11)
     w = np.linspace(400.0, 700.0, 6)

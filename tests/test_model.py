@@ -8,11 +8,11 @@ import numpy as np
 import pytest
 import torch
 
-from specgen_addon.errors import SpecGenError, WeightsError
+from specgen_addon.common.errors import SpecGenError, WeightsError
 from specgen_addon.model import Config, SpecGen, count_parameters, load_weights, save_weights
 from specgen_addon.model.fusion import AFF
 from specgen_addon.model.planes import PLANE_NAMES, normalized_coords, project, sample_plane
-from specgen_addon.table import mu_law_decode, mu_law_encode
+from specgen_addon.brdf.table import mu_law_decode, mu_law_encode
 from tiny_model import TINY_MODEL
 
 SMALL = TINY_MODEL

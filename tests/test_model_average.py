@@ -5,8 +5,8 @@ from __future__ import annotations
 import pytest
 import torch
 
-from specgen_addon.cli import main as cli_main
-from specgen_addon.errors import WeightsError
+from specgen_addon.cli.app import main as cli_main
+from specgen_addon.common.errors import WeightsError
 from specgen_addon.model import Config, SpecGen, load_weights, save_weights
 from specgen_addon.model.average import average_models
 from tiny_model import TINY_MODEL

@@ -8,7 +8,7 @@ import math
 import pytest
 import torch
 
-from specgen_addon.errors import SpecGenError
+from specgen_addon.common.errors import SpecGenError
 from specgen_addon.model import Config, SpecGen, load_weights, save_weights
 from specgen_addon.model.grow import can_grow, grow_state_dict
 from tiny_model import TINY_MODEL
@@ -134,7 +134,7 @@ def test_bad_residual_block_counts_are_refused():
 def test_adding_a_detail_branch_at_twice_the_image_size_keeps_the_network_function():
     import numpy as np
 
-    from specgen_addon.infer import resample_square
+    from specgen_addon.model.runtime.inference import resample_square
 
     torch.manual_seed(0)
     old = lively(SpecGen(Config(**SMALL)))

@@ -5,7 +5,7 @@ from __future__ import annotations
 import numpy as np
 import pytest
 
-from specgen_addon import ndimage_np
+from specgen_addon.photo import ndimage_np
 
 scipy_ndimage = pytest.importorskip("scipy.ndimage", reason="scipy is the independent reference here")
 

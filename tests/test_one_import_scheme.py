@@ -13,9 +13,9 @@ from importlib import import_module
 
 import pytest
 
-from specgen_addon import errors
-from specgen_addon.cli import run_guarded
-from specgen_addon.interrupts import EXIT_ERROR
+from specgen_addon.common import errors
+from specgen_addon.cli.app import run_guarded
+from specgen_addon.common.interrupts import EXIT_ERROR
 
 
 def _raise(exc: BaseException):

@@ -8,10 +8,10 @@ import numpy as np
 import pytest
 import torch
 
-from specgen_addon import infer
-from specgen_addon.errors import WeightsError
+from specgen_addon.model.runtime import inference as infer
+from specgen_addon.common.errors import WeightsError
 from specgen_addon.model import Config, SpecGen, load_weights, save_weights
-from specgen_addon.model.export_onnx import export_onnx
+from specgen_addon.model.runtime.export_onnx import export_onnx
 from tiny_model import TINY_MODEL
 
 pytest.importorskip("onnxruntime")
@@ -51,7 +51,7 @@ def test_onnx_and_torch_tables_agree(exported):
 
 
 def test_onnx_and_torch_generate_the_same_brdf(exported):
-    from specgen_addon.input_image import render_input
+    from specgen_addon.photo.sphere_image import render_input
     from specgen_standins import RampMaterial
 
     weights, _ = exported
@@ -75,8 +75,8 @@ def _copy_without_head(exported, folder):
 
 def test_a_channels_first_head_exported_by_an_earlier_version_still_runs(exported, tmp_path):
     """Graphs exported before the low-rank head (channels-first, 12 inputs) give the same table."""
-    from specgen_addon.input_image import render_input
-    from specgen_addon.model.fast import GridHeadChannelsFirst, GridTables, lambda_coords
+    from specgen_addon.photo.sphere_image import render_input
+    from specgen_addon.model.runtime.fast import GridHeadChannelsFirst, GridTables, lambda_coords
     from specgen_standins import RampMaterial
 
     weights = exported[0]
@@ -109,7 +109,7 @@ def test_a_low_rank_head_with_all_180_phi_d_nodes_fixed_still_runs(exported, tmp
     and the table is the same as with the head that computes only the lookup's reach."""
     import onnx
 
-    from specgen_addon.input_image import render_input
+    from specgen_addon.photo.sphere_image import render_input
     from specgen_standins import RampMaterial
 
     weights, (_, head) = exported

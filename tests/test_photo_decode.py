@@ -1,13 +1,13 @@
 """Camera files read right: bit depth kept, the encoding a choice, saturated pixels found
-(specgen_addon.photo_read), tested against known pixel values."""
+(specgen_addon.photo.read), tested against known pixel values."""
 
 from __future__ import annotations
 
 import numpy as np
 import pytest
 
-from specgen_addon import photo_read
-from specgen_addon.errors import ImageInputError
+from specgen_addon.photo import read as photo_read
+from specgen_addon.common.errors import ImageInputError
 
 
 def _write_oiio(path, pixels: np.ndarray, fmt: str) -> None:
@@ -57,7 +57,7 @@ def test_8_bit_saturation_is_found_and_reported(tmp_path):
 
 
 def test_an_exr_is_unclipped_unless_a_white_level_is_given(tmp_path):
-    from specgen_addon.image_io import write_exr
+    from specgen_addon.common.image_io import write_exr
 
     rgb = np.full((20, 24, 3), 0.25, np.float32)
     rgb[2:4, 2:4] = 8.0
@@ -72,7 +72,7 @@ def test_an_exr_is_unclipped_unless_a_white_level_is_given(tmp_path):
 def test_saturated_pixels_reach_the_crop_that_refinement_excludes(tmp_path):
     from PIL import Image
 
-    from specgen_addon import input_image
+    from specgen_addon.photo import sphere_image as input_image
 
     img = np.zeros((96, 96, 3), np.uint8)
     yy, xx = np.mgrid[:96, :96]
@@ -140,7 +140,7 @@ def test_a_circle_given_in_the_files_pixels_follows_a_downsampled_read(tmp_path)
     user's circle, given in the file's pixels."""
     from PIL import Image
 
-    from specgen_addon import input_image
+    from specgen_addon.photo import sphere_image as input_image
 
     img = np.zeros((300, 4200, 3), np.uint8)
     img[100:200, 2000:2100] = 150

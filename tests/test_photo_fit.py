@@ -5,7 +5,7 @@ from __future__ import annotations
 import numpy as np
 import pytest
 
-from specgen_addon import spectra
+from specgen_addon.spectral import spectra
 from specgen_addon.evaluation import baselines, photo_fit
 
 
@@ -35,7 +35,7 @@ def test_nnls_matches_scipy_on_random_problems():
 @pytest.fixture(scope="module")
 def input_scene():
     """The canonical input lighting (studio map + D65 key light) on a 64² sphere (fast)."""
-    from specgen_addon import input_image
+    from specgen_addon.photo import sphere_image as input_image
 
     return input_image._scene(input_image.CANONICAL_ENV, 0.0, 64), input_image.EXPOSURE
 
@@ -72,7 +72,7 @@ def test_fit_recovers_its_own_model_with_a_coat_exactly_on_the_grid(input_scene)
 
 
 def test_fit_refuses_a_black_photo_and_a_wrong_size(input_scene):
-    from specgen_addon.errors import SpecGenError
+    from specgen_addon.common.errors import SpecGenError
 
     scene, exposure = input_scene
     with pytest.raises(SpecGenError, match="black"):

@@ -88,7 +88,7 @@ def test_the_intel_mac_onnxruntime_release_runs_the_shipped_graphs_like_the_newe
     script = (
         "import sys, numpy as np, onnxruntime as ort\n"
         f"sys.path.insert(0, {str(REPO)!r})\n"
-        "from specgen_addon.infer import generate_brdf\n"
+        "from specgen_addon.model.runtime.inference import generate_brdf\n"
         "t = generate_brdf(sys.argv[1], backend='onnx', wavelengths_nm=[450.0, 550.0, 650.0])\n"
         "np.save(sys.argv[2], t.values)\n"
         "print(ort.__version__)\n")

@@ -13,15 +13,15 @@ bpy = pytest.importorskip("bpy")
 
 from addon_modules import PKG, addon_module
 
-bake = addon_module("specgen_addon.bake")
+bake = addon_module("specgen_addon.generate.lookup")
 render = addon_module("ops.render")
 scene_mod = addon_module("ops.scene")
 principled = addon_module("ops.principled")
 
-from specgen_addon.fit import ClosureFit, ggx_lobe
-from specgen_addon.fit.principled import principled_from_closures
-from specgen_addon.rusinkiewicz import io_from_half_diff
-from specgen_addon.table import BRDFTable
+from specgen_addon.bake.closure_fit import ClosureFit, ggx_lobe
+from specgen_addon.bake.closure_fit.principled import principled_from_closures
+from specgen_addon.brdf.rusinkiewicz import io_from_half_diff
+from specgen_addon.brdf.table import BRDFTable
 
 WL = np.linspace(400.0, 700.0, 8)
 

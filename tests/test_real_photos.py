@@ -11,8 +11,8 @@ import numpy as np
 import pytest
 from conftest import REPO, SHARED
 
-from specgen_addon import input_image
-from specgen_addon.sphere_detect import find_ball
+from specgen_addon.photo import sphere_image as input_image
+from specgen_addon.photo.sphere_detect import find_ball
 
 PHOTOS = SHARED / "data" / "photos" / "psm_gray_chrome"
 
@@ -62,7 +62,7 @@ def test_a_given_circle_and_a_mask_are_used_as_they_are(tmp_path):
 
 @pytest.mark.parametrize("text", ["1,2", "a,b,c", "1,2,0", "1,2,-3"])
 def test_a_bad_circle_is_refused_in_one_sentence(text):
-    from specgen_addon.errors import ImageInputError
+    from specgen_addon.common.errors import ImageInputError
 
     with pytest.raises(ImageInputError, match="--circle takes X,Y,R"):
         input_image.parse_circle(text)
@@ -82,7 +82,7 @@ def test_the_example_sphere_is_found_the_same_at_any_resolution(tmp_path, side, 
     big.save(tmp_path / "big.png")
     crop = input_image.load_sphere_crop(tmp_path / "big.png")
     scale = crop_side = None
-    from specgen_addon.limits import MAX_WORK_SIDE
+    from specgen_addon.common.limits import MAX_WORK_SIDE
 
     factor = int(np.ceil(side / MAX_WORK_SIDE))
     crop_side = side // factor

@@ -9,9 +9,9 @@ import pytest
 import torch
 from test_train import FAST, SMALL, sets
 
-from specgen_addon.errors import SpecGenError
+from specgen_addon.common.errors import SpecGenError
 from specgen_addon.model import Config, SpecGen
-from specgen_addon.table import mu_law_encode
+from specgen_addon.brdf.table import mu_law_encode
 from specgen_addon.train.data import TrainingMaterial
 from specgen_addon.train.loop import MaterialSet, TrainConfig, total_loss, train
 from specgen_addon.train.real_rgb import (

@@ -10,7 +10,7 @@ import pytest
 
 from specgen_addon.corpus.material import Reflectance
 from specgen_addon.corpus.spectra_sources import REFLECTANCE_GRID_NM
-from specgen_addon.errors import SpecGenError
+from specgen_addon.common.errors import SpecGenError
 from specgen_addon.train import recolour as rc
 from specgen_addon.train.data import TrainingMaterial
 from specgen_addon.train.loop import MaterialSet, TrainConfig, _draw, make_step_batches
@@ -49,7 +49,7 @@ def test_a_replaced_reflectance_changes_only_that_field():
 
 
 def test_the_recombined_input_is_what_the_renderer_gives_the_recoloured_material():
-    from specgen_addon import input_image
+    from specgen_addon.photo import sphere_image as input_image
 
     corpus, fam = _corpus()
     m = fam["classic"][0] if rc.affine_slot(fam["classic"][0]) else fam["sheen"][0]

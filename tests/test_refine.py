@@ -5,15 +5,15 @@ from __future__ import annotations
 import numpy as np
 import pytest
 
-from specgen_addon.errors import Cancelled, SpecGenError
-from specgen_addon.input_lighting import InputLighting, LightingError, parse_lighting
-from specgen_addon.refine import (CorrectionBasis, RefineOptions, apply_correction, diffuse_floor_of,
+from specgen_addon.common.errors import Cancelled, SpecGenError
+from specgen_addon.photo.photo_lighting import InputLighting, LightingError, parse_lighting
+from specgen_addon.generate.refine import (CorrectionBasis, RefineOptions, apply_correction, diffuse_floor_of,
                                   refine_brdf, render_under)
-from specgen_addon.refine.basis import hat_matrix
-from specgen_addon.refine.operator import PhotoOperator
-from specgen_addon.refine.solve import nonneg_ridge
-from specgen_addon.rusinkiewicz import io_from_half_diff
-from specgen_addon.table import BRDFTable
+from specgen_addon.generate.refine.basis import hat_matrix
+from specgen_addon.generate.refine.operator import PhotoOperator
+from specgen_addon.generate.refine.solve import nonneg_ridge
+from specgen_addon.brdf.rusinkiewicz import io_from_half_diff
+from specgen_addon.brdf.table import BRDFTable
 from tests.numpy_only import run_numpy_only
 from tests.specgen_standins import RampMaterial
 
@@ -181,7 +181,7 @@ def test_input_lighting_validates_names_files_and_values(tmp_path):
 def test_user_hdr_file_lights_like_the_same_map_as_exr(tmp_path):
     """A Radiance .hdr written by OpenImageIO (a reader no one here wrote) gives the same lighting."""
     oiio = pytest.importorskip("OpenImageIO")
-    from specgen_addon.lighting import env_path
+    from specgen_addon.render.environment_maps import env_path
     from specgen_addon.render.environment import read_exr_rgb
 
     rgb = read_exr_rgb(env_path("forest"))[::4, ::4].copy()
@@ -209,9 +209,9 @@ def test_refinement_runs_with_only_numpy_importable(tmp_path, ramp_table, repo_d
     ramp_table.save(path)
     out = run_numpy_only(repo_dir, f"""
         import numpy as np
-        from specgen_addon.table import BRDFTable
-        from specgen_addon.input_lighting import InputLighting
-        from specgen_addon.refine import refine_brdf, render_under, RefineOptions
+        from specgen_addon.brdf.table import BRDFTable
+        from specgen_addon.photo.photo_lighting import InputLighting
+        from specgen_addon.generate.refine import refine_brdf, render_under, RefineOptions
         t = BRDFTable.load({str(path)!r})
         light = InputLighting()
         photo = render_under(BRDFTable(t.values * 1.3, t.wavelengths), light.scene({SIZE}), 0.5)
@@ -227,7 +227,7 @@ def test_refinement_runs_with_only_numpy_importable(tmp_path, ramp_table, repo_d
 def test_a_coarse_table_is_scored_on_the_fine_render_grid(ramp_table):
     """A 5-band table: the photo model integrates light and camera on the 21-band grid, so the
     refinement reproduces a photo rendered at 21 bands as well as a fine table would."""
-    from specgen_addon.refine.operator import render_grid
+    from specgen_addon.generate.refine.operator import render_grid
 
     coarse_wl = np.linspace(380.0, 780.0, 5)
     coarse = BRDFTable(ramp_table.values[..., ::2], coarse_wl)
@@ -278,7 +278,7 @@ def ramp_table_21() -> BRDFTable:
 def _ochre_body_photo(table: BRDFTable):
     """An ochre Otsu-basis reflectance (Λ,), the canonical lighting, and the photo of ``table``
     with that body."""
-    from specgen_addon.spectral_recovery import otsu2018_reflectance
+    from specgen_addon.spectral.recovery import otsu2018_reflectance
 
     rho = otsu2018_reflectance(np.array([0.25, 0.20, 0.08]), table.wavelengths)
     light = InputLighting()
@@ -303,7 +303,7 @@ def test_a_natural_body_spectrum_is_recovered_from_a_grey_prior(ramp_table_21):
 
 def test_a_metal_keeps_the_network_body_spectrum():
     """A table whose lobe has its floor's colour (a conductor) is not given a diffuse body."""
-    from specgen_addon.refine.body import has_separate_body
+    from specgen_addon.generate.refine.body import has_separate_body
 
     wl = np.linspace(380.0, 780.0, 21)
     colour_ = np.linspace(0.4, 0.95, wl.size)                           # copper-like, rising to red
@@ -335,7 +335,7 @@ def test_a_blended_body_lies_between_the_natural_and_the_network_body(ramp_table
 def test_the_body_tails_the_eye_barely_sees_are_left_to_the_network():
     """Visibility is 1 at each colour-matching function's peak and falls toward 0 in the far violet
     and far red; the tails prior mixes the network's body in only there."""
-    from specgen_addon.refine.body import blind_share, visibility
+    from specgen_addon.generate.refine.body import blind_share, visibility
 
     assert visibility(np.array([442.0, 556.0, 599.0])) == pytest.approx(1.0, abs=0.01)
     wl = np.linspace(380.0, 780.0, 21)
@@ -348,7 +348,7 @@ def test_the_body_tails_the_eye_barely_sees_are_left_to_the_network():
 
 
 def test_the_tails_prior_keeps_the_natural_body_where_the_eye_sees(ramp_table_21):
-    from specgen_addon.refine.body import blind_share
+    from specgen_addon.generate.refine.body import blind_share
 
     wl = ramp_table_21.wavelengths
     rho, light, photo = _ochre_body_photo(ramp_table_21)
@@ -376,7 +376,7 @@ def test_unknown_body_prior_is_refused():
 def test_an_added_angular_term_gives_a_near_lambertian_prior_the_photos_grazing_sheen(ramp_table_21):
     """The network predicts a near-Lambertian table; the photo is brighter towards grazing θd (a
     sheen). A multiplicative lobe correction has almost no lobe to scale; the added term fits it."""
-    from specgen_addon.refine.basis import CorrectionBasis
+    from specgen_addon.generate.refine.basis import CorrectionBasis
 
     basis = CorrectionBasis()
     floor = diffuse_floor_of(ramp_table_21)
@@ -401,7 +401,7 @@ def test_a_blurred_photo_is_fitted_with_its_blur_modelled(ramp_table):
     """The photo of a tinted table, blurred as a lens or an off-grid crop blurs it: with the blur
     chosen by the fit (the default) the tint is recovered far better than by a fit that takes the
     photo as sharp, and an unblurred photo still chooses no blur."""
-    from specgen_addon.refine.blur import blur_image
+    from specgen_addon.generate.refine.blur import blur_image
 
     basis = CorrectionBasis()
     tint = basis.spectral_hats(WL) @ np.array([0.6, 1.05, 1.4])
@@ -519,7 +519,7 @@ def test_the_banded_blur_equals_scipys_gaussian_filter(shape, sigma):
     """The refinement's numpy blur against scipy.ndimage (a second implementation): zeros beyond
     the edge, the same truncated kernel, stacks smaller than a band and than the kernel."""
     ndimage = pytest.importorskip("scipy.ndimage")
-    from specgen_addon.refine.blur import gaussian_blur_stack
+    from specgen_addon.generate.refine.blur import gaussian_blur_stack
 
     img = np.random.default_rng(len(shape) + int(10 * sigma)).random(shape)
     ours = gaussian_blur_stack(img, sigma)
@@ -543,7 +543,7 @@ def _independent_photo(table: BRDFTable, seed: int = 7) -> np.ndarray:
 
 
 def test_discrepancy_scale_finds_the_pull_that_leaves_the_target_residual():
-    from specgen_addon.refine.discrepancy import discrepancy_scale
+    from specgen_addon.generate.refine.discrepancy import discrepancy_scale
 
     def residual(s: float) -> float:        # grows from 0 (plain fit) to 1 (the prior itself)
         return s / (1.0 + s)
@@ -555,7 +555,7 @@ def test_discrepancy_scale_finds_the_pull_that_leaves_the_target_residual():
 
 
 def test_sampling_variance_is_half_the_difference_of_two_independent_renders():
-    from specgen_addon.refine.discrepancy import difference_variance, sampling_variance
+    from specgen_addon.generate.refine.discrepancy import difference_variance, sampling_variance
 
     rng = np.random.default_rng(3)
     truth = rng.uniform(0.2, 0.8, size=(20000, 3))

@@ -5,10 +5,10 @@ from __future__ import annotations
 import numpy as np
 import pytest
 
-from specgen_addon.input_lighting import parse_light, parse_lighting
-from specgen_addon.refine import RefineOptions, refine_brdf, render_under
-from specgen_addon.rusinkiewicz import io_from_half_diff
-from specgen_addon.table import BRDFTable
+from specgen_addon.photo.photo_lighting import parse_light, parse_lighting
+from specgen_addon.generate.refine import RefineOptions, refine_brdf, render_under
+from specgen_addon.brdf.rusinkiewicz import io_from_half_diff
+from specgen_addon.brdf.table import BRDFTable
 from tests.specgen_standins import RampMaterial
 
 SIZE = 40

@@ -1,4 +1,4 @@
-"""The refinement's relaxed re-solve: held-out pixels (:mod:`specgen_addon.refine.holdout`) and which
+"""The refinement's relaxed re-solve: held-out pixels (:mod:`specgen_addon.generate.refine.holdout`) and which
 smoothness it loosens (``RefineOptions.relax_axes``)."""
 
 from __future__ import annotations
@@ -6,10 +6,10 @@ from __future__ import annotations
 import numpy as np
 import pytest
 
-from specgen_addon.errors import SpecGenError
-from specgen_addon.refine import CorrectionBasis, RefineOptions
-from specgen_addon.refine import _normal_equations
-from specgen_addon.refine.holdout import block_folds, holdout_error
+from specgen_addon.common.errors import SpecGenError
+from specgen_addon.generate.refine import CorrectionBasis, RefineOptions
+from specgen_addon.generate.refine import _normal_equations
+from specgen_addon.generate.refine.holdout import block_folds, holdout_error
 
 
 def test_block_folds_colour_square_blocks_like_a_checkerboard():

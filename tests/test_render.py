@@ -7,8 +7,9 @@ import importlib.util
 import numpy as np
 import pytest
 
-from specgen_addon import lighting, spectra
-from specgen_addon.errors import SpecGenError
+from specgen_addon.render import environment_maps as lighting
+from specgen_addon.spectral import spectra
+from specgen_addon.common.errors import SpecGenError
 from specgen_addon.render import (DistantLight, EnvSampling, Environment, Geometry, Scene,
                                   render_rgb, render_spectral, sphere_geometry)
 from specgen_addon.render.analytic import GGXReflector, Lambertian
@@ -166,7 +167,7 @@ def test_scene_renders_are_deterministic_and_reusable():
 
 
 def test_doubling_environment_samples_changes_a_comparison_by_under_half_a_db():
-    from specgen_addon import metrics
+    from specgen_addon.render import metrics
 
     env = _blob_environment()
     gt, pred = GGXReflector(0.15, 0.5, 0.3), GGXReflector(0.2, 0.4, 0.3)

@@ -18,8 +18,8 @@ settings = addon_module("ops.render_settings")
 result_view = addon_module("ops.result_view")
 naming = addon_module("ops.naming")
 
-from specgen_addon.errors import Cancelled
-from specgen_addon.spectral_exr import read_spectral_exr
+from specgen_addon.common.errors import Cancelled
+from specgen_addon.render.spectral_exr import read_spectral_exr
 
 pytestmark = pytest.mark.blender
 

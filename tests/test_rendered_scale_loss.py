@@ -5,8 +5,8 @@ from __future__ import annotations
 import numpy as np
 import torch
 
-from specgen_addon.rusinkiewicz import io_from_half_diff
-from specgen_addon.table import mu_law_encode
+from specgen_addon.brdf.rusinkiewicz import io_from_half_diff
+from specgen_addon.brdf.table import mu_law_encode
 from specgen_addon.train.loop import foreshortening, inverse_mu_law, rendered_scale_loss
 from test_train import twice_and_without
 

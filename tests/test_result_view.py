@@ -19,14 +19,14 @@ from addon_modules import addon_module, psnr  # after the bpy skip
 fullscene = addon_module("ops.render_fullscene")
 result_view = addon_module("ops.result_view")
 render = addon_module("ops.render")
-bake = addon_module("specgen_addon.bake")
+bake = addon_module("specgen_addon.generate.lookup")
 demo = addon_module("ops.demo_scenes")
-vt = addon_module("specgen_addon.view_transform")
+vt = addon_module("specgen_addon.render.view_transform")
 
-from specgen_addon import spectra
-from specgen_addon.fit import ggx_lobe
-from specgen_addon.rusinkiewicz import io_from_half_diff
-from specgen_addon.table import BRDFTable
+from specgen_addon.spectral import spectra
+from specgen_addon.bake.closure_fit import ggx_lobe
+from specgen_addon.brdf.rusinkiewicz import io_from_half_diff
+from specgen_addon.brdf.table import BRDFTable
 
 RGB_WL = spectra.wavelength_grid(380.0, 780.0, 21)
 pytestmark = pytest.mark.blender

@@ -9,11 +9,11 @@ from pathlib import Path
 import numpy as np
 import pytest
 
-from specgen_addon.errors import BRDFFormatError, SpecGenError
-from specgen_addon.formats.rgl import (ConditionalWarp2D, RGLBSDF, read_rgl, read_tensor_file,
+from specgen_addon.common.errors import BRDFFormatError, SpecGenError
+from specgen_addon.brdf.formats.rgl import (ConditionalWarp2D, RGLBSDF, read_rgl, read_tensor_file,
                                        tabulate_rgl, theta_to_u, write_rgl, write_tensor_file)
-from specgen_addon.rusinkiewicz import io_from_half_diff
-from specgen_addon.table import grid_angles
+from specgen_addon.brdf.rusinkiewicz import io_from_half_diff
+from specgen_addon.brdf.table import grid_angles
 
 
 def directions(theta: np.ndarray, phi: np.ndarray) -> np.ndarray:

@@ -1,6 +1,6 @@
 """The room's light given by the user: distant lights by direction, power and colour, an ambient
 term, a calibrated panorama; clear errors for a light without a direction and a panorama of the
-wrong aspect (specgen_addon.input_lighting)."""
+wrong aspect (specgen_addon.photo.photo_lighting)."""
 
 from __future__ import annotations
 
@@ -9,7 +9,7 @@ import math
 import numpy as np
 import pytest
 
-from specgen_addon.input_lighting import InputLighting, Light, LightingError, parse_light, parse_lighting
+from specgen_addon.photo.photo_lighting import InputLighting, Light, LightingError, parse_light, parse_lighting
 
 
 def test_azimuth_and_elevation_follow_the_camera_frame():
@@ -39,7 +39,7 @@ def test_power_and_colour_are_checked():
 
 def test_a_colour_temperature_is_plancks_law():
     colour = pytest.importorskip("colour")
-    from specgen_addon.colour_tables import blackbody
+    from specgen_addon.spectral.colour_tables import blackbody
 
     _, spd = blackbody(3200.0)
     sd = colour.sd_blackbody(3200.0, colour.SpectralShape(360, 830, 1))
@@ -51,7 +51,7 @@ def test_lights_alone_light_a_white_sphere_as_irradiance_over_pi():
     cosine over the disc (2/3) × the canonical exposure, in every channel (D65)."""
     light = parse_lighting(None, lights=(parse_light("0,0"),))
     assert light.env == "none" and light.environment() is None and "light az 0° el 0°" in light.label
-    from specgen_addon import input_image
+    from specgen_addon.photo import sphere_image as input_image
     from specgen_addon.render import sphere_geometry
 
     geo = sphere_geometry(64)
@@ -71,7 +71,7 @@ def test_two_lights_add():
 
 
 def _equirect(path, w: int, h: int, value: float = 2.0) -> None:
-    from specgen_addon.image_io import write_exr
+    from specgen_addon.common.image_io import write_exr
 
     plane = np.full((h, w), value, np.float32)
     write_exr(path, {"R": plane, "G": plane, "B": plane})
@@ -110,7 +110,7 @@ def test_lights_do_not_mix_with_the_canonical_studio():
 def test_the_command_line_refuses_a_bad_light_or_circle_in_one_line(tmp_path, capsys, args, message):
     from conftest import REPO
 
-    from specgen_addon.cli import main
+    from specgen_addon.cli.app import main
 
     code = main(["infer", str(REPO / "examples" / "sphere.png"), "-o", str(tmp_path / "t.npz"), "--quiet", *args])
     err = capsys.readouterr().err.strip().splitlines()
@@ -121,7 +121,7 @@ def test_the_command_line_refuses_a_bad_light_or_circle_in_one_line(tmp_path, ca
 def test_the_command_line_refuses_a_panorama_of_the_wrong_aspect(tmp_path, capsys):
     from conftest import REPO
 
-    from specgen_addon.cli import main
+    from specgen_addon.cli.app import main
 
     _equirect(tmp_path / "square.exr", 16, 16)
     code = main(["infer", str(REPO / "examples" / "sphere.png"), "-o", str(tmp_path / "t.npz"), "--quiet",

@@ -1,7 +1,7 @@
 import numpy as np
 import pytest
 
-from specgen_addon.rusinkiewicz import fold_phi_d, half_diff_from_io, io_from_half_diff
+from specgen_addon.brdf.rusinkiewicz import fold_phi_d, half_diff_from_io, io_from_half_diff
 
 
 def _hemisphere(rng, n):

@@ -8,9 +8,9 @@ from pathlib import Path
 import pytest
 
 from ops import naming
-from specgen_addon.errors import SpecGenError
-from specgen_addon.render_estimate import RenderCost, fit_cost, format_duration
-from specgen_addon.scene_args import ApplySpec, check_objects, parse_apply, parse_frames
+from specgen_addon.common.errors import SpecGenError
+from specgen_addon.render.cycles_time_estimate import RenderCost, fit_cost, format_duration
+from specgen_addon.cli.scene_args import ApplySpec, check_objects, parse_apply, parse_frames
 
 
 @pytest.mark.parametrize("text,frames", [("1-10", list(range(1, 11))), ("1,3,5-7", [1, 3, 5, 6, 7]),

@@ -6,9 +6,10 @@ from __future__ import annotations
 import numpy as np
 import pytest
 
-from specgen_addon import infer, input_image
+from specgen_addon.model.runtime import inference as infer
+from specgen_addon.photo import sphere_image as input_image
 from specgen_addon.model import DEFAULT_WEIGHTS, RESAMPLED_WEIGHTS, shipped_weights
-from specgen_addon.train.evaluate import antialiased_input, displaced_input
+from specgen_addon.evaluation.trained_network import antialiased_input, displaced_input
 from specgen_standins import RampMaterial
 
 BANDS = np.array([450.0, 650.0])
@@ -71,7 +72,7 @@ def test_given_weights_serve_every_input(canonical):
 
 def test_the_pipeline_chooses_by_the_photo_not_by_its_own_crop(canonical):
     # generate() crops the photo, then hands the (whole-pixel) crop on: the choice must follow the photo
-    from specgen_addon.pipeline import generate
+    from specgen_addon.generate.pipeline import generate
 
     out = generate(displaced_input(canonical, 0.5), refine=False, wavelengths_nm=BANDS)
     assert out.table.metadata["weights"] == str(RESAMPLED_WEIGHTS)
@@ -91,8 +92,8 @@ def test_the_shipped_resampled_graphs_match_its_torch_weights():
 
 
 def test_infer_says_which_network_served_a_photo(canonical, tmp_path, capsys):
-    from specgen_addon.cli import main as cli_main
-    from specgen_addon.image_io import write_exr
+    from specgen_addon.cli.app import main as cli_main
+    from specgen_addon.common.image_io import write_exr
 
     photo = displaced_input(canonical, 0.5)
     path = write_exr(tmp_path / "photo.exr", {c: photo[..., i] for i, c in enumerate("RGB")})
@@ -104,9 +105,9 @@ def test_infer_says_which_network_served_a_photo(canonical, tmp_path, capsys):
 def test_the_thin_film_fit_models_the_blur_of_a_resampled_sphere_only(canonical, monkeypatch):
     """``model="thin-film"``: a copied sphere is fitted without a blur model (its pixels are the
     frame's), a resampled one with the refinement's blur candidates (docs/thin_film_fit.md)."""
-    from specgen_addon import pipeline
-    from specgen_addon.fit import thin_film
-    from specgen_addon.refine.blur import BLUR_CANDIDATES_PX
+    from specgen_addon.generate import pipeline
+    from specgen_addon.generate import thin_film
+    from specgen_addon.generate.refine.blur import BLUR_CANDIDATES_PX
 
     seen = []
 

@@ -14,8 +14,8 @@ from pathlib import Path
 
 import pytest
 
-from specgen_addon.errors import SpecGenError
-from specgen_addon.processes import ENV_START_METHOD, can_pool, start_method
+from specgen_addon.common.errors import SpecGenError
+from specgen_addon.common.processes import ENV_START_METHOD, can_pool, start_method
 from specgen_addon.train.data import render_all
 from specgen_addon.train.prefetch import step_batches
 
@@ -70,7 +70,7 @@ SCRIPT = r"""
 import sys, time
 sys.path.insert(0, {repo!r})
 sys.path.insert(0, {mods!r})
-from specgen_addon.interrupts import Interrupted, stop_on_signals
+from specgen_addon.common.interrupts import Interrupted, stop_on_signals
 from specgen_addon.train.data import render_all
 import slow_task
 

@@ -2,8 +2,8 @@ import colour
 import numpy as np
 import pytest
 
-from specgen_addon.errors import SpecGenError
-from specgen_addon.spectra import (DEFAULT_WAVELENGTHS_NM, cmfs, illuminant_spd,
+from specgen_addon.common.errors import SpecGenError
+from specgen_addon.spectral.spectra import (DEFAULT_WAVELENGTHS_NM, cmfs, illuminant_spd,
                                    reflectance_to_linear_srgb, spectral_to_xyz, srgb_decode,
                                    srgb_encode, wavelength_grid)
 

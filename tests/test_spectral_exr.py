@@ -5,8 +5,8 @@ from __future__ import annotations
 import numpy as np
 import pytest
 
-from specgen_addon.errors import OutputExistsError
-from specgen_addon.spectral_exr import (SpectralEXRError, channel_name, parse_channel_name,
+from specgen_addon.common.errors import OutputExistsError
+from specgen_addon.render.spectral_exr import (SpectralEXRError, channel_name, parse_channel_name,
                                         read_spectral_exr, write_preview_png, write_spectral_exr)
 
 colour = pytest.importorskip("colour")
@@ -44,7 +44,7 @@ def test_colour_reader_sees_our_channels_attributes_and_values(tmp_path):
 
 
 def test_preview_is_cmf_integral_of_the_spectrum(tmp_path):
-    from specgen_addon.spectra import cmfs, spectral_to_linear_srgb
+    from specgen_addon.spectral.spectra import cmfs, spectral_to_linear_srgb
 
     wavelengths = np.linspace(380.0, 780.0, 21)
     values = _image(wavelengths, 3, 4)

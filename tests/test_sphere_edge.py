@@ -1,4 +1,4 @@
-"""The sphere finder to a fraction of a pixel (specgen_addon.sphere_edge, input_image's crop).
+"""The sphere finder to a fraction of a pixel (specgen_addon.photo.sphere_edge, input_image's crop).
 
 The truths are analytic: discs drawn by area sampling (8×8 points per pixel, as an antialiased
 render or a camera's pixel integrates) or point sampling (a pixel counts when its centre is
@@ -10,8 +10,8 @@ from __future__ import annotations
 import numpy as np
 import pytest
 
-from specgen_addon import input_image
-from specgen_addon.sphere_edge import refine_circle
+from specgen_addon.photo import sphere_image as input_image
+from specgen_addon.photo.sphere_edge import refine_circle
 
 SUPERSAMPLE = 8
 

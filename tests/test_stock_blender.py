@@ -74,7 +74,7 @@ def test_full_zip_validates_bundles_its_wheels_and_stays_under_60_mb(full_zip):
         manifest = tomllib.loads(zf.read("blender_manifest.toml").decode())
     for wheel in manifest["wheels"]:
         assert wheel.removeprefix("./") in names
-    assert "specgen_addon/data/colour_tables.npz" in names
+    assert "specgen_addon/spectral/data/colour_tables.npz" in names
     assert not any(n.startswith(("tests/", "bench/", ".venv/", ".git")) for n in names)
 
 
@@ -187,7 +187,7 @@ def test_openimageio_backend_writes_exrs_and_pngs_that_openexr_and_pillow_read(t
     pytest.importorskip("OpenImageIO")
     from PIL import Image
 
-    from specgen_addon import image_io
+    from specgen_addon.common import image_io
 
     rng = np.random.default_rng(0)
     planes = {"S0.450,000000nm": rng.random((7, 9)), "R": rng.random((7, 9)), "A": rng.random((7, 9))}
@@ -210,7 +210,8 @@ def test_openimageio_backend_writes_exrs_and_pngs_that_openexr_and_pillow_read(t
 
 
 def test_sphere_is_found_identically_without_scipy_and_skimage(monkeypatch):
-    from specgen_addon import input_image, ndimage_np
+    from specgen_addon.photo import sphere_image as input_image
+    from specgen_addon.photo import ndimage_np
 
     rng = np.random.default_rng(0)
     yy, xx = np.mgrid[:300, :400]
@@ -230,7 +231,7 @@ def test_sphere_is_found_identically_without_scipy_and_skimage(monkeypatch):
 
 def test_numpy_ndimage_twins_match_scipy():
     ndimage = pytest.importorskip("scipy.ndimage")
-    from specgen_addon import ndimage_np
+    from specgen_addon.photo import ndimage_np
 
     rng = np.random.default_rng(1)
     mask = rng.random((97, 131)) > 0.55
@@ -274,8 +275,8 @@ runpy.run_path(script, run_name="__main__")
 def test_batch_renders_a_table_in_a_stock_blender(tmp_path):
     import importlib.util
 
-    from specgen_addon.rusinkiewicz import io_from_half_diff
-    from specgen_addon.table import BRDFTable
+    from specgen_addon.brdf.rusinkiewicz import io_from_half_diff
+    from specgen_addon.brdf.table import BRDFTable
 
     _bpy_root()
     site = tmp_path / "site"

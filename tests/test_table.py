@@ -1,9 +1,9 @@
 import numpy as np
 import pytest
 
-from specgen_addon.errors import BRDFFormatError, SpecGenError
-from specgen_addon.rusinkiewicz import io_from_half_diff
-from specgen_addon.table import (BRDFTable, grid_angles, mu_law_decode, mu_law_encode,
+from specgen_addon.common.errors import BRDFFormatError, SpecGenError
+from specgen_addon.brdf.rusinkiewicz import io_from_half_diff
+from specgen_addon.brdf.table import (BRDFTable, grid_angles, mu_law_decode, mu_law_encode,
                                  theta_h_index)
 
 
@@ -103,7 +103,7 @@ def test_mu_law_round_trip_and_range():
 
 
 def test_bad_values_counts_each_kind_and_passes_clean_tables():
-    from specgen_addon.limits import MAX_BRDF_VALUE, bad_values
+    from specgen_addon.common.limits import MAX_BRDF_VALUE, bad_values
 
     clean = np.random.default_rng(0).random((3, 5_000_000)).astype(np.float32)   # several chunks
     assert bad_values(clean) is None

@@ -10,13 +10,13 @@ import pytest
 
 from specgen_addon.corpus.families.thin_film import ThinFilm, airy_reflectance
 from specgen_addon.corpus.material import Conductor, Dielectric
-from specgen_addon.errors import SpecGenError
-from specgen_addon.fit.thin_film import (AiryThicknessSeries, _ReducedDesign, fit_pixels, fit_thin_film,
+from specgen_addon.common.errors import SpecGenError
+from specgen_addon.generate.thin_film import (AiryThicknessSeries, _ReducedDesign, fit_pixels, fit_thin_film,
                                          lobe_geometry, substrates, theta_d_response)
-from specgen_addon.input_lighting import InputLighting
-from specgen_addon.refine import render_under
-from specgen_addon.refine.operator import PhotoOperator
-from specgen_addon.table import grid_angles
+from specgen_addon.photo.photo_lighting import InputLighting
+from specgen_addon.generate.refine import render_under
+from specgen_addon.generate.refine.operator import PhotoOperator
+from specgen_addon.brdf.table import grid_angles
 from tests.numpy_only import run_numpy_only
 
 SIZE = 32
@@ -57,7 +57,7 @@ def test_malformed_photos_are_refused_before_any_work():
 
 
 def test_unknown_generator_model_is_refused():
-    from specgen_addon.pipeline import generate
+    from specgen_addon.generate.pipeline import generate
 
     with pytest.raises(SpecGenError, match="unknown model"):
         generate(np.zeros((SIZE, SIZE, 3)), model="mlp")
@@ -66,8 +66,8 @@ def test_unknown_generator_model_is_refused():
 def _hue(brdf, theta_d: np.ndarray) -> np.ndarray:
     import colour
 
-    from specgen_addon.rusinkiewicz import io_from_half_diff
-    from specgen_addon.spectra import reflectance_to_linear_srgb
+    from specgen_addon.brdf.rusinkiewicz import io_from_half_diff
+    from specgen_addon.spectral.spectra import reflectance_to_linear_srgb
 
     wi, wo = io_from_half_diff(np.zeros_like(theta_d), theta_d, np.zeros_like(theta_d))
     rgb = reflectance_to_linear_srgb(np.asarray(brdf.eval(wi, wo, WL)), WL)
@@ -80,7 +80,7 @@ def test_a_film_is_recovered_from_its_own_photo_with_only_numpy(tmp_path, repo_d
     """An oxide film on copper, photographed under the canonical lighting: the fit (run with
     torch, scipy and colour-science blocked: the panel's path) reproduces the photo and the
     film's hue over θd, which an RGB or angle-independent model cannot."""
-    from specgen_addon import input_image
+    from specgen_addon.photo import sphere_image as input_image
 
     truth = ThinFilm("t", "test", alpha=0.05, film_eta=2.1, thickness_nm=410.0, substrate=Conductor("Cu"))
     photo_path = tmp_path / "photo.npy"
@@ -88,7 +88,7 @@ def test_a_film_is_recovered_from_its_own_photo_with_only_numpy(tmp_path, repo_d
     out = run_numpy_only(repo_dir, f"""
         import json
         import numpy as np
-        from specgen_addon.fit.thin_film import fit_thin_film
+        from specgen_addon.generate.thin_film import fit_thin_film
         fit = fit_thin_film(np.load({str(photo_path)!r}), clip_level=None)
         m = fit.material
         print(json.dumps({{"psnr": fit.reproduction.psnr_db, "alpha": m.alpha, "eta": m.film_eta,
@@ -107,9 +107,9 @@ def test_a_film_is_recovered_from_its_own_photo_with_only_numpy(tmp_path, repo_d
 
 @pytest.mark.slow
 def test_infer_with_the_thin_film_model_writes_a_table_that_reproduces_the_photo(tmp_path):
-    from specgen_addon import input_image
-    from specgen_addon.cli import main
-    from specgen_addon.table import BRDFTable
+    from specgen_addon.photo import sphere_image as input_image
+    from specgen_addon.cli.app import main
+    from specgen_addon.brdf.table import BRDFTable
 
     truth = ThinFilm("t", "test", alpha=0.12, film_eta=2.2, thickness_nm=300.0,
                      substrate=Dielectric(1.5, 0.004))
@@ -125,7 +125,7 @@ def test_infer_with_the_thin_film_model_writes_a_table_that_reproduces_the_photo
 @pytest.mark.slow
 def test_a_photo_no_film_explains_is_warned_about_by_name():
     """Noise on the sphere: the closest film reproduces it badly, and the fit says so."""
-    from specgen_addon import input_image
+    from specgen_addon.photo import sphere_image as input_image
 
     truth = ThinFilm("t", "test", alpha=0.1, film_eta=1.8, thickness_nm=300.0, substrate=Conductor("Al"))
     photo = input_image.render_input(truth, SIZE)
@@ -177,8 +177,8 @@ def test_a_blurred_photo_is_fitted_with_its_blur_and_not_as_a_rougher_lobe():
     """A sharp film's photo blurred by a Gaussian of 1 px (a resampled crop spreads a highlight
     so): fitted without a blur model, the lobe comes out far rougher than the truth; with the
     refinement's blur candidates the fit chooses σ = 1 px and finds the true roughness."""
-    from specgen_addon import input_image
-    from specgen_addon.refine.blur import BLUR_CANDIDATES_PX, gaussian_blur_stack
+    from specgen_addon.photo import sphere_image as input_image
+    from specgen_addon.generate.refine.blur import BLUR_CANDIDATES_PX, gaussian_blur_stack
 
     truth = ThinFilm("t", "test", alpha=0.03, film_eta=1.9, thickness_nm=380.0, substrate=Conductor("Al"))
     photo = gaussian_blur_stack(input_image.render_input(truth, 64), 1.0)
@@ -190,7 +190,7 @@ def test_a_blurred_photo_is_fitted_with_its_blur_and_not_as_a_rougher_lobe():
     assert blurred.reproduction.psnr_db > sharp.reproduction.psnr_db + 3.0
     # the wording the CLI line and the panel summary share
     assert sharp.blur_note() == "" and blurred.blur_note() == "photo blur σ 1 px modelled"
-    from specgen_addon.cli_model import film_fit_summary
+    from specgen_addon.cli.model import film_fit_summary
     assert "photo blur σ 1 px modelled" in film_fit_summary(blurred, "the canonical studio")
     assert "blur" not in film_fit_summary(sharp, "the canonical studio")
 

@@ -11,10 +11,10 @@ import numpy as np
 import pytest
 import torch
 
-from specgen_addon.errors import SpecGenError
+from specgen_addon.common.errors import SpecGenError
 from specgen_addon.model import Config, load_weights
-from specgen_addon.rusinkiewicz import io_from_half_diff
-from specgen_addon.table import mu_law_encode
+from specgen_addon.brdf.rusinkiewicz import io_from_half_diff
+from specgen_addon.brdf.table import mu_law_encode
 from specgen_addon.train.data import TrainingMaterial, make_batch, material_targets, sample_angles
 from specgen_addon.train.loop import MaterialSet, TrainConfig, load_config, lr_at, train
 from tiny_model import TINY_MODEL
@@ -171,7 +171,7 @@ def test_config_files_load_and_reject_unknown_keys(tmp_path, repo_dir):
 
 
 def test_every_shipped_config_file_passes_the_schema_and_builds_its_model(repo_dir, tmp_path):
-    from specgen_addon.config_schema import read_config_dict
+    from specgen_addon.train.config_schema import read_config_dict
     from specgen_addon.train.loop import validate_train_config
     from specgen_addon.model import SpecGen, count_parameters
 
@@ -298,7 +298,7 @@ def test_lighting_mix_honours_the_configured_canonical_fraction():
     ({"families": {"classic": 1.0}, "family_draw": {"sheen": 1.0}}, "family_draw names no family"),
 ])
 def test_bad_training_configs_are_refused_with_one_clear_error(tmp_path, bad, message):
-    from specgen_addon.cli import main as cli_main
+    from specgen_addon.cli.app import main as cli_main
 
     with pytest.raises(SpecGenError, match=message):
         TrainConfig.from_dict(bad)
@@ -333,7 +333,7 @@ def test_family_draw_weights_the_steps_by_family_and_leaves_the_corpus_as_it_is(
 
 
 def test_train_command_refuses_bad_overrides_before_any_work(tmp_path, repo_dir):
-    from specgen_addon.cli import main as cli_main
+    from specgen_addon.cli.app import main as cli_main
 
     cfg = str(repo_dir / "configs" / "default.json")
     assert cli_main(["train", "--config", cfg, "--out", str(tmp_path / "r"), "--steps", "0", "--quiet"]) == 2
@@ -350,7 +350,7 @@ def test_real_rgl_files_are_held_out_of_default_training(repo_dir):
 
 
 def test_component_stacks_resample_like_a_user_image():
-    from specgen_addon.infer import resample_square
+    from specgen_addon.model.runtime.inference import resample_square
     from specgen_addon.train.lighting_mix import resample_stack
 
     rng = np.random.default_rng(0)
@@ -397,7 +397,7 @@ def test_a_warm_start_that_recycles_dead_units_starts_where_the_old_weights_ende
 
 
 def test_train_command_refuses_weights_of_another_model_before_any_work(tmp_path, repo_dir):
-    from specgen_addon.cli import main as cli_main
+    from specgen_addon.cli.app import main as cli_main
 
     torch.manual_seed(0)
     from specgen_addon.model import SpecGen, save_weights
@@ -410,7 +410,7 @@ def test_train_command_refuses_weights_of_another_model_before_any_work(tmp_path
 
 
 def test_train_command_refuses_to_recycle_a_network_it_cannot_before_any_work(tmp_path, capsys):
-    from specgen_addon.cli import main as cli_main
+    from specgen_addon.cli.app import main as cli_main
     from specgen_addon.model import SpecGen, save_weights
 
     torch.manual_seed(0)
@@ -448,7 +448,7 @@ def test_snapshots_hold_what_the_run_would_ship_at_their_step_and_average(tmp_pa
 
 
 def test_a_run_stopped_before_its_first_step_saves_its_start_and_says_so(tmp_path):
-    from specgen_addon.cli_model import train_summary
+    from specgen_addon.cli.model import train_summary
 
     spec, rgb, val = sets()
     res = train(Config(**SMALL), TrainConfig(**{**FAST, "steps": 5, "max_minutes": 1e-9}), spec, rgb, val,

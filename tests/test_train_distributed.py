@@ -12,7 +12,7 @@ import pytest
 import torch
 import torch.distributed as dist
 
-from specgen_addon.errors import SpecGenError
+from specgen_addon.common.errors import SpecGenError
 from specgen_addon.model import Config, load_weights
 from specgen_addon.train import distributed as ddp
 from specgen_addon.train.data import make_batch

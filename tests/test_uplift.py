@@ -1,12 +1,13 @@
-"""Per-band conversion maths of the full-scene render (specgen_addon.uplift). No bpy."""
+"""Per-band conversion maths of the full-scene render (specgen_addon.bake.scene_uplift). No bpy."""
 
 from __future__ import annotations
 
 import numpy as np
 import pytest
 
-from specgen_addon import spectra, uplift
-from specgen_addon.errors import SpecGenError
+from specgen_addon.spectral import spectra
+from specgen_addon.bake import scene_uplift as uplift
+from specgen_addon.common.errors import SpecGenError
 
 WL = spectra.wavelength_grid(380.0, 780.0, 21)
 

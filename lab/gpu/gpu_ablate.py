@@ -26,11 +26,10 @@ import time
 from multiprocessing import get_context
 from pathlib import Path
 
-sys.path.insert(0, str(Path(__file__).resolve().parents[2]))
 
 from specgen_addon.evaluation import ablation as abl  # noqa: E402
 from specgen_addon.evaluation.ablation_study import study_settings  # noqa: E402
-from specgen_addon.evaluation.cache import cache_root  # noqa: E402
+from specgen_addon.common.cache import cache_root  # noqa: E402
 
 #: Files of an arm's folder that `ablate` and the figures need (not the resumable checkpoint).
 ARM_FILES = ("specgen.pt", "arm.json", "history.csv")

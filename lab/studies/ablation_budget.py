@@ -13,17 +13,15 @@ from __future__ import annotations
 
 import argparse
 import json
-import sys
 from pathlib import Path
 
 REPO = Path(__file__).resolve().parents[2]
-sys.path.insert(0, str(REPO))
 
 
 def scores(path: Path) -> tuple[int, dict[tuple[str, int], float]]:
     """``(steps, {(arm, seed): PSNR dB})`` of one ``ablate --json`` study, its records checked by
     ``ablate``'s own reader (:func:`specgen_addon.evaluation.ablation_study.load_records`)."""
-    from specgen_addon.errors import SpecGenError
+    from specgen_addon.common.errors import SpecGenError
     from specgen_addon.evaluation.ablation_study import load_records
 
     try:

@@ -17,7 +17,6 @@ from __future__ import annotations
 
 import argparse
 import json
-import sys
 import time
 from pathlib import Path
 
@@ -26,7 +25,6 @@ from machine import describe_machine  # bench/machine.py
 from rows import family_groups  # bench/rows.py
 
 REPO = Path(__file__).resolve().parents[2]
-sys.path.insert(0, str(REPO))
 
 
 #: A twin that renders exactly as its material (nothing held out to lose) scores infinite PSNR; means
@@ -44,13 +42,13 @@ def network_rows(paths: list[Path]) -> dict[str, float]:
 
 
 def main() -> int:
-    from specgen_addon import metrics
+    from specgen_addon.render import metrics
     from specgen_addon.corpus.colour_twin import colour_twin
     from specgen_addon.corpus.families import FAMILY_NAMES
     from specgen_addon.corpus.generate import material_family
     from specgen_addon.evaluation.protocol import DISTANT_LIGHTS, WAVELENGTHS_NM
     from specgen_addon.render import render_spectral, sphere_geometry
-    from specgen_addon.train.evaluate import mixed_test_materials
+    from specgen_addon.evaluation.trained_network import mixed_test_materials
 
     ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     ap.add_argument("--per-family", type=int, default=3, help="test materials per family (default 3)")

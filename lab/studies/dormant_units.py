@@ -10,14 +10,12 @@ Usage: ``.venv/bin/python bench/dormant_units.py [--weights W.pt] [--config conf
 from __future__ import annotations
 
 import argparse
-import sys
 from pathlib import Path
 
 import numpy as np
 from machine import describe_machine  # bench/machine.py
 
 REPO = Path(__file__).resolve().parents[2]
-sys.path.insert(0, str(REPO))
 
 
 def census_images(config: Path, image_size: int, n: int, seed: int = 0) -> np.ndarray:

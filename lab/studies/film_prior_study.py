@@ -25,13 +25,11 @@ from __future__ import annotations
 
 import argparse
 import json
-import sys
 import time
 from pathlib import Path
 
 import numpy as np
 
-sys.path.insert(0, str(Path(__file__).resolve().parents[2]))
 
 ARMS = ("network", "shipped", "film", "film refined", "by self", "by held-out")
 PHOTOS = ("independent", "shifted")
@@ -94,11 +92,11 @@ def main(argv: list[str] | None = None) -> int:
     from specgen_addon.corpus.families import FAMILY_NAMES
     from specgen_addon.corpus.generate import material_family
     from specgen_addon.evaluation.protocol import WAVELENGTHS_NM
-    from specgen_addon.fit.thin_film import fit_thin_film
-    from specgen_addon.pipeline import generate, load_photo_crop
-    from specgen_addon.refine import CLIP_LEVEL, RefineOptions, refine_brdf
-    from specgen_addon.refine.blur import BLUR_CANDIDATES_PX
-    from specgen_addon.train.evaluate import displaced_input, mixed_split_materials
+    from specgen_addon.generate.thin_film import fit_thin_film
+    from specgen_addon.generate.pipeline import generate, load_photo_crop
+    from specgen_addon.generate.refine import CLIP_LEVEL, RefineOptions, refine_brdf
+    from specgen_addon.generate.refine.blur import BLUR_CANDIDATES_PX
+    from specgen_addon.evaluation.trained_network import displaced_input, mixed_split_materials
 
     unknown = sorted(set(a.families or ()) - set(FAMILY_NAMES))
     if unknown:

@@ -14,13 +14,10 @@ refine with a denser operator (the input renders' sampling replaced for the fit 
 from __future__ import annotations
 
 import argparse
-import sys
 from dataclasses import replace
-from pathlib import Path
 
 import numpy as np
 
-sys.path.insert(0, str(Path(__file__).resolve().parents[2]))
 
 
 def main(argv: list[str] | None = None) -> int:
@@ -38,12 +35,12 @@ def main(argv: list[str] | None = None) -> int:
         ap.error("--per-family ≥ 1, seeds ≥ 0 and scales in [0.25, 8]")
 
     from off_grid_refine import independent_photo, truth_scorer
-    from specgen_addon import input_image
+    from specgen_addon.photo import sphere_image as input_image
     from specgen_addon.evaluation.protocol import WAVELENGTHS_NM
-    from specgen_addon.infer import generate_brdf
-    from specgen_addon.refine import RefineOptions, refine_brdf
+    from specgen_addon.model.runtime.inference import generate_brdf
+    from specgen_addon.generate.refine import RefineOptions, refine_brdf
     from specgen_addon.render import EnvSampling
-    from specgen_addon.train.evaluate import mixed_test_materials
+    from specgen_addon.evaluation.trained_network import mixed_test_materials
 
     photo_sampling = replace(EnvSampling().scaled(a.photo_scale), seed=a.photo_seed)
     arms = [("refined", None)]

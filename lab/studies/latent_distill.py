@@ -31,7 +31,6 @@ Usage::
 from __future__ import annotations
 
 import argparse
-import sys
 import time
 from pathlib import Path
 
@@ -39,7 +38,6 @@ import numpy as np
 from machine import describe_machine  # bench/machine.py
 
 REPO = Path(__file__).resolve().parents[2]
-sys.path.insert(0, str(REPO))
 
 WAVELENGTH_GRID_NM = np.linspace(380.0, 780.0, 41)
 

@@ -8,8 +8,8 @@ table is then scored against the truth under the protocol's distant lights (spec
 ``evaluate --families``):
 
 * ``network``: the network alone;
-* ``refined``: the shipped refinement of the network's table (:func:`specgen_addon.refine.refine_brdf`);
-* ``fit``: the network's latent fitted to the photo (:func:`specgen_addon.latent_fit.fit_latent`);
+* ``refined``: the shipped refinement of the network's table (:func:`specgen_addon.generate.refine.refine_brdf`);
+* ``fit``: the network's latent fitted to the photo (:func:`specgen_addon.generate.latent_fit.fit_latent`);
 * ``fit+ref``: the shipped refinement of the fitted table;
 * with ``--also-holdout``, ``fit ho`` and ``fit ho+ref``: the same with
   ``LatentFitOptions(holdout=True)`` (fitted to one half of the sphere's blocks, judged by the other);
@@ -25,12 +25,10 @@ from __future__ import annotations
 
 import argparse
 import json
-import sys
 from pathlib import Path
 
 import numpy as np
 
-sys.path.insert(0, str(Path(__file__).resolve().parents[2]))
 
 PHOTOS = ("independent", "shifted")
 COLUMNS = ("network", "refined", "fit", "fit+ref", "fit ho", "fit ho+ref", "fit kp", "fit kp+ref")
@@ -54,10 +52,10 @@ def main(argv: list[str] | None = None) -> int:
     from off_grid_refine import independent_photo, truth_scorer
     from specgen_addon.corpus.generate import material_family
     from specgen_addon.evaluation.protocol import WAVELENGTHS_NM
-    from specgen_addon.infer import generate_brdf, sphere_crop
-    from specgen_addon.latent_fit import LatentFitOptions, fit_latent
-    from specgen_addon.refine import RefineOptions, refine_brdf
-    from specgen_addon.train.evaluate import displaced_input, mixed_split_materials
+    from specgen_addon.model.runtime.inference import generate_brdf, sphere_crop
+    from specgen_addon.generate.latent_fit import LatentFitOptions, fit_latent
+    from specgen_addon.generate.refine import RefineOptions, refine_brdf
+    from specgen_addon.evaluation.trained_network import displaced_input, mixed_split_materials
 
     wl = np.asarray(WAVELENGTHS_NM, np.float64)
     rows = []

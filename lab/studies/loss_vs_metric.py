@@ -18,7 +18,6 @@ from __future__ import annotations
 
 import argparse
 import json
-import sys
 import time
 from pathlib import Path
 
@@ -26,7 +25,6 @@ import numpy as np
 from machine import describe_machine  # bench/machine.py
 
 REPO = Path(__file__).resolve().parents[2]
-sys.path.insert(0, str(REPO))
 
 
 def rank_correlation(x: np.ndarray, y: np.ndarray) -> float:
@@ -39,7 +37,7 @@ def rank_correlation(x: np.ndarray, y: np.ndarray) -> float:
 def main() -> int:
     import torch
 
-    from specgen_addon import input_image
+    from specgen_addon.photo import sphere_image as input_image
     from specgen_addon.corpus.generate import generate_mixed_corpus
     from specgen_addon.model.specgen import DEFAULT_WEIGHTS, load_weights
     from specgen_addon.train import network_inputs

@@ -23,7 +23,6 @@ from pathlib import Path
 
 import numpy as np
 
-sys.path.insert(0, str(Path(__file__).resolve().parents[2]))
 
 NETWORKS = ("default", "resampled")
 
@@ -42,15 +41,15 @@ def main(argv: list[str] | None = None) -> int:
     from off_grid_refine import independent_photo, truth_scorer
     from specgen_addon.corpus.generate import material_family
     from specgen_addon.evaluation.protocol import WAVELENGTHS_NM
-    from specgen_addon.infer import generate_brdf
-    from specgen_addon.input_image import SphereCrop
-    from specgen_addon.input_lighting import InputLighting
+    from specgen_addon.model.runtime.inference import generate_brdf
+    from specgen_addon.photo.sphere_image import SphereCrop
+    from specgen_addon.photo.photo_lighting import InputLighting
     from specgen_addon.model import DEFAULT_WEIGHTS, RESAMPLED_WEIGHTS
-    from specgen_addon.pipeline import load_photo_crop
-    from specgen_addon.refine import render_under
-    from specgen_addon.refine.operator import PhotoOperator
-    from specgen_addon.refine.report import reproduction
-    from specgen_addon.train.evaluate import displaced_input, mixed_split_materials
+    from specgen_addon.generate.pipeline import load_photo_crop
+    from specgen_addon.generate.refine import render_under
+    from specgen_addon.generate.refine.operator import PhotoOperator
+    from specgen_addon.render.photo_reproduction import reproduction
+    from specgen_addon.evaluation.trained_network import displaced_input, mixed_split_materials
 
     weights = {"default": DEFAULT_WEIGHTS, "resampled": RESAMPLED_WEIGHTS}
     light = InputLighting()

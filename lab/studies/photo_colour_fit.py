@@ -19,7 +19,6 @@ from __future__ import annotations
 
 import argparse
 import json
-import sys
 import time
 from pathlib import Path
 
@@ -28,21 +27,21 @@ from machine import describe_machine  # bench/machine.py
 from rows import family_groups  # bench/rows.py
 
 REPO = Path(__file__).resolve().parents[2]
-sys.path.insert(0, str(REPO))
 
 
 def main() -> int:
-    from specgen_addon import input_image, metrics
-    from specgen_addon.colour_tables import mallett2019_basis
+    from specgen_addon.photo import sphere_image as input_image
+    from specgen_addon.render import metrics
+    from specgen_addon.spectral.colour_tables import mallett2019_basis
     from specgen_addon.corpus.families import FAMILY_NAMES
     from specgen_addon.corpus.generate import material_family
     from specgen_addon.evaluation.photo_fit import observed_pixels
     from specgen_addon.evaluation.protocol import DISTANT_LIGHTS, WAVELENGTHS_NM
-    from specgen_addon.infer import generate_brdf
-    from specgen_addon.input_lighting import parse_lighting
+    from specgen_addon.model.runtime.inference import generate_brdf
+    from specgen_addon.photo.photo_lighting import parse_lighting
     from specgen_addon.render import render_spectral, sphere_geometry
-    from specgen_addon.spectra import spectral_to_linear_srgb
-    from specgen_addon.train.evaluate import mixed_split_materials
+    from specgen_addon.spectral.spectra import spectral_to_linear_srgb
+    from specgen_addon.evaluation.trained_network import mixed_split_materials
 
     ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     ap.add_argument("--per-family", type=int, default=3, help="test materials per family (default 3)")

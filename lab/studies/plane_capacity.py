@@ -26,7 +26,6 @@ Usage: ``.venv/bin/python bench/plane_capacity.py [--weights W.pt] [--per-family
 from __future__ import annotations
 
 import argparse
-import sys
 import time
 from pathlib import Path
 
@@ -34,7 +33,6 @@ import numpy as np
 from machine import describe_machine  # bench/machine.py
 
 REPO = Path(__file__).resolve().parents[2]
-sys.path.insert(0, str(REPO))
 
 
 class PlanesBRDF:
@@ -46,8 +44,8 @@ class PlanesBRDF:
     def eval(self, wi: np.ndarray, wo: np.ndarray, wavelengths_nm: np.ndarray) -> np.ndarray:
         import torch
 
-        from specgen_addon.rusinkiewicz import half_diff_from_io
-        from specgen_addon.table import mu_law_decode
+        from specgen_addon.brdf.rusinkiewicz import half_diff_from_io
+        from specgen_addon.brdf.table import mu_law_decode
 
         th, td, pd = (np.asarray(a, dtype=np.float32) for a in half_diff_from_io(wi, wo))
         wl = np.asarray(wavelengths_nm, dtype=np.float32)
@@ -73,8 +71,8 @@ def fit_planes(model, x, mat, free: str, steps: int, seed: int, tv_weight: float
     (:data:`FREE`) is optimised, every weight of the model stays frozen."""
     import torch
 
-    from specgen_addon.rusinkiewicz import io_from_half_diff
-    from specgen_addon.table import mu_law_encode
+    from specgen_addon.brdf.rusinkiewicz import io_from_half_diff
+    from specgen_addon.brdf.table import mu_law_encode
     from specgen_addon.train.data import sample_angles
 
     rng = np.random.default_rng(seed)
@@ -119,13 +117,14 @@ def fit_planes(model, x, mat, free: str, steps: int, seed: int, tv_weight: float
 def main() -> int:
     import torch
 
-    from specgen_addon import input_image, metrics
+    from specgen_addon.photo import sphere_image as input_image
+    from specgen_addon.render import metrics
     from specgen_addon.corpus.generate import material_family
     from specgen_addon.evaluation.protocol import DISTANT_LIGHTS, WAVELENGTHS_NM
-    from specgen_addon.infer import network_input
+    from specgen_addon.model.runtime.inference import network_input
     from specgen_addon.model import load_weights
     from specgen_addon.render import render_spectral, sphere_geometry
-    from specgen_addon.train.evaluate import mixed_test_materials
+    from specgen_addon.evaluation.trained_network import mixed_test_materials
 
     ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     ap.add_argument("--weights", type=Path, default=None, help="weights (.pt); default: shipped")

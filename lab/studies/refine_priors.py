@@ -15,14 +15,12 @@ from __future__ import annotations
 
 import argparse
 import json
-import sys
 import time
 from pathlib import Path
 
 import numpy as np
 
 REPO = Path(__file__).resolve().parents[2]
-sys.path.insert(0, str(REPO))
 
 from bench.machine import describe_machine  # noqa: E402
 
@@ -46,11 +44,11 @@ def main() -> int:
     if args.count < 1:
         ap.error("--count must be at least 1")
 
-    from specgen_addon import input_image
+    from specgen_addon.photo import sphere_image as input_image
     from specgen_addon.corpus import generate_corpus
     from specgen_addon.evaluation import protocol, tables
-    from specgen_addon.evaluation.cache import cache_root
-    from specgen_addon.refine import RefineOptions, refine_brdf
+    from specgen_addon.common.cache import cache_root
+    from specgen_addon.generate.refine import RefineOptions, refine_brdf
 
     mats = [m for m in generate_corpus(protocol.CORPUS_SIZE, protocol.CORPUS_SEED)
             if m.split == args.split][:args.count]

@@ -20,14 +20,12 @@ from __future__ import annotations
 
 import argparse
 import json
-import sys
 import time
 from pathlib import Path
 
 import numpy as np
 
 REPO = Path(__file__).resolve().parents[2]
-sys.path.insert(0, str(REPO))
 
 from bench.family_checks import THETA_D, _lab, _specular  # noqa: E402
 from bench.machine import describe_machine  # noqa: E402
@@ -62,12 +60,12 @@ def main() -> int:
     if args.per_family < 1:
         ap.error("--per-family must be at least 1")
 
-    from specgen_addon import input_image
+    from specgen_addon.photo import sphere_image as input_image
     from specgen_addon.corpus.generate import material_family
     from specgen_addon.evaluation import tables
-    from specgen_addon.evaluation.cache import cache_root
-    from specgen_addon.refine import CorrectionBasis, RefineOptions, refine_brdf
-    from specgen_addon.train.evaluate import mixed_split_materials
+    from specgen_addon.common.cache import cache_root
+    from specgen_addon.generate.refine import CorrectionBasis, RefineOptions, refine_brdf
+    from specgen_addon.evaluation.trained_network import mixed_split_materials
 
     names = list(KNOT_SETS)
     if args.knot_sets is not None and not all(0 <= i < len(names) for i in args.knot_sets):

@@ -12,12 +12,9 @@ the protocol's distant lights at each size; the spectral PSNR and the worst pixe
 from __future__ import annotations
 
 import argparse
-import sys
-from pathlib import Path
 
 import numpy as np
 
-sys.path.insert(0, str(Path(__file__).resolve().parents[2]))
 
 
 def main(argv: list[str] | None = None) -> int:
@@ -25,10 +22,12 @@ def main(argv: list[str] | None = None) -> int:
     ap.add_argument("material", help="a paper-tables test material, e.g. mat0004")
     ap.add_argument("--sizes", type=int, nargs="+", default=[64, 128], help="render sizes (default 64 128)")
     a = ap.parse_args(argv)
-    from specgen_addon import infer, input_image, metrics
+    from specgen_addon.model.runtime import inference as infer
+    from specgen_addon.photo import sphere_image as input_image
+    from specgen_addon.render import metrics
     from specgen_addon.evaluation import protocol
     from specgen_addon.evaluation.protocol import DISTANT_LIGHTS, WAVELENGTHS_NM
-    from specgen_addon.refine import RefineOptions, refine_brdf
+    from specgen_addon.generate.refine import RefineOptions, refine_brdf
     from specgen_addon.render import render_spectral, sphere_geometry
 
     mats = [m for m in protocol.test_materials(10) if m.name == a.material]

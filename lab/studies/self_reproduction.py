@@ -13,16 +13,14 @@ from __future__ import annotations
 
 import argparse
 import json
-import sys
 import time
 from pathlib import Path
 
-sys.path.insert(0, str(Path(__file__).resolve().parents[2]))
 
 from bench.machine import describe_machine  # noqa: E402
 from specgen_addon.evaluation.self_reproduction import run_study, study_items, summarise  # noqa: E402
-from specgen_addon.input_lighting import parse_lighting  # noqa: E402
-from specgen_addon.lighting import HELDOUT_ENVS  # noqa: E402
+from specgen_addon.photo.photo_lighting import parse_lighting  # noqa: E402
+from specgen_addon.render.environment_maps import HELDOUT_ENVS  # noqa: E402
 
 RGL_DIR = Path(__file__).resolve().parents[3] / "shared" / "data" / "rgl"
 

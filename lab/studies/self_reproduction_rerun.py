@@ -4,7 +4,7 @@
         --json docs/refinement_study_fifth_session_relaxed.json
 
 The refinement relaxes its smoothness only where self-reproduction is below
-``specgen_addon.refine.RELAX_BELOW_DB`` (42 dB), so after that change only those rows can differ:
+``specgen_addon.generate.refine.RELAX_BELOW_DB`` (42 dB), so after that change only those rows can differ:
 this re-runs exactly them (self-reproduction only) and writes old and new figures side by side.
 """
 
@@ -12,10 +12,8 @@ from __future__ import annotations
 
 import argparse
 import json
-import sys
 from pathlib import Path
 
-sys.path.insert(0, str(Path(__file__).resolve().parents[2]))
 
 from bench.machine import describe_machine  # noqa: E402
 
@@ -30,8 +28,8 @@ def main() -> int:
         ap.error(f"{args.study}: no such study file")
     from specgen_addon.evaluation.protocol import test_materials
     from specgen_addon.evaluation.self_reproduction import study_one
-    from specgen_addon.formats import load_brdf
-    from specgen_addon.input_lighting import parse_lighting
+    from specgen_addon.brdf.formats import load_brdf
+    from specgen_addon.photo.photo_lighting import parse_lighting
 
     rows = json.loads(args.study.read_text())["rows"]
     out = []

@@ -27,7 +27,6 @@ from __future__ import annotations
 
 import argparse
 import json
-import sys
 import time
 from pathlib import Path
 
@@ -36,20 +35,20 @@ from machine import describe_machine  # bench/machine.py
 from rows import family_groups  # bench/rows.py
 
 REPO = Path(__file__).resolve().parents[2]
-sys.path.insert(0, str(REPO))
 
 
 def main() -> int:
-    from specgen_addon import input_image, metrics
+    from specgen_addon.photo import sphere_image as input_image
+    from specgen_addon.render import metrics
     from specgen_addon.corpus.colour_twin import replace_reflectances
     from specgen_addon.corpus.families import FAMILY_NAMES
     from specgen_addon.corpus.generate import material_family
     from specgen_addon.corpus.material import Reflectance
     from specgen_addon.corpus.spectra_sources import SPLITS, measured_groups
     from specgen_addon.evaluation.protocol import DISTANT_LIGHTS, WAVELENGTHS_NM
-    from specgen_addon.infer import generate_brdf
+    from specgen_addon.model.runtime.inference import generate_brdf
     from specgen_addon.render import render_spectral, sphere_geometry
-    from specgen_addon.train.evaluate import mixed_split_materials
+    from specgen_addon.evaluation.trained_network import mixed_split_materials
 
     ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     ap.add_argument("--pool", choices=SPLITS, default=None, help="split whose measured spectra replace the originals")

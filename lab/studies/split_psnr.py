@@ -13,7 +13,6 @@ materials of ``configs/probe_overfit.json`` are ``--corpus-size 80``).
 from __future__ import annotations
 
 import argparse
-import sys
 import time
 from pathlib import Path
 
@@ -21,14 +20,14 @@ import numpy as np
 from machine import describe_machine  # bench/machine.py
 
 REPO = Path(__file__).resolve().parents[2]
-sys.path.insert(0, str(REPO))
 
 
 def main() -> int:
-    from specgen_addon import input_image, metrics
+    from specgen_addon.photo import sphere_image as input_image
+    from specgen_addon.render import metrics
     from specgen_addon.corpus.generate import generate_mixed_corpus
     from specgen_addon.evaluation.protocol import DISTANT_LIGHTS, WAVELENGTHS_NM
-    from specgen_addon.infer import generate_brdf
+    from specgen_addon.model.runtime.inference import generate_brdf
     from specgen_addon.render import render_spectral, sphere_geometry
 
     ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])

@@ -15,14 +15,12 @@ from __future__ import annotations
 import argparse
 import dataclasses
 import json
-import sys
 from pathlib import Path
 
 import numpy as np
 from scipy.stats import spearmanr
 
 REPO = Path(__file__).resolve().parents[2]
-sys.path.insert(0, str(REPO))
 
 #: Scalar parameters of the families worth relating to the score (roughness, lobe shape, film).
 SCALARS = ("alpha", "roughness", "gamma", "retro_weight", "retro_alpha", "thickness_nm", "film_eta", "coverage",
@@ -45,7 +43,7 @@ def material_features(material) -> dict[str, float]:
 
 def main() -> int:
     from specgen_addon.corpus.generate import generate_mixed_corpus
-    from specgen_addon.train.evaluate import MIXED_CORPUS_SEED, MIXED_CORPUS_SIZE
+    from specgen_addon.evaluation.trained_network import MIXED_CORPUS_SEED, MIXED_CORPUS_SIZE
 
     ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     ap.add_argument("results", type=Path, nargs="+", help="evaluate --families … --json files")

@@ -15,13 +15,11 @@ from __future__ import annotations
 
 import argparse
 import json
-import sys
 import time
 from pathlib import Path
 
 import numpy as np
 
-sys.path.insert(0, str(Path(__file__).resolve().parents[2]))
 
 PHOTOS = ("independent", "shifted")
 #: σ grids compared: none, the refinement's candidates (``BLUR_CANDIDATES_PX``), and :data:`FINE_GRID_PX`
@@ -47,10 +45,10 @@ def main(argv: list[str] | None = None) -> int:
 
     from off_grid_refine import independent_photo, truth_scorer
     from specgen_addon.evaluation.protocol import WAVELENGTHS_NM
-    from specgen_addon.fit.thin_film import fit_thin_film
-    from specgen_addon.pipeline import load_photo_crop
-    from specgen_addon.refine.blur import BLUR_CANDIDATES_PX
-    from specgen_addon.train.evaluate import displaced_input, mixed_split_materials
+    from specgen_addon.generate.thin_film import fit_thin_film
+    from specgen_addon.generate.pipeline import load_photo_crop
+    from specgen_addon.generate.refine.blur import BLUR_CANDIDATES_PX
+    from specgen_addon.evaluation.trained_network import displaced_input, mixed_split_materials
 
     grids = {"none": (0.0,), "refinement": tuple(BLUR_CANDIDATES_PX), "fine": FINE_GRID_PX}
     first, second = a.compare

@@ -15,14 +15,11 @@ the photo with other samples (seed 1, 224 directions per pixel), as a real photo
 from __future__ import annotations
 
 import argparse
-import sys
 import time
 from dataclasses import replace
-from pathlib import Path
 
 import numpy as np
 
-sys.path.insert(0, str(Path(__file__).resolve().parents[2]))
 
 
 def main(argv: list[str] | None = None) -> int:
@@ -35,11 +32,11 @@ def main(argv: list[str] | None = None) -> int:
         ap.error("--per-family must be ≥ 1")
 
     from off_grid_refine import independent_photo, truth_scorer
-    from specgen_addon import input_image
+    from specgen_addon.photo import sphere_image as input_image
     from specgen_addon.evaluation.protocol import WAVELENGTHS_NM
-    from specgen_addon.pipeline import generate
+    from specgen_addon.generate.pipeline import generate
     from specgen_addon.render import EnvSampling
-    from specgen_addon.train.evaluate import mixed_test_materials
+    from specgen_addon.evaluation.trained_network import mixed_test_materials
 
     sampling = replace(EnvSampling().scaled(2.0), seed=1)
     right = 0

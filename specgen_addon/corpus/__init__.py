@@ -10,11 +10,11 @@ Public API::
     table = mats[0].tabulate()                     # BRDFTable on the MERL grid
 """
 
-from .generate import generate_corpus, make_material
-from .manifest import find_material, load_manifest, save_manifest
-from .material import ClearCoat, Conductor, Dielectric, Material, Reflectance
-from .metals import METALS, metal_ior
-from .spectra_sources import METAL_SPLITS, SPLITS
+from specgen_addon.corpus.generate import generate_corpus, make_material
+from specgen_addon.corpus.manifest import find_material, load_manifest, save_manifest
+from specgen_addon.corpus.material import ClearCoat, Conductor, Dielectric, Material, Reflectance
+from specgen_addon.corpus.metals import METALS, metal_ior
+from specgen_addon.corpus.spectra_sources import METAL_SPLITS, SPLITS
 
 __all__ = ["ClearCoat", "Conductor", "Dielectric", "METALS", "METAL_SPLITS", "Material",
            "Reflectance", "SPLITS", "find_material", "generate_corpus", "load_manifest",

@@ -21,9 +21,9 @@ from collections.abc import Callable
 
 import numpy as np
 
-from ..spectral_recovery import otsu2018_reflectance, xyz_of_reflectance
-from .material import Reflectance
-from .spectra_sources import REFLECTANCE_GRID_NM
+from specgen_addon.spectral.recovery import otsu2018_reflectance, xyz_of_reflectance
+from specgen_addon.corpus.material import Reflectance
+from specgen_addon.corpus.spectra_sources import REFLECTANCE_GRID_NM
 
 #: Wavelengths (nm) the colours are integrated on: 5 nm over the CIE 1931 observer's range.
 _XYZ_GRID_NM = np.arange(360.0, 831.0, 5.0)

@@ -14,10 +14,10 @@ from typing import Callable
 
 import numpy as np
 
-from ..errors import SpecGenError
-from .families import CarPaint, Lobes, Sheen, ThinFilm, TintedCoat, check_family_names
-from .material import ClearCoat, Conductor, Dielectric, Material, Reflectance
-from .spectra_sources import (DUPLICATE_RMS, METAL_SPLITS, SPLITS, draw_otsu2018, measured_groups,
+from specgen_addon.common.errors import SpecGenError
+from specgen_addon.corpus.families import CarPaint, Lobes, Sheen, ThinFilm, TintedCoat, check_family_names
+from specgen_addon.corpus.material import ClearCoat, Conductor, Dielectric, Material, Reflectance
+from specgen_addon.corpus.spectra_sources import (DUPLICATE_RMS, METAL_SPLITS, SPLITS, draw_otsu2018, measured_groups,
                               measured_spectra, rms_distance)
 
 #: Probability of each split.

@@ -7,9 +7,9 @@ import os
 from pathlib import Path
 from typing import Sequence
 
-from ..errors import SpecGenError
-from ..io_utils import atomic_write
-from .material import Material
+from specgen_addon.common.errors import SpecGenError
+from specgen_addon.common.atomic_io import atomic_write
+from specgen_addon.corpus.material import Material
 
 MANIFEST_FORMAT = "specgen-corpus"
 MANIFEST_VERSION = 1
@@ -39,7 +39,7 @@ def load_manifest(path: str | os.PathLike) -> list[Material]:
         raise SpecGenError(f"{path}: not a SpecGen corpus manifest")
     if doc.get("version") != MANIFEST_VERSION:
         raise SpecGenError(f"{path}: unsupported manifest version {doc.get('version')}")
-    from .families import material_from_dict
+    from specgen_addon.corpus.families import material_from_dict
 
     try:
         return [material_from_dict(d) for d in doc["materials"]]

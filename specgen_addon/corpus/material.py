@@ -27,13 +27,13 @@ from typing import Any, Callable
 
 import numpy as np
 
-from ..errors import SpecGenError
-from ..spectra import DEFAULT_WAVELENGTHS_NM, reflectance_to_linear_srgb, wavelength_grid
-from .fresnel import cauchy_ior, fresnel_conductor, fresnel_dielectric
-from .metals import METALS, metal_ior
-from .microfacet import (cosine_weighted_mean, lookup_mu, specular_albedo_curves,
+from specgen_addon.common.errors import SpecGenError
+from specgen_addon.spectral.spectra import DEFAULT_WAVELENGTHS_NM, reflectance_to_linear_srgb, wavelength_grid
+from specgen_addon.corpus.fresnel import cauchy_ior, fresnel_conductor, fresnel_dielectric
+from specgen_addon.corpus.metals import METALS, metal_ior
+from specgen_addon.corpus.microfacet import (cosine_weighted_mean, lookup_mu, specular_albedo_curves,
                          specular_geometry)
-from .spectra_sources import REFLECTANCE_GRID_NM, SPLITS
+from specgen_addon.corpus.spectra_sources import REFLECTANCE_GRID_NM, SPLITS
 
 #: Cosine nodes of the Fresnel lookup (linear interpolation in cos θd).
 COS_NODES = np.linspace(0.0, 1.0, 1025)
@@ -212,7 +212,7 @@ class Material:
                 wavelengths_nm: np.ndarray = DEFAULT_WAVELENGTHS_NM) -> np.ndarray:
         """``f_r`` at Rusinkiewicz angles (radians) → (N, Λ), same as ``eval(*io_from_half_diff(...))``.
 
-        Uses the closed forms of :func:`specgen_addon.rusinkiewicz.io_from_half_diff`:
+        Uses the closed forms of :func:`specgen_addon.brdf.rusinkiewicz.io_from_half_diff`:
         ``cos θi,o = cos θh cos θd ∓ sin θh sin θd cos φd``, ``ωi·h = cos θd``.
         """
         cos_i, cos_o, cos_h, cos_d = self._hd_cosines(theta_h, theta_d, phi_d)
@@ -230,8 +230,8 @@ class Material:
     def tabulate(self, wavelengths_nm: np.ndarray = DEFAULT_WAVELENGTHS_NM,
                  progress: Callable[[float], None] | None = None,
                  cancel: Callable[[], bool] | None = None):
-        """The material on the MERL grid as a spectral :class:`~specgen_addon.table.BRDFTable`."""
-        from ..table import BRDFTable
+        """The material on the MERL grid as a spectral :class:`~specgen_addon.brdf.table.BRDFTable`."""
+        from specgen_addon.brdf.table import BRDFTable
 
         w = np.asarray(wavelengths_nm, dtype=np.float64)
         meta = {"source": "specgen corpus", "material": self.to_dict(), "description": self.kind}

@@ -14,7 +14,7 @@ from pathlib import Path
 
 import numpy as np
 
-from ..errors import SpecGenError
+from specgen_addon.common.errors import SpecGenError
 
 IOR_DIR = Path(__file__).resolve().parent / "data" / "ior"
 

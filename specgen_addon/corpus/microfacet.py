@@ -18,7 +18,7 @@ import functools
 
 import numpy as np
 
-from .fresnel import fresnel_dielectric
+from specgen_addon.corpus.fresnel import fresnel_dielectric
 
 
 def ggx_d(cos_h: np.ndarray, alpha: float) -> np.ndarray:

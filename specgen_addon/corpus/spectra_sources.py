@@ -23,7 +23,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from ..errors import SpecGenError
+from specgen_addon.common.errors import SpecGenError
 
 SPLITS: tuple[str, ...] = ("train", "val", "test")
 #: Percent of source groups per split (hash buckets 0–99): test < 20 ≤ val < 30 ≤ train.

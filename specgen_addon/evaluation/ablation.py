@@ -28,7 +28,7 @@ from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Any, Callable
 
-from .cache import read_json, write_json
+from specgen_addon.common.cache import read_json, write_json
 
 
 @dataclass(frozen=True)
@@ -77,8 +77,8 @@ class AblationSettings:
 
     def configs(self, arm: Arm, seed: int):
         """(model Config, TrainConfig) of ``arm`` trained with ``seed``."""
-        from ..model import Config
-        from ..train.loop import TrainConfig
+        from specgen_addon.model import Config
+        from specgen_addon.train.loop import TrainConfig
 
         mcfg = Config.from_dict({**self.model, "fusion": arm.fusion})
         t = {**self.train, "seed": seed, "steps": self.steps,
@@ -105,7 +105,7 @@ class AblationSettings:
         return f"{arm.name}-{hashlib.sha1(blob.encode()).hexdigest()[:10]}"
 
     def describe_markdown(self, results: dict[str, "ArmResult"]) -> str:
-        from . import report
+        from specgen_addon.evaluation import report
 
         rows = [[r.label, r.fusion.upper() if r.fusion == "aff" else "Hadamard",
                  "corpus spectral + RGB" if r.joint else "corpus spectral", str(r.steps), str(r.seed),
@@ -142,8 +142,8 @@ def _default_configs() -> tuple[dict[str, Any], dict[str, Any]]:
 
     Ablation arms train from scratch: the config's ``init_weights`` (a warm start from the shipped
     weights) is dropped, so every arm starts equal and arms of another architecture can train."""
-    from ..model import Config
-    from ..train.loop import TrainConfig, load_config
+    from specgen_addon.model import Config
+    from specgen_addon.train.loop import TrainConfig, load_config
 
     if DEFAULT_CONFIG.is_file():
         mcfg, tcfg = load_config(DEFAULT_CONFIG)
@@ -183,7 +183,7 @@ def ablation_settings(smoke: bool = False, steps: int | None = None, budget_minu
 
 
 def _material_sets(tcfg, mcfg, cache_dir: Path, log: Callable[[str], None]):
-    from ..train import build_material_sets
+    from specgen_addon.train import build_material_sets
 
     return build_material_sets(mcfg, tcfg, cache_dir=cache_dir, log=log)
 
@@ -192,7 +192,7 @@ def time_steps(settings: AblationSettings, n: int = 12, log: Callable[[str], Non
     """Seconds per training step of the joint AFF arm (median-free mean of ``n`` steps after warm-up)."""
     import tempfile
 
-    from ..train.loop import train
+    from specgen_addon.train.loop import train
 
     arm = ARMS_BY_NAME["joint-aff"]
     probe = dataclasses.replace(settings, steps=n + 2)
@@ -208,7 +208,7 @@ def time_steps(settings: AblationSettings, n: int = 12, log: Callable[[str], Non
 
 def _data_cache() -> Path:
     """The cache of training input renders shared with the training runs (nothing rendered twice)."""
-    from .cache import cache_root
+    from specgen_addon.common.cache import cache_root
 
     return cache_root() / "train-data"
 
@@ -227,7 +227,7 @@ def train_arms(settings: AblationSettings, cache_dir: Path, progress: bool = Tru
     ``run_overrides`` sets :data:`RUN_ONLY_FIELDS` for this run (e.g. ``{"device": "cuda"}``). An arm
     that stops before its budget (``max_minutes``) is left without ``arm.json``, so it is neither
     scored nor reported until a later run finishes it; it is then missing from the result."""
-    from ..train.loop import train
+    from specgen_addon.train.loop import train
 
     overrides = dict(run_overrides or {})
     unknown = sorted(set(overrides) - set(RUN_ONLY_FIELDS))

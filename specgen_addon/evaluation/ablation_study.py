@@ -27,8 +27,8 @@ from typing import Any, Callable, Sequence
 
 import numpy as np
 
-from . import ablation as abl
-from .cache import cache_root, read_json, write_json
+from specgen_addon.evaluation import ablation as abl
+from specgen_addon.common.cache import cache_root, read_json, write_json
 
 #: Arms of the study: the shipped configuration (joint AFF) and one change each.
 STUDY_ARMS = ("joint-aff", "joint-hadamard", "spectral-aff")
@@ -59,7 +59,7 @@ def run_arm(settings: abl.AblationSettings, arm: str, seed: int, cache_dir: str,
     """Train (or load) one arm with one seed and score it; a JSON-able record."""
     import torch
 
-    from ..train.evaluate import evaluate_families
+    from specgen_addon.evaluation.trained_network import evaluate_families
 
     torch.set_num_threads(1)
     one = dataclasses.replace(settings, seeds=(seed,), arms=(arm,))
@@ -242,8 +242,8 @@ def load_records(path: str | Path, steps: int) -> list[dict[str, Any]]:
     at ``steps`` steps with known arms: pooling different budgets would mix two experiments."""
     import json
 
-    from ..errors import SpecGenError
-    from .ablation import ARMS_BY_NAME
+    from specgen_addon.common.errors import SpecGenError
+    from specgen_addon.evaluation.ablation import ARMS_BY_NAME
 
     path = Path(path)
     try:
@@ -271,7 +271,7 @@ def pool_records(new: Sequence[dict[str, Any]], earlier: Sequence[dict[str, Any]
     """This run's records with an earlier study's. Where both scored one (arm, seed) the two must
     agree to :data:`SAME_SCORE_DB` (training and scoring are deterministic, so a retrained arm is a
     check of the earlier figure) and this run's is kept; a disagreement is an error."""
-    from ..errors import SpecGenError
+    from specgen_addon.common.errors import SpecGenError
 
     pooled = {(r["arm"], int(r["seed"])): r for r in earlier}
     for r in new:

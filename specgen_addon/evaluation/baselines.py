@@ -18,7 +18,7 @@ Radiance, not reflectance. A render's pixels are unbounded radiance. Following P
 (``RGBUnboundedSpectrum``), a pixel ``rgb`` (negative parts clipped to 0) is split into a scale
 ``s = 2·max(rgb)`` and a chroma ``c = rgb / s`` (largest component 0.5), ``c`` is uplifted as a
 reflectance ``ρ_c(λ)``, and the spectral radiance estimate is ``L(λ) = s · ρ_c(λ) · S(λ)`` with
-``S`` the scene's white (D65, unit luminance; see :mod:`specgen_addon.spectra`). Linear methods
+``S`` the scene's white (D65, unit luminance; see :mod:`specgen_addon.spectral.spectra`). Linear methods
 (Mallett, Smits) do not depend on this split.
 
 Speed. Mallett 2019 is linear in RGB and is applied as one (3, Λ) matrix. The other methods cost
@@ -27,7 +27,7 @@ chroma cube (the face where channel k holds the maximum 0.5) on an ``n × n`` gr
 bilinearly. Because the RGB of a spectrum is linear in the spectrum, interpolating the tabulated
 spectra reproduces the interpolated colour exactly wherever the method itself round-trips at the
 grid nodes; what interpolation changes is only the spectral shape between nodes. Tables are cached
-as ``.npz`` under :func:`specgen_addon.evaluation.cache.cache_root` (Jakob 2019 takes ~30 s for
+as ``.npz`` under :func:`specgen_addon.common.cache.cache_root` (Jakob 2019 takes ~30 s for
 its 17 × 17 faces).
 """
 
@@ -38,9 +38,9 @@ from typing import Callable
 
 import numpy as np
 
-from .. import spectra
-from ..errors import SpecGenError
-from .cache import cache_root
+from specgen_addon.spectral import spectra
+from specgen_addon.common.errors import SpecGenError
+from specgen_addon.common.cache import cache_root
 
 MALLETT2019 = "mallett2019"
 SMITS1999 = "smits1999"
@@ -148,7 +148,7 @@ def face_table(method: str, n: int | None = None) -> np.ndarray:
             if np.array_equal(data["wavelengths"], LUT_WAVELENGTHS_NM) and data["table"].shape[1] == n:
                 return data["table"]
     table = build_face_table(method, n)
-    from ..io_utils import atomic_write
+    from specgen_addon.common.atomic_io import atomic_write
 
     with atomic_write(path, overwrite=True) as tmp:
         np.savez(tmp, table=table, wavelengths=LUT_WAVELENGTHS_NM)

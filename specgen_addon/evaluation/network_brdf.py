@@ -1,6 +1,6 @@
 """SpecGen evaluated directly at a renderer's queries, without tabulating the 90×90×180×Λ grid.
 
-:func:`specgen_addon.infer.generate_brdf` fills the whole MERL grid (~10 s on two cores); a
+:func:`specgen_addon.model.runtime.inference.generate_brdf` fills the whole MERL grid (~10 s on two cores); a
 distant-light render only needs the BRDF at a few hundred thousand (θh, θd, φd, λ) points. The
 ablation arms are scored this way (the same network function and the same μ-law decoding as the
 table, without its grid interpolation), which makes scoring four arms on every test material cheap.
@@ -12,8 +12,8 @@ from pathlib import Path
 
 import numpy as np
 
-from ..rusinkiewicz import half_diff_from_io
-from ..table import mu_law_decode_inplace
+from specgen_addon.brdf.rusinkiewicz import half_diff_from_io
+from specgen_addon.brdf.table import mu_law_decode_inplace
 
 #: Points per network call (bounded memory).
 CHUNK = 262_144
@@ -27,14 +27,14 @@ class NetworkBRDF:
     weights
         ``.pt`` weights file.
     image
-        Linear-sRGB sphere image (H×W×3), as for :func:`specgen_addon.infer.generate_brdf`.
+        Linear-sRGB sphere image (H×W×3), as for :func:`specgen_addon.model.runtime.inference.generate_brdf`.
     """
 
     def __init__(self, weights: str | Path, image: np.ndarray):
         import torch
 
-        from ..infer import network_input
-        from ..model import load_weights
+        from specgen_addon.model.runtime.inference import network_input
+        from specgen_addon.model import load_weights
 
         self.torch = torch
         self.model = load_weights(weights).eval()

@@ -24,7 +24,7 @@ colours come from non-negative least squares (all three channels at once, so the
 weights stay white) for every pair on a roughness grid (coat sharper than the base, or no coat);
 the pair with the smallest residual wins and each roughness is then refined by a golden-section
 search in ``log α`` between its grid neighbours. numpy only (the NNLS is the active-set solver of
-:mod:`specgen_addon.refine.solve`), so it runs inside a stock Blender.
+:mod:`specgen_addon.generate.refine.solve`), so it runs inside a stock Blender.
 
 Spectral BRDF (:class:`AnalyticSpectral`): the same lobes with ``d`` and ``F0`` replaced by
 reflectance spectra (uplifted by :func:`specgen_addon.evaluation.baselines.uplift_albedo`).
@@ -37,10 +37,10 @@ from typing import Any, Callable
 
 import numpy as np
 
-from ..corpus.microfacet import specular_geometry
-from ..errors import Cancelled, SpecGenError
-from ..refine.operator import RIM_COS
-from ..refine.solve import nonneg_ridge
+from specgen_addon.corpus.microfacet import specular_geometry
+from specgen_addon.common.errors import Cancelled, SpecGenError
+from specgen_addon.generate.refine.operator import RIM_COS
+from specgen_addon.generate.refine.solve import nonneg_ridge
 
 ProgressFn = Callable[[float], None]
 CancelFn = Callable[[], bool]
@@ -57,7 +57,7 @@ COEFFICIENTS = ("diffuse_r", "diffuse_g", "diffuse_b", "f0_r", "f0_g", "f0_b", "
 
 def observed_pixels(scene) -> np.ndarray:
     """Flat mask (H·W,) of the photo pixels a fit or a self-reproduction score uses: the sphere
-    facing the camera, off its grazing rim (cos θo ≥ :data:`specgen_addon.refine.operator.RIM_COS`,
+    facing the camera, off its grazing rim (cos θo ≥ :data:`specgen_addon.generate.refine.operator.RIM_COS`,
     the refinement's own rule: the outermost ring mixes sphere and background in a photo)."""
     normals = scene.geometry.normals.reshape(-1, 3)
     return scene.geometry.mask.reshape(-1) & (normals @ scene.camera_dir >= RIM_COS)
@@ -268,13 +268,13 @@ def fit_photo(photo: np.ndarray, scene, exposure: float, *, alphas: tuple[float,
     Parameters
     ----------
     photo
-        Linear sRGB (H, W, 3), the scene's image size (e.g. :func:`specgen_addon.input_image.render_input`).
+        Linear sRGB (H, W, 3), the scene's image size (e.g. :func:`specgen_addon.photo.sphere_image.render_input`).
     scene
         :class:`specgen_addon.render.Scene` of the photo (geometry, lights, environment): e.g.
-        :func:`specgen_addon.input_image._scene` for the canonical input or
-        :meth:`specgen_addon.input_lighting.InputLighting.scene` for another lighting.
+        :func:`specgen_addon.photo.sphere_image._scene` for the canonical input or
+        :meth:`specgen_addon.photo.photo_lighting.InputLighting.scene` for another lighting.
     exposure
-        Photo = exposure × rendered radiance (:data:`specgen_addon.input_image.EXPOSURE`).
+        Photo = exposure × rendered radiance (:data:`specgen_addon.photo.sphere_image.EXPOSURE`).
     alphas, coat_alphas
         Roughness grids (GGX α) of the base lobe and of the coat (``()``: no coat).
     refine_steps, rounds
@@ -350,7 +350,7 @@ def fit_photo(photo: np.ndarray, scene, exposure: float, *, alphas: tuple[float,
 def uplift_fit(brdf: AnalyticRGB, method: str, wavelengths_nm: np.ndarray) -> AnalyticSpectral:
     """The spectral BRDF of a fit: its diffuse and F0 colours uplifted by ``method``
     (:func:`specgen_addon.evaluation.baselines.uplift_albedo`; colour-science, so not for Blender)."""
-    from .baselines import uplift_albedo
+    from specgen_addon.evaluation.baselines import uplift_albedo
 
     wl = np.atleast_1d(np.asarray(wavelengths_nm, dtype=np.float64))
     spectra = uplift_albedo(np.array([brdf.diffuse, brdf.f0]), method, wl)

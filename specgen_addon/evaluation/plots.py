@@ -13,7 +13,7 @@ from typing import Mapping, Sequence
 
 import numpy as np
 
-from ..io_utils import atomic_write
+from specgen_addon.common.atomic_io import atomic_write
 
 #: One colour per method, stable across figures.
 METHOD_STYLE = {

@@ -5,12 +5,12 @@ renderer (:mod:`specgen_addon.render`) and the same sampling seed:
 
 * ground truth: the test material's analytic spectral BRDF;
 * SpecGen: the spectral BRDF generated from the material's *canonical sphere input image*
-  (:mod:`specgen_addon.input_image`), tabulated and rendered in the scene;
+  (:mod:`specgen_addon.photo.sphere_image`), tabulated and rendered in the scene;
 * baselines: the linear-sRGB render of the same scene uplifted pixel by pixel
   (:mod:`.baselines`).
 
 Scenes (:func:`scene_list`): the sphere under distant lights, the sphere under three environment
-maps (one from the training set, two held out, :mod:`specgen_addon.lighting`), and a second shape,
+maps (one from the training set, two held out, :mod:`specgen_addon.render.environment_maps`), and a second shape,
 Blender's Suzanne, under a held-out environment and under the distant lights (the paper's bunny
 experiment). The Suzanne normal map is captured once with Blender (``ops/normal_map.py`` run in a
 subprocess with the ``bpy`` module) and cached; without ``bpy`` an analytic superellipsoid stands in
@@ -28,10 +28,10 @@ from typing import Sequence
 
 import numpy as np
 
-from .. import spectra
-from ..errors import SpecGenError
-from ..render import DistantLight, Environment, Geometry, sphere_geometry
-from .cache import cache_root
+from specgen_addon.spectral import spectra
+from specgen_addon.common.errors import SpecGenError
+from specgen_addon.render import DistantLight, Environment, Geometry, sphere_geometry
+from specgen_addon.common.cache import cache_root
 
 #: Evaluation bands: 20 wavelengths, 400–780 nm in 20 nm steps (paper Table 2 uses 20).
 WAVELENGTHS_NM = spectra.wavelength_grid(400.0, 780.0, 20)
@@ -82,8 +82,9 @@ class EnvChoice:
 def env_choice() -> EnvChoice:
     """The map of training input variant 1 (every training run with ≥ 2 input variants sees it;
     variant 0 is the canonical input's own map) and the two held-out maps of
-    :mod:`specgen_addon.lighting` (outdoor, indoor)."""
-    from .. import input_image, lighting
+    :mod:`specgen_addon.render.environment_maps` (outdoor, indoor)."""
+    from specgen_addon.photo import sphere_image as input_image
+    from specgen_addon.render import environment_maps as lighting
 
     held = list(lighting.HELDOUT_ENVS)
     if len(held) < 2:
@@ -92,10 +93,10 @@ def env_choice() -> EnvChoice:
 
 
 def input_lighting_under(env: str):
-    """The :class:`~specgen_addon.input_lighting.InputLighting` of :func:`input_under_environment`:
+    """The :class:`~specgen_addon.photo.photo_lighting.InputLighting` of :func:`input_under_environment`:
     map ``env`` (unit mean luminance, unrotated) plus the canonical key light. A score of a table
     against such a photo renders it in this same lighting."""
-    from ..input_lighting import InputLighting
+    from specgen_addon.photo.photo_lighting import InputLighting
 
     return InputLighting(env, key_light=True)
 
@@ -103,10 +104,10 @@ def input_lighting_under(env: str):
 def input_under_environment(brdf, env: str, independent: bool = False) -> np.ndarray:
     """The sphere input image of ``brdf`` photographed under environment map ``env`` instead of the
     canonical one: same geometry, key light, exposure and sampling as
-    :func:`specgen_addon.input_image.render_input` (linear sRGB, float32); with ``independent``
-    rendered with :func:`specgen_addon.input_image.independent_sampling` instead, as a photograph
+    :func:`specgen_addon.photo.sphere_image.render_input` (linear sRGB, float32); with ``independent``
+    rendered with :func:`specgen_addon.photo.sphere_image.independent_sampling` instead, as a photograph
     shares no samples with the refinement's operator."""
-    from .. import input_image
+    from specgen_addon.photo import sphere_image as input_image
 
     light = input_lighting_under(env)
     scene = light.scene(input_image.CANONICAL_SIZE)
@@ -130,14 +131,14 @@ def scene_list(envs: EnvChoice) -> dict[str, Scene]:
 
 def load_environment(name: str) -> Environment:
     """An environment map by name, normalised as the training renders normalise it."""
-    from .. import lighting
+    from specgen_addon.render import environment_maps as lighting
 
     return lighting.load_environment(name)
 
 
 def test_materials(count: int | None = None, names: Sequence[str] | None = None) -> list:
     """Held-out corpus materials (split ``test``), in corpus order: the first ``count``, or ``names``."""
-    from ..corpus import generate_corpus
+    from specgen_addon.corpus import generate_corpus
 
     test = [m for m in generate_corpus(CORPUS_SIZE, CORPUS_SEED) if m.split == "test"]
     if names:
@@ -189,7 +190,7 @@ def suzanne_normal_map(resolution: int) -> tuple[np.ndarray, np.ndarray] | None:
 
 def superellipsoid_normal_map(resolution: int, power: float = 4.0) -> tuple[np.ndarray, np.ndarray]:
     """Analytic stand-in shape ``|x|^p + |y|^p + |z|^p = 1`` seen from +z (normal ∝ ∇)."""
-    from ..render.geometry import pixel_grid
+    from specgen_addon.render.geometry import pixel_grid
 
     x, y = pixel_grid(resolution)
     x, y = x / 0.95, y / 0.95

@@ -5,13 +5,13 @@ For one measured RGB file and one set of weights: the file's canonical input pho
 spectral table from it (and, with ``refine``, that table refined to the photo), each rendered on a
 sphere and projected to linear sRGB, against the measured file rendered in RGB
 (:func:`specgen_addon.render.render_rgb`), in every scene: the protocol's two distant lights and
-the held-out maps (:data:`specgen_addon.lighting.HELDOUT_ENVS`). PSNR as everywhere in the project
-(:func:`specgen_addon.metrics.spectral_metrics`, over the sphere, per channel, averaged).
+the held-out maps (:data:`specgen_addon.render.environment_maps.HELDOUT_ENVS`). PSNR as everywhere in the project
+(:func:`specgen_addon.render.metrics.spectral_metrics`, over the sphere, per channel, averaged).
 
 The *ceiling* is the file's own table on the MERL grid (the best any predicted table can do) scored
 the same way: what the representation itself costs on that material.
 
-The measured renders and the photos are cached (:func:`specgen_addon.evaluation.cache.cache_root`),
+The measured renders and the photos are cached (:func:`specgen_addon.common.cache.cache_root`),
 since every fold of a cross-validation scores the same files.
 """
 
@@ -24,13 +24,13 @@ from typing import Any
 
 import numpy as np
 
-from .cache import cache_root
+from specgen_addon.common.cache import cache_root
 
 
 def scenes() -> list[tuple[str, dict[str, Any]]]:
     """(label, render keywords) of the scored scenes: ``distant`` and ``env-<map>`` per held-out map."""
-    from .. import lighting
-    from .protocol import DISTANT_LIGHTS
+    from specgen_addon.render import environment_maps as lighting
+    from specgen_addon.evaluation.protocol import DISTANT_LIGHTS
 
     return [("distant", {"lights": DISTANT_LIGHTS})] + [
         (f"env-{e}", {"environment": lighting.load_environment(e)}) for e in lighting.HELDOUT_ENVS]
@@ -38,8 +38,8 @@ def scenes() -> list[tuple[str, dict[str, Any]]]:
 
 def _measured_render(path: Path, label: str, kw: dict[str, Any], resolution: int) -> np.ndarray:
     """The measured file's RGB render in one scene (cached by file, scene and resolution)."""
-    from ..formats import load_brdf
-    from ..render import render_rgb, sphere_geometry
+    from specgen_addon.brdf.formats import load_brdf
+    from specgen_addon.render import render_rgb, sphere_geometry
 
     cached = cache_root() / "real-files" / f"{path.stem}_{path.stat().st_size}_{label}_{resolution}.npy"
     if cached.is_file():
@@ -55,9 +55,9 @@ def _measured_render(path: Path, label: str, kw: dict[str, Any], resolution: int
 def score_table(path: Path, table: Any, resolution: int = 64,
                 scene_list: Sequence[tuple[str, dict[str, Any]]] | None = None) -> dict[str, float]:
     """``{"psnr_<scene>": dB}`` of a table (spectral or RGB) against the measured file ``path``."""
-    from .. import metrics
-    from ..render import render_rgb, render_spectral, sphere_geometry
-    from .protocol import WAVELENGTHS_NM
+    from specgen_addon.render import metrics
+    from specgen_addon.render import render_rgb, render_spectral, sphere_geometry
+    from specgen_addon.evaluation.protocol import WAVELENGTHS_NM
 
     geo = sphere_geometry(resolution)
     out = {}
@@ -75,9 +75,9 @@ def score_real_file(path: Path, weights: str | Path | None, resolution: int = 64
                     scene_list: Sequence[tuple[str, dict[str, Any]]] | None = None) -> dict[str, Any]:
     """Network alone (``psnr_<scene>``) and, with ``refine``, refined (``psnr_refined_<scene>``) on
     one real file, from its canonical input photo."""
-    from ..infer import generate_brdf
-    from ..train.real_rgb import canonical_photo
-    from .protocol import WAVELENGTHS_NM
+    from specgen_addon.model.runtime.inference import generate_brdf
+    from specgen_addon.train.real_rgb import canonical_photo
+    from specgen_addon.evaluation.protocol import WAVELENGTHS_NM
 
     path = Path(path)
     scene_list = scenes() if scene_list is None else scene_list
@@ -86,7 +86,7 @@ def score_real_file(path: Path, weights: str | Path | None, resolution: int = 64
     table = generate_brdf(photo, weights=weights, wavelengths_nm=WAVELENGTHS_NM)
     row: dict[str, Any] = {"material": path.stem, **score_table(path, table, resolution, scene_list)}
     if refine:
-        from ..refine import RefineOptions, refine_brdf
+        from specgen_addon.generate.refine import RefineOptions, refine_brdf
 
         fit = refine_brdf(table, photo, options=RefineOptions(clip_level=None))
         row |= {f"psnr_refined_{k[5:]}": v for k, v in score_table(path, fit.table, resolution, scene_list).items()}
@@ -97,7 +97,7 @@ def score_real_file(path: Path, weights: str | Path | None, resolution: int = 64
 def table_ceiling(path: Path, resolution: int = 64,
                   scene_list: Sequence[tuple[str, dict[str, Any]]] | None = None) -> dict[str, Any]:
     """The file's own MERL-grid table (as training tabulates it) scored against the measurement."""
-    from ..train.data import load_file_materials
+    from specgen_addon.train.data import load_file_materials
 
     table = load_file_materials([Path(path)], cache_root() / "train-data")[0].brdf
     return {"material": Path(path).stem,

@@ -16,7 +16,7 @@ from typing import Any, Callable, Sequence
 
 import numpy as np
 
-from . import baselines, protocol, report, tables
+from specgen_addon.evaluation import baselines, protocol, report, tables
 
 #: Required margin (dB) of SpecGen over every photo-only baseline.
 TARGET_MARGIN_DB = 2.0

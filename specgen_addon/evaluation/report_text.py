@@ -11,7 +11,7 @@ import os
 from pathlib import Path
 from typing import Any, Sequence
 
-from . import baselines, protocol, report, report_photo, tables
+from specgen_addon.evaluation import baselines, protocol, report, report_photo, tables
 
 BASELINE_ORDER = baselines.METHODS
 
@@ -24,7 +24,7 @@ def compose(h: tables.Harness, mats: Sequence[Any], specgen_arm: str, weights: P
             abl_settings: Any, real: dict, real_note: str, figures: dict[str, Path], out: Path,
             smoke: bool, runs: list[dict], machine: str, commit: str, photo_only: bool = False,
             families: dict | None = None) -> str:
-    from .. import metrics
+    from specgen_addon.render import metrics
 
     names = [m.name for m in mats]
     labels = {specgen_arm: "**SpecGen**", **baselines.LABELS}
@@ -335,9 +335,9 @@ def _lighting(scene: protocol.Scene) -> str:
 
 
 def family_table(res: dict) -> str:
-    """Markdown of :func:`specgen_addon.train.evaluate.evaluate_families`' summary (the rows of
-    :func:`specgen_addon.train.evaluate.family_rows`)."""
-    from ..train.evaluate import family_rows
+    """Markdown of :func:`specgen_addon.evaluation.trained_network.evaluate_families`' summary (the rows of
+    :func:`specgen_addon.evaluation.trained_network.family_rows`)."""
+    from specgen_addon.evaluation.trained_network import family_rows
 
     header, rows = family_rows(res, mean_label="**mean (synthetic)**")
     return report.md_table(["Family"] + header[1:], rows)

@@ -4,7 +4,7 @@ Every score is one ``(arm, material, scene)`` cell: an *arm* is a method (``spec
 of :mod:`.baselines`, an ablation arm of :mod:`.ablation`), a *scene* a role of
 :func:`.protocol.scene_list`. Cells are cached as JSON under ``<cache>/cells/`` as soon as they are
 computed, ground-truth renders as ``.npz`` under ``<cache>/gt/``, so an interrupted run resumes
-where it stopped. PSNR and SSIM come from :mod:`specgen_addon.metrics` (one normalisation for all).
+where it stopped. PSNR and SSIM come from :mod:`specgen_addon.render.metrics` (one normalisation for all).
 """
 
 from __future__ import annotations
@@ -17,10 +17,10 @@ from typing import Any, Callable, Sequence
 
 import numpy as np
 
-from ..errors import SpecGenError
-from ..render import EnvSampling, RenderResult, Scene
-from . import baselines, protocol
-from .cache import read_json, write_json
+from specgen_addon.common.errors import SpecGenError
+from specgen_addon.render import EnvSampling, RenderResult, Scene
+from specgen_addon.evaluation import baselines, protocol
+from specgen_addon.common.cache import read_json, write_json
 
 SPECGEN = "specgen"
 #: Pseudo-role of a cell holding an arm's *self-reproduction*: its BRDF rendered under the input's
@@ -42,7 +42,7 @@ REFINE_VERSION = "v6"
 
 
 def refined_arm(specgen_arm: str) -> str:
-    """The arm of SpecGen's table refined against its input photo (:mod:`specgen_addon.refine`)."""
+    """The arm of SpecGen's table refined against its input photo (:mod:`specgen_addon.generate.refine`)."""
     return f"{specgen_arm}+refined-{REFINE_VERSION}"
 #: Prefix of the photo-only baselines' arms (:mod:`.photo_fit` + uplifting), e.g. ``photo-otsu2018``.
 PHOTO_PREFIX = "photo-"
@@ -71,7 +71,7 @@ def photo_arm(method: str) -> str:
 
 #: What the sphere photo of SpecGen and the photo-only baselines is (:attr:`Settings.input_photo`):
 #: ``independent`` (the default): rendered with other environment samples than the refinement's
-#: operator and the photo fit, as a real photograph is (:func:`specgen_addon.input_image.independent_sampling`);
+#: operator and the photo fit, as a real photograph is (:func:`specgen_addon.photo.sphere_image.independent_sampling`);
 #: ``canonical``: the input render itself, which shares them, so a fit to it can be exact (an
 #: "inverse crime", a best case kept for comparison with earlier reports).
 INPUT_PHOTOS = ("independent", "canonical")
@@ -83,8 +83,8 @@ def input_photo_phrase(kind: str) -> str:
         return ("the material's sphere photo under the canonical lighting, rendered with other "
                 "environment samples (seed 1, twice the directions) than the refinement's operator "
                 "and the photo fit use, as a real photograph shares none "
-                "(`specgen_addon.input_image.render_independent_input`)")
-    return ("the material's canonical sphere input image (`specgen_addon.input_image.render_input`), "
+                "(`specgen_addon.photo.sphere_image.render_independent_input`)")
+    return ("the material's canonical sphere input image (`specgen_addon.photo.sphere_image.render_input`), "
             "rendered with the same environment samples the refinement's operator and the photo fit use")
 
 
@@ -129,7 +129,7 @@ class Settings:
 
     def photo_fit_options(self) -> dict[str, Any]:
         """Keyword arguments of :func:`.photo_fit.fit_photo` (a coarser search for the smoke run)."""
-        from . import photo_fit
+        from specgen_addon.evaluation import photo_fit
 
         if not self.smoke:
             return {}
@@ -149,7 +149,7 @@ class Settings:
 
 def score(gt: np.ndarray, pred: np.ndarray, mask: np.ndarray) -> dict[str, Any]:
     """Per-band and mean PSNR (dB) / SSIM of ``pred`` against ``gt`` (H×W×C) inside ``mask``."""
-    from .. import metrics
+    from specgen_addon.render import metrics
 
     res = metrics.spectral_metrics(gt, pred, mask)
     return {"psnr": [float(x) for x in res.psnr], "ssim": [float(x) for x in res.ssim],
@@ -204,7 +204,7 @@ class Harness:
                                     wavelengths_nm=d["wavelengths_nm"])
         res = self._render(material, role)
         path.parent.mkdir(parents=True, exist_ok=True)
-        from ..io_utils import atomic_write
+        from specgen_addon.common.atomic_io import atomic_write
 
         with atomic_write(path, overwrite=True) as tmp:
             np.savez(tmp, rgb=res.rgb.astype(np.float32), mask=res.mask,
@@ -237,9 +237,9 @@ class Harness:
         that environment map instead of the canonical one (robustness, table (b)). ``direct``
         queries the network at the render's directions instead of tabulating it
         (:class:`.network_brdf.NetworkBRDF`, used for the ablation arms). ``refine`` refines the
-        canonical input's table against that input (:func:`specgen_addon.refine.refine_brdf`).
+        canonical input's table against that input (:func:`specgen_addon.generate.refine.refine_brdf`).
         ``lighting_given`` (with ``input_env``): the input's lighting is known, as when a user names
-        it: :func:`specgen_addon.pipeline.generate` with that lighting, refinement on.
+        it: :func:`specgen_addon.generate.pipeline.generate` with that lighting, refinement on.
         """
         todo = [r for r in roles if self.cell(arm, material.name, r) is None]
         self_repro = not direct and input_env is None and self.cell(arm, material.name, SELF_ROLE) is None
@@ -247,26 +247,26 @@ class Harness:
             return
         t0 = time.perf_counter()
         if direct:
-            from .network_brdf import NetworkBRDF
+            from specgen_addon.evaluation.network_brdf import NetworkBRDF
 
             table = NetworkBRDF(weights, self.input_photo(material))
         elif input_env is None:
             photo = self.input_photo(material)
             table = generate_from_photo(photo, weights, self.wl)
             if refine:
-                from ..refine import RefineOptions, refine_brdf
+                from specgen_addon.generate.refine import RefineOptions, refine_brdf
 
                 table = refine_brdf(table, photo,
                                     options=RefineOptions(clip_level=None)).table
         elif lighting_given:
-            from ..input_lighting import InputLighting
-            from ..pipeline import generate
+            from specgen_addon.photo.photo_lighting import InputLighting
+            from specgen_addon.generate.pipeline import generate
 
             table = generate(self.input_photo(material, input_env),
                              lighting=InputLighting(input_env, key_light=True), refine=True,
                              weights=weights, wavelengths_nm=self.wl).table
         else:
-            from .. import infer
+            from specgen_addon.model.runtime import inference as infer
 
             table = infer.generate_brdf(self.input_photo(material, input_env),
                                         weights=weights, wavelengths_nm=self.wl)
@@ -288,7 +288,7 @@ class Harness:
         """The material's sphere photo that SpecGen and the photo fits see: under the canonical
         lighting, or with ``env`` under that map and the key light (table (b)); rendered with
         independent samples or the input renders' own (:data:`INPUT_PHOTOS`). Kept per material."""
-        from .. import input_image
+        from specgen_addon.photo import sphere_image as input_image
 
         name = getattr(material, "name", None)
         key = (name, env)
@@ -311,10 +311,10 @@ class Harness:
         """Cell :data:`SELF_ROLE` of ``arm``: ``brdf`` (spectral) rendered under the canonical input
         lighting, exactly as the input image is made, against that image (RGB PSNR, mean ΔE2000 over
         the sphere without its grazing rim, as the refinement scores it;
-        :func:`specgen_addon.refine.report.reproduction`). Another SpecGen variant (e.g.
+        :func:`specgen_addon.render.photo_reproduction.reproduction`). Another SpecGen variant (e.g.
         the refined table) gets its column by calling this with its own arm and BRDF."""
-        from ..input_lighting import InputLighting
-        from .self_reproduction import self_reproduction
+        from specgen_addon.photo.photo_lighting import InputLighting
+        from specgen_addon.evaluation.self_reproduction import self_reproduction
 
         t0 = time.perf_counter()
         rep = self_reproduction(brdf, self.input_photo(material), InputLighting())
@@ -333,8 +333,8 @@ class Harness:
     def photo_fit(self, material: Any) -> dict:
         """The analytic RGB BRDF fitted to the material's input photo (:func:`.photo_fit.fit_photo`
         under the canonical input lighting), cached as JSON: ``{"brdf", "residual", "seconds", ...}``."""
-        from ..input_lighting import InputLighting
-        from . import photo_fit
+        from specgen_addon.photo.photo_lighting import InputLighting
+        from specgen_addon.evaluation import photo_fit
 
         cached = self.cell_fit(material.name)
         if cached is not None:
@@ -354,7 +354,7 @@ class Harness:
         """The photo-only baselines: fit an analytic RGB BRDF to the input photo, uplift its colours
         with each method, render that spectral BRDF in ``roles`` as SpecGen's is rendered, and score
         its self-reproduction (:data:`SELF_ROLE`)."""
-        from . import photo_fit
+        from specgen_addon.evaluation import photo_fit
 
         arms = {m: photo_arm(m) for m in self.s.photo_baselines}
         todo = {m: [r for r in list(roles) + [SELF_ROLE] if self.cell(arm, material.name, r) is None]
@@ -391,7 +391,7 @@ class Harness:
         todo = [r for r in roles if out[r] is None]
         if not todo:
             return out
-        from ..formats import load_brdf
+        from specgen_addon.brdf.formats import load_brdf
 
         measured = load_brdf(path)
         t0 = time.perf_counter()
@@ -412,14 +412,14 @@ class Harness:
 
     def run_families(self, weights: Path | None, arm: str, rgl_dir: Path | None) -> dict[str, Any]:
         """Per-family scores of the mixed corpus' test split, network alone, cached per
-        arm: :func:`specgen_addon.train.evaluate.evaluate_families` with
+        arm: :func:`specgen_addon.evaluation.trained_network.evaluate_families` with
         :attr:`Settings.family_materials` per family and the held-out maps (1 material and distant
         lights only in the smoke run)."""
         path = self.cache / "families" / f"{arm}.json"
         done = read_json(path)
         if done is not None:
             return done
-        from ..train.evaluate import evaluate_families
+        from specgen_addon.evaluation.trained_network import evaluate_families
 
         res = evaluate_families(weights=weights, per_family=1 if self.s.smoke else self.s.family_materials, envs=not self.s.smoke,
                                 rgl_dir=rgl_dir)
@@ -458,7 +458,7 @@ class Harness:
 
 def generate_from_photo(photo: np.ndarray, weights: Path | None, wavelengths_nm: np.ndarray):
     """SpecGen's spectral BRDF table generated from a sphere photo (linear sRGB, H×W×3)."""
-    from .. import infer
+    from specgen_addon.model.runtime import inference as infer
 
     return infer.generate_brdf(photo, weights=weights, wavelengths_nm=wavelengths_nm)
 

@@ -6,7 +6,7 @@ Blender needs them); the torch modules load on first use of the other names (PEP
 
 from pathlib import Path
 
-from .config import Config
+from specgen_addon.model.config import Config
 
 #: The shipped network for a sphere copied pixel for pixel from a canonical frame (the test split's
 #: inputs, renders framed on whole pixels).
@@ -17,7 +17,7 @@ RESAMPLED_WEIGHTS = DEFAULT_WEIGHTS.with_name("specgen_resampled.pt")
 
 
 def shipped_weights(copied: bool) -> Path:
-    """The shipped network for an input cut by :func:`specgen_addon.input_image.crop_sphere`:
+    """The shipped network for an input cut by :func:`specgen_addon.photo.sphere_image.crop_sphere`:
     :data:`DEFAULT_WEIGHTS` when its sphere was ``copied``, else :data:`RESAMPLED_WEIGHTS`."""
     return DEFAULT_WEIGHTS if copied else RESAMPLED_WEIGHTS
 
@@ -29,7 +29,7 @@ __all__ = ["Config", "SpecGen", "DEFAULT_WEIGHTS", "RESAMPLED_WEIGHTS", "shipped
 
 def __getattr__(name: str):
     if name in _TORCH_NAMES:
-        from . import specgen
+        from specgen_addon.model import specgen
 
         return getattr(specgen, name)
     raise AttributeError(f"module {__name__!r} has no attribute {name!r}")

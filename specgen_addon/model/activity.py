@@ -13,7 +13,7 @@ from dataclasses import dataclass
 import torch
 from torch import nn
 
-from .specgen import SpecGen
+from specgen_addon.model.specgen import SpecGen
 
 
 @dataclass(frozen=True)

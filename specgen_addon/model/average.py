@@ -13,9 +13,9 @@ from typing import Sequence
 
 import torch
 
-from ..errors import WeightsError
-from .config import Config
-from .specgen import SpecGen, load_weights
+from specgen_addon.common.errors import WeightsError
+from specgen_addon.model.config import Config
+from specgen_addon.model.specgen import SpecGen, load_weights
 
 
 def load_any(path: str | Path) -> SpecGen:

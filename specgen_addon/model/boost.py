@@ -16,8 +16,8 @@ from __future__ import annotations
 import torch
 from torch import nn
 
-from .config import Config
-from .encoder import ImageEncoder, pixel_coords
+from specgen_addon.model.config import Config
+from specgen_addon.model.encoder import ImageEncoder, pixel_coords
 
 #: Slope below zero of every activation in the branch.
 NEGATIVE_SLOPE = 0.01

@@ -16,7 +16,7 @@ import hashlib
 import os
 from pathlib import Path
 
-from ..errors import WeightsError
+from specgen_addon.common.errors import WeightsError
 
 SUMS_NAME = "SHA256SUMS"
 #: (path, size, mtime_ns) -> sha256 hex, so a file is hashed once per process while unchanged.
@@ -67,7 +67,7 @@ def verify(path: str | os.PathLike) -> None:
 
 def record(path: str | os.PathLike) -> None:
     """After writing ``path``: update its line where its folder keeps a ``SHA256SUMS``."""
-    from ..io_utils import atomic_write
+    from specgen_addon.common.atomic_io import atomic_write
 
     path = Path(path)
     sums_path = path.parent / SUMS_NAME

@@ -13,7 +13,7 @@ from typing import Any
 
 import numpy as np
 
-from ..errors import SpecGenError
+from specgen_addon.common.errors import SpecGenError
 
 FUSIONS = ("aff", "hadamard")
 

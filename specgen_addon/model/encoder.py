@@ -8,9 +8,9 @@ import torch
 import torch.nn.functional as F
 from torch import nn
 
-from ..resample import aa_bilinear_weights
-from .config import Config
-from .residual import mlp_blocks
+from specgen_addon.photo.resample import aa_bilinear_weights
+from specgen_addon.model.config import Config
+from specgen_addon.model.residual import mlp_blocks
 
 
 def pixel_coords(size: int) -> torch.Tensor:
@@ -31,7 +31,7 @@ class ImageEncoder(nn.Module):
     follow the linear layer.
 
     With ``detail_factor`` k > 1 the conv stack sees the image resampled to S/k (the antialiased
-    bilinear weights of :func:`specgen_addon.resample.resample_square`, as fixed matrices), and a
+    bilinear weights of :func:`specgen_addon.photo.resample.resample_square`, as fixed matrices), and a
     *detail branch* of stride-2 convs sees it at full size, so a sharp highlight spans k² times
     as many pixels. The branch's output joins the first conv's before its ReLU; its last layer
     starts at zero, so weights of the S/k model start this one exactly (:mod:`.grow`).

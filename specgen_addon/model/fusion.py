@@ -18,7 +18,7 @@ from __future__ import annotations
 import torch
 from torch import nn
 
-from .config import Config
+from specgen_addon.model.config import Config
 
 
 class AFF(nn.Module):

@@ -37,8 +37,8 @@ import dataclasses
 import torch
 import torch.nn.functional as F
 
-from ..errors import SpecGenError
-from .config import Config
+from specgen_addon.common.errors import SpecGenError
+from specgen_addon.model.config import Config
 
 #: Config fields a warm start may change.
 GROWABLE = ("spectral_code_knots", "latent_res_blocks", "trunk_res_blocks", "trunk_upsample_stages",

@@ -16,8 +16,8 @@ import torch
 import torch.nn.functional as F
 from torch import nn
 
-from .config import Config
-from .residual import conv_blocks, upsample_stages
+from specgen_addon.model.config import Config
+from specgen_addon.model.residual import conv_blocks, upsample_stages
 
 PLANE_NAMES = ("d1", "d2", "d3", "e1", "e2", "e3")
 # Which coordinate indexes the rows and the columns of each plane.

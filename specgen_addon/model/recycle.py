@@ -23,7 +23,7 @@ import torch
 import torch.nn.functional as F
 from torch import nn
 
-from .specgen import SpecGen
+from specgen_addon.model.specgen import SpecGen
 
 #: Stages :func:`recycle_dormant` can renew.
 STAGES = ("encoder", "latent", "trunk", "heads")

@@ -1,7 +1,7 @@
 """The SpecGen network (paper §3): image -> tri-planes -> projection -> fusion -> MLP -> r'.
 
 Also the weights file format (``.pt``: config + state dict + provenance) and its loader, which
-turns every way a file can be wrong into :class:`~specgen_addon.errors.WeightsError`.
+turns every way a file can be wrong into :class:`~specgen_addon.common.errors.WeightsError`.
 """
 
 from __future__ import annotations
@@ -13,19 +13,19 @@ from typing import Any
 import torch
 from torch import nn
 
-from ..errors import WeightsError
-from ..io_utils import atomic_write
-from . import checksums
-from .boost import BoostEncoder
-from .config import Config
-from .decoder import BRDFMapping
-from .encoder import ImageEncoder
-from .fusion import make_fusion
-from .planes import PlaneGenerator, normalized_coords, project, tv_loss
+from specgen_addon.common.errors import WeightsError
+from specgen_addon.common.atomic_io import atomic_write
+from specgen_addon.model import checksums
+from specgen_addon.model.boost import BoostEncoder
+from specgen_addon.model.config import Config
+from specgen_addon.model.decoder import BRDFMapping
+from specgen_addon.model.encoder import ImageEncoder
+from specgen_addon.model.fusion import make_fusion
+from specgen_addon.model.planes import PlaneGenerator, normalized_coords, project, tv_loss
 
 WEIGHTS_FORMAT = "specgen-weights"
 WEIGHTS_VERSION = 1
-from . import DEFAULT_WEIGHTS  # noqa: E402  (one definition, torch-free)
+from specgen_addon.model import DEFAULT_WEIGHTS  # noqa: E402  (one definition, torch-free)
 
 
 class SpecGen(nn.Module):

@@ -10,11 +10,11 @@ Typical use::
     gt, pred = scene.render_spectral(gt_brdf), scene.render_spectral(pred_brdf)
 """
 
-from .environment import Environment, uplift_basis
-from .geometry import Geometry, OrthographicCamera, sphere_geometry
-from .lights import DistantLight
-from .renderer import RenderResult, Scene, render_rgb, render_spectral
-from .sampling import EnvSampling
+from specgen_addon.render.environment import Environment, uplift_basis
+from specgen_addon.render.geometry import Geometry, OrthographicCamera, sphere_geometry
+from specgen_addon.render.lights import DistantLight
+from specgen_addon.render.renderer import RenderResult, Scene, render_rgb, render_spectral
+from specgen_addon.render.sampling import EnvSampling
 
 __all__ = ["DistantLight", "EnvSampling", "Environment", "Geometry", "OrthographicCamera",
            "RenderResult", "Scene", "render_rgb", "render_spectral", "sphere_geometry", "uplift_basis"]

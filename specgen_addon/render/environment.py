@@ -29,8 +29,8 @@ from pathlib import Path
 
 import numpy as np
 
-from .. import spectra
-from ..errors import SpecGenError
+from specgen_addon.spectral import spectra
+from specgen_addon.common.errors import SpecGenError
 
 MALLETT2019 = "mallett2019"
 #: Rec. 709 / sRGB luminance weights (row Y of the sRGB → XYZ matrix), from colour-science.
@@ -41,7 +41,7 @@ def srgb_luminance_weights() -> np.ndarray:
     """(3,) weights giving CIE Y from linear sRGB (colour-science's sRGB matrix)."""
     global _SRGB_Y_WEIGHTS
     if _SRGB_Y_WEIGHTS is None:
-        from ..colour_tables import tables
+        from specgen_addon.spectral.colour_tables import tables
 
         _SRGB_Y_WEIGHTS = np.asarray(tables()["srgb_rgb_to_xyz"][1], float)
     return _SRGB_Y_WEIGHTS
@@ -51,9 +51,9 @@ def srgb_luminance_weights() -> np.ndarray:
 def _uplift_basis_cached(method: str, key: tuple[float, ...]) -> np.ndarray:
     w = np.asarray(key)
     if method == MALLETT2019:
-        from ..colour_tables import mallett2019_basis
+        from specgen_addon.spectral.colour_tables import mallett2019_basis
 
-        # colour-science's basis, precomputed (specgen_addon.colour_tables). Outside its 380–780 nm
+        # colour-science's basis, precomputed (specgen_addon.spectral.colour_tables). Outside its 380–780 nm
         # support the nearest value is held (a smooth continuation of the flat reflectance that
         # white uplifts to).
         return mallett2019_basis(w).T * spectra.illuminant_spd("D65", w)[None, :]
@@ -67,8 +67,8 @@ def uplift_basis(wavelengths_nm: np.ndarray, method: str = MALLETT2019) -> np.nd
 
 def read_exr_rgb(path: str | Path) -> np.ndarray:
     """Read the R, G, B channels of an OpenEXR file as float32 (H, W, 3), row 0 on top
-    (OpenEXR, or Blender's bundled OpenImageIO: :mod:`specgen_addon.image_io`)."""
-    from ..image_io import ImageIOError, read_exr
+    (OpenEXR, or Blender's bundled OpenImageIO: :mod:`specgen_addon.common.image_io`)."""
+    from specgen_addon.common.image_io import ImageIOError, read_exr
 
     path = Path(path)
     if not path.is_file():

@@ -15,7 +15,7 @@ from dataclasses import dataclass, field
 
 import numpy as np
 
-from ..errors import SpecGenError
+from specgen_addon.common.errors import SpecGenError
 
 
 def _unit(v: np.ndarray) -> np.ndarray:

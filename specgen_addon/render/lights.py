@@ -2,7 +2,7 @@
 
 A distant light arriving from unit direction ``ω_l`` (world, pointing *towards* the light) with
 irradiance ``E`` (on a surface facing it) adds ``f_r(ω_l, ω_o, λ) · E · S(λ) · max(0, n·ω_l)`` to the
-outgoing radiance. ``S`` is :func:`specgen_addon.spectra.illuminant_spd`, normalised to unit
+outgoing radiance. ``S`` is :func:`specgen_addon.spectral.spectra.illuminant_spd`, normalised to unit
 luminance, so a white Lambertian facing a light of ``E = π`` has radiance with ``Y = 1``.
 No shadowing: the renderer's surfaces are convex (a sphere) or treated as such.
 """
@@ -13,8 +13,8 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from .. import spectra
-from ..errors import SpecGenError
+from specgen_addon.spectral import spectra
+from specgen_addon.common.errors import SpecGenError
 
 
 @dataclass(frozen=True)

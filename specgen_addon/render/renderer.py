@@ -22,12 +22,12 @@ from typing import Callable, Protocol, Sequence
 
 import numpy as np
 
-from .. import spectra
-from ..errors import SpecGenError
-from .environment import Environment
-from .geometry import Geometry, shading_frame, to_local
-from .lights import DistantLight
-from .sampling import EnvSampler, EnvSampling, SampleBlock, diffuse_floor
+from specgen_addon.spectral import spectra
+from specgen_addon.common.errors import SpecGenError
+from specgen_addon.render.environment import Environment
+from specgen_addon.render.geometry import Geometry, shading_frame, to_local
+from specgen_addon.render.lights import DistantLight
+from specgen_addon.render.sampling import EnvSampler, EnvSampling, SampleBlock, diffuse_floor
 
 ProgressFn = Callable[[float], None]
 
@@ -182,7 +182,7 @@ class Scene:
                         progress: ProgressFn | None = None) -> RenderResult:
         """Spectral radiance (H, W, Λ) of ``brdf`` and its linear sRGB through the CIE 1931 CMFs.
 
-        ``rgb`` is :func:`specgen_addon.spectra.spectral_to_linear_srgb` (white-balanced to D65), or
+        ``rgb`` is :func:`specgen_addon.spectral.spectra.spectral_to_linear_srgb` (white-balanced to D65), or
         ``None`` if the grid has no visible band.
         """
         wl = np.atleast_1d(np.asarray(wavelengths_nm, dtype=np.float64))

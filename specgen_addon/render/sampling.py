@@ -31,9 +31,9 @@ from typing import Callable
 
 import numpy as np
 
-from ..errors import SpecGenError
-from .environment import Environment
-from .geometry import shading_frame
+from specgen_addon.common.errors import SpecGenError
+from specgen_addon.render.environment import Environment
+from specgen_addon.render.geometry import shading_frame
 
 
 @dataclass(frozen=True)

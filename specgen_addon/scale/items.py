@@ -13,7 +13,7 @@ from dataclasses import asdict, dataclass
 from pathlib import Path
 from typing import Iterable, Sequence
 
-from ..errors import SpecGenError
+from specgen_addon.common.errors import SpecGenError
 
 #: Photos of a sphere: ``batch.py --image``.
 IMAGE_SUFFIXES = (".png", ".jpg", ".jpeg", ".exr", ".tif", ".tiff")

@@ -5,7 +5,7 @@
   ``DIR/<stem>.npz`` (``--brdf``);
 * an RGB BRDF (MERL ``.binary``, RGB ``.bsdf`` or ``.npz``) has no spectrum to render: SpecGen
   generates one from the photo the material would give, its canonical sphere render
-  (:func:`specgen_addon.input_image.render_input`), written to ``DIR/<stem>.exr`` (``--image``).
+  (:func:`specgen_addon.photo.sphere_image.render_input`), written to ``DIR/<stem>.exr`` (``--image``).
 
 Prints one line ``brdf PATH`` or ``image PATH``. A bad file exits 2 with one line on stderr, like
 ``batch.py``, so the worker reports it without retrying.
@@ -16,17 +16,17 @@ from __future__ import annotations
 import sys
 from pathlib import Path
 
-from ..errors import SpecGenError
+from specgen_addon.common.errors import SpecGenError
 
 EXIT_BAD_INPUT = 2
 
 
 def prepare(src: Path, work: Path) -> tuple[str, Path]:
     """(``"brdf"`` or ``"image"``, path to hand to ``batch.py``) for the BRDF file ``src``."""
-    from ..cli_brdf import tabulate_file
-    from ..formats import load_brdf
-    from ..spectra import wavelength_grid
-    from ..table import BRDFTable
+    from specgen_addon.cli.brdf import tabulate_file
+    from specgen_addon.brdf.formats import load_brdf
+    from specgen_addon.spectral.spectra import wavelength_grid
+    from specgen_addon.brdf.table import BRDFTable
 
     brdf = load_brdf(src)
     spectral = bool(getattr(brdf, "is_spectral", False))
@@ -38,7 +38,7 @@ def prepare(src: Path, work: Path) -> tuple[str, Path]:
         dst = work / f"{src.stem}.npz"
         table.save(dst, overwrite=True)
         return "brdf", dst
-    from .. import input_image
+    from specgen_addon.photo import sphere_image as input_image
 
     dst = work / f"{src.stem}.exr"
     input_image.write_exr_rgb(dst, input_image.render_input(brdf), overwrite=True)

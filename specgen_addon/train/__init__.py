@@ -7,7 +7,7 @@
   (when present and ``use_shared_rgl``), and RGB files from ``brdf_dirs`` (MERL/RGL);
 * validation: the corpus' ``val`` split (spectral).
 
-Input images are the canonical sphere renders (:mod:`specgen_addon.input_image`) under
+Input images are the canonical sphere renders (:mod:`specgen_addon.photo.sphere_image`) under
 ``input_variants`` training lightings each, rendered once and cached in ``cache_dir``.
 """
 
@@ -18,23 +18,23 @@ from typing import Callable
 
 import numpy as np
 
-from ..model import Config
-from .data import InputImageCache, TrainingMaterial, find_brdf_files, load_file_materials
-from .loop import MaterialSet, TrainConfig
+from specgen_addon.model import Config
+from specgen_addon.train.data import InputImageCache, TrainingMaterial, find_brdf_files, load_file_materials
+from specgen_addon.train.loop import MaterialSet, TrainConfig
 
 SHARED_RGL_DIR = Path(__file__).resolve().parents[3] / "shared" / "data" / "rgl"
 
 
 def render_input_variant(brdf, variant: int) -> np.ndarray:
     """Canonical sphere render ``(128, 128, 3)`` of ``brdf`` under training lighting ``variant``."""
-    from .. import input_image
+    from specgen_addon.photo import sphere_image as input_image
 
     return input_image.render_training_input(brdf, variant)
 
 
 def png_like(image: np.ndarray) -> np.ndarray:
     """What an 8-bit sRGB PNG of a linear render holds once read back: clipped to [0, 1], quantised."""
-    from ..spectra import srgb_decode, srgb_encode
+    from specgen_addon.spectral.spectra import srgb_decode, srgb_encode
 
     q = np.round(srgb_encode(np.clip(image, 0.0, 1.0)) * 255.0) / 255.0
     return srgb_decode(q).astype(np.float32)
@@ -46,8 +46,8 @@ def network_inputs(images: list[np.ndarray], image_size: int, png_augment: bool 
     With ``png_augment`` each render also appears as its 8-bit PNG version (highlights clipped),
     so the network copes with PNG/JPEG inputs as well as linear EXR (2K images).
     """
-    from .. import input_image
-    from ..resample import resample_square
+    from specgen_addon.photo import sphere_image as input_image
+    from specgen_addon.photo.resample import resample_square
 
     if png_augment:
         images = list(images) + [png_like(im) for im in images]
@@ -58,8 +58,8 @@ def build_material_sets(mcfg: Config, tcfg: TrainConfig, cache_dir: str | Path,
                         log: Callable[[str], None] = print, progress: bool = False
                         ) -> tuple[MaterialSet, MaterialSet, MaterialSet]:
     """(spectral, rgb, validation) material sets with cached input renders."""
-    from ..corpus import generate_corpus
-    from ..corpus.generate import generate_mixed_corpus
+    from specgen_addon.corpus import generate_corpus
+    from specgen_addon.corpus.generate import generate_mixed_corpus
 
     cache_dir = Path(cache_dir)
     if tcfg.families is None:
@@ -112,7 +112,7 @@ def build_material_sets(mcfg: Config, tcfg: TrainConfig, cache_dir: str | Path,
 def _mixed_lighting_sets(mcfg: Config, tcfg: TrainConfig, cache_dir: Path, spectral, rgb, valset,
                         log: Callable[[str], None], progress: bool):
     """Material sets whose images are lighting-component stacks (:mod:`.lighting_mix`)."""
-    from .lighting_mix import COMPONENTS, ComponentCache
+    from specgen_addon.train.lighting_mix import COMPONENTS, ComponentCache
 
     cache = ComponentCache(cache_dir)
     valset = valset[: tcfg.val_materials]  # only these are ever used
@@ -149,7 +149,7 @@ def _fill_with_bar(fill: Callable[..., None], mats: list[TrainingMaterial], n_to
 def _recolour_source(tcfg: TrainConfig, cache_dir: Path, mats: list[TrainingMaterial],
                      log: Callable[[str], None], progress: bool):
     """Per-band canonical renders of the corpus's recolourable training materials (:mod:`.recolour`)."""
-    from .recolour import AffinePairCache
+    from specgen_addon.train.recolour import AffinePairCache
 
     cache = AffinePairCache(cache_dir)
     todo = cache.missing(mats)

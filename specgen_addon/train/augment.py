@@ -1,7 +1,7 @@
 """Input augmentations of the training images that the lighting mix does not cover.
 
 The corpus renders are framed exactly: the sphere's outline on the pixel grid, its outline pixels
-point-sampled. A user's sphere lies off the grid, and :mod:`specgen_addon.input_image` finds it to
+point-sampled. A user's sphere lies off the grid, and :mod:`specgen_addon.photo.sphere_image` finds it to
 a fraction of a pixel and resamples it; the resampling blurs the image a little and the outline
 pixels mix with the background. Measurements (lab/notebook) show what that costs a
 network trained on exact framing (docs/model.md, ``evaluate --input-shift``).
@@ -44,9 +44,9 @@ def offgrid_photo_crop(img: np.ndarray, rng: np.random.Generator, finder_error_p
     """``(C, S, S)`` canonical input as the pipeline passes on a photo of it moved by a fraction of
     a pixel (uniform in [0, 1)² pixels, bilinear): found with a Gaussian error of ``finder_error_px``
     (standard deviation, each of centre x, y and radius) and resampled by
-    :func:`specgen_addon.input_image._resample_circle`."""
-    from ..input_image import _resample_circle
-    from .evaluate import displaced_input
+    :func:`specgen_addon.photo.sphere_image._resample_circle`."""
+    from specgen_addon.photo.sphere_image import _resample_circle
+    from specgen_addon.evaluation.trained_network import displaced_input
 
     img = np.asarray(img, dtype=np.float32)
     s = img.shape[-1]

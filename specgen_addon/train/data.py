@@ -22,9 +22,9 @@ from typing import Any, Callable, Sequence
 
 import numpy as np
 
-from ..errors import SpecGenError
-from ..rusinkiewicz import io_from_half_diff
-from ..table import mu_law_encode
+from specgen_addon.common.errors import SpecGenError
+from specgen_addon.brdf.rusinkiewicz import io_from_half_diff
+from specgen_addon.brdf.table import mu_law_encode
 
 BRDF_SUFFIXES = (".binary", ".bsdf")
 
@@ -120,7 +120,7 @@ def render_all(make: Callable[[Any], None], todo: Sequence[Any], workers: int = 
     """``make(item)`` for every item, on ``workers`` processes (in order when 1), reporting the
     fraction done: the render caches' fill. Inside a pool worker (an ablation arm), or where
     ``make`` cannot be pickled to a worker, the items are made in this process."""
-    from ..processes import context, pool_workers, quiet_worker
+    from specgen_addon.common.processes import context, pool_workers, quiet_worker
 
     workers = pool_workers(workers, make, per_task=True)
     if workers <= 1:
@@ -152,8 +152,8 @@ def load_file_materials(files: Sequence[Path], cache_dir: Path,
 
     RGB files supervise the RGB branch; spectral RGL files the spectral branch.
     """
-    from ..formats import detect_format, load_brdf
-    from ..table import BRDFTable
+    from specgen_addon.brdf.formats import detect_format, load_brdf
+    from specgen_addon.brdf.table import BRDFTable
 
     out = []
     for path in files:

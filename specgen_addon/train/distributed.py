@@ -35,8 +35,8 @@ import numpy as np
 import torch
 import torch.distributed as dist
 
-from ..errors import SpecGenError
-from .data import Batch
+from specgen_addon.common.errors import SpecGenError
+from specgen_addon.train.data import Batch
 
 
 @dataclass(frozen=True)

@@ -3,9 +3,9 @@
 A render is linear in its lights, so each material is rendered once under a few *components*
 and every training step mixes them with fresh random weights:
 
-* ``canonical``: the canonical input (:func:`specgen_addon.input_image.render_input`), and its
+* ``canonical``: the canonical input (:func:`specgen_addon.photo.sphere_image.render_input`), and its
   exact 8-bit PNG version (clipped, quantised at full resolution);
-* ``env``: one of the bundled maps (:data:`specgen_addon.lighting.TRAIN_ENVS`) at one of eight
+* ``env``: one of the bundled maps (:data:`specgen_addon.render.environment_maps.TRAIN_ENVS`) at one of eight
   rotations, chosen per material (:func:`env_variant`), with the key light; a step scales it by a
   random exposure 2^U(−1, 1);
 * ``sun0`` … ``sun5``: a D65 distant light (irradiance π) from each of :data:`SUN_DIRECTIONS`;
@@ -27,8 +27,9 @@ import zlib
 
 import numpy as np
 
-from .. import input_image, spectra
-from ..resample import aa_bilinear_weights
+from specgen_addon.photo import sphere_image as input_image
+from specgen_addon.spectral import spectra
+from specgen_addon.photo.resample import aa_bilinear_weights
 
 #: Unit directions (world; camera looks down −z, +y up) of the six synthetic suns.
 SUN_DIRECTIONS = ((-0.6, 0.6, 0.53), (0.7, 0.5, 0.5), (0.0, 0.9, 0.44), (-0.85, -0.1, 0.52),
@@ -53,7 +54,7 @@ def env_variant(name: str) -> int:
 
 
 def _light_scene(directions, irradiance: float):
-    from ..render import DistantLight, Scene, sphere_geometry
+    from specgen_addon.render import DistantLight, Scene, sphere_geometry
 
     lights = [DistantLight(d, irradiance, spectra.DEFAULT_ILLUMINANT) for d in directions]
     return Scene(sphere_geometry(input_image.CANONICAL_SIZE), lights)
@@ -91,8 +92,8 @@ def _render(brdf, scene, exposure: float) -> np.ndarray:
 def _env_scene(env_name: str, rotation_rad: float):
     """A training map with the key light, at a quarter of the input sampling (:data:`ENV_SAMPLING_SCALE`):
     an augmentation image, whose extra noise is far below the 8-bit quantisation it may get."""
-    from .. import lighting
-    from ..render import Scene, sphere_geometry
+    from specgen_addon.render import environment_maps as lighting
+    from specgen_addon.render import Scene, sphere_geometry
 
     env = lighting.load_environment(env_name, rotation_rad=rotation_rad)
     return Scene(sphere_geometry(input_image.CANONICAL_SIZE), [input_image._key_light()], env,
@@ -146,7 +147,7 @@ class ComponentCache:
         self.cache_dir = Path(cache_dir)
 
     def path(self, mat):
-        from .data import material_key
+        from specgen_addon.train.data import material_key
 
         return self.cache_dir / f"mix_{mat.name.replace('/', '_')}_{material_key(mat)}.npy"
 
@@ -167,7 +168,7 @@ class ComponentCache:
 
     def fill(self, mats, workers: int = 2, progress=None) -> None:
         """Render what is missing, grouped by environment variant (prepared scenes are reused)."""
-        from .data import render_all
+        from specgen_addon.train.data import render_all
 
         todo = sorted(self.missing(mats), key=lambda m: env_variant(m.name))
         if todo:
@@ -180,7 +181,7 @@ class ComponentCache:
 
 def resample_stack(stack: np.ndarray, size: int) -> np.ndarray:
     """``(K, H, W, 3)`` → ``(K, 3, size, size)`` float16 with the antialiased bilinear weights of
-    :func:`specgen_addon.resample.resample_square`, applied separably (two small matrix products
+    :func:`specgen_addon.photo.resample.resample_square`, applied separably (two small matrix products
     instead of its one four-index ``einsum``, which is ~100× slower at 128² → 64²)."""
     chw = np.ascontiguousarray(np.asarray(stack, dtype=np.float32).transpose(0, 3, 1, 2))
     if chw.shape[2:] == (size, size):

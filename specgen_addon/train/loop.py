@@ -30,14 +30,14 @@ from typing import Any, Callable, Sequence
 import numpy as np
 import torch
 
-from ..config_schema import MODEL_BOUNDS, TRAIN_BOUNDS, type_error, read_config_dict, validate_section
-from ..errors import SpecGenError
-from ..io_utils import atomic_write
-from ..model import Config, SpecGen, count_parameters, save_weights
-from ..spectra import wavelength_grid
-from . import distributed as ddp
-from .data import Batch, TrainingMaterial, make_batch
-from .prefetch import step_batches
+from specgen_addon.train.config_schema import MODEL_BOUNDS, TRAIN_BOUNDS, type_error, read_config_dict, validate_section
+from specgen_addon.common.errors import SpecGenError
+from specgen_addon.common.atomic_io import atomic_write
+from specgen_addon.model import Config, SpecGen, count_parameters, save_weights
+from specgen_addon.spectral.spectra import wavelength_grid
+from specgen_addon.train import distributed as ddp
+from specgen_addon.train.data import Batch, TrainingMaterial, make_batch
+from specgen_addon.train.prefetch import step_batches
 
 #: Band grid (nm) the spectral targets are evaluated on: 10 nm steps over the visible range.
 TARGET_WAVELENGTHS_NM = wavelength_grid(380.0, 780.0, 41)
@@ -222,11 +222,11 @@ class TrainConfig:
         if self.spectral_materials_per_step + self.rgb_materials_per_step == 0:
             raise SpecGenError("training config: no materials per step")
         if self.families is not None:
-            from ..corpus.generate import check_mix
+            from specgen_addon.corpus.generate import check_mix
 
             check_mix(self.families)
         if self.family_draw is not None:
-            from ..corpus.generate import check_mix
+            from specgen_addon.corpus.generate import check_mix
 
             check_mix(self.family_draw)
             if self.families is not None and not set(self.family_draw) & set(self.families):
@@ -235,7 +235,7 @@ class TrainConfig:
         if self.init_weights is not None and not Path(self.init_weights).is_file():
             raise SpecGenError(f"training config: init_weights {self.init_weights}: file not found")
         if self.recycle_dormant:
-            from ..model.recycle import STAGES
+            from specgen_addon.model.recycle import STAGES
 
             bad = [s for s in self.recycle_dormant if s not in STAGES] if isinstance(
                 self.recycle_dormant, list) else [self.recycle_dormant]
@@ -263,7 +263,7 @@ class TrainConfig:
 def load_config(path: str | Path) -> tuple[Config, TrainConfig]:
     """Read ``{"model": {...}, "train": {...}}`` from a JSON or TOML file, its ``extends`` bases
     merged in and a relative ``init_weights`` taken against the folder of the file that names it
-    (:func:`~specgen_addon.config_schema.read_config_dict`)."""
+    (:func:`~specgen_addon.train.config_schema.read_config_dict`)."""
     d = read_config_dict(path)
     unknown = set(d) - {"model", "train"}
     if unknown:
@@ -318,7 +318,7 @@ def family_draw_probabilities(materials: Sequence[TrainingMaterial], weights: di
 
     SpecGenError when no material belongs to a weighted family.
     """
-    from ..corpus.generate import check_mix, material_family
+    from specgen_addon.corpus.generate import check_mix, material_family
 
     share = check_mix(weights)
     families = [material_family(m.brdf) for m in materials]
@@ -354,7 +354,7 @@ def _draw(rng: np.random.Generator, mset: MaterialSet, k: int, canonical_fractio
                 imgs.append(drawn[1])
                 continue
         if lighting == "mix":
-            from .lighting_mix import mix_lighting
+            from specgen_addon.train.lighting_mix import mix_lighting
 
             mats.append(mset.materials[i])
             imgs.append(mix_lighting(stack, rng, canonical_p=canonical_fraction))
@@ -374,7 +374,7 @@ def recycle_census(spectral: MaterialSet, rgb: MaterialSet, tcfg: TrainConfig,
     """The inputs the dead-unit census of a warm start sees: the canonical input of up to
     ``limit`` training materials and, with ``lighting="mix"``, each again under a drawn
     lighting (drawn from the run's seed, so a run stays reproducible)."""
-    from .lighting_mix import mix_lighting
+    from specgen_addon.train.lighting_mix import mix_lighting
 
     seen: set[int] = set()      # an RGB version shares its spectral original's input stack
     stacks = [s for mset in (spectral, rgb) for s in mset.images
@@ -518,11 +518,11 @@ def make_step_batches(tcfg: TrainConfig, mcfg: Config, spectral: MaterialSet, rg
         mats, imgs = _draw(rng, mset, k, tcfg.canonical_fraction, tcfg.input_variants, tcfg.lighting)
         if tcfg.input_jitter_px > 0 or tcfg.input_scale_jitter > 0:
             # (no draws when off: earlier runs keep their data bit for bit)
-            from .augment import jitter_framing
+            from specgen_addon.train.augment import jitter_framing
 
             imgs = [jitter_framing(im, rng, tcfg.input_jitter_px, tcfg.input_scale_jitter) for im in imgs]
         if tcfg.input_offgrid_fraction > 0:
-            from .augment import offgrid_photo_crop
+            from specgen_addon.train.augment import offgrid_photo_crop
 
             imgs = [offgrid_photo_crop(im, rng, tcfg.input_finder_error_px)
                     if rng.random() < tcfg.input_offgrid_fraction else im for im in imgs]
@@ -557,8 +557,8 @@ def train(mcfg: Config, tcfg: TrainConfig, spectral: MaterialSet, rgb: MaterialS
     if len(spectral) == 0 and len(rgb) == 0:
         raise SpecGenError("no training materials")
     if real is None and tcfg.real_materials_per_step > 0:
-        from ..evaluation.cache import cache_root
-        from .real_rgb import real_source
+        from specgen_addon.common.cache import cache_root
+        from specgen_addon.train.real_rgb import real_source
 
         real = real_source(tcfg, cache_root() / "train-data", log=print if show_progress else (lambda _m: None))
     if tcfg.family_draw is not None:  # once, before any output and before data workers fork
@@ -577,9 +577,9 @@ def train(mcfg: Config, tcfg: TrainConfig, spectral: MaterialSet, rgb: MaterialS
     torch.manual_seed(tcfg.seed)
     model = SpecGen(mcfg)
     if tcfg.init_weights is not None and not (resume and (out / "checkpoint.pt").is_file()):
-        from ..model import load_weights
+        from specgen_addon.model import load_weights
 
-        from ..model.grow import can_grow, grow_state_dict
+        from specgen_addon.model.grow import can_grow, grow_state_dict
 
         init = load_weights(tcfg.init_weights)
         if not can_grow(init.cfg, mcfg, fresh_encoder=tcfg.fresh_encoder):
@@ -587,7 +587,7 @@ def train(mcfg: Config, tcfg: TrainConfig, spectral: MaterialSet, rgb: MaterialS
         model.load_state_dict(grow_state_dict(init.state_dict(), init.cfg, mcfg, fresh=model.state_dict(),
                                               fresh_encoder=tcfg.fresh_encoder))
         if tcfg.recycle_dormant:
-            from ..model.recycle import recycle_dormant, revive_at_boundary
+            from specgen_addon.model.recycle import recycle_dormant, revive_at_boundary
 
             census, stages = recycle_census(spectral, rgb, tcfg), tuple(tcfg.recycle_dormant)
             renewed = (recycle_dormant(model, census, stages=stages, seed=tcfg.seed)
@@ -670,7 +670,7 @@ def train(mcfg: Config, tcfg: TrainConfig, spectral: MaterialSet, rgb: MaterialS
             opt.zero_grad(set_to_none=True)
             g_real = None
             if real is not None:
-                from .real_rgb import real_loss
+                from specgen_addon.train.real_rgb import real_loss
 
                 g_real = real_loss(model, real.batch(tcfg.seed, step, mcfg.image_size,
                                                      tcfg.angles_per_material, mcfg.mu))

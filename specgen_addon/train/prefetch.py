@@ -46,7 +46,7 @@ def step_batches(make: Callable[[int], Any], start: int, stop: int, workers: int
         for step in range(start, stop):
             yield make(step)
         return
-    from ..processes import can_pool, context
+    from specgen_addon.common.processes import can_pool, context
 
     if not can_pool(make):  # inside a pool worker, or spawn and ``make`` cannot travel
         for step in range(start, stop):

@@ -37,9 +37,9 @@ from typing import Any
 import numpy as np
 import torch
 
-from ..errors import SpecGenError
-from ..spectra import reflectance_to_linear_srgb, wavelength_grid
-from .data import TrainingMaterial, load_file_materials, sample_angles
+from specgen_addon.common.errors import SpecGenError
+from specgen_addon.spectral.spectra import reflectance_to_linear_srgb, wavelength_grid
+from specgen_addon.train.data import TrainingMaterial, load_file_materials, sample_angles
 
 #: Bands (nm) at which the spectral branch is queried and projected to RGB for a real material.
 REAL_BANDS_NM = wavelength_grid(380.0, 780.0, 16)
@@ -117,9 +117,9 @@ class RealSource:
     def batch(self, seed: int, step: int, image_size: int, n_angles: int, mu: float) -> RealBatch:
         """The real batch of ``step``: a pure function of ``(seed, step)`` (its own stream, so the
         corpus draws of a run stay as they were without real files)."""
-        from ..rusinkiewicz import io_from_half_diff
-        from ..table import mu_law_encode
-        from . import network_inputs, png_like
+        from specgen_addon.brdf.rusinkiewicz import io_from_half_diff
+        from specgen_addon.brdf.table import mu_law_encode
+        from specgen_addon.train import network_inputs, png_like
 
         rng = np.random.default_rng([seed, step, 0x2EA1])
         idx = np.sort(rng.choice(len(self), size=min(self.per_step, len(self)), replace=False))
@@ -146,7 +146,7 @@ class RealSource:
 def real_loss(model: Any, b: RealBatch, projection: torch.Tensor | None = None,
               bands_nm: np.ndarray = REAL_BANDS_NM) -> tuple[torch.Tensor, torch.Tensor]:
     """``(L_colour + L_grey, TV of the planes)`` of a real batch (module docstring)."""
-    from .loop import _masked_mse, inverse_mu_law
+    from specgen_addon.train.loop import _masked_mse, inverse_mu_law
 
     dev = next(model.parameters()).device
     t = lambda a: torch.from_numpy(np.ascontiguousarray(a)).to(dev)
@@ -187,9 +187,9 @@ def real_source(tcfg: Any, cache_dir: str | Path, log: Callable[[str], None] = p
 
 def canonical_photo(path: Path, cache_dir: Path, log: Callable[[str], None] = print) -> np.ndarray:
     """The canonical input photo ``(128, 128, 3)`` of a measured file, as the evaluation renders it
-    (:func:`specgen_addon.input_image.render_input` of the file itself), cached by content."""
-    from .. import input_image
-    from ..formats import load_brdf
+    (:func:`specgen_addon.photo.sphere_image.render_input` of the file itself), cached by content."""
+    from specgen_addon.photo import sphere_image as input_image
+    from specgen_addon.brdf.formats import load_brdf
 
     key = hashlib.sha1(f"{path.resolve()}:{path.stat().st_size}:{path.stat().st_mtime_ns}".encode()).hexdigest()[:16]
     cached = Path(cache_dir) / f"real_input_{path.stem}_{key}.npy"

@@ -16,7 +16,7 @@ both), and its targets are the analytic BRDF with ρ replaced.
 Which reflectance a material is affine in is checked numerically (:func:`affine_slot`), not
 listed per family: a spectrum that enters through a logarithm (a tinted coat's absorption) or a
 clamp fails the check and is never swapped. Units: wavelengths in nm, radiance as the input
-renderer's (linear sRGB after :func:`specgen_addon.spectra.spectral_to_linear_srgb`).
+renderer's (linear sRGB after :func:`specgen_addon.spectral.spectra.spectral_to_linear_srgb`).
 """
 
 from __future__ import annotations
@@ -28,10 +28,10 @@ from typing import Any, Sequence
 
 import numpy as np
 
-from .. import spectra
-from ..corpus.material import Reflectance
-from ..corpus.spectra_sources import REFLECTANCE_GRID_NM
-from .data import TrainingMaterial, material_key
+from specgen_addon.spectral import spectra
+from specgen_addon.corpus.material import Reflectance
+from specgen_addon.corpus.spectra_sources import REFLECTANCE_GRID_NM
+from specgen_addon.train.data import TrainingMaterial, material_key
 
 #: Bands (nm) the canonical input is rendered in (the input renderer's grid).
 BANDS_NM = spectra.DEFAULT_WAVELENGTHS_NM
@@ -70,7 +70,7 @@ def reflectance_at(obj: Any, path: tuple[str, ...]) -> Reflectance:
 
 def _probe_points(n: int = 256) -> tuple[np.ndarray, np.ndarray]:
     rng = np.random.default_rng(12345)
-    from ..rusinkiewicz import io_from_half_diff
+    from specgen_addon.brdf.rusinkiewicz import io_from_half_diff
 
     u = rng.random((3, n))
     return io_from_half_diff(u[0] ** 2 * (np.pi / 2), u[1] * (np.pi / 2), u[2] * np.pi)
@@ -126,7 +126,7 @@ def recoloured(mat: TrainingMaterial, path: tuple[str, ...], values: np.ndarray)
 def render_affine_pair(brdf: Any, path: tuple[str, ...]) -> np.ndarray:
     """``(2, Λ, 128, 128)`` float32: the canonical input's spectral radiance (× the input exposure)
     with ρ ≡ 0, and with ρ ≡ 1 minus that (:data:`BANDS_NM`; the canonical scene and its samples)."""
-    from .. import input_image
+    from specgen_addon.photo import sphere_image as input_image
 
     scene = input_image._scene(input_image.CANONICAL_ENV, 0.0, input_image.CANONICAL_SIZE)
     l0, l1 = (np.asarray(scene.render_spectral(with_reflectance(brdf, path, value), BANDS_NM).spectral,
@@ -136,7 +136,7 @@ def render_affine_pair(brdf: Any, path: tuple[str, ...]) -> np.ndarray:
 
 def combine(pair: np.ndarray, values: np.ndarray) -> np.ndarray:
     """Linear-sRGB canonical input ``(H, W, 3)`` of the material with reflectance ``values`` (on the
-    corpus grid), from its ``pair``: as :func:`specgen_addon.input_image.render_input` would render it."""
+    corpus grid), from its ``pair``: as :func:`specgen_addon.photo.sphere_image.render_input` would render it."""
     rho = np.interp(BANDS_NM, REFLECTANCE_GRID_NM, np.asarray(values, np.float64)).astype(np.float32)
     radiance = pair[0].astype(np.float32) + rho[:, None, None] * pair[1].astype(np.float32)
     rgb = spectra.spectral_to_linear_srgb(radiance.transpose(1, 2, 0), BANDS_NM)
@@ -146,7 +146,7 @@ def combine(pair: np.ndarray, values: np.ndarray) -> np.ndarray:
 def recoloured_input(pair: np.ndarray, values: np.ndarray, png: bool, size: int) -> np.ndarray:
     """The network's input ``(3, size, size)``: :func:`combine`, 8-bit PNG-quantised at full size when
     ``png`` (as the cached ``canonical_png`` component is), then resampled as the component cache is."""
-    from .lighting_mix import quantise, resample_stack
+    from specgen_addon.train.lighting_mix import quantise, resample_stack
 
     image = combine(pair, values)
     if png:
@@ -200,7 +200,7 @@ class AffinePairCache:
 
     def fill(self, mats: Sequence[TrainingMaterial], workers: int = 2, progress=None) -> None:
         """Render what is missing on ``workers`` processes."""
-        from .data import render_all
+        from specgen_addon.train.data import render_all
 
         todo = self.missing(mats)
         if todo:

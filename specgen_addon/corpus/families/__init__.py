@@ -5,13 +5,13 @@
 lobes) all follow the BRDF protocol; :func:`material_from_dict` rebuilds any of them.
 """
 
-from .base import (FAMILIES, FamilyMaterial, check_family_names, directional_albedo, family_names,
+from specgen_addon.corpus.families.base import (FAMILIES, FamilyMaterial, check_family_names, directional_albedo, family_names,
                    halfvector_quadrature, hemisphere_quadrature, material_from_dict)
-from .car_paint import CarPaint
-from .lobes import Lobes
-from .sheen import Sheen
-from .thin_film import ThinFilm, airy_reflectance
-from .tinted_coat import TintedCoat
+from specgen_addon.corpus.families.car_paint import CarPaint
+from specgen_addon.corpus.families.lobes import Lobes
+from specgen_addon.corpus.families.sheen import Sheen
+from specgen_addon.corpus.families.thin_film import ThinFilm, airy_reflectance
+from specgen_addon.corpus.families.tinted_coat import TintedCoat
 
 #: Every family name, the classic recipe first.
 FAMILY_NAMES: tuple[str, ...] = family_names()

@@ -23,12 +23,12 @@ from typing import Any, Callable, ClassVar, Iterable
 
 import numpy as np
 
-from ...errors import SpecGenError
-from ...spectra import DEFAULT_WAVELENGTHS_NM, wavelength_grid
-from ..material import (ALPHA_RANGE, CHUNK_ROWS, RGB_WAVELENGTHS_NM, ClearCoat, Conductor, Dielectric,
+from specgen_addon.common.errors import SpecGenError
+from specgen_addon.spectral.spectra import DEFAULT_WAVELENGTHS_NM, wavelength_grid
+from specgen_addon.corpus.material import (ALPHA_RANGE, CHUNK_ROWS, RGB_WAVELENGTHS_NM, ClearCoat, Conductor, Dielectric,
                         Material, Reflectance, _rgb_projection)
-from ..microfacet import MU_NODES, smith_lambda
-from ..spectra_sources import REFLECTANCE_GRID_NM, SPLITS
+from specgen_addon.corpus.microfacet import MU_NODES, smith_lambda
+from specgen_addon.corpus.spectra_sources import REFLECTANCE_GRID_NM, SPLITS
 
 #: Wavelength grid (nm) on which per-material albedo curves are integrated, then interpolated.
 ALBEDO_WAVELENGTHS_NM = wavelength_grid(380.0, 780.0, 41)
@@ -85,8 +85,8 @@ class FamilyMaterial:
                               project=_rgb_projection())
 
     def tabulate(self, wavelengths_nm: np.ndarray = DEFAULT_WAVELENGTHS_NM, progress=None, cancel=None):
-        """The material on the MERL grid as a spectral :class:`~specgen_addon.table.BRDFTable`."""
-        from ...table import BRDFTable
+        """The material on the MERL grid as a spectral :class:`~specgen_addon.brdf.table.BRDFTable`."""
+        from specgen_addon.brdf.table import BRDFTable
 
         w = np.asarray(wavelengths_nm, dtype=np.float64)
         meta = {"source": "specgen corpus", "material": self.to_dict(), "description": self.kind}

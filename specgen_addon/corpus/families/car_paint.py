@@ -22,10 +22,10 @@ from typing import ClassVar
 
 import numpy as np
 
-from ..fresnel import fresnel_dielectric
-from ..material import COS_NODES, ClearCoat, Conductor, Reflectance, _lerp_nodes
-from ..microfacet import lookup_mu, specular_albedo_curves, specular_geometry
-from .base import FamilyMaterial, check_alpha, register
+from specgen_addon.corpus.fresnel import fresnel_dielectric
+from specgen_addon.corpus.material import COS_NODES, ClearCoat, Conductor, Reflectance, _lerp_nodes
+from specgen_addon.corpus.microfacet import lookup_mu, specular_albedo_curves, specular_geometry
+from specgen_addon.corpus.families.base import FamilyMaterial, check_alpha, register
 
 
 @register

@@ -26,10 +26,10 @@ from typing import ClassVar
 
 import numpy as np
 
-from ..fresnel import fresnel_dielectric
-from ..material import COS_NODES, Dielectric, Reflectance, _lerp_nodes
-from ..microfacet import cosine_weighted_mean, ggx_d, lookup_mu
-from .base import (ALBEDO_WAVELENGTHS_NM, FamilyMaterial, check_alpha, curves_at, directional_albedo,
+from specgen_addon.corpus.fresnel import fresnel_dielectric
+from specgen_addon.corpus.material import COS_NODES, Dielectric, Reflectance, _lerp_nodes
+from specgen_addon.corpus.microfacet import cosine_weighted_mean, ggx_d, lookup_mu
+from specgen_addon.corpus.families.base import (ALBEDO_WAVELENGTHS_NM, FamilyMaterial, check_alpha, curves_at, directional_albedo,
                    halfvector_quadrature, hemisphere_quadrature, register, smith_g2)
 
 GAMMA_RANGE = (1.1, 2.0)

@@ -22,9 +22,9 @@ from typing import ClassVar
 
 import numpy as np
 
-from ..material import Reflectance
-from ..microfacet import MU_NODES, cosine_weighted_mean, lookup_mu
-from .base import FamilyMaterial, directional_albedo, hemisphere_quadrature, register
+from specgen_addon.corpus.material import Reflectance
+from specgen_addon.corpus.microfacet import MU_NODES, cosine_weighted_mean, lookup_mu
+from specgen_addon.corpus.families.base import FamilyMaterial, directional_albedo, hemisphere_quadrature, register
 
 ROUGHNESS_RANGE = (0.05, 1.0)
 

@@ -28,11 +28,11 @@ from typing import ClassVar
 
 import numpy as np
 
-from ..fresnel import cauchy_ior
-from ..material import COS_NODES, Conductor, Dielectric, Reflectance, _lerp_nodes
-from ..metals import metal_ior
-from ..microfacet import cosine_weighted_mean, lookup_mu, specular_geometry
-from .base import (ALBEDO_WAVELENGTHS_NM, FamilyMaterial, check_alpha, curves_at, directional_albedo,
+from specgen_addon.corpus.fresnel import cauchy_ior
+from specgen_addon.corpus.material import COS_NODES, Conductor, Dielectric, Reflectance, _lerp_nodes
+from specgen_addon.corpus.metals import metal_ior
+from specgen_addon.corpus.microfacet import cosine_weighted_mean, lookup_mu, specular_geometry
+from specgen_addon.corpus.families.base import (ALBEDO_WAVELENGTHS_NM, FamilyMaterial, check_alpha, curves_at, directional_albedo,
                    halfvector_quadrature, register)
 
 #: Film thickness range (nm) the corpus draws from, and film indices (oil, soap ≈ 1.33–1.5; oxides up to 2.4).

@@ -25,10 +25,10 @@ from typing import ClassVar
 
 import numpy as np
 
-from ..fresnel import fresnel_dielectric
-from ..material import COS_NODES, ClearCoat, Material, Reflectance, _lerp_nodes, _lookup
-from ..microfacet import lookup_mu, specular_albedo_curves, specular_geometry
-from .base import FamilyMaterial, register
+from specgen_addon.corpus.fresnel import fresnel_dielectric
+from specgen_addon.corpus.material import COS_NODES, ClearCoat, Material, Reflectance, _lerp_nodes, _lookup
+from specgen_addon.corpus.microfacet import lookup_mu, specular_albedo_curves, specular_geometry
+from specgen_addon.corpus.families.base import FamilyMaterial, register
 
 #: Smallest transmittance a dye spectrum is clipped to before taking its logarithm.
 TAU_FLOOR = 1e-3

@@ -1,0 +1,1 @@
+"""SpecGen core: bake (see docs/dev/architecture.md)."""

@@ -1,0 +1,1 @@
+"""SpecGen core: brdf (see docs/dev/architecture.md)."""

@@ -1,0 +1,85 @@
+"""CLI commands on BRDF files: ``info`` (metadata) and ``tabulate`` (to the SpecGen table format)."""
+
+from __future__ import annotations
+
+import argparse
+import json
+from pathlib import Path
+
+import numpy as np
+
+from specgen_addon.common.errors import SpecGenError
+from specgen_addon.brdf.formats import detect_format, load_brdf
+from specgen_addon.common.progress import progress_bar
+from specgen_addon.spectral.spectra import DEFAULT_RANGE_NM, DEFAULT_BAND_COUNT, wavelength_grid
+from specgen_addon.brdf.table import BRDFTable
+
+
+def add_parser(sub: argparse._SubParsersAction) -> None:
+    p = sub.add_parser("info", help="print a BRDF file's metadata (RGL .bsdf, MERL .binary, .npz table)")
+    p.add_argument("file", type=Path)
+    p.add_argument("--json", action="store_true", help="print machine-readable JSON")
+    p.set_defaults(func=run_info)
+
+    p = sub.add_parser("tabulate", help="tabulate an RGL or MERL file onto the MERL grid (.npz table)")
+    p.add_argument("file", type=Path)
+    p.add_argument("-o", "--out", type=Path, required=True,
+                   help="output: .npz (compact material; full table with --full-table), .bsdf or .binary")
+    p.add_argument("--full-table", action="store_true",
+                   help="write the full float32 table instead of the compact material file")
+    p.add_argument("--wl-min", type=float, default=DEFAULT_RANGE_NM[0], help="first wavelength, nm")
+    p.add_argument("--wl-max", type=float, default=DEFAULT_RANGE_NM[1], help="last wavelength, nm")
+    p.add_argument("--bands", type=int, default=DEFAULT_BAND_COUNT,
+                   help="wavelength count for spectral files (RGB files keep R, G, B)")
+    p.add_argument("--overwrite", action="store_true", help="replace an existing output")
+    p.add_argument("--quiet", action="store_true", help="no progress bar")
+    p.set_defaults(func=run_tabulate)
+
+
+def describe(path: Path) -> dict:
+    """Metadata of a BRDF file as a plain dict."""
+    kind = detect_format(path)
+    brdf = load_brdf(path)
+    info: dict = {"file": str(path), "format": kind}
+    if isinstance(brdf, BRDFTable):
+        info.update(kind="spectral" if brdf.is_spectral else "rgb", channels=len(brdf.channels),
+                    grid=list(brdf.values.shape[:3]), metadata=brdf.metadata)
+        if brdf.is_spectral:
+            info["wavelengths_nm"] = [float(brdf.wavelengths[0]), float(brdf.wavelengths[-1])]
+    else:
+        info.update(brdf.info() if hasattr(brdf, "info") else {})
+    return info
+
+
+def run_info(args: argparse.Namespace) -> int:
+    info = describe(args.file)
+    if args.json:
+        print(json.dumps(info, indent=2, default=str))
+    else:
+        for key, value in info.items():
+            print(f"{key:>16}: {value}")
+    return 0
+
+
+def tabulate_file(path: Path, wavelengths_nm: np.ndarray, progress=None) -> BRDFTable:
+    """Load any BRDF file and return it on the MERL grid (spectral files at ``wavelengths_nm``)."""
+    brdf = load_brdf(path)
+    if isinstance(brdf, BRDFTable):
+        return brdf
+    from specgen_addon.brdf.formats.rgl import tabulate_rgl
+
+    return tabulate_rgl(brdf, wavelengths_nm if brdf.is_spectral else None, progress=progress)
+
+
+def run_tabulate(args: argparse.Namespace) -> int:
+    from specgen_addon.brdf.formats.export import check_output, write_output
+
+    check_output(args.out)
+    if args.out.exists() and not args.overwrite:
+        raise SpecGenError(f"{args.out}: already exists (use --overwrite)")
+    wavelengths = wavelength_grid(args.wl_min, args.wl_max, args.bands)
+    with progress_bar(f"tabulating {args.file.name}", enabled=not args.quiet) as update:
+        table = tabulate_file(args.file, wavelengths, progress=update)
+    print(write_output(table, args.out, overwrite=args.overwrite, full_table=args.full_table)
+          + f": {'spectral' if table.is_spectral else 'RGB'}, {table.n_channels} channels")
+    return 0

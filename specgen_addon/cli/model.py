@@ -1,0 +1,465 @@
+"""CLI commands of the network: ``train``, ``infer``, ``evaluate``, ``export-onnx``, ``average-weights``."""
+
+from __future__ import annotations
+
+import argparse
+import json
+import time
+from pathlib import Path
+
+from specgen_addon.common.errors import OutputExistsError, SpecGenError
+from specgen_addon.common.progress import progress_bar
+
+
+def add_parser(sub: argparse._SubParsersAction) -> argparse.ArgumentParser:
+    p = sub.add_parser("train", help="train SpecGen on the corpus (+ RGB BRDFs) from a config file",
+                       description="Joint spectral + RGB training (paper §3.3), on CPU by default (--device). Writes OUT/"
+                                   "specgen.pt, checkpoint.pt, history.csv and loss_curve.png. Under "
+                                   "torchrun (torchrun --nproc_per_node N -m specgen_addon train ...) "
+                                   "each rank trains on a shard of every step's materials with DDP "
+                                   "(docs/scale.md).")
+    p.add_argument("--config", type=Path, default=None,
+                   help="JSON/TOML with 'model' and 'train' sections (default: configs/default.json)")
+    p.add_argument("--out", type=Path, default=None, help="output directory (required unless --show-config)")
+    p.add_argument("--show-config", action="store_true",
+                   help="print the configuration the run would use (bases named by 'extends' merged, "
+                        "defaults filled in, command-line overrides applied) as JSON and exit")
+    p.add_argument("--brdf-dir", type=Path, action="append", default=[],
+                   help="extra directory of MERL .binary / RGL .bsdf files (repeatable)")
+    p.add_argument("--steps", type=int, default=None, help="override the number of steps")
+    p.add_argument("--max-minutes", type=float, default=None, help="stop (and save) after this long")
+    p.add_argument("--seed", type=int, default=None, help="override the seed")
+    p.add_argument("--device", choices=("cpu", "cuda", "auto"), default=None,
+                   help="where the network trains (default: the config's, cpu); cuda: one GPU per "
+                        "rank, DDP over nccl")
+    p.add_argument("--resume", action="store_true", help="continue OUT/checkpoint.pt")
+    p.add_argument("--quiet", action="store_true", help="no progress bar")
+    p.set_defaults(func=run_train)
+
+    p = sub.add_parser("infer", help="generate the spectral BRDF of the material in a sphere image",
+                       description="Writes the spectral BRDF (90×90×180×Λ on the MERL grid): a compact "
+                                   "material file (.npz, a few MB) by default, the full float32 table with "
+                                   "--full-table, or an RGL .bsdf (spectral) or MERL .binary (RGB) export.")
+    p.add_argument("image", type=Path, help="image of a material sphere (EXR, PNG, JPEG)")
+    p.add_argument("-o", "--output", type=Path, required=True,
+                   help="output: .npz (compact material; full table with --full-table), .bsdf or .binary")
+    p.add_argument("--full-table", action="store_true",
+                   help="write the full float32 table (122 MB at 21 bands) instead of the compact file")
+    p.add_argument("--weights", type=Path, default=None,
+                   help="weights (.pt); default: the shipped network for how the sphere was cut "
+                        "(copied from a canonical frame, or resampled from a photo)")
+    p.add_argument("--backend", choices=("torch", "onnx"), default="torch")
+    p.add_argument("--bands", type=int, default=21, help="wavelength bands (default 21)")
+    p.add_argument("--range", type=float, nargs=2, default=(380.0, 780.0), metavar=("START", "END"),
+                   help="wavelength range in nm (default 380 780)")
+    p.add_argument("--rgb", action="store_true", help="also write OUTPUT_rgb.npz (RGB projection, D65)")
+    add_refine_arguments(p)
+    p.add_argument("--latent-fit", action="store_true",
+                   help="before refinement, fit the network's own latent to the photo and decode the "
+                        "table again (torch backend; about 25 s more on two cores; off by default: on "
+                        "held-out photos it did not beat refinement alone, docs/refinement.md)")
+    p.add_argument("--overwrite", action="store_true", help="replace existing outputs")
+    p.add_argument("--quiet", action="store_true", help="no progress bar")
+    p.set_defaults(func=run_infer)
+
+    p = sub.add_parser("evaluate", help="PSNR/SSIM of SpecGen on the held-out test materials",
+                       description="Renders each test material's sphere under a distant light at 20 "
+                                   "wavelengths from the predicted and the true BRDF; prints per-"
+                                   "material and mean PSNR/SSIM.")
+    p.add_argument("--weights", type=Path, default=None,
+                   help="weights (.pt); default: the shipped network for how the sphere was cut "
+                        "(copied from a canonical frame, or resampled from a photo)")
+    p.add_argument("--limit", type=int, default=None, help="only the first N test materials")
+    p.add_argument("--json", type=Path, default=None, help="also write the results as JSON")
+    p.add_argument("--overwrite", action="store_true", help="replace an existing --json file")
+    p.add_argument("--backend", choices=("torch", "onnx"), default="torch")
+    p.add_argument("--refine", action=argparse.BooleanOptionalAction, default=True,
+                   help="also refine each table to its input photo and report the refined PSNR/SSIM "
+                        "and both tables' self-reproduction (RGB PSNR, ΔE2000 under the input "
+                        "lighting; default: on)")
+    p.add_argument("--families", type=int, default=0, metavar="N",
+                   help="also score N test materials per corpus family (mixed corpus of "
+                        "configs/default.json) under the distant lights and the held-out maps, and "
+                        "the real RGL files in ../shared/data/rgl, each with its self-reproduction "
+                        "(the network's table in its photo's own lighting against the photo: RGB "
+                        "PSNR, ΔE2000) (default 0: off)")
+    p.add_argument("--no-envs", action="store_true", help="with --families: distant lights only")
+    p.add_argument("--input-env", default=None, metavar="MAP",
+                   help="with --families: photograph each input sphere under this environment map "
+                        "(e.g. a held-out one: courtyard, interior) instead of the canonical lighting, "
+                        "without telling the network; measures its robustness to the input's lighting")
+    p.add_argument("--input-shift", type=float, default=0.0, metavar="PX",
+                   help="with --families: move each input sphere by PX pixels right and down inside "
+                        "a black border before the sphere is found and cropped (the canonical image is "
+                        "128 px); measures how the network takes a sphere a user's crop leaves off "
+                        "centre (default 0)")
+    p.add_argument("--input-antialias", action="store_true",
+                   help="with --families: take each input sphere as a camera or an antialiased render "
+                        "does, each pixel the mean over its area (rendered at 4× and box-filtered; "
+                        "--input-shift then moves it by quarter pixels)")
+    p.add_argument("--family", action="append", default=None, metavar="NAME",
+                   help="with --families: score only this corpus family (classic, tinted_coat, car_paint, "
+                        "thin_film, sheen, lobes; repeat for several); the real RGL files are then skipped")
+    p.add_argument("--family-split", choices=("test", "train", "val"), default="test",
+                   help="with --families: the corpus split to score (default test, the held-out one; "
+                        "train scores the same protocol on materials the network was trained on, and "
+                        "leaves out the real RGL files)")
+    p.add_argument("--family-resolution", type=int, default=64,
+                   help="sphere size (px) of the per-family renders (default 64)")
+    p.add_argument("--quiet", action="store_true", help="no progress bar")
+    p.set_defaults(func=run_evaluate)
+
+    p = sub.add_parser("export-onnx", help="export weights to ONNX graphs for onnxruntime",
+                       description="Writes <stem>.tables.onnx and <stem>.head.onnx beside the weights.")
+    p.add_argument("--weights", type=Path, default=None,
+                   help="weights (.pt); default: both shipped networks (copied and resampled inputs)")
+    p.add_argument("--overwrite", action="store_true", help="replace existing .onnx graphs")
+    p.set_defaults(func=run_export)
+
+    p = sub.add_parser("average-weights", help="average weights files or checkpoints of one run (SWA)",
+                       description="Writes the element-wise mean of the given weights files "
+                                   "(specgen.pt) or training checkpoints (checkpoint.pt), all of one "
+                                   "model configuration: stochastic weight averaging after the fact.")
+    p.add_argument("sources", type=Path, nargs="+", help="two or more .pt files")
+    p.add_argument("-o", "--output", type=Path, required=True, help="averaged weights file (.pt)")
+    p.add_argument("--half", action="store_true", help="store float16 tensors (as the shipped weights)")
+    p.add_argument("--overwrite", action="store_true", help="replace an existing output")
+    p.set_defaults(func=run_average)
+    return p
+
+
+def add_refine_arguments(p: argparse.ArgumentParser) -> None:
+    """``--model``, ``--refine/--no-refine`` and the input lighting options (shared with batch.py)."""
+    g = p.add_argument_group("photo consistency",
+                             "the lighting the photo was taken under, and the refinement that makes "
+                             "the BRDF reproduce the photo under it")
+    g.add_argument("--model", choices=("network", "thin-film"), default="network",
+                   help="what makes the BRDF: 'network' (SpecGen, then refinement; default) or "
+                        "'thin-film': fit the thin-film interference family (soap, oil, anodised "
+                        "metal) to the photo, for a colour that changes with angle")
+    g.add_argument("--refine", action=argparse.BooleanOptionalAction, default=True,
+                   help="refine the network's BRDF so it reproduces the photo (default: on)")
+    g.add_argument("--input-env", default="canonical", metavar="NAME|FILE",
+                   help="lighting of the photo: 'canonical' (studio map + key light, default), a "
+                        "bundled map name (forest, courtyard, ...), an .exr/.hdr file, or 'estimate': "
+                        "a few distant lights + ambient estimated from the ball's own shading")
+    g.add_argument("--input-rotation", type=float, default=0.0, metavar="DEG",
+                   help="rotation of the input map about the up axis, degrees (default 0)")
+    g.add_argument("--input-exposure", type=float, default=1.0,
+                   help="input map brightness relative to the canonical level (default 1)")
+    g.add_argument("--input-key-light", action=argparse.BooleanOptionalAction, default=None,
+                   help="add the canonical D65 key light to a map (default: only for canonical)")
+    g.add_argument("--input-env-calibrated", action="store_true",
+                   help="the --input-env panorama holds radiance as photographed: use its values as "
+                        "they are (no normalisation to unit mean; --input-exposure still multiplies)")
+    g.add_argument("--light", action="append", default=[], metavar="AZ,EL[,POWER[,COLOUR]]",
+                   help="a distant light (or the sun) of the room, by azimuth and elevation in degrees "
+                        "in the camera's frame (azimuth 0 faces the camera, +90 is to the right; "
+                        "elevation +90 is up), power (1: the canonical key light) and colour (a CIE "
+                        "illuminant such as D65 or A, or a temperature such as 3200K); repeatable. "
+                        "Without --input-env the lights (and --ambient) alone light the photo")
+    g.add_argument("--light-vector", action="append", default=[], metavar="X,Y,Z[,POWER[,COLOUR]]",
+                   help="a distant light by its direction in the camera's frame (x right, y up, z "
+                        "towards the camera), as --light; repeatable")
+    g.add_argument("--ambient", type=float, default=0.0, metavar="L",
+                   help="uniform ambient radiance of the room (1: the radiance of a white surface "
+                        "facing the canonical key light; default 0)")
+    g.add_argument("--light-probe", type=Path, default=None, metavar="CHROME",
+                   help="a photo of a chrome (mirror) ball from the same place under the same light, "
+                        "taken like the photo: unwrapped into the room's environment in the camera's frame "
+                        "(Debevec 1998; written beside the output as OUTPUT_probe.exr), its clipped "
+                        "light sources made distant lights with their power fitted to the photo")
+    g.add_argument("--probe-mask", type=Path, default=None, metavar="FILE",
+                   help="mask of the chrome ball in --light-probe (the ball white)")
+    g.add_argument("--probe-circle", default=None, metavar="X,Y,R",
+                   help="the chrome ball's centre and radius in --light-probe's pixels")
+    g.add_argument("--probe-reflectance", type=float, default=None, metavar="R",
+                   help="the chrome ball's reflectance (default 0.75)")
+    g.add_argument("--linear", action="store_true",
+                   help="the photo's 8/16-bit values are linear light (a linear export of a RAW, a "
+                        "scientific camera); default: sRGB-encoded. EXR/HDR are always linear and "
+                        "camera RAW files are developed linearly")
+    g.add_argument("--white-level", type=float, default=None, metavar="V",
+                   help="values at or above V count as saturated and are left out of every fit (for "
+                        "EXR/HDR; 8/16-bit files and RAW are checked at their own full scale)")
+    g.add_argument("--circle", default=None, metavar="X,Y,R",
+                   help="the sphere's centre and radius in the photo's pixels (x right, y down from the "
+                        "top-left corner) instead of finding it")
+    g.add_argument("--mask", type=Path, default=None, metavar="FILE",
+                   help="a mask image of the photo's size, the sphere white (or opaque): its circle is used")
+    g.add_argument("--circle-preview", type=Path, default=None, metavar="PNG",
+                   help="write the photo with the circle used drawn on it (8-bit sRGB PNG)")
+
+
+def input_lighting_from_args(args: argparse.Namespace):
+    """The validated :class:`InputLighting` of :func:`add_refine_arguments`' options."""
+    from specgen_addon.photo.photo_lighting import parse_light, parse_lighting
+
+    lights = tuple(parse_light(t) for t in getattr(args, "light", None) or []) + \
+        tuple(parse_light(t, vector=True) for t in getattr(args, "light_vector", None) or [])
+    return parse_lighting(args.input_env, args.input_rotation, args.input_exposure, args.input_key_light,
+                          lights=lights, ambient=float(getattr(args, "ambient", 0.0) or 0.0),
+                          calibrated=bool(getattr(args, "input_env_calibrated", False)))
+
+
+def photo_source_from_args(args: argparse.Namespace, image: Path):
+    """The :class:`~specgen_addon.photo.sphere_image.PhotoSource` of a photo and the photo options."""
+    from specgen_addon.photo.sphere_image import PhotoSource, parse_circle
+
+    circle = getattr(args, "circle", None)
+    return PhotoSource(Path(image), encoding="linear" if getattr(args, "linear", False) else "auto",
+                       white_level=getattr(args, "white_level", None),
+                       circle=parse_circle(circle) if circle else None, mask=getattr(args, "mask", None))
+
+
+def estimated_lighting(args: argparse.Namespace, source):
+    """``--input-env estimate``: distant lights + ambient estimated from the ball itself
+    (:mod:`specgen_addon.photo.light_estimate`); the run says so, with the model's residual."""
+    from specgen_addon.photo.light_estimate import estimate_lights
+
+    if args.light or args.light_vector or getattr(args, "light_probe", None) is not None:
+        raise SpecGenError("--input-env estimate finds the light itself: leave out --light, --light-vector "
+                           "and --light-probe")
+    crop = source.crop()
+    estimate = estimate_lights(crop.image.astype("float64"), crop.saturated)
+    if not estimate.directions:
+        raise SpecGenError("no light could be estimated from the ball (its shading shows no direction); "
+                           "give --light or --light-probe")
+    print(f"input lighting {estimate.text()}")
+    return estimate.lighting()
+
+
+def probe_lighting_from_args(args: argparse.Namespace, source, env_path: Path):
+    """The lighting unwrapped from ``--light-probe`` (:mod:`specgen_addon.photo.light_probe`), its
+    environment written to ``env_path``; the run's notes about it printed."""
+    from specgen_addon.photo.sphere_image import parse_circle
+    from specgen_addon.photo.light_probe import CHROME_REFLECTANCE, probe_lighting, read_probe
+
+    if env_path.exists() and not args.overwrite:
+        raise OutputExistsError(f"{env_path}: already exists (pass --overwrite to replace it)")
+    if args.light or args.light_vector or args.input_env not in (None, "", "canonical"):
+        raise SpecGenError("--light-probe gives the room's light: leave out --light, --light-vector and --input-env")
+    probe = read_probe(args.light_probe, circle=parse_circle(args.probe_circle) if args.probe_circle else None,
+                       mask=args.probe_mask, encoding=source.encoding,
+                       reflectance=args.probe_reflectance or CHROME_REFLECTANCE)
+    photo = source.crop().image.astype("float64")
+    lighting = probe_lighting(probe, env_path, photo, overwrite=args.overwrite)
+    for note in probe.notes:
+        print(f"light probe: {note}")
+    print(f"{env_path}: the room's environment unwrapped from the chrome ball (camera frame)")
+    return lighting
+
+
+def print_photo_report(generated, args: argparse.Namespace, source) -> None:
+    """The circle used (and the preview with it drawn), and the network's self-reproduction when
+    there was no refinement to report it."""
+    crop = generated.crop
+    if crop is not None:
+        print(crop.describe())
+        preview = getattr(args, "circle_preview", None)
+        if preview is not None and crop.circle is not None:
+            from specgen_addon.photo.sphere_image import write_circle_preview
+
+            write_circle_preview(preview, source, crop.circle, overwrite=getattr(args, "overwrite", False))
+            print(f"{preview}: the photo with the circle used")
+    if generated.network_reproduction is not None:
+        print(f"self-reproduction of the network alone under {generated.table.metadata.get('input_lighting', 'the input lighting')}: "
+              f"{generated.network_reproduction.text()} (no refinement)")
+
+
+def film_fit_summary(fit, lighting_label: str) -> str:
+    """One line on a thin-film fit: the film found and its self-reproduction."""
+    m = fit.material
+    note = fit.blur_note()
+    blur = f"; {note}" if note else ""
+    return (f"thin-film fit: {m.kind}, η_f {m.film_eta:g}, d {m.thickness_nm:g} nm, α {m.alpha:.4g}{blur}; "
+            f"self-reproduction under {lighting_label}: {fit.reproduction.text()}")
+
+
+def print_refinement(generated) -> None:
+    """One line on what refinement reached, and its warnings (on stderr)."""
+    import sys
+
+    res = generated.refinement
+    if res is not None:
+        kept = "" if res.improved else " (network's table kept)"
+        print(f"refinement under {res.table.metadata.get('refine_lighting', 'the input lighting')}: "
+              f"{res.summary()}{kept}")
+    for w in generated.warnings:
+        print(f"warning: {w}", file=sys.stderr)
+
+
+def run_train(args: argparse.Namespace) -> int:
+    import dataclasses
+
+    from specgen_addon.model import DEFAULT_WEIGHTS, count_parameters, load_weights
+    from specgen_addon.train import build_material_sets
+    from specgen_addon.train import distributed as ddp
+    from specgen_addon.train.loop import load_config, plot_history, train
+
+    cfg_path = args.config or DEFAULT_WEIGHTS.parents[1] / "configs" / "default.json"
+    mcfg, tcfg = load_config(cfg_path)
+    over = {k: v for k, v in (("steps", args.steps), ("max_minutes", args.max_minutes),
+                              ("seed", args.seed), ("device", args.device)) if v is not None}
+    if args.brdf_dir:
+        over["brdf_dirs"] = list(tcfg.brdf_dirs) + [str(d) for d in args.brdf_dir]
+    tcfg = dataclasses.replace(tcfg, **over).validate()
+    if args.show_config:
+        print(json.dumps({"model": mcfg.to_dict(), "train": dataclasses.asdict(tcfg)}, indent=1))
+        return 0
+    if tcfg.init_weights is not None and not args.resume:  # before the input renders, not after
+        from specgen_addon.model.grow import can_grow
+
+        if not can_grow(load_weights(tcfg.init_weights).cfg, mcfg, fresh_encoder=tcfg.fresh_encoder):
+            raise SpecGenError(f"{tcfg.init_weights}: weights were made with a different model config")
+    if tcfg.recycle_dormant:
+        from specgen_addon.model.recycle import unsupported
+
+        why = unsupported(mcfg)
+        if why:
+            raise SpecGenError(f"training config: recycle_dormant: {why}")
+    out: Path = args.out
+    if out.exists() and not out.is_dir():
+        raise SpecGenError(f"{out}: exists and is not a directory")
+    if (out / "specgen.pt").exists() and not args.resume:
+        raise OutputExistsError(f"{out}/specgen.pt: exists (pass --resume to continue that run)")
+    out.mkdir(parents=True, exist_ok=True)
+    dctx = ddp.init_from_env(tcfg.device)  # under torchrun: join the process group; else one process
+    say = print if dctx.is_main else ddp.silent  # rank 0 speaks for the job
+    from specgen_addon.common.cache import cache_root
+
+    cache = cache_root() / "train-data"
+    t0 = time.perf_counter()
+    with ddp.main_first(dctx):  # rank 0 fills the input-render cache, the others then read it
+        spectral, rgb, val = build_material_sets(mcfg, tcfg, cache_dir=cache, log=say,
+                                                 progress=not args.quiet and dctx.is_main)
+    prep = time.perf_counter() - t0
+    say(f"materials: {len(spectral)} spectral, {len(rgb)} RGB, {len(val)} validation "
+          f"(inputs ready in {prep:.0f} s)")
+    res = train(mcfg, tcfg, spectral, rgb, val, out, resume=args.resume, show_progress=not args.quiet,
+                meta={"config_file": str(cfg_path), "data_prep_seconds": round(prep, 1),
+                      "world_size": dctx.world_size})
+    if not dctx.is_main:
+        return 0
+    if res.history:  # (a run stopped before its first step has no curve to draw)
+        plot_history(res.history, out / "loss_curve.png",
+                     title=f"SpecGen training: seed {tcfg.seed}, {res.steps} steps, "
+                           f"{res.wall_seconds / 60:.1f} min")
+    print(train_summary(res, count_parameters(load_weights(res.weights))))
+    return 0
+
+
+def train_summary(res, parameters: int) -> str:
+    """The line ``train`` ends with, for a :class:`~specgen_addon.train.loop.TrainResult`; a run
+    stopped by ``--max-minutes`` before its first step has no validation figure to report."""
+    note = " (stopped by --max-minutes)" if res.stopped_early else ""
+    val = res.history[-1].get("val") if res.history else None
+    tail = f"final validation μ-law MSE {val:.4g}" if val is not None else "no step was trained in this call"
+    return (f"{res.weights}: {parameters:,} parameters, {res.steps} steps in {res.wall_seconds:.0f} s{note}; "
+            f"{tail}")
+
+
+def run_infer(args: argparse.Namespace) -> int:
+    from specgen_addon.brdf.formats.export import check_output, write_output
+    from specgen_addon.generate.pipeline import generate
+    from specgen_addon.spectral.spectra import wavelength_grid
+
+    out: Path = args.output
+    check_output(out)
+    rgb_out = out.with_name(out.stem + "_rgb.npz")
+    extra = [p for p in (args.circle_preview,) if p is not None]
+    for p in [out] + ([rgb_out] if args.rgb else []) + extra:
+        if p.exists() and not args.overwrite:
+            raise OutputExistsError(f"{p}: already exists (pass --overwrite to replace it)")
+    wl = wavelength_grid(args.range[0], args.range[1], args.bands)
+    source = photo_source_from_args(args, args.image)
+    if args.input_env == "estimate":
+        lighting = estimated_lighting(args, source)
+    else:
+        lighting = input_lighting_from_args(args)
+    if getattr(args, "light_probe", None) is not None:
+        lighting = probe_lighting_from_args(args, source, out.with_name(out.stem + "_probe.exr"))
+    t0 = time.perf_counter()
+    with progress_bar("infer", enabled=not args.quiet) as update:
+        generated = generate(source, lighting, refine=args.refine, weights=args.weights,
+                             wavelengths_nm=wl, backend=args.backend, progress=update, model=args.model,
+                             latent_fit=args.latent_fit)
+    table = generated.table
+    dt = time.perf_counter() - t0
+    print(f"{out}: spectral BRDF {table.values.shape} ({wl[0]:g}–{wl[-1]:g} nm) in {dt:.1f} s")
+    print(write_output(table, out, overwrite=args.overwrite, full_table=args.full_table))
+    if "input_sphere" in table.metadata:  # which network: the sphere was copied, or resampled from a photo
+        print(f"network: {table.metadata['weights']} (sphere {table.metadata['input_sphere']})")
+    print_photo_report(generated, args, source)
+    if generated.latent_fit is not None:
+        print(generated.latent_fit.summary())
+    print_refinement(generated)
+    if generated.film_fit is not None:
+        print(film_fit_summary(generated.film_fit, lighting.label))
+    if args.rgb:
+        print(write_output(table.to_rgb(), rgb_out, overwrite=args.overwrite, full_table=args.full_table)
+              + ": RGB projection (D65, linear sRGB)")
+    return 0
+
+
+def run_evaluate(args: argparse.Namespace) -> int:
+    from specgen_addon.evaluation.trained_network import evaluate_families, evaluate_test_split, format_family_results, format_results
+
+    if args.limit is not None and args.limit < 1:
+        raise SpecGenError(f"--limit must be ≥ 1, got {args.limit}")
+    if not 16 <= args.family_resolution <= 1024:
+        raise SpecGenError(f"--family-resolution must be 16–1024, got {args.family_resolution}")
+    if args.families < 0:
+        raise SpecGenError(f"--families must be ≥ 0, got {args.families}")
+    if args.weights is not None and not args.weights.is_file():
+        raise SpecGenError(f"{args.weights}: weights file not found")
+    with progress_bar("evaluate", enabled=not args.quiet) as update:
+        res = evaluate_test_split(weights=args.weights, limit=args.limit, backend=args.backend,
+                                  progress=update, refine=args.refine)
+    print(format_results(res))
+    if args.families:
+        from specgen_addon.train import SHARED_RGL_DIR
+
+        with progress_bar("evaluate families", enabled=not args.quiet) as update:
+            res["by_family"] = evaluate_families(weights=args.weights, per_family=args.families,
+                                                 envs=not args.no_envs,
+                                                 rgl_dir=None if args.family or args.family_split != "test"
+                                                 else SHARED_RGL_DIR,
+                                                 split=args.family_split,
+                                                 families=args.family,
+                                                 resolution=args.family_resolution,
+                                                 backend=args.backend, progress=update,
+                                                 input_env=args.input_env,
+                                                 input_shift_px=args.input_shift,
+                                                 input_antialias=args.input_antialias)
+        print(format_family_results(res["by_family"]))
+    if args.json:
+        from specgen_addon.common.atomic_io import atomic_write
+
+        with atomic_write(args.json, overwrite=True) as tmp:
+            tmp.write_text(json.dumps(res, indent=1))
+    return 0
+
+
+def run_average(args: argparse.Namespace) -> int:
+    from specgen_addon.model import save_weights
+    from specgen_addon.model.average import average_models
+
+    model = average_models(args.sources)
+    path = save_weights(model, args.output, meta=model.meta, overwrite=args.overwrite, half=args.half)
+    print(f"{path}: mean of {len(args.sources)} files, {path.stat().st_size / 1e6:.1f} MB")
+    return 0
+
+
+def run_export(args: argparse.Namespace) -> int:
+    from specgen_addon.model import DEFAULT_WEIGHTS, RESAMPLED_WEIGHTS
+    from specgen_addon.model.runtime.export_onnx import export_onnx
+
+    sources = [args.weights] if args.weights is not None else [DEFAULT_WEIGHTS, RESAMPLED_WEIGHTS]
+    for w in sources:
+        if not Path(w).is_file():
+            raise SpecGenError(f"{w}: weights file not found")
+    for w in sources:
+        for p in export_onnx(w, overwrite=args.overwrite):
+            print(f"{p}: {p.stat().st_size / 1e6:.1f} MB")
+    return 0

@@ -1,0 +1,1 @@
+"""SpecGen core: common (see docs/dev/architecture.md)."""

@@ -1,0 +1,1 @@
+"""SpecGen core: generate (see docs/dev/architecture.md)."""

@@ -1,0 +1,173 @@
+"""Photo → spectral BRDF, the way every front end runs it (CLI ``infer``, batch.py, the panel).
+
+1. the photo is read and its sphere cropped to the canonical frame
+   (:func:`specgen_addon.photo.sphere_image.load_sphere_image`);
+2. it is brought to the canonical white level of its input lighting
+   (:meth:`~specgen_addon.photo.photo_lighting.InputLighting.network_gain`) and the network generates the
+   table (:func:`specgen_addon.model.runtime.inference.generate_brdf`): unless weights are given, the shipped network
+   for a sphere copied from a canonical frame, or the one for a sphere resampled from a photo
+   (:func:`specgen_addon.model.shipped_weights`);
+3. optionally (``latent_fit``, torch only), the network's latent is fitted to the photo under that
+   lighting and the table decoded again from it (:func:`specgen_addon.generate.latent_fit.fit_latent`);
+4. unless switched off, the table is refined against the photo under that lighting
+   (:func:`specgen_addon.generate.refine.refine_brdf`). Without refinement the network's table is returned
+   untouched.
+
+With ``model="thin-film"`` steps 2–4 are replaced by the thin-film family's fit to the photo
+(:func:`specgen_addon.generate.thin_film.fit_thin_film`): for interference films (soap, oil, anodised
+metal) whose angle-dependent colour the network's prior does not place. Where the crop resampled the
+sphere, the fit models the photo's blur as the refinement does.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+from pathlib import Path
+from typing import TYPE_CHECKING, Callable
+
+import numpy as np
+
+from specgen_addon.brdf.table import BRDFTable
+
+if TYPE_CHECKING:
+    from specgen_addon.photo.sphere_image import SphereCrop
+
+ProgressFn = Callable[[float], None]
+CancelFn = Callable[[], bool]
+
+#: Share of the progress bar taken by the network when refinement (and no latent fit) follows.
+NETWORK_SHARE = 0.45
+#: What generates the table: the network (then refinement), or the thin-film family's fit.
+MODELS = ("network", "thin-film")
+
+
+@dataclass
+class Generated:
+    """The table a front end uses, and the refinement's report (``None`` when switched off)."""
+
+    table: BRDFTable
+    refinement: object | None = None   # specgen_addon.generate.refine.RefineResult
+    latent_fit: object | None = None   # specgen_addon.generate.latent_fit.LatentFitResult (latent_fit=True)
+    film_fit: object | None = None     # specgen_addon.generate.thin_film.ThinFilmFit (model="thin-film")
+    crop: object | None = None         # specgen_addon.photo.sphere_image.SphereCrop: the circle used, saturation
+    network_reproduction: object | None = None   # refine.report.Reproduction of the network alone (no refinement)
+
+    @property
+    def warnings(self) -> list[str]:
+        fit = [] if self.film_fit is None else list(self.film_fit.warnings)
+        return fit + ([] if self.refinement is None else list(self.refinement.warnings))
+
+
+def load_photo(image) -> tuple[np.ndarray, bool]:
+    """The canonical sphere crop (S, S, 3) of a path or array, and whether it is linear HDR (EXR
+    or array: no pixel counts as clipped) rather than an 8/16-bit sRGB file."""
+    crop, linear = load_photo_crop(image)
+    return crop.image.astype(np.float64), linear
+
+
+def load_photo_crop(image) -> tuple[SphereCrop, bool]:
+    """:func:`load_photo` as a :class:`~specgen_addon.photo.sphere_image.SphereCrop` (which also says
+    whether the sphere was copied or resampled, and so which shipped network it gets)."""
+    from specgen_addon.model.runtime.inference import sphere_crop
+    from specgen_addon.photo.sphere_image import PhotoSource
+
+    if isinstance(image, PhotoSource):
+        return sphere_crop(image), image.linear
+    linear = not isinstance(image, (str, Path)) or Path(image).suffix.lower() == ".exr"
+    return sphere_crop(image), linear
+
+
+def generate(image, lighting=None, refine: bool = True, weights=None, wavelengths_nm=None,
+             backend: str = "torch", progress: ProgressFn | None = None,
+             cancel: CancelFn | None = None, model: str = "network", latent_fit: bool = False) -> Generated:
+    """Generate (and by default refine) the spectral BRDF of the sphere in ``image``.
+
+    ``lighting`` is an :class:`~specgen_addon.photo.photo_lighting.InputLighting` (default: canonical).
+    ``model`` is one of :data:`MODELS` (``"thin-film"`` ignores ``refine``, ``weights``, ``backend``).
+    ``latent_fit`` fits the network's latent to the photo before any refinement (torch backend only).
+    ``progress(fraction)`` and ``cancel()`` are passed down; cancelling raises
+    :class:`~specgen_addon.common.errors.Cancelled` and returns nothing.
+    """
+    from specgen_addon.common.errors import SpecGenError
+    from specgen_addon.model.runtime.inference import generate_brdf
+    from specgen_addon.photo.sphere_image import SphereCrop
+    from specgen_addon.photo.photo_lighting import InputLighting
+
+    if model not in MODELS:
+        raise SpecGenError(f"unknown model {model!r}; choose one of {', '.join(MODELS)}")
+    if latent_fit and model != "network":
+        raise SpecGenError(f"the latent fit is the network's; it does not apply to model {model!r}")
+    if latent_fit and backend != "torch":
+        raise SpecGenError("the latent fit needs the torch backend (gradients through the network); "
+                           "use --backend torch or leave the latent fit off")
+    lighting = lighting or InputLighting()
+    crop, linear = load_photo_crop(image)
+    photo = crop.image.astype(np.float64)
+    src = str(image.path) if hasattr(image, "path") else str(image) if isinstance(image, (str, Path)) else "image"
+
+    def sub(lo: float, hi: float) -> ProgressFn | None:
+        return None if progress is None else (lambda f: progress(lo + (hi - lo) * f))
+
+    if model == "thin-film":
+        from specgen_addon.generate.thin_film import fit_thin_film
+        from specgen_addon.generate.refine import CLIP_LEVEL
+        from specgen_addon.generate.refine.blur import BLUR_CANDIDATES_PX
+        from specgen_addon.spectral.spectra import DEFAULT_WAVELENGTHS_NM
+
+        wl = DEFAULT_WAVELENGTHS_NM if wavelengths_nm is None else np.asarray(wavelengths_nm, np.float64)
+        # a resampled crop spreads the highlight: the fit models that blur (docs/thin_film_fit.md)
+        fit = fit_thin_film(photo, lighting, clip_level=None if linear else CLIP_LEVEL,
+                            progress=sub(0.0, 0.8), cancel=cancel,
+                            blur_px=(0.0,) if crop.copied else BLUR_CANDIDATES_PX)
+        table = fit.table(wl, progress=sub(0.8, 1.0), cancel=cancel)
+        table.metadata = {**table.metadata, "input_image": src, "input_lighting": lighting.label}
+        return Generated(table, film_fit=fit)
+    from specgen_addon.generate.refine import CLIP_LEVEL
+
+    clip_level = None if linear else CLIP_LEVEL
+    # progress: the network, then the latent fit (about 4× the network's time), then refinement
+    ends = np.cumsum([NETWORK_SHARE, 4.0 * NETWORK_SHARE if latent_fit else 0.0,
+                      1.0 - NETWORK_SHARE if refine else 0.0])
+    ends = ends / ends[-1]
+    # the photo's crop, not cut again: how the photo was cut chooses the shipped network
+    network_input = SphereCrop(photo * lighting.network_gain(), crop.copied)
+    table = generate_brdf(network_input, weights=weights, wavelengths_nm=wavelengths_nm,
+                          backend=backend, progress=sub(0.0, ends[0]), cancel=cancel)
+    fitted = None
+    if latent_fit:
+        from specgen_addon.generate.latent_fit import fit_latent
+
+        fitted = fit_latent(network_input, photo, lighting, weights, wavelengths_nm, clip_level=clip_level,
+                            network_table=table, progress=sub(ends[0], ends[1]), cancel=cancel)
+        table = fitted.table
+    table.metadata = {**table.metadata, "input_image": src, "input_lighting": lighting.label}
+    if not refine:
+        return Generated(table, latent_fit=fitted, crop=crop,
+                         network_reproduction=network_reproduction(table, photo, lighting, clip_level, crop.saturated))
+    from specgen_addon.generate.refine import RefineOptions, refine_brdf
+
+    options = RefineOptions(clip_level=clip_level, exclude=crop.saturated)
+    result = refine_brdf(table, photo, lighting, options, progress=sub(ends[1], 1.0), cancel=cancel)
+    return Generated(result.table, result, latent_fit=fitted, crop=crop)
+
+
+def network_reproduction(table: BRDFTable, photo: np.ndarray, lighting, clip_level: float | None,
+                         exclude: np.ndarray | None = None):
+    """How well a table alone reproduces the photo under its lighting (RGB PSNR, ΔE2000 over the
+    sphere's unsaturated pixels): the figure a run without refinement reports."""
+    from specgen_addon.generate.refine import render_under
+    from specgen_addon.render.photo_reproduction import reproduction
+
+    scene = lighting.scene(photo.shape[0])
+    img = render_under(table, scene, lighting.image_exposure)
+    if clip_level is not None:
+        img = np.minimum(img, 1.0)
+    inside = np.any(photo > 0, axis=-1) | np.any(img > 0, axis=-1)
+    from specgen_addon.render import sphere_geometry
+
+    inside &= sphere_geometry(photo.shape[0]).mask
+    if exclude is not None:
+        inside &= ~exclude
+    if clip_level is not None:
+        inside &= ~np.any(photo >= clip_level, axis=-1)
+    return reproduction(photo[inside], img[inside])

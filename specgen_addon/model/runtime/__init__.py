@@ -1,0 +1,1 @@
+"""SpecGen core: model runtime (see docs/dev/architecture.md)."""

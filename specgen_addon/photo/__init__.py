@@ -1,0 +1,1 @@
+"""SpecGen core: photo (see docs/dev/architecture.md)."""

@@ -1,0 +1,148 @@
+"""The room's light estimated from the ball itself, when the user gives none.
+
+A first-order answer that the refinement then builds on: the ball's shading is explained by a
+Lambertian surface under K distant lights plus a uniform ambient term. The directions are searched
+on a grid over the sphere of directions (every :data:`GRID_DEG` degrees, towards the camera's half
+and a little behind), one light at a time (greedy), each light's power and the ambient fitted by
+non-negative least squares on the luminance of the sphere's unsaturated pixels; then each direction
+is polished on a finer grid about it. A light is kept only if it lowers the residual by
+:data:`MIN_GAIN` or more.
+
+The powers are in photo units divided by an assumed albedo (:data:`ASSUMED_ALBEDO`): the albedo and
+the light's power cannot be told apart from one photo, and the refinement fits the brightness
+anyway. The run says that the light was estimated and the residual the model reached.
+
+Numpy only.
+"""
+
+from __future__ import annotations
+
+import math
+from dataclasses import dataclass
+
+import numpy as np
+
+#: Spacing (degrees) of the direction grid.
+GRID_DEG = 6.0
+#: Albedo assumed to turn fitted brightness into light power.
+ASSUMED_ALBEDO = 0.8
+#: A further light must lower the residual's rms by this fraction.
+MIN_GAIN = 0.15
+#: A residual rms below this fraction of the photo's peak needs no further light (8-bit precision).
+EXPLAINED = 0.004
+#: Most lights estimated.
+MAX_LIGHTS = 3
+
+
+@dataclass(frozen=True)
+class Estimate:
+    """Estimated lights (unit directions, camera frame; powers × the canonical key light), ambient
+    (× a white surface's radiance under the key light) and the fit's residual."""
+
+    directions: tuple[tuple[float, float, float], ...]
+    powers: tuple[float, ...]
+    ambient: float
+    residual_db: float   # PSNR (dB) of the Lambertian model against the photo's luminance
+
+    def lighting(self):
+        from specgen_addon.photo.photo_lighting import Light, parse_lighting
+
+        return parse_lighting(None, lights=tuple(Light(d, p) for d, p in zip(self.directions, self.powers)),
+                              ambient=self.ambient)
+
+    def text(self) -> str:
+        from specgen_addon.photo.photo_lighting import Light
+
+        lights = ", ".join(Light(d, p).label for d, p in zip(self.directions, self.powers))
+        return (f"estimated from the ball (nothing given): {lights}, ambient {self.ambient:.3g}; "
+                f"Lambertian residual {self.residual_db:.1f} dB")
+
+
+def _directions(step_deg: float, min_z: float = -0.3) -> np.ndarray:
+    """Roughly uniform unit directions (Fibonacci sphere) about ``step_deg`` apart, z ≥ ``min_z``."""
+    n = int(4 * math.pi / math.radians(step_deg) ** 2)
+    k = np.arange(n) + 0.5
+    z = 1 - 2 * k / n
+    phi = math.pi * (1 + 5 ** 0.5) * k
+    r = np.sqrt(1 - z * z)
+    d = np.stack([r * np.cos(phi), r * np.sin(phi), z], -1)
+    return d[d[:, 2] >= min_z]
+
+
+def _fit(columns: list[np.ndarray], y: np.ndarray) -> tuple[np.ndarray, float]:
+    a = np.stack(columns, -1)
+    gram = a.T @ a + 1e-12 * np.eye(a.shape[1])
+    coef = np.linalg.solve(gram, a.T @ y)
+    if np.any(coef < 0):   # non-negative least squares, only where the plain solution goes negative
+        from specgen_addon.photo.light_probe import _nnls
+
+        coef = _nnls(a, y, iterations=30)
+    return coef, float(np.sqrt(np.mean((a @ coef - y) ** 2)))
+
+
+def estimate_lights(photo: np.ndarray, exclude: np.ndarray | None = None,
+                    max_lights: int = MAX_LIGHTS) -> Estimate:
+    """Distant lights + ambient explaining a ball crop (S, S, 3, linear; the ball filling it)."""
+    from specgen_addon.photo.sphere_image import EXPOSURE
+    from specgen_addon.photo.light_probe import ball_normals
+
+    s = photo.shape[0]
+    n, inside = ball_normals(s)
+    lum = photo[..., :3] @ np.array([0.2126, 0.7152, 0.0722])
+    use = inside & (lum > 0)
+    if exclude is not None:
+        use &= ~exclude
+    nn, y = n[use], lum[use]
+    grid = _directions(GRID_DEG)
+    cos_grid = np.maximum(nn @ grid.T, 0.0)                     # (P, D)
+    ones = np.ones_like(y)
+    chosen: list[np.ndarray] = []
+    coef, rms = _fit([ones], y)
+    peak = float(np.percentile(y, 99.9)) or 1.0
+    for _ in range(max_lights):
+        if chosen and rms <= EXPLAINED * peak:   # already explained to the photo's own precision
+            break
+        cols = [ones] + [np.maximum(nn @ d, 0.0) for d in chosen]
+        base = np.stack(cols, -1)
+        # for each candidate: least squares on [base, candidate]; scored by the residual
+        best, best_rms = None, rms
+        q, _ = np.linalg.qr(base)                                    # (P, k): the base's span
+        r0 = y - q @ (q.T @ y)
+        c_res = cos_grid - q @ (q.T @ cos_grid)                      # candidates orthogonal to the base
+        num = c_res.T @ r0
+        den = np.maximum(np.einsum("pd,pd->d", c_res, c_res), 1e-12)
+        gain = num ** 2 / den
+        order = np.argsort(-gain)[:8]
+        for k in order:
+            cand = _polish(grid[k], cols, nn, y)
+            c, r = _fit(cols + [np.maximum(nn @ cand, 0.0)], y)
+            if r < best_rms and c[-1] > 0:
+                best, best_rms = cand, r
+        if best is None or best_rms > (1.0 - MIN_GAIN) * rms:
+            break
+        chosen.append(best)
+        coef, rms = _fit([ones] + [np.maximum(nn @ d, 0.0) for d in chosen], y)
+    residual_db = 20.0 * math.log10(peak / max(rms, 1e-12))
+    scale = 1.0 / (EXPOSURE * ASSUMED_ALBEDO)   # photo units → power (1: the key light)
+    return Estimate(tuple(tuple(float(v) for v in d) for d in chosen),
+                    tuple(float(c * scale) for c in coef[1:]), float(coef[0] * scale), residual_db)
+
+
+def _polish(d: np.ndarray, cols: list[np.ndarray], nn: np.ndarray, y: np.ndarray) -> np.ndarray:
+    """A direction refined on finer rings about ``d`` (GRID_DEG/2, /4, /8)."""
+    best = d / np.linalg.norm(d)
+    _, best_rms = _fit(cols + [np.maximum(nn @ best, 0.0)], y)
+    step = math.radians(GRID_DEG) / 2
+    for _ in range(3):
+        u = np.cross(best, [0.0, 1.0, 0.0] if abs(best[1]) < 0.9 else [1.0, 0.0, 0.0])
+        u /= np.linalg.norm(u)
+        v = np.cross(best, u)
+        improved = best
+        for a in np.linspace(0, 2 * math.pi, 8, endpoint=False):
+            c = best * math.cos(step) + (u * math.cos(a) + v * math.sin(a)) * math.sin(step)
+            _, r = _fit(cols + [np.maximum(nn @ c, 0.0)], y)
+            if r < best_rms:
+                improved, best_rms = c, r
+        best = improved / np.linalg.norm(improved)
+        step /= 2
+    return best

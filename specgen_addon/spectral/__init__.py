@@ -1,0 +1,1 @@
+"""SpecGen core: spectral (see docs/dev/architecture.md)."""
