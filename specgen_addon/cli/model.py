@@ -215,36 +215,31 @@ def photo_source_from_args(args: argparse.Namespace, image: Path):
 def estimated_lighting(args: argparse.Namespace, source):
     """``--input-env estimate``: distant lights + ambient estimated from the ball itself
     (:mod:`specgen_addon.photo.light_estimate`); the run says so, with the model's residual."""
-    from specgen_addon.photo.light_estimate import estimate_lights
+    from specgen_addon.photo.light_estimate import estimated_lighting as estimate
 
     if args.light or args.light_vector or getattr(args, "light_probe", None) is not None:
         raise SpecGenError("--input-env estimate finds the light itself: leave out --light, --light-vector "
                            "and --light-probe")
-    crop = source.crop()
-    estimate = estimate_lights(crop.image.astype("float64"), crop.saturated)
-    if not estimate.directions:
-        raise SpecGenError("no light could be estimated from the ball (its shading shows no direction); "
-                           "give --light or --light-probe")
-    print(f"input lighting {estimate.text()}")
-    return estimate.lighting()
+    lighting, text = estimate(source)
+    print(f"input lighting {text}")
+    return lighting
 
 
 def probe_lighting_from_args(args: argparse.Namespace, source, env_path: Path):
     """The lighting unwrapped from ``--light-probe`` (:mod:`specgen_addon.photo.light_probe`), its
     environment written to ``env_path``; the run's notes about it printed."""
+    from specgen_addon.photo.light_probe import lighting_from_probe
     from specgen_addon.photo.sphere_image import parse_circle
-    from specgen_addon.photo.light_probe import CHROME_REFLECTANCE, probe_lighting, read_probe
 
     if env_path.exists() and not args.overwrite:
         raise OutputExistsError(f"{env_path}: already exists (pass --overwrite to replace it)")
     if args.light or args.light_vector or args.input_env not in (None, "", "canonical"):
         raise SpecGenError("--light-probe gives the room's light: leave out --light, --light-vector and --input-env")
-    probe = read_probe(args.light_probe, circle=parse_circle(args.probe_circle) if args.probe_circle else None,
-                       mask=args.probe_mask, encoding=source.encoding,
-                       reflectance=args.probe_reflectance or CHROME_REFLECTANCE)
-    photo = source.crop().image.astype("float64")
-    lighting = probe_lighting(probe, env_path, photo, overwrite=args.overwrite)
-    for note in probe.notes:
+    lighting, notes = lighting_from_probe(args.light_probe, source, env_path,
+                                          circle=parse_circle(args.probe_circle) if args.probe_circle else None,
+                                          mask=args.probe_mask, reflectance=args.probe_reflectance,
+                                          overwrite=args.overwrite)
+    for note in notes:
         print(f"light probe: {note}")
     print(f"{env_path}: the room's environment unwrapped from the chrome ball (camera frame)")
     return lighting

@@ -146,3 +146,16 @@ def _polish(d: np.ndarray, cols: list[np.ndarray], nn: np.ndarray, y: np.ndarray
         best = improved / np.linalg.norm(improved)
         step /= 2
     return best
+
+
+def estimated_lighting(source) -> tuple:
+    """The lighting estimated from a :class:`~specgen_addon.photo.sphere_image.PhotoSource`'s ball
+    and the run's line saying so (the CLI's ``--input-env estimate`` and the panel's Estimate)."""
+    from specgen_addon.photo.photo_lighting import LightingError
+
+    crop = source.crop()
+    estimate = estimate_lights(crop.image.astype("float64"), crop.saturated)
+    if not estimate.directions:
+        raise LightingError("no light could be estimated from the ball (its shading shows no direction); "
+                            "give the room's lights or a chrome ball photo")
+    return estimate.lighting(), estimate.text()

@@ -140,7 +140,7 @@ def read_probe(path: str | Path, circle: tuple[float, float, float] | None = Non
     try:
         crop = PhotoSource(Path(path), encoding=encoding, circle=circle, mask=mask).crop(size=256)
     except ImageInputError as exc:
-        raise ProbeError(f"chrome ball not found: {exc} (give --probe-mask or --probe-circle)") from None
+        raise ProbeError(f"chrome ball not found: {exc} (give its mask or circle)") from None
     env, sat = unwrap(crop.image.astype(np.float64), reflectance, width, crop.saturated)
     if not np.any(env > 0):
         raise ProbeError(f"{path}: the chrome ball reflects nothing (a black probe)")
@@ -218,3 +218,18 @@ def probe_lighting(probe: Probe, env_path: str | Path, photo: np.ndarray | None 
     lights = tuple(Light(tuple(d), p / EXPOSURE) for (d, _), p in zip(probe.clipped_lights, powers) if p > 0)
     return parse_lighting(str(env_path), exposure=1.0 / EXPOSURE, lights=lights, calibrated=True,
                           key_light=False)
+
+
+def lighting_from_probe(probe_path: str | Path, source, env_path: str | Path,
+                        circle: tuple[float, float, float] | None = None, mask: str | Path | None = None,
+                        reflectance: float | None = None, overwrite: bool = False):
+    """The lighting of a chrome-ball photo for a :class:`~specgen_addon.photo.sphere_image.PhotoSource`
+    taken alike (same encoding): the probe unwrapped (:func:`read_probe`), its environment written to
+    ``env_path`` and its clipped sources' powers fitted to the source's ball
+    (:func:`probe_lighting`). Returns ``(lighting, notes)`` (the CLI's ``--light-probe`` and the
+    panel's Chrome Ball)."""
+    probe = read_probe(probe_path, circle=circle, mask=mask, encoding=source.encoding,
+                       reflectance=reflectance or CHROME_REFLECTANCE)
+    photo = source.crop().image.astype(np.float64)
+    lighting = probe_lighting(probe, env_path, photo, overwrite=overwrite)
+    return lighting, list(probe.notes)

@@ -29,6 +29,7 @@ from __future__ import annotations
 
 import functools
 import math
+import os
 from dataclasses import dataclass
 from pathlib import Path
 
@@ -222,7 +223,8 @@ class InputLighting:
         if not self.has_map:
             env = None
         elif self.is_file:
-            env = _file_environment(str(Path(self.env).resolve()), float(self.exposure), rot, self.calibrated)
+            path = str(Path(self.env).resolve())
+            env = _file_environment(path, float(self.exposure), rot, self.calibrated, file_stamp(path))
         else:
             self.validate()
             env = lighting.load_environment(self.env, exposure=self.exposure, rotation_rad=rot)
@@ -241,7 +243,7 @@ class InputLighting:
         size = int(size or input_image.CANONICAL_SIZE)
         if self.is_canonical:
             return input_image._scene(input_image.CANONICAL_ENV, 0.0, size)
-        return _scene(self, size)
+        return _scene(self, size, self._stamp())
 
     @property
     def image_exposure(self) -> float:
@@ -252,7 +254,7 @@ class InputLighting:
 
     def white_sphere_rgb(self, size: int | None = None) -> np.ndarray:
         """Mean linear-sRGB photo value of a white Lambertian sphere under this lighting (3,)."""
-        return _white_rgb(self, int(size or 0))
+        return _white_rgb(self, int(size or 0), self._stamp())
 
     def network_gain(self) -> np.ndarray:
         """Per-channel gain (3,) that maps a photo under this lighting to the canonical white level.
@@ -263,7 +265,11 @@ class InputLighting:
         """
         if self.is_canonical:
             return np.ones(3)
-        return _white_rgb(InputLighting(), 0) / np.maximum(_white_rgb(self, 0), 1e-12)
+        return _white_rgb(InputLighting(), 0) / np.maximum(_white_rgb(self, 0, self._stamp()), 1e-12)
+
+    def _stamp(self) -> tuple[int, int, int] | None:
+        """The map file's identity now, so cached maps and scenes follow a file rewritten in place."""
+        return file_stamp(self.env) if self.is_file else None
 
 
 def parse_lighting(env: str | None, rotation_deg: float = 0.0, exposure: float = 1.0,
@@ -364,8 +370,20 @@ def read_map_bounded(path: str | Path, max_width: int = MAP_WORK_WIDTH) -> np.nd
     return out
 
 
+def file_stamp(path: str | Path) -> tuple[int, int, int] | None:
+    """(inode, modification time in ns, size) of a file, None when it cannot be read: part of the
+    cache keys of a panorama, so a long-running session (Blender) never renders a map that a
+    later run wrote anew under the same name."""
+    try:
+        st = os.stat(path)
+    except OSError:
+        return None
+    return st.st_ino, st.st_mtime_ns, st.st_size
+
+
 @functools.lru_cache(maxsize=4)
-def _file_environment(path: str, exposure: float, rotation_rad: float, calibrated: bool = False):
+def _file_environment(path: str, exposure: float, rotation_rad: float, calibrated: bool = False,
+                      stamp: tuple | None = None):
     """A panorama file as the renderer's environment: unit mean luminance × exposure, or, when
     ``calibrated``, its values as radiance × exposure. Read in strips (:func:`read_map_bounded`)."""
     from specgen_addon.render.environment import Environment
@@ -388,7 +406,7 @@ def _file_environment(path: str, exposure: float, rotation_rad: float, calibrate
 
 
 @functools.lru_cache(maxsize=4)
-def _scene(light: InputLighting, size: int):
+def _scene(light: InputLighting, size: int, stamp: tuple | None = None):
     from specgen_addon.photo import sphere_image as input_image
     from specgen_addon.render import Scene, sphere_geometry
 
@@ -397,7 +415,7 @@ def _scene(light: InputLighting, size: int):
 
 
 @functools.lru_cache(maxsize=8)
-def _white_rgb(light: InputLighting, size: int) -> np.ndarray:
+def _white_rgb(light: InputLighting, size: int, stamp: tuple | None = None) -> np.ndarray:
     """Exact (noise-free) white-Lambertian photo mean: irradiance/π, not a sampled render."""
     from specgen_addon.photo import sphere_image as input_image
     from specgen_addon.render import sphere_geometry
