@@ -8,7 +8,7 @@ and the core package.
 
 from __future__ import annotations
 
-_MODULES = ("properties", "operators", "export_brdf", "panel", "travel")
+_MODULES = ("properties", "operators", "export_brdf", "photo_panel", "panel", "travel")
 
 
 def _modules():

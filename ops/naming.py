@@ -6,7 +6,9 @@ Each Generate makes one *set*, found from its stem ``<stem>`` (e.g. ``sphere``, 
   group of the same name (:func:`group_name`) whose OSL Script node reads the lookups;
 * preview image ``SpecGen <stem> preview`` (the numpy-rendered sphere, :mod:`specgen_addon.bake.preview`);
 * files in the output folder: ``<stem>_lookup.gNN.exr`` (lookups), ``<stem>_lookup.json`` (basis
-  and layout), ``<stem>_preview.png``, and ``<stem>.npz`` only when the table is exported.
+  and layout), ``<stem>_preview.png``, and ``<stem>.npz`` only when the table is exported; with
+  the photo options also ``<stem>_probe.exr`` (a chrome ball unwrapped), ``<stem>_scene_env.exr``
+  (the scene's world, lit like this scene) and ``<stem>_circle.png`` (the circle preview).
 
 With *Replace Materials* off a new Generate never reuses a stem that has a material, a node group
 or files; with it on, the stem of the input is reused and its set replaced.
@@ -58,13 +60,29 @@ def preview_png(out_dir: str | Path, stem: str) -> Path:
     return Path(out_dir) / f"{stem}_preview.png"
 
 
+def probe_exr(out_dir: str | Path, stem: str) -> Path:
+    """The room's environment unwrapped from a chrome ball photo."""
+    return Path(out_dir) / f"{stem}_probe.exr"
+
+
+def scene_env_exr(out_dir: str | Path, stem: str) -> Path:
+    """The scene's world seen from its camera, the photo's panorama for "lit like this scene"."""
+    return Path(out_dir) / f"{stem}_scene_env.exr"
+
+
+def circle_png(out_dir: str | Path, stem: str) -> Path:
+    """The photo with the circle used drawn on it."""
+    return Path(out_dir) / f"{stem}_circle.png"
+
+
 def files_of(out_dir: str | Path, stem: str) -> list[Path]:
     """Existing files of the set ``stem`` in ``out_dir``."""
     out = Path(out_dir)
     if not out.is_dir():
         return []
     return sorted(p for p in out.iterdir() if p.name.startswith(f"{stem}_lookup")
-                  or p.name in (f"{stem}_preview.png", f"{stem}.npz"))
+                  or p.name in (f"{stem}_preview.png", f"{stem}.npz", f"{stem}_probe.exr",
+                                f"{stem}_scene_env.exr", f"{stem}_circle.png"))
 
 
 def unique_stem(base: str, taken: Callable[[str], bool]) -> str:

@@ -16,6 +16,7 @@ from __future__ import annotations
 import os
 import threading
 import time
+from dataclasses import dataclass
 from pathlib import Path
 
 import bpy
@@ -27,8 +28,10 @@ from specgen_addon.generate import lookup as bake
 from specgen_addon.photo.image_checks import check_pixel_count
 from specgen_addon.render.cycles_time_estimate import format_duration
 from . import naming
-from .properties import input_lighting, output_dir
+from .photo_inputs import lighting_job, photo_source
+from .properties import output_dir
 from .render_settings import PREVIEW_PERCENT, PREVIEW_SAMPLES
+from .scene_lighting import ball_position
 from .reporting import check_generate_settings, check_render_settings, report_exception
 
 TIMER_STEP_S = 0.1
@@ -102,6 +105,37 @@ class _Modal:
         _set_status(context, None)
 
 
+@dataclass
+class GenerateRun:
+    """What one Generate made: the baked lookup, the photo's lighting, what the run says about
+    that lighting, and the circle preview written (or None)."""
+
+    info: bake.AtlasInfo
+    lighting: object
+    notes: list[str]
+    circle_png: Path | None = None
+
+
+def generate_with_photo_lighting(args: dict, lighting, circle_png: Path | None = None,
+                                 **kwargs) -> GenerateRun:
+    """Make the photo's lighting (:func:`.photo_inputs.lighting_job`'s job: an estimate or a
+    chrome ball take seconds), then generate and bake; runs on the worker thread, without bpy.
+    Whatever it wrote is removed if any step fails or is cancelled."""
+    from specgen_addon.common.atomic_io import make_dirs
+    from specgen_addon.common.interrupts import OutputGuard
+    from specgen_addon.photo.sphere_image import write_circle_preview
+
+    with OutputGuard([args["out_dir"]]):
+        make_dirs(Path(args["out_dir"]))
+        photo_lighting, notes = lighting(args["image"])
+        info = bake.generate_lookup(**args, lighting=photo_lighting, **kwargs)
+        if circle_png is not None and info.crop is not None and info.crop.circle is not None:
+            write_circle_preview(circle_png, args["image"], info.crop.circle, overwrite=args["overwrite"])
+        else:
+            circle_png = None
+    return GenerateRun(info, photo_lighting, notes, circle_png)
+
+
 class SPECGEN_OT_generate_brdf(_Modal, bpy.types.Operator):
     """Predict the spectral BRDF of the material in the input image and bake its lookup textures"""
 
@@ -123,15 +157,22 @@ class SPECGEN_OT_generate_brdf(_Modal, bpy.types.Operator):
                                               [m.name for m in bpy.data.materials],
                                               [g.name for g in bpy.data.node_groups])
         self._out = out
-        return dict(image=image, out_dir=out, wavelengths_nm=_wavelengths(s), weights=weights,
-                    n_phi_d=int(s.lookup_resolution), tolerance=s.basis_tolerance, name=self._stem,
-                    save_table=s.export_table, preview=True,
-                    lighting=input_lighting(s), refine=s.refine, overwrite=s.overwrite, model=s.model)
+        self._lighting = lighting_job(s.photo, context.scene, out, self._stem, s.overwrite,
+                                      ball_position(context))
+        self._circle_png = naming.circle_png(out, self._stem) if s.photo.circle_preview else None
+        return dict(image=photo_source(s.photo, image), out_dir=out, wavelengths_nm=_wavelengths(s),
+                    weights=weights, n_phi_d=int(s.lookup_resolution), tolerance=s.basis_tolerance,
+                    name=self._stem, save_table=s.export_table, preview=True, refine=s.refine,
+                    overwrite=s.overwrite, model=s.model)
 
-    def _done(self, context, info: bake.AtlasInfo) -> None:
+    def _run(self, args: dict, **kwargs) -> GenerateRun:
+        return generate_with_photo_lighting(args, self._lighting, self._circle_png, **kwargs)
+
+    def _done(self, context, run: GenerateRun) -> None:
         from .render import make_material
 
         s = context.scene.specgen
+        info = run.info
         s.atlas_json = str(naming.lookup_json(self._out, self._stem))
         mat = make_material(naming.material_name(self._stem), info)
         mat["specgen_stem"] = self._stem
@@ -148,6 +189,7 @@ class SPECGEN_OT_generate_brdf(_Modal, bpy.types.Operator):
             img.use_fake_user = True   # only the material names it: kept when the .blend is saved
             mat["specgen_preview"] = img.name
         s.material = mat
+        self._report_photo(s.photo, mat, run)
         ref, fit = info.refinement, info.film_fit
         s.refine_summary = "" if ref is None else (
             f"Photo match: {ref.after.text()}, network's lobe kept (within the renderer's sampling error)"
@@ -162,10 +204,27 @@ class SPECGEN_OT_generate_brdf(_Modal, bpy.types.Operator):
         self.report({"INFO"}, f"SpecGen: material {mat.name!r} generated, {info.n_coeffs} spectral "
                               f"basis coefficients (max error {info.rel_error:.1e})")
 
+    def _report_photo(self, photo, mat, run: GenerateRun) -> None:
+        """The lighting and the circle used, on the material, in the panel and in the reports."""
+        lines = [f"photo lighting: {run.lighting.label}"]
+        mat["specgen_lighting"] = run.lighting.label
+        crop = run.info.crop
+        if crop is not None:
+            lines.append(crop.describe())
+            mat["specgen_sphere"] = crop.describe()
+        if run.circle_png is not None:
+            lines.append(f"{run.circle_png}: the photo with the circle used")
+        lines += run.notes
+        photo.report = "\n".join(lines)
+        for line in lines:
+            if line.startswith("warning: "):
+                self.report({"WARNING"}, f"SpecGen: {line.removeprefix('warning: ')}")
+            else:
+                self.report({"INFO"}, f"SpecGen: {line}")
+
     def execute(self, context):
         try:
-            info = bake.generate_lookup(**self._job_args(context))
-            self._done(context, info)
+            self._done(context, self._run(self._job_args(context)))
         except BaseException as exc:  # Ctrl-C in a headless run included: one sentence, no traceback
             return report_exception(self, exc, "BRDF generation")
         return {"FINISHED"}
@@ -181,9 +240,8 @@ class SPECGEN_OT_generate_brdf(_Modal, bpy.types.Operator):
 
         def work() -> None:
             try:
-                self._result.append(bake.generate_lookup(
-                    **args, progress=lambda f: setattr(self, "_fraction", f),
-                    cancel=self._cancel.is_set))
+                self._result.append(self._run(
+                    args, progress=lambda f: setattr(self, "_fraction", f), cancel=self._cancel.is_set))
             except BaseException as exc:  # handed to the main thread, reported there
                 self._result.append(exc)
 

@@ -4,6 +4,8 @@ from __future__ import annotations
 
 import bpy
 
+from .photo_panel import draw_photo
+
 
 class SPECGEN_PT_main(bpy.types.Panel):
     """Input image, spectral sampling, render settings and the three actions."""
@@ -28,14 +30,8 @@ class SPECGEN_PT_main(bpy.types.Panel):
             _thumbnail(col, s.image)
         col.prop(s, "weights_path")
 
-        col = layout.column(heading="Photo")
-        col.prop(s, "input_env")
-        if s.input_env == "FILE":
-            col.prop(s, "input_env_file")
-        if s.input_env != "canonical":
-            col.prop(s, "input_rotation")
-            col.prop(s, "input_exposure")
-            col.prop(s, "input_key_light")
+        draw_photo(layout, s.photo)
+        col = layout.column(heading="BRDF")
         col.prop(s, "model")
         if s.model == "network":
             col.prop(s, "refine")

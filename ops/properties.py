@@ -11,6 +11,8 @@ from bpy.props import (BoolProperty, EnumProperty, FloatProperty, IntProperty, P
 
 from specgen_addon.generate.lookup import DEFAULT_TOLERANCE
 from specgen_addon.spectral.spectra import DEFAULT_BAND_COUNT, DEFAULT_RANGE_NM
+from .photo_properties import CLASSES as PHOTO_CLASSES
+from .photo_properties import SpecGenPhotoSettings
 
 LOOKUP_RESOLUTIONS = (
     ("180", "Full (180 φd)", "The whole MERL grid: 90 θh × 90 θd × 180 φd"),
@@ -32,21 +34,6 @@ RENDER_MODES = (
 
 # "//" = relative to the .blend (Blender 4.5+ asks path properties to opt in)
 _PATH = {"PATH_SUPPORTS_BLEND_RELATIVE"} if bpy.app.version >= (4, 5, 0) else set()
-
-
-def _input_env_items(self, context):
-    """'Canonical', Blender's bundled HDRIs (found at run time) and 'File…'."""
-    items = [("canonical", "Canonical Studio", "The studio lighting the network's inputs are rendered with")]
-    try:
-        from specgen_addon.render.environment_maps import available_envs
-
-        names = available_envs()
-    except Exception:  # no studio lights found: canonical and file still work
-        names = []
-    items += [(n, n.title(), f"Blender's bundled '{n}' HDRI") for n in names if n != "canonical"]
-    items.append(("FILE", "File…", "Your own equirectangular HDRI (.exr or .hdr)"))
-    _input_env_items.cache = items  # Blender needs the strings kept alive
-    return items
 
 
 def _is_specgen_material(self, material) -> bool:
@@ -108,16 +95,8 @@ class SpecGenSettings(bpy.types.PropertyGroup):
     refine: BoolProperty(name="Refine to Photo", default=True,
                          description="Refine the network's BRDF so that, rendered under the input "
                                      "lighting, it reproduces the photo")
-    input_env: EnumProperty(name="Photo Lighting", items=_input_env_items,
-                            description="The lighting the photo was taken under")
-    input_env_file: StringProperty(name="HDRI File", subtype="FILE_PATH", options=_PATH,
-                                   description="Equirectangular HDRI (.exr or .hdr) the photo was lit by")
-    input_rotation: FloatProperty(name="Rotation", default=0.0, min=-360.0, max=360.0, precision=1,
-                                  description="Rotation of the photo's HDRI about the up axis (degrees)")
-    input_exposure: FloatProperty(name="Exposure", default=1.0, min=2.0 ** -10, max=2.0 ** 10,
-                                  description="Brightness of the photo's HDRI relative to the canonical level")
-    input_key_light: BoolProperty(name="Key Light", default=False,
-                                  description="Add the canonical D65 key light to the photo's HDRI")
+    photo: PointerProperty(type=SpecGenPhotoSettings, name="Photo",
+                           description="The photo's encoding, its sphere and its lighting")
     export_table: BoolProperty(name="Export Table", default=True,
                                description="Also write the BRDF as a compact material file (<name>.npz, "
                                "a few MB) beside the lookups; lookups that go missing are baked again "
@@ -136,16 +115,6 @@ class SpecGenSettings(bpy.types.PropertyGroup):
     running: StringProperty(name="Running", default="", options={"HIDDEN"})
 
 
-def input_lighting(settings: SpecGenSettings):
-    """The validated :class:`~specgen_addon.photo.photo_lighting.InputLighting` of the panel."""
-    from specgen_addon.photo.photo_lighting import parse_lighting
-
-    if settings.input_env == "canonical":
-        return parse_lighting(None)
-    env = bpy.path.abspath(settings.input_env_file) if settings.input_env == "FILE" else settings.input_env
-    return parse_lighting(env, settings.input_rotation, settings.input_exposure, settings.input_key_light)
-
-
 def output_dir(settings: SpecGenSettings) -> str:
     """The output folder as an absolute path (a temp folder if the .blend is unsaved and the
     setting is relative)."""
@@ -155,7 +124,7 @@ def output_dir(settings: SpecGenSettings) -> str:
     return bpy.path.abspath(raw)
 
 
-CLASSES = (SpecGenSettings,)
+CLASSES = (*PHOTO_CLASSES, SpecGenSettings)
 
 
 def register() -> None:

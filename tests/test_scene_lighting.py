@@ -152,3 +152,11 @@ def test_a_panorama_rewritten_in_place_is_read_again(tmp_path):
     for level in (0.5, 2.0):
         write_exr(path, {c: np.full((8, 16), level, np.float32) for c in "RGB"}, overwrite=True)
         assert light.white_sphere_rgb().mean() == pytest.approx(level * light.image_exposure, rel=5e-3)
+
+
+def test_a_lights_exposure_and_temperature_reach_its_power_and_colour():
+    from specgen_addon.photo.scene_lighting import emitted_rgb
+
+    np.testing.assert_allclose(emitted_rgb((1, 1, 1), exposure=1.0), (2, 2, 2))
+    colour = light_colour(emitted_rgb((1, 1, 1), temperature_k=3200))
+    assert float(colour.name[:-1]) == pytest.approx(3200, rel=0.015) and colour.luminance == pytest.approx(1.0)

@@ -99,6 +99,7 @@ class AtlasInfo:
     closures: ClosureFit | None = None  # native closure fit for the full-scene render
     refinement: object | None = None   # specgen_addon.generate.refine.RefineResult of a generated table
     film_fit: object | None = None     # specgen_addon.generate.thin_film.ThinFilmFit (model "thin-film")
+    crop: object | None = None         # specgen_addon.photo.sphere_image.SphereCrop: the circle used
 
     @property
     def n_coeffs(self) -> int:
@@ -585,4 +586,5 @@ def _generate_lookup(image, out: Path, wavelengths_nm, weights, n_phi_d, toleran
     save_atlas_info(info, out / f"{name}_lookup.json")
     info.refinement = generated.refinement
     info.film_fit = generated.film_fit
+    info.crop = generated.crop
     return info

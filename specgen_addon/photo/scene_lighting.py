@@ -95,7 +95,7 @@ def world_in_camera_frame(rgb: np.ndarray, camera_rotation: np.ndarray,
     direction ``w`` reads the image at ``M w``."""
     from specgen_addon.render.environment import _bilinear_equirect, _box_downsample, _texel_directions
 
-    src = np.asarray(rgb, np.float32)[..., :3]
+    src = np.maximum(np.asarray(rgb, np.float32)[..., :3], 0.0)
     if src.ndim != 3 or src.shape[0] < 2 or src.shape[1] < 2:
         raise LightingError(f"the world's image must be H×W×3, got shape {src.shape}")
     src = _box_downsample(src, 2 * width)
@@ -104,7 +104,7 @@ def world_in_camera_frame(rgb: np.ndarray, camera_rotation: np.ndarray,
     tex = world @ (np.eye(3) if texture_matrix is None else np.asarray(texture_matrix, np.float64)).T
     tex /= np.maximum(np.linalg.norm(tex, axis=-1, keepdims=True), 1e-12)
     renderer = np.stack([tex[..., 0], tex[..., 2], -tex[..., 1]], -1)  # Blender → renderer frame
-    return _bilinear_equirect(src, renderer, 0.0).astype(np.float32)
+    return np.maximum(_bilinear_equirect(src, renderer, 0.0), 0.0).astype(np.float32)   # as the renderer clamps
 
 
 @functools.lru_cache(maxsize=1)
@@ -151,6 +151,16 @@ def light_colour(rgb) -> LightColour:
     if err_white <= errs[i] or err_white <= 0.01:
         return LightColour("D65", y, err_white)
     return LightColour(f"{_KELVIN_GRID[i]:.0f}K", y, float(errs[i]))
+
+
+def emitted_rgb(color, exposure: float = 0.0, temperature_k: float | None = None) -> np.ndarray:
+    """The linear RGB a light's settings multiply its power by: its colour, ``2^exposure`` and, when
+    it uses a colour temperature, that black body's colour at unit luminance."""
+    rgb = np.asarray(color, np.float64)[:3] * 2.0 ** float(exposure)
+    if temperature_k is not None:
+        body = Light((0.0, 0.0, 1.0), 1.0, f"{float(temperature_k):.0f}K").distant_light().rgb()
+        rgb = rgb * np.asarray(body) / float(_luminance(np.asarray(body)))
+    return rgb
 
 
 def sun_light(camera_rotation: np.ndarray, sun_rotation: np.ndarray, strength_w_m2: float, rgb) -> Light:
