@@ -272,3 +272,39 @@ def test_the_photo_section_draws_for_every_lighting_source(panel):
         layout = Recorder()
         panel_mod.draw_photo(layout, photo)
         assert "lighting" in layout.props
+
+
+def _ball_exr(path: Path, rgb_of_normal) -> Path:
+    """A ball filling a 96² EXR (black around), each pixel ``rgb_of_normal(n)`` (n: camera frame)."""
+    from specgen_addon.common.image_io import write_exr
+    from specgen_addon.photo.light_probe import ball_normals
+
+    n, inside = ball_normals(96)
+    img = np.zeros((96, 96, 3), np.float32)
+    img[inside] = rgb_of_normal(n[inside])
+    write_exr(path, {c: img[..., i] for i, c in enumerate("RGB")})
+    return path
+
+
+def test_estimate_and_chrome_ball_give_the_clis_lighting(panel, tmp_path):
+    from specgen_addon.cli.model import estimated_lighting, probe_lighting_from_args
+
+    scene, _s, photo = panel
+    light = np.array([0.4, 0.5, 0.77]) / np.linalg.norm([0.4, 0.5, 0.77])
+    ball = _ball_exr(tmp_path / "ball.exr", lambda n: (0.05 + 0.5 * np.maximum(n @ light, 0))[:, None] * [1, 1, 1])
+    chrome = _ball_exr(tmp_path / "chrome.exr", lambda n: np.full((len(n), 3), 0.3))
+    source = photo_inputs.photo_source(photo, str(ball))
+
+    photo.lighting = "ESTIMATE"
+    ours, notes = _lighting(scene, photo, tmp_path, source)
+    assert ours == estimated_lighting(_cli("--input-env", "estimate"), source)
+    assert notes[0].startswith("lighting estimated from the ball")
+
+    photo.lighting, photo.probe_path = "PROBE", str(chrome)
+    ours, notes = _lighting(scene, photo, tmp_path, source)
+    args = _cli("--light-probe", str(chrome))
+    args.overwrite = False                                   # an option of infer itself
+    cli = probe_lighting_from_args(args, source, tmp_path / "cli_probe.exr")
+    assert Path(ours.env).name == "ball_probe.exr" and ours.calibrated
+    np.testing.assert_allclose(ours.white_sphere_rgb(), cli.white_sphere_rgb(), rtol=1e-6)
+    assert any(n.startswith("chrome ball: chrome ball sphere: centre") for n in notes)
