@@ -7,6 +7,7 @@ recorded rows in Blender's dark theme with matplotlib. ``tests/test_blender_addo
 same recording.
 
     .venv/bin/python scripts/draw_panel.py docs/figures/panel.png
+    .venv/bin/python scripts/draw_panel.py docs/figures/panel_photo_lights.png --lights
 """
 
 from __future__ import annotations
@@ -68,12 +69,23 @@ class RecordingLayout:
 
         module, op = idname.split(".")
         label = getattr(getattr(bpy.ops, module), op).get_rna_type().name
-        self.rows.append(Row("operator", label if text is None else text, icon, idname, self.enabled))
+        self.rows.append(Row("operator", label if not text else text, icon, idname, self.enabled))
 
     def template_ID(self, data, name: str, open: str = "", **_):
         value = getattr(data, name)
         self.rows.append(Row("template", data.bl_rna.properties[name].name,
                              value.name if value is not None else "New / Open…", name, self.enabled))
+
+    def panel(self, idname: str, default_closed: bool = False):
+        """A collapsible section (Blender 4.1+ layout panels), recorded open."""
+        return self._child(), self._child()
+
+    def template_list(self, listtype: str, list_id: str, data, propname: str, active_data, active_propname: str,
+                      **_):
+        for item in getattr(data, propname):
+            values = [_value_text(k, getattr(item, k.identifier)) for k in item.bl_rna.properties
+                      if k.identifier not in ("rna_type", "name")]
+            self.rows.append(Row("label", "  ".join(values), "", propname, self.enabled))
 
     def label(self, text: str = "", icon: str = "", **_):
         self.rows.append(Row("label", text, icon))
@@ -86,6 +98,17 @@ class RecordingLayout:
 
     def template_icon(self, icon_value: int = 0, scale: float = 1.0, **_):
         self.rows.append(Row("icon", "", str(icon_value)))
+
+
+def _value_text(rna, value) -> str:
+    """A list item's value as the UI shows it (angles in degrees)."""
+    if rna.type != "FLOAT":
+        return str(value)
+    if rna.subtype == "ANGLE":
+        import math
+
+        return f"{math.degrees(value):.0f}°"
+    return f"{value:.4g}"
 
 
 def record_panel(context) -> list[Row]:
@@ -152,7 +175,8 @@ def paint(rows: list[Row], path: Path, title: str = "SpecGen") -> Path:
 
 def main(argv: list[str] | None = None) -> int:
     argv = sys.argv[1:] if argv is None else argv
-    out = Path(argv[0]) if argv else REPO / "docs" / "figures" / "panel.png"
+    paths = [a for a in argv if not a.startswith("--")]
+    out = Path(paths[0]) if paths else REPO / "docs" / "figures" / "panel.png"
     sys.path.insert(0, str(REPO))
     import batch
 
@@ -164,6 +188,13 @@ def main(argv: list[str] | None = None) -> int:
         s = bpy.context.scene.specgen
         s.image_path = "//examples/sphere.png"
         s.atlas_json = "//specgen/sphere_lookup.json"
+        if "--lights" in argv:   # the Photo section with the room's lights given
+            import math
+
+            s.photo.lighting = "LIGHTS"
+            light = s.photo.lights.add()
+            light.azimuth, light.elevation, light.power = math.radians(30), math.radians(20), 2.0
+            s.photo.ambient = 0.05
         print(paint(record_panel(bpy.context), out))
     finally:
         pkg.unregister()

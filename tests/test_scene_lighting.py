@@ -74,7 +74,7 @@ def test_a_black_body_colour_comes_back_as_its_temperature(kelvin):
 
     rgb = Light((0, 0, 1), 1.0, f"{kelvin}K").distant_light().rgb() / math.pi
     colour = light_colour(2.0 * rgb)
-    assert colour.name.endswith("K") and float(colour.name[:-1]) == pytest.approx(kelvin, rel=0.015)
+    assert colour.name.endswith("K") and float(colour.name[:-1]) == pytest.approx(kelvin, rel=0.003)
     assert colour.luminance == pytest.approx(2.0, rel=1e-3) and not colour.changed
 
 
@@ -159,4 +159,4 @@ def test_a_lights_exposure_and_temperature_reach_its_power_and_colour():
 
     np.testing.assert_allclose(emitted_rgb((1, 1, 1), exposure=1.0), (2, 2, 2))
     colour = light_colour(emitted_rgb((1, 1, 1), temperature_k=3200))
-    assert float(colour.name[:-1]) == pytest.approx(3200, rel=0.015) and colour.luminance == pytest.approx(1.0)
+    assert float(colour.name[:-1]) == pytest.approx(3200, rel=0.003) and colour.luminance == pytest.approx(1.0)

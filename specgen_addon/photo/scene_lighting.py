@@ -107,12 +107,16 @@ def world_in_camera_frame(rgb: np.ndarray, camera_rotation: np.ndarray,
     return np.maximum(_bilinear_equirect(src, renderer, 0.0), 0.0).astype(np.float32)   # as the renderer clamps
 
 
+def _blackbody_chromaticity(kelvin: float) -> np.ndarray:
+    """(3,) linear-sRGB colour of a unit-luminance black body, as a light of that colour renders."""
+    rgb = np.asarray(Light((0.0, 0.0, 1.0), 1.0, f"{kelvin:.0f}K").distant_light().rgb())
+    return rgb / float(_luminance(rgb))
+
+
 @functools.lru_cache(maxsize=1)
 def _blackbody_chromaticities() -> np.ndarray:
-    """(len(_KELVIN_GRID), 3) linear-sRGB colour of a unit-luminance black body, as a light renders."""
-    rows = [np.asarray(Light((0.0, 0.0, 1.0), 1.0, f"{k:.0f}K").distant_light().rgb()) for k in _KELVIN_GRID]
-    rows = np.array(rows)
-    return rows / _luminance(rows)[:, None]
+    """:func:`_blackbody_chromaticity` at every temperature of :data:`_KELVIN_GRID`."""
+    return np.array([_blackbody_chromaticity(k) for k in _KELVIN_GRID])
 
 
 def _luminance(rgb: np.ndarray) -> np.ndarray:
@@ -150,7 +154,11 @@ def light_colour(rgb) -> LightColour:
     i = int(np.argmin(errs))
     if err_white <= errs[i] or err_white <= 0.01:
         return LightColour("D65", y, err_white)
-    return LightColour(f"{_KELVIN_GRID[i]:.0f}K", y, float(errs[i]))
+    lo, hi = _KELVIN_GRID[max(i - 1, 0)], _KELVIN_GRID[min(i + 1, len(_KELVIN_GRID) - 1)]
+    fine = np.unique(np.round(np.linspace(lo, hi, 41)))          # whole kelvins between the neighbours
+    fine_errs = [float(np.max(np.abs(_blackbody_chromaticity(k) - target))) for k in fine]
+    j = int(np.argmin(fine_errs))
+    return LightColour(f"{fine[j]:.0f}K", y, fine_errs[j])
 
 
 def emitted_rgb(color, exposure: float = 0.0, temperature_k: float | None = None) -> np.ndarray:
