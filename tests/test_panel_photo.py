@@ -308,3 +308,12 @@ def test_estimate_and_chrome_ball_give_the_clis_lighting(panel, tmp_path):
     assert Path(ours.env).name == "ball_probe.exr" and ours.calibrated
     np.testing.assert_allclose(ours.white_sphere_rgb(), cli.white_sphere_rgb(), rtol=1e-6)
     assert any(n.startswith("chrome ball: chrome ball sphere: centre") for n in notes)
+
+
+def test_an_image_not_saved_to_a_file_asks_to_be_saved_for_the_file_options(panel, tmp_path):
+    _scene, s, photo = panel
+    s.image = bpy.data.images.new("painted", 64, 64)
+    photo.sphere.mode, photo.sphere.radius = "CIRCLE", 20.0
+    with pytest.raises(RuntimeError, match="the sphere's circle or mask needs the photo as a file: save"):
+        bpy.ops.specgen.generate_brdf()
+    assert not (tmp_path / "out").exists()
