@@ -165,7 +165,10 @@ def _image_rgb(image) -> np.ndarray:
 
 
 def ball_position(context) -> np.ndarray | None:
-    """Where the ball stands for the scene's point lights: the active object's origin, if any."""
+    """Where the ball stands for the scene's point lights: the active object's origin when it is
+    a surface (a mesh, curve …; not a light or the camera just clicked), else None."""
     obj = getattr(context, "active_object", None)
-    return None if obj is None else np.array(obj.matrix_world.translation)
+    if obj is None or obj.type not in {"MESH", "CURVE", "SURFACE", "META", "FONT"}:
+        return None
+    return np.array(obj.matrix_world.translation)
 
