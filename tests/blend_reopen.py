@@ -51,3 +51,25 @@ def reopen_and_render(blend: Path, out: Path) -> str:
                           timeout=300, check=False)
     assert done.returncode == 0, done.stderr[-2000:]
     return done.stdout
+
+
+def sphere_scene_with_material(folder: Path, stem: str, table: BRDFTable):
+    """In the open (empty) file: camera, sphere and sun, and a SpecGen material ``SpecGen <stem>``
+    on the sphere, its lookups and compact file written into ``folder`` as Generate writes them.
+    Returns (material, its spectral stack rendered now at 16², 1 spp). Needs bpy."""
+    from addon_modules import addon_module
+
+    bake, render, scene_mod = (addon_module(m) for m in ("specgen_addon.generate.lookup", "ops.render",
+                                                         "ops.scene"))
+    import bpy
+
+    sc = bpy.context.scene
+    scene_mod.add_camera(sc)
+    obj = scene_mod.add_mesh(sc, "sphere")
+    scene_mod.add_sun(sc, (0.0, 0.3, 1.0))
+    info = bake.bake_atlas(table, folder / f"{stem}_lookup.exr")
+    bake.save_atlas_info(info, folder / f"{stem}_lookup.json")
+    table.save(folder / f"{stem}.npz", compact=True)
+    mat = render.make_material(f"SpecGen {stem}", info)
+    obj.data.materials.append(mat)
+    return mat, render.SpectralRenderJob(sc, None, samples=1, resolution=(16, 16)).run()

@@ -15,11 +15,10 @@ from addon_modules import PKG, addon_module
 
 bake = addon_module("specgen_addon.generate.lookup")
 render = addon_module("ops.render")
-scene_mod = addon_module("ops.scene")
 travel = addon_module("ops.travel")
 
 from blend_reopen import reopen_and_render as _reopen
-from blend_reopen import small_table
+from blend_reopen import small_table, sphere_scene_with_material
 
 
 def _table():
@@ -36,15 +35,7 @@ def test_a_packed_blend_copied_alone_rebuilds_its_lookups_and_renders_the_same(t
     PKG.register()
     try:
         sc = bpy.context.scene
-        scene_mod.add_camera(sc)
-        obj = scene_mod.add_mesh(sc, "sphere")
-        scene_mod.add_sun(sc, (0.0, 0.3, 1.0))
-        info = bake.bake_atlas(_table(), lookups / "ball_lookup.exr")   # what Generate writes
-        bake.save_atlas_info(info, lookups / "ball_lookup.json")
-        _table().save(lookups / "ball.npz", compact=True)
-        mat = render.make_material("SpecGen ball", info)
-        obj.data.materials.append(mat)
-        before = render.SpectralRenderJob(sc, None, samples=1, resolution=(16, 16)).run()
+        mat, before = sphere_scene_with_material(lookups, "ball", _table())
 
         assert bpy.ops.specgen.pack_materials() == {"FINISHED"}
         assert sc.specgen_pack
