@@ -80,3 +80,24 @@ def test_packing_refuses_a_material_without_its_compact_file_and_unpack_removes_
         assert (tmp_path / "ball.npz").is_file()
     finally:
         PKG.unregister()
+
+
+@pytest.mark.slow
+@pytest.mark.blender
+def test_a_render_bakes_lookups_deleted_after_opening_again_from_the_packed_copy(tmp_path):
+    lookups = tmp_path / "specgen"
+    lookups.mkdir()
+    bpy.ops.wm.read_factory_settings(use_empty=True)
+    PKG.register()
+    try:
+        mat, before = sphere_scene_with_material(lookups, "ball", _table())
+        travel.pack(mat)
+        for f in lookups.iterdir():            # lookups and compact file gone while the file is open
+            f.unlink()
+        warnings = []
+        after = render.SpectralRenderJob(bpy.context.scene, None, samples=1, resolution=(16, 16),
+                                         warn=warnings.append).run()
+        assert any("baked again from the compact material packed into the .blend" in w for w in warnings), warnings
+        assert 10 * np.log10(before.max() ** 2 / np.mean((after - before) ** 2)) >= 60.0
+    finally:
+        PKG.unregister()
