@@ -24,6 +24,7 @@ import argparse
 import importlib.util
 import os
 import sys
+import tempfile
 import time
 import warnings
 from pathlib import Path
@@ -210,8 +211,13 @@ def run(args) -> Path:
     scene.render.engine = "CYCLES"
     scene_mod.add_camera(scene)
     obj = scene_mod.add_mesh(scene, args.mesh)
-    env_file = out / "lookup" / f"env_{args.env}.exr"
-    _write_rgb_exr(env_file, env.rgb)  # the reference renderer's normalised map, as Cycles sees it
+    # the reference renderer's normalised map, as Cycles sees it, read from the run's private
+    # temporary folder (Blender takes a backslash in a POSIX path for a separator); lookup/ keeps
+    # a copy with --keep-lookups
+    env_file = Path(tempfile.gettempdir()) / f"env_{args.env}.exr"
+    _write_rgb_exr(env_file, env.rgb)
+    if args.keep_lookups:
+        _write_rgb_exr(out / "lookup" / env_file.name, env.rgb)
     scene_mod.set_world_environment(scene, env_file, 1.0)
     if args.sun:
         scene_mod.add_sun(scene, (-0.5, 0.6, 0.62), float(np.pi))

@@ -33,6 +33,8 @@ def build_principled(mat: bpy.types.Material, fit: ClosureFit, cycles_output: bp
     node.inputs["Coat Weight"].default_value = p.coat_weight
     node.inputs["Coat Roughness"].default_value = p.coat_roughness
     node.inputs["Sheen Weight"].default_value = p.sheen_weight
+    node.inputs["Sheen Tint"].default_value = (*p.sheen_tint, 1.0)
+    node.inputs["Sheen Roughness"].default_value = p.sheen_roughness
     out = tree.nodes.get(EEVEE_OUTPUT) or tree.nodes.new("ShaderNodeOutputMaterial")
     out.name = out.label = EEVEE_OUTPUT
     out.location = (300, 400)

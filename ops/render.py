@@ -635,6 +635,10 @@ class SpectralRenderJob(RenderJobOutputs):
         if stale:
             raise SpecGenError(f"SpecGen material {stale[0]!r} was baked by an older SpecGen; "
                                "generate it again")
+        from .travel import restore_missing
+
+        for note in restore_missing(mats):   # from the compact material, beside them or packed
+            self.warn(f"SpecGen: {note}")
         bands = {tuple(m["specgen_wavelengths_nm"]) for m in mats}
         if len(bands) != 1:
             raise SpecGenError("SpecGen materials in the scene have different wavelength bands; "

@@ -11,9 +11,17 @@ take them). On every save (``save_pre``, with the file's new path):
 On every load (``load_post``) the Script node gets the absolute path of the lookups again, so a
 .blend moved together with its ``specgen/`` folder (to another folder or machine) renders the
 same. Missing lookups are baked again from the material's compact file (``<stem>.npz``, which
-Generate writes beside them) when it is there; otherwise they are reported by material and file
-name (and the spectral render refuses to start with the same sentence), never rendered black
-without a word.
+Generate writes beside them) when it is there, or from the copy packed into the .blend;
+otherwise they are reported by material and file name (and the spectral render refuses to start
+with the same sentence), never rendered black without a word.
+
+*Pack Into .blend* (:class:`SPECGEN_OT_pack_materials`, in the panel's *Saving* section) stores
+each material's compact file inside the .blend, so that the .blend alone travels: the lookups
+(tens of MB, read by path) stay files, and are baked again from the packed copy where they are
+missing. The bytes ride in an image datablock packed with ``Image.pack(data=…)``: Blender keeps
+a packed file of any content through save and open, without decoding it, and *File → External
+Data → Unpack Resources* writes it back as ``//specgen/<stem>.npz``, where it is looked for. A
+Text datablock would need base64 (a third larger) and slows the Text editor.
 """
 
 from __future__ import annotations
@@ -25,13 +33,20 @@ from pathlib import Path
 
 import bpy
 from bpy.app.handlers import persistent
+from bpy.props import BoolProperty
 
+from specgen_addon.brdf.formats.export import size_text
+from specgen_addon.common.atomic_io import atomic_write
 from specgen_addon.common.errors import SpecGenError
 
 from . import naming
 
 #: The folder beside the .blend that takes the lookups of an unsaved file on its first save.
 FOLDER = "specgen"
+#: Name prefix of the image datablock holding a material's packed compact file.
+PACKED_PREFIX = "SpecGen packed "
+#: The material's custom property naming that datablock.
+PACKED_KEY = "specgen_packed"
 
 
 def _specgen_materials() -> list:
@@ -105,6 +120,10 @@ def relocate(blend_path: str) -> list[str]:
                         img.filepath = _relative(str(new_dir / Path(img.filepath).name), blend_dir)
         mat["specgen_atlas_groups"] = [_relative(p, blend_dir) for p in groups]
         mat["specgen_atlas"] = _relative(atlas, blend_dir)
+        img = packed_image(mat)
+        if img is not None:   # Unpack Resources writes it where it is looked for
+            stem = Path(atlas).name.removesuffix("_lookup.exr")
+            img.filepath_raw = _relative(str(Path(atlas).parent / f"{stem}.npz"), blend_dir)
         node = script_node(mat)
         if node is not None and node.inputs["Atlas"].default_value:
             node.inputs["Atlas"].default_value = groups[0]
@@ -122,13 +141,80 @@ def missing_lookups(materials=None) -> list[str]:
     return out
 
 
+def compact_path(mat) -> Path:
+    """Where a material's compact file (``<stem>.npz``) lies: beside its lookups."""
+    atlas = Path(_absolute(str(mat["specgen_atlas"])))
+    return atlas.parent / f"{atlas.name.removesuffix('_lookup.exr')}.npz"
+
+
+def packed_image(mat):
+    """The image datablock holding the material's packed compact file, or None."""
+    name = mat.get(PACKED_KEY)
+    img = bpy.data.images.get(name) if name else None
+    return img if img is not None and img.packed_file is not None else None
+
+
+def pack(mat) -> int:
+    """Store the material's compact file inside the .blend (module docstring); its size in bytes.
+
+    A material already packed keeps its copy unless the file beside it has changed (Generate with
+    *Replace Materials*)."""
+    source, img = compact_path(mat), packed_image(mat)
+    if not source.is_file():
+        if img is not None:
+            return int(img.packed_file.size)
+        raise SpecGenError(f"material {mat.name!r} has no compact material file to pack ({source} is "
+                           "missing): Generate it again with Export Table on")
+    data = source.read_bytes()
+    if img is not None and int(img.packed_file.size) == len(data) and bytes(img.packed_file.data) == data:
+        return len(data)
+    if img is not None:
+        bpy.data.images.remove(img)
+    img = bpy.data.images.new(PACKED_PREFIX + source.stem, 1, 1)
+    img.source = "FILE"
+    img.filepath_raw = _relative(str(source), os.path.dirname(bpy.data.filepath)) if bpy.data.filepath \
+        else str(source)
+    img.pack(data=data, data_len=len(data))
+    img.use_fake_user = True   # no material or node uses it: kept on save by its fake user
+    mat[PACKED_KEY] = img.name
+    return len(data)
+
+
+def unpack(mat) -> None:
+    """Remove the material's packed compact file from the .blend (the file beside it stays)."""
+    img = packed_image(mat)
+    if img is not None:
+        bpy.data.images.remove(img)
+    if PACKED_KEY in mat:
+        del mat[PACKED_KEY]
+
+
+def _restore_packed(mat, source: Path) -> Path | None:
+    """Write the packed compact file back to ``source`` (or, where that folder cannot be
+    written, to the temporary folder that a later save moves beside the .blend); its path, or None."""
+    img = packed_image(mat)
+    if img is None:
+        return None
+    data = bytes(img.packed_file.data)
+    for folder in (source.parent, Path(tempfile.gettempdir()) / FOLDER):
+        try:
+            folder.mkdir(parents=True, exist_ok=True)
+            with atomic_write(folder / source.name, overwrite=True) as tmp:
+                tmp.write_bytes(data)
+        except (OSError, SpecGenError):
+            continue
+        return folder / source.name
+    return None
+
+
 def rebuild(mat) -> str | None:
     """Bake a material's missing lookups again from its compact material file (``<stem>.npz``
-    beside them, which Generate writes) and rebuild the material; what was done, or None."""
+    beside them, which Generate writes, or the copy packed into the .blend) and rebuild the
+    material; what was done, or None."""
     import numpy as np
 
-    from specgen_addon.generate import lookup as bake
     from specgen_addon.brdf.table import BRDFTable
+    from specgen_addon.generate import lookup as bake
 
     from .render import make_material, script_node
 
@@ -136,8 +222,15 @@ def rebuild(mat) -> str | None:
     stem = atlas.name.removesuffix("_lookup.exr")
     source = atlas.parent / f"{stem}.npz"
     node = script_node(mat)
-    if not source.is_file() or node is None:
+    if node is None:
         return None
+    origin = str(source)
+    if not source.is_file():
+        restored = _restore_packed(mat, source)
+        if restored is None:
+            return None
+        source, atlas = restored, restored.parent / atlas.name
+        origin = f"the compact material packed into the .blend (written back to {source})"
     info = bake.bake_atlas(BRDFTable.load(source), atlas, wavelengths_nm=np.asarray(mat["specgen_wavelengths_nm"]),
                            n_phi_d=int(node.inputs["PhiD"].default_value))
     bake.save_atlas_info(info, naming.lookup_json(atlas.parent, stem))
@@ -146,16 +239,14 @@ def rebuild(mat) -> str | None:
         blend_dir = os.path.dirname(bpy.data.filepath)
         mat["specgen_atlas_groups"] = [_relative(str(p), blend_dir) for p in info.group_paths]
         mat["specgen_atlas"] = _relative(str(atlas), blend_dir)
-    return f"the lookups of {mat.name!r} were missing and were baked again from {source}"
+    return f"the lookups of {mat.name!r} were missing and were baked again from {origin}"
 
 
-def reconnect() -> list[str]:
-    """What ``load_post`` does: point every Script node at its lookups' absolute path, bake missing
-    lookups again from the compact material where it is there; warnings for what is still missing."""
-    from .render import script_node
-
+def restore_missing(materials=None) -> list[str]:
+    """Bake again, from the compact material (beside the lookups or packed), the lookups that are
+    missing (default: of every SpecGen material); what was done and what could not be."""
     notes = []
-    for mat in _specgen_materials():
+    for mat in _specgen_materials() if materials is None else materials:
         if missing_lookups([mat]):
             try:
                 done = rebuild(mat)
@@ -164,11 +255,89 @@ def reconnect() -> list[str]:
                 notes.append(f"material {mat.name!r}: cannot bake its lookups again ({exc})")
             if done:
                 notes.append(done)
+    return notes
+
+
+def reconnect() -> list[str]:
+    """What ``load_post`` does: point every Script node at its lookups' absolute path, bake missing
+    lookups again from the compact material where it is there; warnings for what is still missing."""
+    from .render import script_node
+
+    notes = restore_missing()
+    for mat in _specgen_materials():
         node = script_node(mat)
         groups = atlas_groups(mat)
         if node is not None and groups:
             node.inputs["Atlas"].default_value = groups[0]
     return notes + missing_lookups()
+
+
+def packing_wanted() -> bool:
+    """Whether the open file asks for its materials to be packed (any scene's *Pack Into .blend*)."""
+    return any(getattr(sc, "specgen_pack", False) for sc in bpy.data.scenes)
+
+
+def pack_all() -> tuple[int, int]:
+    """Pack every SpecGen material (:func:`pack`); (materials packed, bytes)."""
+    sizes = [pack(mat) for mat in _specgen_materials()]
+    return len(sizes), sum(sizes)
+
+
+def packed_total() -> tuple[int, int]:
+    """(materials packed, bytes) in the open file."""
+    imgs = [img for img in map(packed_image, _specgen_materials()) if img is not None]
+    return len(imgs), sum(int(img.packed_file.size) for img in imgs)
+
+
+class SPECGEN_OT_pack_materials(bpy.types.Operator):
+    """Store each SpecGen material's compact file inside the .blend, so the .blend alone travels
+    (its lookups are baked again from it where they are missing); Unpack removes the copies"""
+
+    bl_idname = "specgen.pack_materials"
+    bl_label = "Pack Materials Into .blend"
+    bl_options = {"REGISTER", "UNDO"}
+
+    unpack: BoolProperty(name="Unpack", default=False,
+                         description="Remove the packed copies (the files beside the .blend stay)")
+
+    def execute(self, context):
+        for sc in bpy.data.scenes:
+            sc.specgen_pack = not self.unpack
+        if self.unpack:
+            for mat in _specgen_materials():
+                unpack(mat)
+            self.report({"INFO"}, "SpecGen: materials no longer packed into the .blend")
+            return {"FINISHED"}
+        try:
+            n, size = pack_all()
+        except (SpecGenError, OSError) as exc:
+            self.report({"ERROR"}, f"SpecGen: {exc}")
+            return {"CANCELLED"}
+        self.report({"INFO"}, f"SpecGen: packed {n} material{'s' * (n != 1)} into the .blend ({size_text(size)}); "
+                              "materials generated later are packed when the file is saved")
+        return {"FINISHED"}
+
+
+class SPECGEN_PT_saving(bpy.types.Panel):
+    """Whether the materials' compact files travel inside the .blend."""
+
+    bl_idname = "SPECGEN_PT_saving"
+    bl_label = "Saving"
+    bl_parent_id = "SPECGEN_PT_main"
+    bl_space_type = "VIEW_3D"
+    bl_region_type = "UI"
+    bl_category = "SpecGen"
+    bl_options = {"DEFAULT_CLOSED"}
+
+    def draw(self, context):
+        layout = self.layout
+        on = context.scene.specgen_pack
+        op = layout.operator(SPECGEN_OT_pack_materials.bl_idname, text="Pack Into .blend", depress=on,
+                             icon="PACKAGE" if on else "UGLYPACKAGE")
+        op.unpack = on
+        n, size = packed_total()
+        layout.label(text=f"{n} material{'s' * (n != 1)} packed ({size_text(size)})" if n
+                     else f"lookups read from //{FOLDER}/ beside the .blend")
 
 
 @persistent
@@ -177,6 +346,12 @@ def _save_pre(filepath, *_args) -> None:
     if path:
         for warning in relocate(path):
             print(warning)
+    if packing_wanted():
+        for mat in _specgen_materials():
+            try:
+                pack(mat)
+            except (SpecGenError, OSError) as exc:
+                print(f"SpecGen: {exc}")
 
 
 @persistent
@@ -185,7 +360,15 @@ def _load_post(*_args) -> None:
         print(f"SpecGen: {warning}")
 
 
+_CLASSES = (SPECGEN_OT_pack_materials, SPECGEN_PT_saving)
+
+
 def register() -> None:
+    bpy.types.Scene.specgen_pack = BoolProperty(
+        name="Pack Into .blend", default=False,
+        description="Keep each SpecGen material's compact file inside the .blend when it is saved")
+    for cls in _CLASSES:
+        bpy.utils.register_class(cls)
     if _save_pre not in bpy.app.handlers.save_pre:
         bpy.app.handlers.save_pre.append(_save_pre)
     if _load_post not in bpy.app.handlers.load_post:
@@ -196,3 +379,6 @@ def unregister() -> None:
     for handlers, fn in ((bpy.app.handlers.save_pre, _save_pre), (bpy.app.handlers.load_post, _load_post)):
         if fn in handlers:
             handlers.remove(fn)
+    for cls in reversed(_CLASSES):
+        bpy.utils.unregister_class(cls)
+    del bpy.types.Scene.specgen_pack

@@ -9,8 +9,6 @@ from __future__ import annotations
 
 import json
 import shutil
-import subprocess
-import sys
 import tempfile
 from pathlib import Path
 
@@ -26,46 +24,8 @@ render = addon_module("ops.render")
 scene_mod = addon_module("ops.scene")
 properties = addon_module("ops.properties")
 
-from specgen_addon.bake.closure_fit import ggx_lobe
-from specgen_addon.brdf.rusinkiewicz import io_from_half_diff
-from specgen_addon.brdf.table import BRDFTable
-
-REPO = Path(__file__).resolve().parents[1]
-WL = np.array([450.0, 550.0, 650.0])
-
-REOPEN = r"""
-import json, sys
-import numpy as np
-sys.path.insert(0, {repo!r})
-sys.path.insert(0, {tests!r})
-import bpy
-from addon_modules import PKG, addon_module
-PKG.register()
-bpy.ops.wm.open_mainfile(filepath=sys.argv[1])
-render = addon_module("ops.render")
-try:
-    stack = render.SpectralRenderJob(bpy.context.scene, None, samples=1, resolution=(16, 16)).run()
-    np.save(sys.argv[2], stack)
-    print("RENDERED")
-except Exception as exc:
-    print("REFUSED", exc)
-"""
-
-
-def _table() -> BRDFTable:
-    def fn(th, td, pd):
-        wi, wo = io_from_half_diff(th, td, pd)
-        above = ((wi[:, 2] > 0) & (wo[:, 2] > 0))[:, None]
-        return above * np.array([0.2, 0.5, 0.7]) / np.pi + ggx_lobe(wi, wo, 0.3)[:, None] * 0.1
-    return BRDFTable.tabulate(fn, WL)
-
-
-def _reopen(blend: Path, out: Path) -> str:
-    script = REOPEN.format(repo=str(REPO), tests=str(REPO / "tests"))
-    done = subprocess.run([sys.executable, "-c", script, str(blend), str(out)], capture_output=True, text=True,
-                          timeout=300, check=False)
-    assert done.returncode == 0, done.stderr[-2000:]
-    return done.stdout
+from blend_reopen import reopen_and_render as _reopen
+from blend_reopen import small_table as _table
 
 
 @pytest.mark.slow

@@ -77,6 +77,18 @@ def group_path(base: Path, group: int) -> Path:
     return base.with_name(f"{base.stem}.g{group:02d}{base.suffix or '.exr'}")
 
 
+def _fit_standins(table, wavelengths_nm: np.ndarray | None):
+    """The native closure fit of ``table`` (its rendered error checked) with the Principled
+    stand-in's sheen where the material needs one."""
+    from specgen_addon.bake.closure_fit import fit_closures
+    from specgen_addon.bake.closure_fit.sheen import fit_sheen
+
+    fit = fit_closures(table, wavelengths_nm, check=True)
+    sheen = fit_sheen(lambda wi, wo: table.eval(wi, wo, fit.wavelengths_nm), fit)
+    fit.sheen = None if sheen is None else sheen.to_dict()
+    return fit
+
+
 @dataclass
 class AtlasInfo:
     """What :func:`bake_atlas` wrote.
@@ -270,8 +282,6 @@ def bake_atlas(table, path: str | os.PathLike, wavelengths_nm: np.ndarray | None
     The native closure fit (:func:`specgen_addon.bake.closure_fit.fit_closures`) at the same bands is stored
     in the returned info.
     """
-    from specgen_addon.bake.closure_fit import fit_closures
-
     if not getattr(table, "is_spectral", False):
         raise SpecGenError("the Blender bake needs a spectral BRDF table (wavelengths in nm)")
     if not (isinstance(tolerance, (int, float, np.floating)) and 0.0 <= tolerance <= 1.0):
@@ -282,7 +292,7 @@ def bake_atlas(table, path: str | os.PathLike, wavelengths_nm: np.ndarray | None
     wl = np.asarray(table.wavelengths if wavelengths_nm is None else wavelengths_nm, dtype=np.float64)
     # the closure fit only reads the table: it runs on a second thread beside the basis
     with ThreadPoolExecutor(max_workers=1) as pool:
-        closures = pool.submit(fit_closures, table, None if wavelengths_nm is None else wl, check=True)
+        closures = pool.submit(_fit_standins, table, None if wavelengths_nm is None else wl)
         values = table.values
         if wavelengths_nm is not None:
             weights = table.wavelength_weights(wl).astype(np.float32)       # (C, Λ)

@@ -27,6 +27,7 @@ from importlib import util as importlib_util
 from pathlib import Path
 from typing import Callable, Iterator
 
+from specgen_addon.brdf.formats.export import size_text
 from specgen_addon.common.errors import SpecGenError
 from specgen_addon.common.limits import check_number
 from specgen_addon.common.atomic_io import atomic_write
@@ -297,6 +298,10 @@ def format_summary(report: dict) -> str:
     lines = [f"batch-many: {len(report['items'])} items: {c['done']} done, {c['skipped']} skipped, "
              f"{c['failed']} failed in {report['wall_seconds']:.1f} s"
              + (f" (mean {mean:.1f} s per item on {report['workers']} workers)" if done else "")]
+    if done:
+        n_files = sum(len(r.get("outputs", ())) for r in done)
+        lines.append(f"wrote {n_files} files in {len(done)} item folders under {report['out']} "
+                     f"({size_text(sum(r.get('bytes', 0) for r in done))})")
     lines += [f"  failed {r['id']}: {r['error']} (log: {r['log']})" for r in report["items"]
               if r["status"] == "failed"]
     lines.append(f"report: {Path(report['out']) / REPORT_NAME}")

@@ -142,8 +142,10 @@ def run_item(item: dict, out: str, run: str, batch_cmd: list[str], batch_args: l
         if code != 0:
             return fail(last or f"batch.py exited with status {code}", retry=code != EXIT_BAD_INPUT)
         shutil.rmtree(work / "input", ignore_errors=True)  # prepared inputs are intermediate
-        outputs = sorted(str(p.relative_to(work)) for p in work.rglob("*") if p.is_file())
-        record.update(status="done", error=None, outputs=outputs, seconds=round(time.perf_counter() - t0, 2),
+        files = sorted(p for p in work.rglob("*") if p.is_file())
+        outputs = [str(p.relative_to(work)) for p in files]
+        record.update(status="done", error=None, outputs=outputs, bytes=sum(p.stat().st_size for p in files),
+                      seconds=round(time.perf_counter() - t0, 2),
                       cpu_seconds=round(cpu[0], 2), fingerprint=fingerprint, run=run)
         try:
             (work / RECORD_NAME).write_text(json.dumps(record, indent=1))

@@ -145,6 +145,9 @@ class ClosureFit:
     #: worst mean ΔE2000 of the fit against its table rendered under the check lights
     #: (:func:`specgen_addon.bake.closure_fit.fit_check.rendered_fit_error`); None when not measured
     rendered_error: float | None = None
+    #: the Principled stand-in's sheen (:class:`specgen_addon.bake.closure_fit.sheen.SheenFit` as a
+    #: dict), fitted beside the closures where a fibre surface needs one; None when it does not
+    sheen: dict | None = None
 
     def __post_init__(self) -> None:
         self.wavelengths_nm = np.asarray(self.wavelengths_nm, np.float64)
@@ -196,7 +199,7 @@ class ClosureFit:
         rows = lambda m: np.stack([interp(x) for x in m]) if len(m) else np.zeros((0, w.size))  # noqa: E731
         return ClosureFit(w, interp(self.diffuse), rows(self.roughness), rows(self.specular),
                           interp(self.rel_error), interp(self.diffuse_fresnel),
-                          rows(self.specular_fresnel), self.ior, self.rendered_error)
+                          rows(self.specular_fresnel), self.ior, self.rendered_error, self.sheen)
 
     def to_json(self) -> str:
         return json.dumps({"wavelengths_nm": self.wavelengths_nm.tolist(),
@@ -204,7 +207,7 @@ class ClosureFit:
                            "specular": self.specular.tolist(), "rel_error": self.rel_error.tolist(),
                            "diffuse_fresnel": self.diffuse_fresnel.tolist(),
                            "specular_fresnel": self.specular_fresnel.tolist(), "ior": self.ior,
-                           "rendered_error": self.rendered_error})
+                           "rendered_error": self.rendered_error, "sheen": self.sheen})
 
     @classmethod
     def from_json(cls, text: str) -> "ClosureFit":
@@ -220,7 +223,8 @@ class ClosureFit:
                        np.asarray(d["rel_error"], np.float64),
                        np.asarray(d.get("diffuse_fresnel", np.zeros(wl.size)), np.float64),
                        spec_f.reshape(-1, wl.size), float(d.get("ior", 1.5)),
-                       None if d.get("rendered_error") is None else float(d["rendered_error"]))
+                       None if d.get("rendered_error") is None else float(d["rendered_error"]),
+                       d.get("sheen"))
         except (ValueError, KeyError, TypeError) as exc:
             raise SpecGenError(f"corrupt closure fit ({exc})") from None
 
@@ -279,7 +283,7 @@ def group_closures(fit: ClosureFit, group: np.ndarray,
             for c in layout}
 
 
-def _srgb_weights(wavelengths_nm: np.ndarray) -> np.ndarray | None:
+def srgb_weights(wavelengths_nm: np.ndarray) -> np.ndarray | None:
     """(Λ, 3) linear-sRGB weights of a reflectance's bands under D65 (None off the visible range)."""
     from specgen_addon.spectral.spectra import reflectance_to_linear_srgb
 
@@ -302,7 +306,7 @@ def rgb_standin(fit: ClosureFit) -> dict[str, np.ndarray]:
     if not terms:
         return {}
     spectra_ = np.stack([t[3] for t in terms])
-    m = _srgb_weights(fit.wavelengths_nm)
+    m = srgb_weights(fit.wavelengths_nm)
     rgb = spectra_ @ m if m is not None else np.repeat(spectra_.mean(axis=1, keepdims=True), 3, axis=1)
     rgb = np.clip(np.asarray(rgb, np.float64), 0.0, None)
     return {t[0]: rgb[i] for i, t in enumerate(terms)}
@@ -313,7 +317,7 @@ def standin_closures(fit: ClosureFit, layout: list[StackClosure]) -> dict[str, t
     colours; a lobe's roughness per channel is its ``ln r(λ)`` averaged with that channel's
     (positive) sRGB weights times the lobe's spectrum."""
     colours = rgb_standin(fit)
-    m = _srgb_weights(fit.wavelengths_nm)
+    m = srgb_weights(fit.wavelengths_nm)
     terms = {t[0]: t for t in fit.terms(nonzero=False)}
     out = {}
     for c in layout:
