@@ -618,6 +618,9 @@ class SpectralRenderJob(RenderJobOutputs):
     holdout_others: bool = False
     #: light from the world too (False: only suns and point lights, see :mod:`.exact_direct`)
     world: bool = True
+    #: one Cycles render of the scene as set up, as a generator (None: a blocking render); the
+    #: Full Scene job passes a render job that Esc stops inside the render (:mod:`.exact_direct`)
+    render_call: Callable[[], Iterator[None]] | None = None
     spectral: np.ndarray | None = field(default=None, init=False)
     wavelengths_nm: np.ndarray | None = field(default=None, init=False)
     basis: np.ndarray | None = field(default=None, init=False)
@@ -704,7 +707,10 @@ class SpectralRenderJob(RenderJobOutputs):
                         touch(mat)
                 t = time.perf_counter()
                 with _SceneState(self.scene, self.samples, self.resolution, out_dir, self.holdout_others):
-                    bpy.ops.render.render(write_still=False, scene=self.scene.name)
+                    if self.render_call is None:
+                        bpy.ops.render.render(write_still=False, scene=self.scene.name)
+                    else:
+                        yield from self.render_call()   # None while a render job runs
                 t_render += time.perf_counter() - t
                 for j in range(len(PASSES)):
                     images[g][:, :, r * bake.COEFFS_PER_RENDER + j] = _read_pass(_find_output(out_dir, j))
@@ -748,6 +754,6 @@ class SpectralRenderJob(RenderJobOutputs):
     def run(self, progress: Callable[[float], None] | None = None) -> np.ndarray:
         """Run all steps; returns the spectral stack (H, W, Λ)."""
         for fraction in self.steps():
-            if progress is not None:
+            if progress is not None and fraction is not None:   # None: a render job runs
                 progress(fraction)
         return self.spectral

@@ -143,15 +143,15 @@ def estimate(scene: bpy.types.Scene, bands: int, cost: RenderCost) -> tuple[floa
                      f"{samples} samples{extra}")
 
 
-def band_render(scene: bpy.types.Scene, layer: str, interactive: bool) -> Iterator[None]:
-    """Render ``layer`` of ``scene`` once; as a cancellable render job when ``interactive`` and a
-    window exists (yields ``None`` while it runs), else blocking. Raises Cancelled if the user
-    stopped the render."""
+def band_render(scene: bpy.types.Scene, layer: str | None, interactive: bool) -> Iterator[None]:
+    """Render ``layer`` of ``scene`` once (None: every layer in use); as a cancellable render job
+    when ``interactive`` and a window exists (yields ``None`` while it runs), else blocking.
+    Raises Cancelled if the user stopped the render."""
+    which = {"write_still": False, "scene": scene.name} | ({} if layer is None else {"layer": layer})
     if not interactive or bpy.app.background:
-        bpy.ops.render.render(write_still=False, layer=layer, scene=scene.name)
+        bpy.ops.render.render(**which)
         return
-    yield from render_job(lambda: bpy.ops.render.render("INVOKE_DEFAULT", write_still=False,
-                                                        layer=layer, scene=scene.name))
+    yield from render_job(lambda: bpy.ops.render.render("INVOKE_DEFAULT", **which))
 
 
 def render_job(start: Callable[[], set[str]]) -> Iterator[None]:
