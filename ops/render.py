@@ -20,6 +20,7 @@ operator can run it one Cycles render per timer tick and cancel between renders.
 
 from __future__ import annotations
 
+import hashlib
 import math
 import os
 import shutil
@@ -38,6 +39,8 @@ from specgen_addon.generate import lookup as bake
 from specgen_addon.common.interrupts import private_tempdir
 
 SHADER_PATH = Path(__file__).resolve().parent / "osl" / "specgen_brdf.osl"
+#: The Script node's custom property naming the OSL source its bytecode was compiled from.
+SHADER_DIGEST_KEY = "specgen_osl_sha256"
 SHADER_TEXT_NAME = "specgen_brdf.osl"
 MATERIAL_TAG = "specgen"
 PASSES = (("Emission", "emit"), ("Diffuse Color", "diffuse_color"),
@@ -123,6 +126,21 @@ def compile_script_node(node: bpy.types.Node) -> None:
         scene.render.engine = engine
     if "Atlas" not in node.inputs or "BSDF" not in node.outputs:
         raise SpecGenError("the SpecGen OSL shader did not compile (is Cycles built with OSL?)")
+    node[SHADER_DIGEST_KEY] = _shader_digest()
+
+
+def _shader_digest() -> str:
+    return hashlib.sha256(SHADER_PATH.read_bytes()).hexdigest()[:16]
+
+
+def refresh_shader(mats: list[bpy.types.Material]) -> None:
+    """Recompile the Script nodes of ``mats`` not compiled from this version's OSL (a .blend saved
+    by an older SpecGen keeps its shader's bytecode in the node); their socket values are kept."""
+    digest = _shader_digest()
+    for mat in mats:
+        node = script_node(mat)
+        if node is not None and node.get(SHADER_DIGEST_KEY) != digest:
+            compile_script_node(node)
 
 
 def _brdf_group(name: str) -> bpy.types.NodeTree:
@@ -656,6 +674,7 @@ class SpectralRenderJob(RenderJobOutputs):
         missing = missing_lookups(mats)
         if missing:
             raise SpecGenError(missing[0])
+        refresh_shader(mats)
         return mats
 
     def steps(self) -> Iterator[float]:

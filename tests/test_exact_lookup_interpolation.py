@@ -62,3 +62,33 @@ def test_a_mirror_like_table_renders_its_highlight_and_body_as_the_table_says(tm
         np.max(np.abs(g[body] - r[body]) / np.maximum(r[body], 1e-9))
     # and the highlight: a bicubic lookup spreads the peak over its neighbours (+7.5 % here)
     assert g[lit].sum() / r[lit].sum() == pytest.approx(1.0, abs=0.01)
+
+
+@pytest.mark.blender
+def test_a_material_compiled_by_an_older_version_renders_with_this_versions_shader(tmp_path, monkeypatch):
+    bpy = pytest.importorskip("bpy")
+    from addon_modules import addon_module
+
+    bake = addon_module("specgen_addon.generate.lookup")
+    render = addon_module("ops.render")
+    scene_mod = addon_module("ops.scene")
+    info = bake.bake_atlas(BRDFTable.tabulate(_mirror_like, WL), tmp_path / "t.exr")
+    bpy.ops.wm.read_factory_settings(use_empty=True)
+    sc = bpy.context.scene
+    scene_mod.add_camera(sc)
+    mat = render.make_material("SpecGen old", info)
+    scene_mod.add_mesh(sc, "sphere").data.materials.append(mat)
+    node = render.script_node(mat)
+    atlas = node.inputs["Atlas"].default_value
+    # as a .blend saved by an older SpecGen: its own OSL text and bytecode, no source digest
+    shipped = render.SHADER_PATH
+    older = tmp_path / "older.osl"
+    older.write_text(shipped.read_text().replace('"interp", "linear"', '"interp", "bilinear"'))
+    monkeypatch.setattr(render, "SHADER_PATH", older)
+    render.compile_script_node(node)
+    monkeypatch.setattr(render, "SHADER_PATH", shipped)
+    del node[render.SHADER_DIGEST_KEY]
+    assert '"bilinear"' in node.bytecode
+    render.SpectralRenderJob(sc, None)._preflight()
+    assert '"bilinear"' not in node.bytecode and '"linear"' in node.bytecode
+    assert node.inputs["Atlas"].default_value == atlas           # its lookups kept
