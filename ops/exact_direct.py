@@ -190,17 +190,6 @@ def exact_direct_steps(scene: bpy.types.Scene, wavelengths_nm: np.ndarray, shape
     return _resample(job.spectral, job.wavelengths_nm, np.asarray(wavelengths_nm, np.float64))
 
 
-def render_exact_direct(scene: bpy.types.Scene, wavelengths_nm: np.ndarray, shape: tuple[int, int],
-                        warn: Callable[[str], None] = print, world: bool = True) -> np.ndarray | None:
-    """:func:`exact_direct_steps` run to its end with blocking renders."""
-    steps = exact_direct_steps(scene, wavelengths_nm, shape, warn, world)
-    while True:
-        try:
-            next(steps)
-        except StopIteration as done:
-            return done.value
-
-
 def compose(full: np.ndarray, closure_direct: np.ndarray, exact: np.ndarray) -> np.ndarray:
     """``full − closure_direct + exact`` (H, W, Λ), clipped at 0 (noise in the two direct terms)."""
     return np.maximum(full - closure_direct + exact, 0.0).astype(np.float32)
