@@ -4,7 +4,9 @@ A new file's default scene (cube, light, camera; 1920×1080, Cycles' default sam
 sampling and denoising) with one photo's SpecGen material on the cube: the estimate at the scene's
 own settings (not rendered: it runs for the better part of two hours here), and the estimate and
 the real render of the Quick Preview (25 %, 16 samples, no denoising); then one plain render of the
-default scene at 25 % with 1024 adaptive samples against its estimate.
+default scene at 25 % with 1024 adaptive samples against its estimate; then the denoiser's
+estimated cost per render against the difference of two renders of a sphere under a sun (640×480,
+8 samples) with and without denoising (``--denoiser-only``: this last check alone).
 
 Run: ``.venv/bin/python bench/render_estimate.py [--bands 21 --photo examples/sphere.png]``.
 """
@@ -23,10 +25,36 @@ REPO = Path(__file__).resolve().parents[1]
 sys.path.insert(0, str(REPO))
 
 
+def denoiser_check(bpy, settings, scene_mod) -> None:
+    """The denoiser's estimated seconds per render against a render with and without it."""
+    bpy.ops.wm.read_factory_settings(use_empty=True)
+    sc = bpy.context.scene
+    sc.render.engine = "CYCLES"
+    scene_mod.add_camera(sc)
+    scene_mod.add_mesh(sc, "sphere")
+    scene_mod.add_sun(sc, (0.3, -0.4, 0.8))
+    sc.render.resolution_x, sc.render.resolution_y = 640, 480
+    sc.cycles.samples, sc.cycles.use_adaptive_sampling, sc.cycles.use_denoising = 8, False, True
+    cost = settings.measure_cost(sc)
+
+    def timed() -> float:
+        t = time.perf_counter()
+        bpy.ops.render.render(write_still=False)
+        return time.perf_counter() - t
+
+    timed()                                            # kernels and the denoiser loaded
+    denoised = min(timed() for _ in range(2))
+    sc.cycles.use_denoising = False
+    plain = min(timed() for _ in range(2))
+    print(f"denoiser at 640x480, 8 samples: {denoised - plain:.1f} s per render (denoised "
+          f"{denoised:.1f} s, plain {plain:.1f} s), estimated {cost.denoise_s(640 * 480):.1f} s")
+
+
 def main(argv: list[str] | None = None) -> int:
     ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     ap.add_argument("--bands", type=int, default=21)
     ap.add_argument("--photo", default=str(REPO / "examples" / "sphere.png"))
+    ap.add_argument("--denoiser-only", action="store_true", help="only the denoiser's estimate")
     args = ap.parse_args(argv)
 
     import bpy
@@ -37,6 +65,10 @@ def main(argv: list[str] | None = None) -> int:
     from importlib import import_module
 
     settings = import_module(f"{pkg.__name__}.ops.render_settings")
+    if args.denoiser_only:
+        denoiser_check(bpy, settings, import_module(f"{pkg.__name__}.ops.scene"))
+        print(describe_machine())
+        return 0
     bpy.ops.wm.read_factory_settings()
     pkg.register()
     sc = bpy.context.scene
@@ -78,6 +110,7 @@ def main(argv: list[str] | None = None) -> int:
     took = time.perf_counter() - t
     print(f"adaptive {w}x{h} at 1024 samples: rendered in {took:.1f} s, estimated {predicted:.1f} s "
           f"(share {cost.sample_fraction:.3f}; ratio {predicted / took:.2f})")
+    denoiser_check(bpy, settings, import_module(f"{pkg.__name__}.ops.scene"))
     print(describe_machine())
     return 0
 

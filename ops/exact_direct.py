@@ -24,15 +24,16 @@ with the closures (whose rendered error the job reports per material).
 
 from __future__ import annotations
 
-from typing import Callable
+from typing import Callable, Generator
 
 import bpy
 import numpy as np
 
 from specgen_addon.generate import lookup as bake
-from specgen_addon.common.errors import SpecGenError
+from specgen_addon.common.errors import Cancelled, SpecGenError
 from .render import (SavedAttributes, SpectralRenderJob, is_specgen_material, script_node,
                      specgen_materials)
+from .render_settings import band_render
 
 #: Samples of the exact render at most (its suns and point lights are noiseless but for the pixel
 #: filter; the environment is importance-sampled in the shader).
@@ -143,10 +144,16 @@ def world_light(scene: bpy.types.Scene, warn: Callable[[str], None] = print) -> 
     return True
 
 
-def render_exact_direct(scene: bpy.types.Scene, wavelengths_nm: np.ndarray, shape: tuple[int, int],
-                        warn: Callable[[str], None] = print, world: bool = True) -> np.ndarray | None:
+def exact_direct_steps(scene: bpy.types.Scene, wavelengths_nm: np.ndarray, shape: tuple[int, int],
+                       warn: Callable[[str], None] = print, world: bool = True,
+                       interactive: bool = False) -> Generator[float | None, None, np.ndarray | None]:
     """The exact mode's direct light on SpecGen surfaces (H, W, Λ) at ``wavelengths_nm``, other
-    objects held out; None (with a warning saying why) when the exact mode cannot render the scene."""
+    objects held out, as a generator: it yields the fraction done after each Cycles render (None
+    while an ``interactive`` render runs as Blender's render job, which Esc stops inside the
+    render: :func:`.render_settings.band_render`) and returns the stack; it returns None (with a
+    warning saying why) when the exact mode cannot render the scene. A cancelled render raises
+    :class:`~specgen_addon.common.errors.Cancelled`; the shader's sockets and the held-out slots
+    are put back either way."""
     r = scene.render
     size = (round(r.resolution_x * r.resolution_percentage / 100),
             round(r.resolution_y * r.resolution_percentage / 100))
@@ -161,7 +168,8 @@ def render_exact_direct(scene: bpy.types.Scene, wavelengths_nm: np.ndarray, shap
             warn(msg)
 
     job = SpectralRenderJob(scene, None, samples=samples, resolution=size, warn=relay,
-                            holdout_others=True, world=world)
+                            holdout_others=True, world=world,
+                            render_call=lambda: band_render(scene, None, interactive))
     # the exact job leaves its lights on the shader's sockets: put back what the file had
     sockets = [(sock, sock.default_value if isinstance(sock.default_value, (int, float, str))
                 else tuple(sock.default_value))
@@ -169,7 +177,9 @@ def render_exact_direct(scene: bpy.types.Scene, wavelengths_nm: np.ndarray, shap
                for sock in script_node(mat).inputs if hasattr(sock, "default_value")]
     try:
         with HeldOutSlots(scene):
-            spectral = job.run()
+            yield from job.steps()
+    except Cancelled:
+        raise
     except SpecGenError as exc:
         warn(f"SpecGen: exact direct light unavailable ({exc}); SpecGen surfaces show the native "
              "closure stack only")
@@ -177,7 +187,7 @@ def render_exact_direct(scene: bpy.types.Scene, wavelengths_nm: np.ndarray, shap
     finally:
         for sock, value in sockets:
             sock.default_value = value
-    return _resample(spectral, job.wavelengths_nm, np.asarray(wavelengths_nm, np.float64))
+    return _resample(job.spectral, job.wavelengths_nm, np.asarray(wavelengths_nm, np.float64))
 
 
 def compose(full: np.ndarray, closure_direct: np.ndarray, exact: np.ndarray) -> np.ndarray:

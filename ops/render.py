@@ -20,6 +20,7 @@ operator can run it one Cycles render per timer tick and cancel between renders.
 
 from __future__ import annotations
 
+import hashlib
 import math
 import os
 import shutil
@@ -38,6 +39,8 @@ from specgen_addon.generate import lookup as bake
 from specgen_addon.common.interrupts import private_tempdir
 
 SHADER_PATH = Path(__file__).resolve().parent / "osl" / "specgen_brdf.osl"
+#: The Script node's custom property naming the OSL source its bytecode was compiled from.
+SHADER_DIGEST_KEY = "specgen_osl_sha256"
 SHADER_TEXT_NAME = "specgen_brdf.osl"
 MATERIAL_TAG = "specgen"
 PASSES = (("Emission", "emit"), ("Diffuse Color", "diffuse_color"),
@@ -123,6 +126,21 @@ def compile_script_node(node: bpy.types.Node) -> None:
         scene.render.engine = engine
     if "Atlas" not in node.inputs or "BSDF" not in node.outputs:
         raise SpecGenError("the SpecGen OSL shader did not compile (is Cycles built with OSL?)")
+    node[SHADER_DIGEST_KEY] = _shader_digest()
+
+
+def _shader_digest() -> str:
+    return hashlib.sha256(SHADER_PATH.read_bytes()).hexdigest()[:16]
+
+
+def refresh_shader(mats: list[bpy.types.Material]) -> None:
+    """Recompile the Script nodes of ``mats`` not compiled from this version's OSL (a .blend saved
+    by an older SpecGen keeps its shader's bytecode in the node); their socket values are kept."""
+    digest = _shader_digest()
+    for mat in mats:
+        node = script_node(mat)
+        if node is not None and node.get(SHADER_DIGEST_KEY) != digest:
+            compile_script_node(node)
 
 
 def _brdf_group(name: str) -> bpy.types.NodeTree:
@@ -618,6 +636,9 @@ class SpectralRenderJob(RenderJobOutputs):
     holdout_others: bool = False
     #: light from the world too (False: only suns and point lights, see :mod:`.exact_direct`)
     world: bool = True
+    #: one Cycles render of the scene as set up, as a generator (None: a blocking render); the
+    #: Full Scene job passes a render job that Esc stops inside the render (:mod:`.exact_direct`)
+    render_call: Callable[[], Iterator[None]] | None = None
     spectral: np.ndarray | None = field(default=None, init=False)
     wavelengths_nm: np.ndarray | None = field(default=None, init=False)
     basis: np.ndarray | None = field(default=None, init=False)
@@ -657,6 +678,7 @@ class SpectralRenderJob(RenderJobOutputs):
         missing = missing_lookups(mats)
         if missing:
             raise SpecGenError(missing[0])
+        refresh_shader(mats)
         return mats
 
     def steps(self) -> Iterator[float]:
@@ -708,7 +730,10 @@ class SpectralRenderJob(RenderJobOutputs):
                         touch(mat)
                 t = time.perf_counter()
                 with _SceneState(self.scene, self.samples, self.resolution, out_dir, self.holdout_others):
-                    bpy.ops.render.render(write_still=False, scene=self.scene.name)
+                    if self.render_call is None:
+                        bpy.ops.render.render(write_still=False, scene=self.scene.name)
+                    else:
+                        yield from self.render_call()   # None while a render job runs
                 t_render += time.perf_counter() - t
                 for j in range(len(PASSES)):
                     images[g][:, :, r * bake.COEFFS_PER_RENDER + j] = _read_pass(_find_output(out_dir, j))
@@ -752,6 +777,6 @@ class SpectralRenderJob(RenderJobOutputs):
     def run(self, progress: Callable[[float], None] | None = None) -> np.ndarray:
         """Run all steps; returns the spectral stack (H, W, Λ)."""
         for fraction in self.steps():
-            if progress is not None:
+            if progress is not None and fraction is not None:   # None: a render job runs
                 progress(fraction)
         return self.spectral

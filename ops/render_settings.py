@@ -97,14 +97,25 @@ def _timed_render(scene: bpy.types.Scene) -> float:
     return time.perf_counter() - t
 
 
+def denoised_renders(scene: bpy.types.Scene, bands: int, exact_direct: bool = True) -> int:
+    """Cycles renders of a Full Scene job that run the scene's denoiser: the band groups and, with
+    SpecGen surfaces, their direct-light pass (the exact render does not denoise)."""
+    if not scene.cycles.use_denoising:
+        return 0
+    groups = len(uplift.band_groups(bands))
+    return 2 * groups if exact_direct and specgen_materials(scene) else groups
+
+
 def measure_cost(scene: bpy.types.Scene) -> RenderCost:
     """Cost model of the scene from tiny test renders (a few seconds for simple scenes): two at
-    fixed samples for the overhead and the rate, and with adaptive sampling on, one at the scene's
-    own samples for the share adaptive sampling takes."""
+    fixed samples for the overhead and the rate; with adaptive sampling on, one at the scene's
+    own samples for the share adaptive sampling takes; with denoising on, two one-sample renders
+    with the scene's denoiser at two sizes for its cost."""
     w, h = render_size(scene)
     scale = min(1.0, math.sqrt(TEST_PIXELS / (w * h)))
     r, c = scene.render, scene.cycles
     samples, adaptive, percent = c.samples, c.use_adaptive_sampling, r.resolution_percentage
+    denoise = c.use_denoising
     with _Settings(scene) as s:
         s._set(r, "engine", "CYCLES")
         s._set(r, "resolution_percentage", max(1, int(percent * scale)))
@@ -119,6 +130,19 @@ def measure_cost(scene: bpy.types.Scene) -> RenderCost:
         t2 = _timed_render(scene)
         tw, th = render_size(scene)
         cost = fit_cost(tw * th, TEST_SAMPLES, (t1, t2))
+        if denoise:
+            c.use_denoising, c.samples = True, 1
+            test_percent = r.resolution_percentage
+            sizes, times = [], []
+            for p in (max(1, test_percent // 2), test_percent):  # a quarter of the pixels, then all
+                r.resolution_percentage = p
+                if not sizes:
+                    _timed_render(scene)           # the denoiser loaded, as in the real job
+                times.append(_timed_render(scene))
+                sizes.append(render_size(scene)[0] * render_size(scene)[1])
+            if sizes[0] != sizes[1]:
+                cost = cost.with_denoising(tuple(sizes), tuple(times))
+            c.use_denoising = False
         if adaptive and samples > TEST_SAMPLES[1]:
             # as many pixels as fit ADAPTIVE_TEST_S at all samples (at least a 16-pixel square)
             pixels = max(256.0, ADAPTIVE_TEST_S / (cost.rate_s * samples))
@@ -135,23 +159,28 @@ def estimate(scene: bpy.types.Scene, bands: int, cost: RenderCost) -> tuple[floa
     w, h = render_size(scene)
     n = planned_renders(scene, bands)
     samples = scene.cycles.samples
-    seconds = cost.predict(n, w * h, samples)
-    extra = ", plus denoising" if scene.cycles.use_denoising else ""
+    denoised = denoised_renders(scene, bands)
+    seconds = cost.predict(n, w * h, samples, denoised)
+    extra = ""
+    if denoised:
+        extra = f", denoising {denoised} of them" + (
+            f" (~{format_duration(cost.denoise_s(w * h))} each)" if cost.denoise_rate_s > 0 else
+            " (not timed)")
     if cost.sample_fraction < 1.0:
         extra += f", adaptive sampling taking ~{100 * cost.sample_fraction:.0f} % of the samples"
     return seconds, (f"about {format_duration(seconds)}: {n} Cycles renders of {w}×{h} at "
                      f"{samples} samples{extra}")
 
 
-def band_render(scene: bpy.types.Scene, layer: str, interactive: bool) -> Iterator[None]:
-    """Render ``layer`` of ``scene`` once; as a cancellable render job when ``interactive`` and a
-    window exists (yields ``None`` while it runs), else blocking. Raises Cancelled if the user
-    stopped the render."""
+def band_render(scene: bpy.types.Scene, layer: str | None, interactive: bool) -> Iterator[None]:
+    """Render ``layer`` of ``scene`` once (None: every layer in use); as a cancellable render job
+    when ``interactive`` and a window exists (yields ``None`` while it runs), else blocking.
+    Raises Cancelled if the user stopped the render."""
+    which = {"write_still": False, "scene": scene.name} | ({} if layer is None else {"layer": layer})
     if not interactive or bpy.app.background:
-        bpy.ops.render.render(write_still=False, layer=layer, scene=scene.name)
+        bpy.ops.render.render(**which)
         return
-    yield from render_job(lambda: bpy.ops.render.render("INVOKE_DEFAULT", write_still=False,
-                                                        layer=layer, scene=scene.name))
+    yield from render_job(lambda: bpy.ops.render.render("INVOKE_DEFAULT", **which))
 
 
 def render_job(start: Callable[[], set[str]]) -> Iterator[None]:
