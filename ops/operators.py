@@ -30,7 +30,7 @@ from specgen_addon.render.cycles_time_estimate import format_duration
 from . import naming
 from .photo_inputs import lighting_job, photo_source
 from .properties import output_dir
-from .render_settings import PREVIEW_PERCENT, PREVIEW_SAMPLES
+from .render_settings import PREVIEW_PERCENT, PREVIEW_SAMPLES, band_render
 from .scene_lighting import ball_position
 from .reporting import check_generate_settings, check_render_settings, report_exception
 
@@ -364,6 +364,9 @@ class SPECGEN_OT_render_stack(_Modal, bpy.types.Operator):
                 job.interactive = interactive
                 if self.estimate_time:
                     self._estimate(context)
+            elif interactive:
+                # each Exact render as Blender's render job: Esc stops it inside the render
+                job.render_call = lambda: band_render(sc, None, True)
         except BaseException:
             self._end()
             raise
