@@ -22,23 +22,13 @@ from specgen_addon.common.errors import SpecGenError
 from specgen_addon.scale import items as items_mod
 from specgen_addon.scale.batch_many import DEFAULT_BATCH_SCRIPT, check_batch_args
 from specgen_addon.scale.worker import PYTHON, run_item
+from batch_stand_in import stand_in_source, touch_inputs
 
 REPO = Path(__file__).resolve().parents[1]
 
 #: Stand-in for batch.py (same options): "flaky*" crashes on its first attempt, "crash*" always,
 #: "bad*" is refused as bad input (exit 2), anything else writes an output.
-FAKE_BATCH = '''
-import argparse, pathlib, sys
-def build_parser():
-    ap = argparse.ArgumentParser()
-    g = ap.add_mutually_exclusive_group(required=True)
-    g.add_argument("--image"); g.add_argument("--brdf")
-    ap.add_argument("--out", required=True); ap.add_argument("--overwrite", action="store_true")
-    ap.add_argument("--samples", type=int, default=1)
-    return ap
-if __name__ == "__main__":
-    a = build_parser().parse_args()
-    src = pathlib.Path(a.image or a.brdf)
+FAKE_BATCH = stand_in_source('''
     if src.stem.startswith("flaky") and not src.with_suffix(".tried").exists():
         src.with_suffix(".tried").write_text("1"); sys.exit(1)
     if src.stem.startswith("crash"):
@@ -46,19 +36,12 @@ if __name__ == "__main__":
     if src.stem.startswith("bad"):
         print("batch.py: error: no sphere found", file=sys.stderr); sys.exit(2)
     (pathlib.Path(a.out) / (src.stem + "_render.exr")).write_text(str(a.samples))
-'''
-
-
-def _touch(folder: Path, *names: str) -> list[Path]:
-    folder.mkdir(parents=True, exist_ok=True)
-    for n in names:
-        (folder / n).write_bytes(b"x")
-    return [folder / n for n in names]
+''')
 
 
 def test_folders_and_manifests_give_inputs_with_stable_unique_names(tmp_path):
-    _touch(tmp_path / "lib", "oak.png", "oak.exr", "felt.bsdf", "notes.txt")
-    _touch(tmp_path / "more", "oak.png", "gold.binary")
+    touch_inputs(tmp_path / "lib", "oak.png", "oak.exr", "felt.bsdf", "notes.txt")
+    touch_inputs(tmp_path / "more", "oak.png", "gold.binary")
     (tmp_path / "list.txt").write_text("# studio list\nmore/gold.binary\n\nmore/oak.png  # again\n")
     (tmp_path / "list.json").write_text(json.dumps({"inputs": ["lib/felt.bsdf"]}))
     files = items_mod.collect_inputs([tmp_path / "lib"], tmp_path / "list.txt")
@@ -75,7 +58,7 @@ def test_folders_and_manifests_give_inputs_with_stable_unique_names(tmp_path):
 
 
 def test_plan_skips_finished_items_and_refuses_to_replace_other_results(tmp_path):
-    its = items_mod.make_items(_touch(tmp_path / "in", "a.png", "b.png"))
+    its = items_mod.make_items(touch_inputs(tmp_path / "in", "a.png", "b.png"))
     out = tmp_path / "out"
     (out / "a").mkdir(parents=True)
     (out / "a" / "item.json").write_text(json.dumps({"fingerprint": its[0].fingerprint(["--samples", "4"])}))
@@ -100,7 +83,7 @@ def test_batch_arguments_are_checked_by_batch_py_before_any_work():
 def test_worker_publishes_an_item_whole_or_not_at_all(tmp_path):
     script = tmp_path / "fake_batch.py"
     script.write_text(FAKE_BATCH)
-    inputs = _touch(tmp_path / "in", "good.png", "bad.png", "crash.png")
+    inputs = touch_inputs(tmp_path / "in", "good.png", "bad.png", "crash.png")
     out = tmp_path / "out"
     out.mkdir()
     its = {it.id: it for it in items_mod.make_items(inputs)}
@@ -211,7 +194,7 @@ def test_batch_many_on_a_separate_scheduler_and_workers_retries_then_reports(tmp
             probe.wait_for_workers(2, timeout=60)
         script = tmp_path / "fake_batch.py"
         script.write_text(FAKE_BATCH)
-        inputs = _touch(tmp_path / "in", "good.png", "flaky.png", "crash.png", "bad.png")
+        inputs = touch_inputs(tmp_path / "in", "good.png", "flaky.png", "crash.png", "bad.png")
         done = subprocess.run([sys.executable, "-m", "specgen_addon", "batch-many", *map(str, inputs),
                                "--out", str(tmp_path / "out"), "--scheduler", address, "--retries", "1",
                                "--batch-script", str(script), "--quiet"],
@@ -236,7 +219,7 @@ def test_ctrl_c_stops_batch_many_cleanly_with_exit_130(tmp_path):
     pytest.importorskip("distributed")
     script = tmp_path / "slow_batch.py"
     script.write_text(FAKE_BATCH.replace("    (pathlib.Path(a.out)", "    import time; time.sleep(60)\n    (pathlib.Path(a.out)"))
-    inputs = _touch(tmp_path / "in", "a.png", "b.png", "c.png")
+    inputs = touch_inputs(tmp_path / "in", "a.png", "b.png", "c.png")
     out = tmp_path / "out"
     proc = subprocess.Popen([sys.executable, "-m", "specgen_addon", "batch-many", *map(str, inputs), "--out", str(out),
                              "--batch-script", str(script), "--dashboard-address", ":0", "--quiet"],

@@ -19,22 +19,13 @@ from specgen_addon.common.atomic_io import lock_path
 from specgen_addon.scale import items as items_mod
 from specgen_addon.scale.batch_many import BatchManyOptions, run_batch_many
 from specgen_addon.scale.worker import PYTHON, RECORD_NAME, run_item
+from batch_stand_in import stand_in, touch_inputs
 
 REPO = Path(__file__).resolve().parents[1]
 
 #: Stand-in for batch.py: writes one output and appends the input's name to ``runs.txt`` beside
 #: the inputs, so a test can count how often each item was really made; sleeps SLOW seconds.
 FAKE_BATCH = '''
-import argparse, os, pathlib, sys, time
-def build_parser():
-    ap = argparse.ArgumentParser()
-    g = ap.add_mutually_exclusive_group(required=True)
-    g.add_argument("--image"); g.add_argument("--brdf")
-    ap.add_argument("--out", required=True); ap.add_argument("--overwrite", action="store_true")
-    return ap
-if __name__ == "__main__":
-    a = build_parser().parse_args()
-    src = pathlib.Path(a.image or a.brdf)
     time.sleep(float(os.environ.get("FAKE_BATCH_SLOW", "0")))
     with open(src.parent / "runs.txt", "a") as fh:
         fh.write(src.name + "\\n")
@@ -42,25 +33,16 @@ if __name__ == "__main__":
 '''
 
 
-def _inputs(folder: Path, *names: str) -> list[Path]:
-    folder.mkdir(parents=True, exist_ok=True)
-    for n in names:
-        (folder / n).write_bytes(b"x")
-    return [folder / n for n in names]
-
-
 def _script(tmp_path: Path) -> Path:
-    script = tmp_path / "fake_batch.py"
-    script.write_text(FAKE_BATCH)
-    return script
+    return stand_in(tmp_path / "fake_batch.py", FAKE_BATCH)
 
 
 # ------------------------------------------------------------------------------------ names
 def test_item_folders_never_take_batch_many_s_own_names(tmp_path):
     """``failed.png`` was published over OUT/failed/ (the failure logs), ``.work.png`` into the
     staging folder, and ``...png`` named OUT/.. itself."""
-    files = _inputs(tmp_path / "in", "failed.png", "Failed.exr", ".work.png", "...png", "..png",
-                    "report.json.png", "work.png", "item.png", ".hidden.png")
+    files = touch_inputs(tmp_path / "in", "failed.png", "Failed.exr", ".work.png", "...png", "..png",
+                         "report.json.png", "work.png", "item.png", ".hidden.png")
     ids = [it.id for it in items_mod.make_items(files)]
     assert len({i.lower() for i in ids}) == len(ids), ids
     for i in ids:
@@ -74,7 +56,7 @@ def test_an_item_published_by_a_lost_attempt_is_not_made_again(tmp_path):
     """A worker that published its item and died before returning: Dask's retry finds the
     published result of this run and returns its record, which is item.json's."""
     script = _script(tmp_path)
-    [src] = _inputs(tmp_path / "in", "oak.png")
+    [src] = touch_inputs(tmp_path / "in", "oak.png")
     out = tmp_path / "out"
     out.mkdir()
     [it] = items_mod.make_items([src])
@@ -98,7 +80,7 @@ def _opts(tmp_path: Path, inputs: list[Path], **kw) -> BatchManyOptions:
 
 
 def test_a_second_batch_many_on_one_output_folder_is_refused_before_any_work(tmp_path):
-    inputs = _inputs(tmp_path / "in", "a.png")
+    inputs = touch_inputs(tmp_path / "in", "a.png")
     (tmp_path / "out").mkdir()
     holder = subprocess.Popen([sys.executable, "-c", "import time; time.sleep(60)"])
     try:
@@ -112,7 +94,7 @@ def test_a_second_batch_many_on_one_output_folder_is_refused_before_any_work(tmp
 
 
 def test_stale_staging_of_a_killed_run_is_removed_by_the_next_run(tmp_path):
-    inputs = _inputs(tmp_path / "in", "a.png")
+    inputs = touch_inputs(tmp_path / "in", "a.png")
     out = tmp_path / "out"
     [it] = items_mod.make_items(inputs)
     (out / "a").mkdir(parents=True)  # finished already: the rerun starts no cluster
@@ -161,7 +143,7 @@ def test_after_kill_9_of_the_main_process_a_rerun_does_every_item_exactly_once(t
     once, report.json and every item.json agree, no .work left."""
     psutil = pytest.importorskip("psutil")
     pytest.importorskip("distributed")
-    inputs = _inputs(tmp_path / "in", "a.png", "b.png", "c.png", "d.png", "e.png", "f.png")
+    inputs = touch_inputs(tmp_path / "in", "a.png", "b.png", "c.png", "d.png", "e.png", "f.png")
     out = tmp_path / "out"
     cmd = [sys.executable, "-m", "specgen_addon", "batch-many", *map(str, inputs), "--out", str(out),
            "--workers", "2", "--dashboard-address", ":0", "--quiet", "--batch-script", str(_script(tmp_path))]
@@ -204,7 +186,7 @@ def test_a_full_disk_while_publishing_is_the_item_s_one_sentence_error(tmp_path,
     import errno
 
     script = _script(tmp_path)
-    [src] = _inputs(tmp_path / "in", "oak.png")
+    [src] = touch_inputs(tmp_path / "in", "oak.png")
     out = tmp_path / "out"
     out.mkdir()
     [it] = items_mod.make_items([src])

@@ -19,7 +19,7 @@ import pytest
 
 bpy = pytest.importorskip("bpy")
 
-from addon_modules import PKG, addon_module
+from addon_modules import addon_module
 
 bake = addon_module("specgen_addon.generate.lookup")
 render = addon_module("ops.render")
@@ -70,35 +70,30 @@ def _reopen(blend: Path, out: Path) -> str:
 
 @pytest.mark.slow
 @pytest.mark.blender
-def test_lookups_move_beside_the_saved_blend_and_a_moved_blend_renders_the_same(tmp_path, monkeypatch):
+def test_lookups_move_beside_the_saved_blend_and_a_moved_blend_renders_the_same(tmp_path, monkeypatch, registered_addon):
     monkeypatch.setattr(tempfile, "tempdir", str(tmp_path / "temp"))
-    bpy.ops.wm.read_factory_settings(use_empty=True)
-    PKG.register()
-    try:
-        sc = bpy.context.scene
-        scene_mod.add_camera(sc)
-        obj = scene_mod.add_mesh(sc, "sphere")
-        scene_mod.add_sun(sc, (0.0, 0.3, 1.0))
-        unsaved = Path(properties.output_dir(sc.specgen))            # the unsaved file's folder
-        assert str(unsaved).startswith(str(tmp_path / "temp"))
-        unsaved.mkdir(parents=True)
-        info = bake.bake_atlas(_table(), unsaved / "ball_lookup.exr")
-        bake.save_atlas_info(info, unsaved / "ball_lookup.json")
-        _table().save(unsaved / "ball.npz", compact=True)            # what Generate writes beside them
-        mat = render.make_material("SpecGen ball", info)
-        obj.data.materials.append(mat)
-        before = render.SpectralRenderJob(sc, None, samples=1, resolution=(16, 16)).run()
+    sc = bpy.context.scene
+    scene_mod.add_camera(sc)
+    obj = scene_mod.add_mesh(sc, "sphere")
+    scene_mod.add_sun(sc, (0.0, 0.3, 1.0))
+    unsaved = Path(properties.output_dir(sc.specgen))            # the unsaved file's folder
+    assert str(unsaved).startswith(str(tmp_path / "temp"))
+    unsaved.mkdir(parents=True)
+    info = bake.bake_atlas(_table(), unsaved / "ball_lookup.exr")
+    bake.save_atlas_info(info, unsaved / "ball_lookup.json")
+    _table().save(unsaved / "ball.npz", compact=True)            # what Generate writes beside them
+    mat = render.make_material("SpecGen ball", info)
+    obj.data.materials.append(mat)
+    before = render.SpectralRenderJob(sc, None, samples=1, resolution=(16, 16)).run()
 
-        blend = tmp_path / "project" / "scene.blend"
-        blend.parent.mkdir()
-        bpy.ops.wm.save_as_mainfile(filepath=str(blend))
-        moved = sorted(p.name for p in (blend.parent / "specgen").iterdir())
-        assert "ball_lookup.json" in moved and any(n.startswith("ball_lookup.g") for n in moved)
-        assert not any(unsaved.iterdir())                             # moved, not copied
-        stored = list(bpy.data.materials["SpecGen ball"]["specgen_atlas_groups"])
-        assert all(p.startswith("//specgen/ball_lookup.g") for p in stored), stored
-    finally:
-        PKG.unregister()
+    blend = tmp_path / "project" / "scene.blend"
+    blend.parent.mkdir()
+    bpy.ops.wm.save_as_mainfile(filepath=str(blend))
+    moved = sorted(p.name for p in (blend.parent / "specgen").iterdir())
+    assert "ball_lookup.json" in moved and any(n.startswith("ball_lookup.g") for n in moved)
+    assert not any(unsaved.iterdir())                             # moved, not copied
+    stored = list(bpy.data.materials["SpecGen ball"]["specgen_atlas_groups"])
+    assert all(p.startswith("//specgen/ball_lookup.g") for p in stored), stored
 
     elsewhere = tmp_path / "elsewhere" / "project moved ü"              # spaces and non-ASCII
     elsewhere.parent.mkdir()

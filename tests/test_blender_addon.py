@@ -260,7 +260,7 @@ def test_extension_zip_installs_and_registers(tmp_path):
 
 
 @pytest.mark.parametrize("case", ["missing", "no_sphere", "unknown_env", "unwritable"])
-def test_batch_bad_input_exits_nonzero_with_one_line(case, tmp_path):
+def test_batch_bad_input_exits_nonzero_with_one_line(case, tmp_path, sphere_photo):
     from PIL import Image
 
     flat = tmp_path / "flat.png"
@@ -272,7 +272,7 @@ def test_batch_bad_input_exits_nonzero_with_one_line(case, tmp_path):
             "unknown_env": ["--image", str(flat), "--env", "moon", "--out", str(tmp_path / "o")],
             "unwritable": ["--image", str(flat), "--out", str(blocker / "sub")]}[case]
     if case in ("unknown_env", "unwritable"):  # needs a sphere to get past the image check
-        args[1] = str(_sphere_png(tmp_path / "sphere.png"))
+        args[1] = str(sphere_photo)
     done = subprocess.run([sys.executable, str(REPO / "batch.py"), *args], capture_output=True,
                           text=True, timeout=120)
     assert done.returncode == 2, done.stderr
@@ -328,75 +328,54 @@ def test_panel_draws_every_setting_and_the_three_buttons():
     assert any(r.kind == "progress" for r in busy)
 
 
-def test_operators_apply_and_render_headless_and_report_errors(table, tmp_path):
+def test_operators_apply_and_render_headless_and_report_errors(table, tmp_path, registered_addon):
     info = bake.bake_atlas(table, tmp_path / "lookup" / "brdf_lookup.exr")
     bake.save_atlas_info(info, tmp_path / "lookup" / "brdf_lookup.json")
-    bpy.ops.wm.read_factory_settings(use_empty=True)
-    PKG.register()
-    try:
-        sc = bpy.context.scene
-        scene_mod.add_camera(sc)
-        obj = scene_mod.add_mesh(sc, "sphere")
-        scene_mod.add_sun(sc, (0.0, 0.0, 1.0))
-        s = sc.specgen
-        s.output_dir = str(tmp_path / "out")
-        s.resolution, s.samples = 16, 1
-        s.render_mode = "EXACT"
-        with pytest.raises(RuntimeError, match="no render-visible object uses a SpecGen material"):
-            bpy.ops.specgen.render_stack()          # reported through self.report, one line
-        assert not bpy.ops.specgen.apply.poll()     # nothing generated yet
-        s.atlas_json = str(tmp_path / "lookup" / "brdf_lookup.json")
-        bpy.context.view_layer.objects.active = obj
-        obj.select_set(True)
-        assert bpy.ops.specgen.apply() == {"FINISHED"}
-        assert render.is_specgen_material(obj.active_material)
-        assert bpy.ops.specgen.render_stack() == {"FINISHED"}
-        # named after the scene, the camera and the frame
-        assert (tmp_path / "out" / f"{sc.name}_SpecGen_camera_f{sc.frame_current:04d}.exr").is_file()
-        with pytest.raises(RuntimeError, match="already exists"):
-            bpy.ops.specgen.render_stack()          # never overwritten unless asked
-        s.overwrite_outputs = True                   # outputs only; materials keep their switch
-        assert not s.overwrite
-        assert bpy.ops.specgen.render_stack() == {"FINISHED"}
-        s.render_mode = "FULL_SCENE"                 # the scene's resolution and samples
-        sc.render.resolution_x, sc.render.resolution_y, sc.cycles.samples = 12, 8, 1
-        assert bpy.ops.specgen.render_stack(filename="full.exr") == {"FINISHED"}
-        from specgen_addon.render.spectral_exr import read_spectral_exr
+    sc = bpy.context.scene
+    scene_mod.add_camera(sc)
+    obj = scene_mod.add_mesh(sc, "sphere")
+    scene_mod.add_sun(sc, (0.0, 0.0, 1.0))
+    s = sc.specgen
+    s.output_dir = str(tmp_path / "out")
+    s.resolution, s.samples = 16, 1
+    s.render_mode = "EXACT"
+    with pytest.raises(RuntimeError, match="no render-visible object uses a SpecGen material"):
+        bpy.ops.specgen.render_stack()          # reported through self.report, one line
+    assert not bpy.ops.specgen.apply.poll()     # nothing generated yet
+    s.atlas_json = str(tmp_path / "lookup" / "brdf_lookup.json")
+    bpy.context.view_layer.objects.active = obj
+    obj.select_set(True)
+    assert bpy.ops.specgen.apply() == {"FINISHED"}
+    assert render.is_specgen_material(obj.active_material)
+    assert bpy.ops.specgen.render_stack() == {"FINISHED"}
+    # named after the scene, the camera and the frame
+    assert (tmp_path / "out" / f"{sc.name}_SpecGen_camera_f{sc.frame_current:04d}.exr").is_file()
+    with pytest.raises(RuntimeError, match="already exists"):
+        bpy.ops.specgen.render_stack()          # never overwritten unless asked
+    s.overwrite_outputs = True                   # outputs only; materials keep their switch
+    assert not s.overwrite
+    assert bpy.ops.specgen.render_stack() == {"FINISHED"}
+    s.render_mode = "FULL_SCENE"                 # the scene's resolution and samples
+    sc.render.resolution_x, sc.render.resolution_y, sc.cycles.samples = 12, 8, 1
+    assert bpy.ops.specgen.render_stack(filename="full.exr") == {"FINISHED"}
+    from specgen_addon.render.spectral_exr import read_spectral_exr
 
-        assert read_spectral_exr(tmp_path / "out" / "full.exr").values.shape == (8, 12, s.bands)
-        assert "specgen_fit_error" in obj.active_material
-    finally:
-        PKG.unregister()
+    assert read_spectral_exr(tmp_path / "out" / "full.exr").values.shape == (8, 12, s.bands)
+    assert "specgen_fit_error" in obj.active_material
 
 
-def _sphere_png(path: Path) -> Path:
-    from PIL import Image
-    from specgen_addon.render.analytic import Lambertian
-
-    img = render_spectral(Lambertian(albedo=0.5), sphere_geometry(64), lights=[DistantLight((0, 0, 1))],
-                          wavelengths_nm=WL).spectral
-    rgb = np.clip(np.repeat(img.mean(-1, keepdims=True), 3, -1), 0, 1)
-    Image.fromarray((rgb * 255).astype(np.uint8)).save(path)
-    return path
-
-
-def test_generate_operator_bakes_a_lookup_from_an_image(tmp_path):
+def test_generate_operator_bakes_a_lookup_from_an_image(tmp_path, registered_addon, sphere_photo):
     from specgen_addon.model import DEFAULT_WEIGHTS
 
     if not Path(DEFAULT_WEIGHTS).is_file():
         pytest.skip(f"no shipped weights at {DEFAULT_WEIGHTS} yet")
-    bpy.ops.wm.read_factory_settings(use_empty=True)
-    PKG.register()
-    try:
-        s = bpy.context.scene.specgen
-        s.image_path = str(_sphere_png(tmp_path / "sphere.png"))
-        s.output_dir = str(tmp_path / "out")
-        s.bands = 6
-        assert bpy.ops.specgen.generate_brdf() == {"FINISHED"}
-        info = bake.load_atlas_info(s.atlas_json)
-        assert info.wavelengths_nm.size == 6 and all(p.is_file() for p in info.group_paths)
-    finally:
-        PKG.unregister()
+    s = bpy.context.scene.specgen
+    s.image_path = str(sphere_photo)
+    s.output_dir = str(tmp_path / "out")
+    s.bands = 6
+    assert bpy.ops.specgen.generate_brdf() == {"FINISHED"}
+    info = bake.load_atlas_info(s.atlas_json)
+    assert info.wavelengths_nm.size == 6 and all(p.is_file() for p in info.group_paths)
 
 
 @pytest.mark.slow

@@ -35,8 +35,8 @@ def test_an_otsu_reflectance_is_its_own_twin():
     np.testing.assert_allclose(reflectance_twin(r).values, r.values, atol=2e-3)
 
 
-def test_the_twin_of_each_family_changes_only_its_reflectances():
-    mats = generate_mixed_corpus(60, 0)
+def test_the_twin_of_each_family_changes_only_its_reflectances(tiny_corpus):
+    mats = tiny_corpus
     seen = set()
     for m in mats:
         twin = colour_twin(m)
@@ -56,19 +56,19 @@ def test_the_twin_of_each_family_changes_only_its_reflectances():
     assert len(seen) >= 5   # the families, each rebuilt by dataclasses.replace
 
 
-def test_a_saturated_colour_clipped_by_otsu_is_restored():
+def test_a_saturated_colour_clipped_by_otsu_is_restored(tiny_corpus):
     """A saturated magenta-red, whose Otsu 2018 spectrum clipping to [0, 1] makes 4 % less red."""
-    m = next(x for x in generate_mixed_corpus(60, 0) if x.name == "mat0042")
+    m = next(x for x in tiny_corpus if x.name == "mat0042")
     r = m.sheen_color
     clipped = otsu2018_reflectance(_xyz(r), REFLECTANCE_GRID_NM)
     assert np.abs(xyz_of_reflectance(np.interp(GRID, REFLECTANCE_GRID_NM, clipped), GRID) - _xyz(r)).max() > 5e-3
     np.testing.assert_allclose(_xyz(reflectance_twin(r)), _xyz(r), atol=1e-4)
 
 
-def test_the_twin_renders_the_same_colour_under_d65():
+def test_the_twin_renders_the_same_colour_under_d65(tiny_corpus):
     """Every BRDF evaluation of the twin matches the material's RGB (a renderer's colour) closely,
     while its spectral values differ: what metamerism hides from an RGB photo."""
-    m = next(x for x in generate_mixed_corpus(60, 0) if type(x).__name__ == "Sheen")
+    m = next(x for x in tiny_corpus if type(x).__name__ == "Sheen")
     twin = colour_twin(m)
     rng = np.random.default_rng(0)
     wi = rng.normal(size=(64, 3)); wi[:, 2] = np.abs(wi[:, 2]); wi /= np.linalg.norm(wi, axis=1, keepdims=True)

@@ -8,7 +8,7 @@ import pytest
 
 bpy = pytest.importorskip("bpy")
 
-from addon_modules import PKG, addon_module
+from addon_modules import addon_module
 
 bake = addon_module("specgen_addon.generate.lookup")
 render = addon_module("ops.render")
@@ -29,23 +29,18 @@ def _table() -> BRDFTable:
 
 @pytest.mark.slow
 @pytest.mark.blender
-def test_export_brdf_writes_rgl_and_merl_files_of_the_panels_material(tmp_path):
+def test_export_brdf_writes_rgl_and_merl_files_of_the_panels_material(tmp_path, registered_addon):
     table = _table()
     info = bake.bake_atlas(table, tmp_path / "ball_lookup.exr")
     table.save(tmp_path / "ball.npz", compact=True)
     bare = bake.bake_atlas(table, tmp_path / "bare" / "bare_lookup.exr")
-    bpy.ops.wm.read_factory_settings(use_empty=True)
-    PKG.register()
-    try:
-        s = bpy.context.scene.specgen
-        s.material = render.make_material("SpecGen ball", info)
-        assert bpy.ops.specgen.export_brdf(filepath=str(tmp_path / "ball.bsdf")) == {"FINISHED"}
-        assert bpy.ops.specgen.export_brdf(filepath=str(tmp_path / "ball.binary")) == {"FINISHED"}
-        s.material = render.make_material("SpecGen bare", bare)
-        with pytest.raises(RuntimeError, match="has no BRDF file beside its lookups"):
-            bpy.ops.specgen.export_brdf(filepath=str(tmp_path / "bare.bsdf"))
-    finally:
-        PKG.unregister()
+    s = bpy.context.scene.specgen
+    s.material = render.make_material("SpecGen ball", info)
+    assert bpy.ops.specgen.export_brdf(filepath=str(tmp_path / "ball.bsdf")) == {"FINISHED"}
+    assert bpy.ops.specgen.export_brdf(filepath=str(tmp_path / "ball.binary")) == {"FINISHED"}
+    s.material = render.make_material("SpecGen bare", bare)
+    with pytest.raises(RuntimeError, match="has no BRDF file beside its lookups"):
+        bpy.ops.specgen.export_brdf(filepath=str(tmp_path / "bare.bsdf"))
     bsdf = load_brdf(tmp_path / "ball.bsdf")
     assert bsdf.is_spectral and np.allclose(bsdf.wavelengths, WL)
     merl = load_brdf(tmp_path / "ball.binary")

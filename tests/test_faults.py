@@ -21,6 +21,7 @@ import pytest
 
 from specgen_addon.common.errors import OutputBusyError, OutputExistsError, OutputWriteError, SpecGenError
 from specgen_addon.common.atomic_io import OutputLock, atomic_write, lock_path
+from stop_stand_ins import fake_blender_modules, sigint_when_ready
 
 REPO = Path(__file__).resolve().parents[1]
 EXAMPLE = REPO / "examples" / "sphere.png"
@@ -54,34 +55,33 @@ def test_a_write_without_overwrite_never_replaces_a_file_that_appeared_meanwhile
     assert sorted(p.name for p in tmp_path.iterdir()) == ["t.json"]
 
 
-def test_a_stopped_command_keeps_a_neighbours_outputs_in_its_folder(tmp_path):
-    """Two batch.py runs into one folder: the stopped one removes only what it made."""
+def _a_neighbour_publishes_beside_ours(out: Path) -> None:
+    (out / "theirs.exr").write_text("a neighbour's finished render")
+
+
+def _another_process_replaces_ours(out: Path) -> None:
+    os.unlink(out / "ours.exr")
+    (out / "ours.exr").write_text("theirs, same name")  # another inode: not ours any more
+
+
+@pytest.mark.parametrize("stop, neighbour, left", [
+    (KeyboardInterrupt, _a_neighbour_publishes_beside_ours, {"theirs.exr": "a neighbour's finished render"}),
+    (RuntimeError, _another_process_replaces_ours, {"ours.exr": "theirs, same name"}),
+], ids=["stopped-with-a-neighbours-file-beside", "failed-after-ours-was-replaced"])
+def test_cleanup_removes_only_what_the_command_made(tmp_path, stop, neighbour, left):
+    """Two batch.py runs into one folder, or our output replaced by another process after we wrote
+    it: the clean-up of the stopped or failed command removes only its own files."""
     from specgen_addon.common.interrupts import OutputGuard
 
     out = tmp_path / "out"
     out.mkdir()
-    with pytest.raises(KeyboardInterrupt):
+    with pytest.raises(stop):
         with OutputGuard([out]):
-            with atomic_write(out / "mine.exr") as tmp:
-                tmp.write_text("mine")
-            (out / "theirs.exr").write_text("a neighbour's finished render")
-            raise KeyboardInterrupt
-    assert sorted(p.name for p in out.iterdir()) == ["theirs.exr"]
-
-
-def test_cleanup_spares_a_file_replaced_by_another_process_after_we_wrote_it(tmp_path):
-    from specgen_addon.common.interrupts import OutputGuard
-
-    out = tmp_path / "out"
-    out.mkdir()
-    with pytest.raises(RuntimeError):
-        with OutputGuard([out]):
-            with atomic_write(out / "a.exr") as tmp:
+            with atomic_write(out / "ours.exr") as tmp:
                 tmp.write_text("ours")
-            os.unlink(out / "a.exr")
-            (out / "a.exr").write_text("theirs, same name")  # another inode: not ours any more
-            raise RuntimeError("failed later")
-    assert (out / "a.exr").read_text() == "theirs, same name"
+            neighbour(out)
+            raise stop
+    assert {p.name: p.read_text() for p in out.iterdir()} == left
 
 
 # ------------------------------------------------------------------------------------ locks
@@ -498,28 +498,13 @@ sys.exit(run_guarded("infer", work, ([], [out])))
 def test_a_hard_stop_while_an_output_is_staged_removes_the_staging_file(tmp_path):
     """SIGINT during a long C call inside a write: the watcher ends the process itself, and the
     half-written staging file beside the single output goes too."""
-    import signal
-
-    from test_interrupts import FAKE_BLENDER
-
-    blender = tmp_path / "blender" / "5.0" / "scripts" / "modules"  # a path Blender's own code has
-    blender.mkdir(parents=True)
-    (blender / "fake_blender.py").write_text(FAKE_BLENDER)
+    blender = fake_blender_modules(tmp_path)
     work = tmp_path / "work"
     work.mkdir()
     script = tmp_path / "s.py"
     script.write_text(HARD_STOP_SCRIPT.format(repo=str(REPO), blender=str(blender), out=str(work / "b.npz")))
-    proc = subprocess.Popen([sys.executable, str(script)], stdout=subprocess.PIPE, stderr=subprocess.STDOUT,
-                            text=True)
-    try:
-        assert proc.stdout.readline().strip() == "READY"
-        time.sleep(0.3)
-        proc.send_signal(signal.SIGINT)
-        text, _ = proc.communicate(timeout=60)
-    finally:
-        if proc.poll() is None:
-            proc.kill()
-    assert proc.returncode == 130, text
+    code, text = sigint_when_ready([sys.executable, str(script)], delay=0.3)
+    assert code == 130, text
     assert sorted(p.name for p in work.iterdir()) == [], text
 
 

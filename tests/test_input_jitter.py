@@ -13,7 +13,7 @@ from specgen_addon.photo.sphere_image import prepare_sphere_array
 from specgen_addon.train.augment import jitter_framing, offgrid_photo_crop, reframe
 from specgen_addon.evaluation.trained_network import displaced_input
 from specgen_addon.train.loop import TrainConfig
-from test_train import twice_and_without
+from tiny_training import twice_and_without
 
 needs_bpy = pytest.mark.skipif(importlib.util.find_spec("bpy") is None,
                                reason="the canonical input's environment map ships in the bpy wheel")

@@ -12,6 +12,7 @@ import time
 import pytest
 
 from specgen_addon.common.interrupts import HARD_STOP_GRACE_S, stop_on_signals
+from stop_stand_ins import fake_blender_modules, sigint_when_ready
 
 pytestmark = pytest.mark.skipif(sys.platform == "win32", reason="fork and POSIX signals")
 
@@ -72,7 +73,6 @@ except Interrupted as exc:
 def test_a_signal_inside_a_slow_import_is_raised_in_the_code_after_it(tmp_path):
     """A lazy ``import onnxruntime`` can take seconds; a Ctrl-C landing there must not end in the
     watcher's hard stop (generic message) but raise in the command's own code once it is over."""
-    import subprocess
     from pathlib import Path
 
     mods = tmp_path / "mods"
@@ -80,59 +80,11 @@ def test_a_signal_inside_a_slow_import_is_raised_in_the_code_after_it(tmp_path):
     (mods / "slow_to_import.py").write_text(f"import time\ntime.sleep({HARD_STOP_GRACE_S + 2.0})\n")
     script = tmp_path / "s.py"
     script.write_text(SLOW_IMPORT_SCRIPT.format(repo=str(Path(__file__).resolve().parents[1]), mods=str(mods)))
-    proc = subprocess.Popen([sys.executable, str(script)], stdout=subprocess.PIPE, stderr=subprocess.STDOUT,
-                            text=True)
-    try:
-        assert proc.stdout.readline().strip() == "READY"
-        time.sleep(0.5)                     # inside the import's sleep
-        proc.send_signal(signal.SIGINT)
-        out, _ = proc.communicate(timeout=30)
-    finally:
-        if proc.poll() is None:
-            proc.kill()
-    assert proc.returncode == 130, out
+    code, out = sigint_when_ready([sys.executable, str(script)], delay=0.5, timeout=30)  # in the import's sleep
+    assert code == 130, out
     assert "IMPORTED" in out and "RAISED SIGINT" in out, out
     assert "cancelled: stopped by" not in out, out
 
-
-FAKE_BLENDER = r"""
-import os, time
-from specgen_addon.common import atomic_io as io_utils
-
-
-def busy_writing(folder, seconds):
-    # Blender's own Python (a startup script, an operator): running, writing files, for a while
-    t = time.monotonic()
-    i = 0
-    while time.monotonic() - t < seconds:
-        path = folder / f"from_blender_{i % 500}.txt"
-        path.write_text("x")
-        # SpecGen's writer called from Blender's code: the file enters the ledger of what the
-        # command made (inline, so that no frame of SpecGen's own code runs here)
-        st = os.lstat(path)
-        io_utils._LEDGER[os.path.abspath(path)] = ((st.st_dev, st.st_ino, st.st_mtime_ns, st.st_size),
-                                                   next(io_utils._SEQ))
-        i += 1
-    return i
-
-
-def fails_after(seconds):
-    # Blender's C code whose system call the signal cut short: it reports an error a while later
-    t = time.monotonic()
-    while time.monotonic() - t < seconds:
-        pass
-    raise RuntimeError("Error: cannot read file (Interrupted system call)")
-
-
-def stuck_in_a_c_call(seconds):
-    # a Cycles render: one long C call under Blender's Python, where no Python signal handler runs
-    import signal
-    old = signal.pthread_sigmask(signal.SIG_BLOCK, {signal.SIGINT})   # the C handler runs on
-    try:                                                              # another thread meanwhile
-        time.sleep(seconds)
-    finally:
-        signal.pthread_sigmask(signal.SIG_SETMASK, old)
-"""
 
 #: A hard-stop clean-up step that takes a second (a large temporary folder), run before the
 #: output folder's own clean-up: the main thread comes back from its C call meanwhile.
@@ -172,12 +124,9 @@ sys.exit(cli.run_guarded("the work", work, ([out], []), prog="s"))
 
 def _run_guarded_script(tmp_path, call: str, delay: float, before: str = ""):
     """Start GUARDED_SCRIPT with ``call`` as the step the signal lands in; SIGINT after ``delay``."""
-    import subprocess
     from pathlib import Path
 
-    blender = tmp_path / "blender" / "5.0" / "scripts" / "modules"  # a path Blender's own code has
-    blender.mkdir(parents=True)
-    (blender / "fake_blender.py").write_text(FAKE_BLENDER)
+    blender = fake_blender_modules(tmp_path)
     out = tmp_path / "out"
     out.mkdir()
     (out / "keep.txt").write_text("x")
@@ -185,19 +134,10 @@ def _run_guarded_script(tmp_path, call: str, delay: float, before: str = ""):
     script.write_text(GUARDED_SCRIPT.format(repo=str(Path(__file__).resolve().parents[1]),
                                             blender=str(blender), out=str(out), call=call,
                                             before=before))
-    proc = subprocess.Popen([sys.executable, str(script)], stdout=subprocess.PIPE,
-                            stderr=subprocess.STDOUT, text=True)
     t0 = time.monotonic()
-    try:
-        assert proc.stdout.readline().strip() == "READY"
-        time.sleep(delay)
-        proc.send_signal(signal.SIGINT)
-        text, _ = proc.communicate(timeout=60)
-    finally:
-        if proc.poll() is None:
-            proc.kill()
+    code, text = sigint_when_ready([sys.executable, str(script)], delay)
     left = sorted(str(p.relative_to(out)) for p in out.rglob("*"))
-    return proc.returncode, text, left, time.monotonic() - t0
+    return code, text, left, time.monotonic() - t0
 
 
 def test_a_signal_inside_blender_code_that_keeps_running_is_acted_on_once_in_our_code(tmp_path):

@@ -18,11 +18,6 @@ from tiny_model import TINY_MODEL
 SMALL = TINY_MODEL
 
 
-def small_model(**kw) -> SpecGen:
-    torch.manual_seed(0)
-    return SpecGen(Config(**{**SMALL, **kw}))
-
-
 def random_queries(b: int, n: int, seed: int = 0):
     g = torch.Generator().manual_seed(seed)
     th = torch.rand(b, n, generator=g) * math.pi / 2
@@ -37,8 +32,8 @@ def test_default_model_fits_the_cpu_budget():
     assert 1_000_000 <= n <= 5_000_000
 
 
-def test_planes_and_predictions_have_configured_shapes():
-    model = small_model()
+def test_planes_and_predictions_have_configured_shapes(tiny_network):
+    model = tiny_network()
     planes = model.planes(torch.rand(3, 3, 32, 32))
     assert list(planes) == list(PLANE_NAMES)
     for name, (rows, cols) in model.cfg.plane_shapes.items():
@@ -49,11 +44,11 @@ def test_planes_and_predictions_have_configured_shapes():
 
 
 @pytest.mark.parametrize("fusion", ["aff", "hadamard"])
-def test_a_training_step_runs_wholly_on_the_models_device(fusion):
+def test_a_training_step_runs_wholly_on_the_models_device(fusion, tiny_network):
     """Every tensor the network makes lives on its parameters' device, so it trains on a GPU:
     torch's shape-only "meta" device refuses a host tensor as a GPU does (the GPU check of
     bench/gpu_check.sh found AFF's constant maps made on the host)."""
-    model = small_model(fusion=fusion, spectral_code_knots=3, trunk_upsample_stages=1).to("meta")
+    model = tiny_network(fusion=fusion, spectral_code_knots=3, trunk_upsample_stages=1).to("meta")
     planes = model.planes(torch.rand(2, 3, 32, 32, device="meta"))
     q = [t.to("meta") for t in random_queries(2, 40)]
     loss = model.query(planes, *q).pow(2).mean() + model.query(planes, *q[:3], None).pow(2).mean()
@@ -61,8 +56,8 @@ def test_a_training_step_runs_wholly_on_the_models_device(fusion):
     assert all(p.grad is not None and p.grad.device.type == "meta" for p in model.parameters())
 
 
-def test_gradients_reach_all_six_planes():
-    model = small_model()
+def test_gradients_reach_all_six_planes(tiny_network):
+    model = tiny_network()
     planes = model.planes(torch.rand(2, 3, 32, 32))
     for p in planes.values():
         p.retain_grad()
@@ -72,8 +67,8 @@ def test_gradients_reach_all_six_planes():
         assert p.grad is not None and p.grad.abs().sum() > 0, name
 
 
-def test_rgb_branch_gradients_reach_spectral_planes_through_the_lambda_average():
-    model = small_model()
+def test_rgb_branch_gradients_reach_spectral_planes_through_the_lambda_average(tiny_network):
+    model = tiny_network()
     planes = model.planes(torch.rand(1, 3, 32, 32))
     for p in planes.values():
         p.retain_grad()
@@ -86,8 +81,8 @@ def test_rgb_branch_gradients_reach_spectral_planes_through_the_lambda_average()
         assert g.abs().sum() > 0
 
 
-def test_aff_branch_weights_are_a_softmax_over_six():
-    model = small_model()
+def test_aff_branch_weights_are_a_softmax_over_six(tiny_network):
+    model = tiny_network()
     feats = torch.randn(7, 11, 6, 16)
     w = model.fusion.branch_weights(feats)
     assert w.shape == (7, 11, 6)
@@ -109,16 +104,16 @@ def test_aff_statistic_is_the_gap_of_the_summed_branch_convs():
     assert torch.allclose(aff.hybrid_map(feats).mean(dim=(-1, -2)), literal, atol=1e-5)
 
 
-def test_aff_output_is_the_weighted_sum_of_the_input_features():
-    model = small_model()
+def test_aff_output_is_the_weighted_sum_of_the_input_features(tiny_network):
+    model = tiny_network()
     feats = torch.randn(5, 6, 16)
     w = model.fusion.branch_weights(feats)
     expected = sum(w[:, k:k + 1] * feats[:, k] for k in range(6))
     assert torch.allclose(model.fusion(feats), expected, atol=1e-6)
 
 
-def test_hadamard_fusion_is_the_elementwise_product():
-    model = small_model(fusion="hadamard")
+def test_hadamard_fusion_is_the_elementwise_product(tiny_network):
+    model = tiny_network(fusion="hadamard")
     feats = torch.randn(5, 6, 16)
     assert torch.allclose(model.fusion(feats), feats.prod(dim=1))
     th, td, pd, lam = random_queries(1, 20)
@@ -175,8 +170,8 @@ def test_config_rejects_inconsistent_sizes():
         Config.from_dict({"planes": 3})
 
 
-def test_weights_round_trip(tmp_path):
-    model = small_model()
+def test_weights_round_trip(tmp_path, tiny_network):
+    model = tiny_network()
     path = save_weights(model, tmp_path / "w.pt", meta={"seed": 3})
     loaded = load_weights(path)
     assert loaded.cfg == model.cfg and loaded.meta == {"seed": 3}
@@ -184,8 +179,8 @@ def test_weights_round_trip(tmp_path):
         assert torch.equal(a, b), k
 
 
-def test_corrupt_weights_raise_a_clear_error(tmp_path):
-    path = save_weights(small_model(), tmp_path / "w.pt")
+def test_corrupt_weights_raise_a_clear_error(tmp_path, tiny_network):
+    path = save_weights(tiny_network(), tmp_path / "w.pt")
     data = path.read_bytes()
     (tmp_path / "cut.pt").write_bytes(data[: len(data) // 2])
     with pytest.raises(WeightsError, match="cut.pt: not a readable weights file"):
@@ -197,8 +192,8 @@ def test_corrupt_weights_raise_a_clear_error(tmp_path):
         load_weights(tmp_path / "missing.pt")
 
 
-def test_mismatched_weights_raise_a_clear_error(tmp_path):
-    model = small_model()
+def test_mismatched_weights_raise_a_clear_error(tmp_path, tiny_network):
+    model = tiny_network()
     payload = torch.load(save_weights(model, tmp_path / "w.pt"), weights_only=True)
     payload["config"]["feature_dim"] = 32
     payload["config"]["aff_map_hw"] = [4, 8]
@@ -212,8 +207,8 @@ def test_mismatched_weights_raise_a_clear_error(tmp_path):
         load_weights(tmp_path / "w.pt", expect=Config())
 
 
-def test_half_precision_weights_load_as_float32_close_to_the_original(tmp_path):
-    model = small_model()
+def test_half_precision_weights_load_as_float32_close_to_the_original(tmp_path, tiny_network):
+    model = tiny_network()
     small = save_weights(model, tmp_path / "h.pt", half=True)
     full = save_weights(model, tmp_path / "f.pt")
     assert small.stat().st_size < 0.7 * full.stat().st_size

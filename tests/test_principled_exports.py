@@ -11,7 +11,7 @@ import pytest
 
 bpy = pytest.importorskip("bpy")
 
-from addon_modules import PKG, addon_module
+from addon_modules import addon_module
 
 bake = addon_module("specgen_addon.generate.lookup")
 render = addon_module("ops.render")
@@ -49,23 +49,18 @@ def atlas(tmp_path_factory):
 
 @pytest.mark.slow
 @pytest.mark.blender
-def test_gltf_usd_and_materialx_exports_carry_the_principled_stand_in(atlas, tmp_path):
-    bpy.ops.wm.read_factory_settings(use_empty=True)
-    PKG.register()
-    try:
-        obj = scene_mod.add_mesh(bpy.context.scene, "sphere")
-        mat = render.make_material("SpecGen ball", atlas)
-        obj.data.materials.append(mat)
-        p = dict(mat["specgen_principled"])
-        base = list(p["base_color"])
-        tree = mat.node_tree
-        assert tree.get_output_node("EEVEE").inputs["Surface"].links[0].from_node.name == principled.PRINCIPLED_NODE
-        assert render.material_output(mat).inputs["Surface"].links[0].from_node.name != principled.PRINCIPLED_NODE
-        bpy.ops.export_scene.gltf(filepath=str(tmp_path / "ball.gltf"), export_format="GLTF_SEPARATE")
-        bpy.ops.wm.usd_export(filepath=str(tmp_path / "ball.usda"), export_materials=True,
-                              generate_materialx_network=True)
-    finally:
-        PKG.unregister()
+def test_gltf_usd_and_materialx_exports_carry_the_principled_stand_in(atlas, tmp_path, registered_addon):
+    obj = scene_mod.add_mesh(bpy.context.scene, "sphere")
+    mat = render.make_material("SpecGen ball", atlas)
+    obj.data.materials.append(mat)
+    p = dict(mat["specgen_principled"])
+    base = list(p["base_color"])
+    tree = mat.node_tree
+    assert tree.get_output_node("EEVEE").inputs["Surface"].links[0].from_node.name == principled.PRINCIPLED_NODE
+    assert render.material_output(mat).inputs["Surface"].links[0].from_node.name != principled.PRINCIPLED_NODE
+    bpy.ops.export_scene.gltf(filepath=str(tmp_path / "ball.gltf"), export_format="GLTF_SEPARATE")
+    bpy.ops.wm.usd_export(filepath=str(tmp_path / "ball.usda"), export_materials=True,
+                          generate_materialx_network=True)
     gltf = json.loads((tmp_path / "ball.gltf").read_text())
     pbr = next(m for m in gltf["materials"] if m["name"] == "SpecGen ball")["pbrMetallicRoughness"]
     assert pbr["baseColorFactor"][:3] == pytest.approx(base, abs=1e-4)

@@ -7,13 +7,16 @@ is measured on the brightest-of-twelve image, where every side of the ball is li
 
 from __future__ import annotations
 
+from pathlib import Path
+
 import numpy as np
 import pytest
-from conftest import REPO, SHARED
 
 from specgen_addon.photo import sphere_image as input_image
 from specgen_addon.photo.sphere_detect import find_ball
 
+REPO = Path(__file__).resolve().parents[1]
+SHARED = REPO.parent / "shared"
 PHOTOS = SHARED / "data" / "photos" / "psm_gray_chrome"
 
 

@@ -7,7 +7,7 @@ import dataclasses
 import numpy as np
 import pytest
 import torch
-from test_train import FAST, SMALL, sets
+from tiny_training import FAST_TRAIN as FAST, TRAIN_MODEL as SMALL, material_sets as sets
 
 from specgen_addon.common.errors import SpecGenError
 from specgen_addon.model import Config, SpecGen

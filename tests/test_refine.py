@@ -14,22 +14,10 @@ from specgen_addon.generate.refine.operator import PhotoOperator
 from specgen_addon.generate.refine.solve import nonneg_ridge
 from specgen_addon.brdf.rusinkiewicz import io_from_half_diff
 from specgen_addon.brdf.table import BRDFTable
-from tests.numpy_only import run_numpy_only
-from tests.specgen_standins import RampMaterial
+from specgen_standins import RampMaterial
 
 SIZE = 48
 WL = np.linspace(380.0, 780.0, 9)
-
-
-@pytest.fixture(scope="module")
-def ramp_table() -> BRDFTable:
-    mat = RampMaterial(a=0.3, b=0.3, alpha=0.2, f0=0.05)
-
-    def fn(th, td, pd):
-        wi, wo = io_from_half_diff(th, td, pd)
-        return mat.eval(wi, wo, WL)
-
-    return BRDFTable.tabulate(fn, WL)
 
 
 def _tinted(table: BRDFTable, tint: np.ndarray) -> BRDFTable:
@@ -203,11 +191,11 @@ def test_network_gain_brings_a_map_to_the_canonical_white_level():
     assert np.allclose(InputLighting().network_gain(), 1.0)
 
 
-def test_refinement_runs_with_only_numpy_importable(tmp_path, ramp_table, repo_dir):
+def test_refinement_runs_with_only_numpy_importable(tmp_path, ramp_table, numpy_only):
     """The panel's path: numpy only (torch, scipy, scikit-image, Pillow, colour-science and OpenEXR blocked)."""
     path = tmp_path / "t.npz"
     ramp_table.save(path)
-    out = run_numpy_only(repo_dir, f"""
+    out = numpy_only(f"""
         import numpy as np
         from specgen_addon.brdf.table import BRDFTable
         from specgen_addon.photo.photo_lighting import InputLighting

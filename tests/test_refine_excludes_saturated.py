@@ -3,41 +3,26 @@
 from __future__ import annotations
 
 import numpy as np
-import pytest
 
 from specgen_addon.photo.photo_lighting import parse_light, parse_lighting
 from specgen_addon.generate.refine import RefineOptions, refine_brdf, render_under
-from specgen_addon.brdf.rusinkiewicz import io_from_half_diff
-from specgen_addon.brdf.table import BRDFTable
-from tests.specgen_standins import RampMaterial
 
 SIZE = 40
 WL = np.linspace(380.0, 780.0, 9)
 
 
-@pytest.fixture(scope="module")
-def table() -> BRDFTable:
-    mat = RampMaterial(a=0.3, b=0.3, alpha=0.2, f0=0.05)
-
-    def fn(th, td, pd):
-        wi, wo = io_from_half_diff(th, td, pd)
-        return mat.eval(wi, wo, WL)
-
-    return BRDFTable.tabulate(fn, WL)
-
-
-def test_excluded_pixels_are_counted_as_clipped_and_do_not_pull_the_fit(table):
+def test_excluded_pixels_are_counted_as_clipped_and_do_not_pull_the_fit(ramp_table):
     """A linear photo (no clip level) whose highlight core was flattened by the camera: marked as
     saturated, the flattened pixels neither count as data nor drag the fit down."""
     light = parse_lighting(None, lights=(parse_light("20,30"),), ambient=0.05)
-    photo = render_under(table, light.scene(SIZE), light.image_exposure)
+    photo = render_under(ramp_table, light.scene(SIZE), light.image_exposure)
     core = photo.max(-1) > np.percentile(photo.max(-1), 97)
     flattened = photo.copy()
     flattened[core] = 0.5 * photo[core]          # a clipped core, far below the truth
-    plain = refine_brdf(table, flattened, light, RefineOptions(clip_level=None))
-    masked = refine_brdf(table, flattened, light, RefineOptions(clip_level=None, exclude=core))
+    plain = refine_brdf(ramp_table, flattened, light, RefineOptions(clip_level=None))
+    masked = refine_brdf(ramp_table, flattened, light, RefineOptions(clip_level=None, exclude=core))
     assert plain.clipped_fraction == 0.0 and masked.clipped_fraction > 0.0
-    truth = render_under(table, light.scene(SIZE), light.image_exposure)
+    truth = render_under(ramp_table, light.scene(SIZE), light.image_exposure)
 
     def err(res):
         img = render_under(res.table, light.scene(SIZE), light.image_exposure)

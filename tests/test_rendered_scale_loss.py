@@ -8,7 +8,7 @@ import torch
 from specgen_addon.brdf.rusinkiewicz import io_from_half_diff
 from specgen_addon.brdf.table import mu_law_encode
 from specgen_addon.train.loop import foreshortening, inverse_mu_law, rendered_scale_loss
-from test_train import twice_and_without
+from tiny_training import twice_and_without
 
 
 def test_foreshortening_is_the_smaller_cosine_of_the_two_directions():

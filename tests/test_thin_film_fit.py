@@ -17,7 +17,6 @@ from specgen_addon.photo.photo_lighting import InputLighting
 from specgen_addon.generate.refine import render_under
 from specgen_addon.generate.refine.operator import PhotoOperator
 from specgen_addon.brdf.table import grid_angles
-from tests.numpy_only import run_numpy_only
 
 SIZE = 32
 WL = np.linspace(380.0, 780.0, 21)
@@ -76,7 +75,7 @@ def _hue(brdf, theta_d: np.ndarray) -> np.ndarray:
 
 
 @pytest.mark.slow
-def test_a_film_is_recovered_from_its_own_photo_with_only_numpy(tmp_path, repo_dir):
+def test_a_film_is_recovered_from_its_own_photo_with_only_numpy(tmp_path, numpy_only):
     """An oxide film on copper, photographed under the canonical lighting: the fit (run with
     torch, scipy and colour-science blocked: the panel's path) reproduces the photo and the
     film's hue over θd, which an RGB or angle-independent model cannot."""
@@ -85,7 +84,7 @@ def test_a_film_is_recovered_from_its_own_photo_with_only_numpy(tmp_path, repo_d
     truth = ThinFilm("t", "test", alpha=0.05, film_eta=2.1, thickness_nm=410.0, substrate=Conductor("Cu"))
     photo_path = tmp_path / "photo.npy"
     np.save(photo_path, input_image.render_input(truth, 48))
-    out = run_numpy_only(repo_dir, f"""
+    out = numpy_only(f"""
         import json
         import numpy as np
         from specgen_addon.generate.thin_film import fit_thin_film

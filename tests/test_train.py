@@ -17,21 +17,8 @@ from specgen_addon.brdf.rusinkiewicz import io_from_half_diff
 from specgen_addon.brdf.table import mu_law_encode
 from specgen_addon.train.data import TrainingMaterial, make_batch, material_targets, sample_angles
 from specgen_addon.train.loop import MaterialSet, TrainConfig, load_config, lr_at, train
-from tiny_model import TINY_MODEL
+from tiny_training import FAST_TRAIN as FAST, TRAIN_MODEL as SMALL, material_sets as sets
 from specgen_standins import RampMaterial
-
-SMALL = {**TINY_MODEL, "decoder_channels": (16, 16), "res_theta_h": 12, "res_theta_d": 12}
-FAST = dict(angles_per_material=128, wavelengths_per_angle=4, spectral_materials_per_step=2,
-            rgb_materials_per_step=1, val_every=5, checkpoint_every=3, threads=1, tv_weight=0.1)
-
-
-def sets(n: int = 3):
-    mats = [RampMaterial(a=0.1 + 0.1 * i, b=0.3, alpha=0.1 + 0.1 * i) for i in range(n)]
-    tm = [TrainingMaterial(f"m{i}", m, True) for i, m in enumerate(mats)]
-    imgs = [m.image(32)[None] for m in mats]
-    rgb = [TrainingMaterial(f"m{i}/rgb", m, False) for i, m in enumerate(mats)]
-    return MaterialSet(tm, imgs), MaterialSet(rgb, imgs), MaterialSet(tm[:1], imgs[:1])
-
 
 def test_spectral_targets_are_mu_law_of_the_brdf():
     mat = RampMaterial()
@@ -90,16 +77,6 @@ def test_tiny_overfit_reduces_the_loss_tenfold(tmp_path):
     first = np.mean([r["spec"] for r in res.history[:5]])
     last = np.mean([r["spec"] for r in res.history[-20:]])
     assert last < first / 10, (first, last)
-
-
-def twice_and_without(tmp_path, steps: int = 3, **option):
-    """Three tiny runs: two with ``option`` set, one with it at its default; (states, results)."""
-    spec, rgb, val = sets()
-    with_option = TrainConfig(**{**FAST, "steps": steps, **option})
-    without = dataclasses.replace(with_option, **{k: getattr(TrainConfig(), k) for k in option})
-    runs = [train(Config(**SMALL), t, spec, rgb, val, tmp_path / name, show_progress=False)
-            for name, t in (("a", with_option), ("b", with_option), ("c", without))]
-    return [load_weights(r.weights).state_dict() for r in runs], runs
 
 
 def test_training_is_bit_for_bit_deterministic_and_resumable(tmp_path):

@@ -17,7 +17,7 @@ from specgen_addon.model import Config, load_weights
 from specgen_addon.train import distributed as ddp
 from specgen_addon.train.data import make_batch
 from specgen_addon.train.loop import TrainConfig, train
-from test_train import FAST, SMALL, sets
+from tiny_training import FAST_TRAIN as FAST, TRAIN_MODEL as SMALL, material_sets as sets
 
 HERE = Path(__file__).resolve().parent
 
