@@ -1,4 +1,4 @@
-"""Tiny training runs for tests/test_train_distributed.py: ``python ddp_tiny_run.py OUT`` or under
+"""Tiny training runs for tests/train/test_train_distributed.py: ``python ddp_tiny_run.py OUT`` or under
 ``torchrun``. Each rank writes into OUT/rank<r>/: ``full`` (4 steps) and ``resumed`` (2 steps, then
 resumed to 4). Only rank 0 should leave files there."""
 
