@@ -346,7 +346,10 @@ def main() -> int:
         return 0
     for src, dst, _ in moves:
         dst.parent.mkdir(parents=True, exist_ok=True)
-        git("mv", str(src), str(dst))
+        if git("ls-files", str(src)).strip():
+            git("mv", str(src), str(dst))
+        else:                                   # not tracked yet (a new file): a plain move
+            src.rename(dst)
         dst.write_text(fix_depth(dst.read_text(), len(dst.parts) - len(src.parts)))
     where = where_tests_are()
     changed = []
