@@ -69,6 +69,16 @@ def registered_addon(blank_scene):
         PKG.unregister()
 
 
+@pytest.fixture(scope="session")
+def default_weights() -> Path:
+    """The shipped default network; tests that run it skip where it has not been built yet."""
+    from specgen_addon.model import DEFAULT_WEIGHTS
+
+    if not Path(DEFAULT_WEIGHTS).is_file():
+        pytest.skip(f"no shipped weights at {DEFAULT_WEIGHTS}")
+    return Path(DEFAULT_WEIGHTS)
+
+
 @pytest.fixture
 def sphere_photo(tmp_path: Path) -> Path:
     """A 64 px PNG of a grey Lambertian sphere lit from the camera, as Generate takes it."""

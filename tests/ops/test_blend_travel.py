@@ -70,7 +70,8 @@ def _reopen(blend: Path, out: Path) -> str:
 
 @pytest.mark.slow
 @pytest.mark.blender
-def test_lookups_move_beside_the_saved_blend_and_a_moved_blend_renders_the_same(tmp_path, monkeypatch, registered_addon):
+def test_lookups_move_beside_the_saved_blend_and_a_moved_blend_renders_the_same(tmp_path, monkeypatch,
+                                                                               registered_addon):
     monkeypatch.setattr(tempfile, "tempdir", str(tmp_path / "temp"))
     sc = bpy.context.scene
     scene_mod.add_camera(sc)

@@ -364,11 +364,8 @@ def test_operators_apply_and_render_headless_and_report_errors(table, tmp_path, 
     assert "specgen_fit_error" in obj.active_material
 
 
-def test_generate_operator_bakes_a_lookup_from_an_image(tmp_path, registered_addon, sphere_photo):
-    from specgen_addon.model import DEFAULT_WEIGHTS
-
-    if not Path(DEFAULT_WEIGHTS).is_file():
-        pytest.skip(f"no shipped weights at {DEFAULT_WEIGHTS} yet")
+def test_generate_operator_bakes_a_lookup_from_an_image(tmp_path, registered_addon, sphere_photo,
+                                                        default_weights):
     s = bpy.context.scene.specgen
     s.image_path = str(sphere_photo)
     s.output_dir = str(tmp_path / "out")

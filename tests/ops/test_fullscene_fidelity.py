@@ -10,6 +10,7 @@ the same sphere under the same D65 sun (as bench/fullscene_vs_reference.py).
 from __future__ import annotations
 
 from pathlib import Path
+from types import SimpleNamespace
 
 import numpy as np
 import pytest
@@ -74,43 +75,48 @@ def test_the_checked_fit_keeps_the_weighting_that_renders_closer(outside_table):
 
 
 # ------------------------------------------------------------------------- Cycles
-def _sphere_scene(info, name: str, sun, res: int):
-    """An empty .blend with the bench's sphere wearing SpecGen material ``name`` of lookup ``info``,
-    an orthographic camera sampling pixel centres and a sun of irradiance π from ``sun``; gives
-    (scene, sphere). Skips without the bpy module."""
+@pytest.fixture(scope="module")
+def addon() -> SimpleNamespace:
+    """bpy and the add-on's modules these renders use, loaded as Blender loads them; skips
+    without the bpy module."""
     bpy = pytest.importorskip("bpy")
     from addon_modules import addon_module
 
-    render, scene_mod = addon_module("ops.render"), addon_module("ops.scene")
+    return SimpleNamespace(bpy=bpy, bake=addon_module("specgen_addon.generate.lookup"),
+                           render=addon_module("ops.render"), scene=addon_module("ops.scene"),
+                           fullscene=addon_module("ops.render_fullscene"),
+                           convert=addon_module("ops.scene_convert"), demo=addon_module("ops.demo_scenes"))
+
+
+def _sphere_scene(addon: SimpleNamespace, info, name: str, sun, res: int):
+    """An empty .blend with the bench's sphere wearing SpecGen material ``name`` of lookup ``info``,
+    an orthographic camera sampling pixel centres and a sun of irradiance π from ``sun``; gives
+    (scene, sphere)."""
+    bpy = addon.bpy
     bpy.ops.wm.read_factory_settings(use_empty=True)
     sc = bpy.context.scene
-    scene_mod.add_camera(sc)
-    sphere = scene_mod.add_mesh(sc, "sphere")
-    sphere.data.materials.append(render.make_material(name, info))
+    addon.scene.add_camera(sc)
+    sphere = addon.scene.add_mesh(sc, "sphere")
+    sphere.data.materials.append(addon.render.make_material(name, info))
     sc.cycles.filter_width = 0.01
-    scene_mod.add_sun(sc, sun, irradiance=np.pi)
+    addon.scene.add_sun(sc, sun, irradiance=np.pi)
     sc.render.resolution_x = sc.render.resolution_y = res
     return sc, sphere
 
 
-def _sphere_render(table: BRDFTable, tmp_path: Path, res: int = 40, samples: int = 8):
+def _sphere_render(addon: SimpleNamespace, table: BRDFTable, tmp_path: Path, res: int = 40, samples: int = 8):
     """(reference, Full Scene, closures alone, warnings) for ``table`` on the bench's sphere."""
-    pytest.importorskip("bpy")
-    from addon_modules import addon_module
-
     from specgen_addon.render import DistantLight, render_spectral, sphere_geometry
 
-    bake = addon_module("specgen_addon.generate.lookup")
-    fullscene = addon_module("ops.render_fullscene")
-    info = bake.bake_atlas(table, tmp_path / "t.exr")
+    info = addon.bake.bake_atlas(table, tmp_path / "t.exr")
     ref = render_spectral(table, sphere_geometry(res), lights=[DistantLight(SUN, np.pi)],
                           wavelengths_nm=table.wavelengths).spectral
     out, warnings = {}, []
     for exact in (True, False):
-        sc, _ = _sphere_scene(info, "SpecGen fid", SUN, res)
+        sc, _ = _sphere_scene(addon, info, "SpecGen fid", SUN, res)
         sc.cycles.samples, sc.cycles.use_denoising = samples, False
-        job = fullscene.FullSceneRenderJob(sc, None, table.wavelengths, exact_direct=exact,
-                                           warn=warnings.append, log=lambda _: None)
+        job = addon.fullscene.FullSceneRenderJob(sc, None, table.wavelengths, exact_direct=exact,
+                                                 warn=warnings.append, log=lambda _: None)
         out[exact] = job.run()
     return ref, out[True], out[False], warnings, info.closures
 
@@ -125,8 +131,8 @@ def _score(ref: np.ndarray, got: np.ndarray, wl: np.ndarray) -> tuple[float, flo
 
 
 @pytest.mark.blender
-def test_full_scene_renders_a_material_the_closures_cannot_hold(outside_table, tmp_path):
-    ref, full, closures, warnings, fit = _sphere_render(outside_table, tmp_path)
+def test_full_scene_renders_a_material_the_closures_cannot_hold(outside_table, tmp_path, addon):
+    ref, full, closures, warnings, fit = _sphere_render(addon, outside_table, tmp_path)
     de, energy = _score(ref, full, WL)
     assert de <= MAX_DELTA_E and abs(energy - 1) <= MAX_ENERGY_OFF, (de, energy)
     de_closures, energy_closures = _score(ref, closures, WL)   # what the closure stack alone shows
@@ -139,40 +145,35 @@ def test_full_scene_renders_a_material_the_closures_cannot_hold(outside_table, t
 
 @pytest.mark.blender
 @pytest.mark.slow
-def test_full_scene_renders_the_example_photos_material_as_the_reference(repo_dir, tmp_path):
+def test_full_scene_renders_the_example_photos_material_as_the_reference(repo_dir, tmp_path, addon):
     from specgen_addon.generate import pipeline
 
     table = pipeline.generate(repo_dir / "examples" / "sphere.png").table   # network + refinement
-    ref, full, _, warnings, fit = _sphere_render(table, tmp_path, res=48)
+    ref, full, _, warnings, fit = _sphere_render(addon, table, tmp_path, res=48)
     de, energy = _score(ref, full, table.wavelengths)
     assert de <= MAX_DELTA_E and abs(energy - 1) <= MAX_ENERGY_OFF, (de, energy)
     assert (fit.rendered_error > WARN_DELTA_E) == any("'SpecGen fid'" in w for w in warnings), warnings
 
 
 @pytest.mark.blender
-def test_exact_direct_light_changes_only_the_specgen_surface_of_an_ordinary_scene(outside_table, tmp_path):
-    bpy = pytest.importorskip("bpy")
-    from addon_modules import addon_module
+def test_exact_direct_light_changes_only_the_specgen_surface_of_an_ordinary_scene(outside_table, tmp_path,
+                                                                                  addon):
+    bpy = addon.bpy
     from bpy_extras.object_utils import world_to_camera_view
     from mathutils import Vector
 
-    bake = addon_module("specgen_addon.generate.lookup")
-    render = addon_module("ops.render")
-    fullscene = addon_module("ops.render_fullscene")
-    convert = addon_module("ops.scene_convert")
-    demo = addon_module("ops.demo_scenes")
-    info = bake.bake_atlas(outside_table, tmp_path / "t.exr")
+    info = addon.bake.bake_atlas(outside_table, tmp_path / "t.exr")
     bpy.ops.wm.read_factory_settings(use_empty=True)
-    mat = render.make_material("SpecGen fid", info)
+    mat = addon.render.make_material("SpecGen fid", info)
     w, h = 48, 32
-    sc = demo.ordinary_scene(samples=4, size=(w, h), specgen_material=mat)
-    before = convert.fingerprint()
+    sc = addon.demo.ordinary_scene(samples=4, size=(w, h), specgen_material=mat)
+    before = addon.convert.fingerprint()
     stacks, warnings = {}, []
     for exact in (True, False):
-        job = fullscene.FullSceneRenderJob(sc, None, WL, exact_direct=exact, warn=warnings.append,
-                                           log=lambda _: None, show_result=False)
+        job = addon.fullscene.FullSceneRenderJob(sc, None, WL, exact_direct=exact, warn=warnings.append,
+                                                 log=lambda _: None, show_result=False)
         stacks[exact] = job.run()
-    assert convert.fingerprint() == before
+    assert addon.convert.fingerprint() == before
     # the world (two Background nodes) is beyond the exact lookups: said, and left to the closures
     assert any("world's light on SpecGen surfaces" in m for m in warnings), warnings
     changed = np.abs(stacks[True] - stacks[False]).sum(-1) > 0
@@ -188,39 +189,29 @@ def test_exact_direct_light_changes_only_the_specgen_surface_of_an_ordinary_scen
 @pytest.mark.blender
 @pytest.mark.xfail(strict=True, reason="known: the exact lookups read 6-15 % dark within about 1° "
                    "of retro-reflection (light exactly behind an orthographic camera); not found yet")
-def test_exact_mode_matches_the_reference_with_the_sun_behind_the_camera(tmp_path):
-    pytest.importorskip("bpy")
-    from addon_modules import addon_module
-
+def test_exact_mode_matches_the_reference_with_the_sun_behind_the_camera(tmp_path, addon):
     from specgen_addon.render import DistantLight, render_spectral, sphere_geometry
 
-    bake = addon_module("specgen_addon.generate.lookup")
-    render = addon_module("ops.render")
     table = BRDFTable.tabulate(_inside_the_model, WL)
-    info = bake.bake_atlas(table, tmp_path / "t.exr")
-    sc, _ = _sphere_scene(info, "SpecGen retro", (0.0, 0.0, 1.0), 24)
-    got = render.SpectralRenderJob(sc, None, samples=2, resolution=(24, 24)).run()
+    info = addon.bake.bake_atlas(table, tmp_path / "t.exr")
+    sc, _ = _sphere_scene(addon, info, "SpecGen retro", (0.0, 0.0, 1.0), 24)
+    got = addon.render.SpectralRenderJob(sc, None, samples=2, resolution=(24, 24)).run()
     ref = render_spectral(table, sphere_geometry(24), lights=[DistantLight((0.0, 0.0, 1.0), np.pi)],
                           wavelengths_nm=WL).spectral
     assert abs(_score(ref, got, WL)[1] - 1) <= MAX_ENERGY_OFF
 
 
 @pytest.mark.blender
-def test_other_materials_of_a_specgen_object_keep_their_own_light(outside_table, tmp_path):
-    bpy = pytest.importorskip("bpy")
-    from addon_modules import addon_module
-
-    bake = addon_module("specgen_addon.generate.lookup")
-    fullscene = addon_module("ops.render_fullscene")
-    demo = addon_module("ops.demo_scenes")
-    info = bake.bake_atlas(outside_table, tmp_path / "t.exr")
-    sc, sphere = _sphere_scene(info, "SpecGen fid", SUN, 24)
-    sphere.data.materials.append(demo.principled("red", (0.8, 0.1, 0.1)))
+def test_other_materials_of_a_specgen_object_keep_their_own_light(outside_table, tmp_path, addon):
+    bpy = addon.bpy
+    info = addon.bake.bake_atlas(outside_table, tmp_path / "t.exr")
+    sc, sphere = _sphere_scene(addon, info, "SpecGen fid", SUN, 24)
+    sphere.data.materials.append(addon.demo.principled("red", (0.8, 0.1, 0.1)))
     for poly in sphere.data.polygons:          # the left half (camera's view) is red Principled
         poly.material_index = int(poly.center.x < 0)
     sc.cycles.samples, sc.cycles.use_denoising = 4, False
-    stacks = {exact: fullscene.FullSceneRenderJob(sc, None, WL, exact_direct=exact, warn=lambda _: None,
-                                                  log=lambda _: None, show_result=False).run()
+    stacks = {exact: addon.fullscene.FullSceneRenderJob(sc, None, WL, exact_direct=exact, warn=lambda _: None,
+                                                        log=lambda _: None, show_result=False).run()
               for exact in (True, False)}
     diff = np.abs(stacks[True] - stacks[False]).sum(-1)
     assert diff[:, :10].max() == 0 and diff[:, 14:].max() > 0     # red half untouched, SpecGen half exact

@@ -4,7 +4,6 @@ before it; redo brings them back."""
 
 from __future__ import annotations
 
-from pathlib import Path
 
 import pytest
 
@@ -23,11 +22,8 @@ def _state() -> tuple:
 
 @pytest.mark.slow
 @pytest.mark.blender
-def test_one_undo_after_generate_removes_only_what_generate_made(tmp_path, registered_addon, sphere_photo):
-    from specgen_addon.model import DEFAULT_WEIGHTS
-
-    if not Path(DEFAULT_WEIGHTS).is_file():
-        pytest.skip(f"no shipped weights at {DEFAULT_WEIGHTS}")
+def test_one_undo_after_generate_removes_only_what_generate_made(tmp_path, registered_addon, sphere_photo,
+                                                                  default_weights):
     s = bpy.context.scene.specgen
     s.image_path = str(sphere_photo)
     s.output_dir = str(tmp_path / "out")

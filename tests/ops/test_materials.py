@@ -62,11 +62,7 @@ def _group_of(mat):
     return node.node_tree
 
 
-def test_two_generates_make_two_material_sets_and_apply_assigns_the_chosen_one(tmp_path):
-    from specgen_addon.model import DEFAULT_WEIGHTS
-
-    if not Path(DEFAULT_WEIGHTS).is_file():
-        pytest.skip(f"no shipped weights at {DEFAULT_WEIGHTS}")
+def test_two_generates_make_two_material_sets_and_apply_assigns_the_chosen_one(tmp_path, default_weights):
     bpy.ops.wm.read_factory_settings(use_empty=True)
     PKG.register()
     try:
@@ -167,13 +163,8 @@ def test_two_materials_with_different_bases_render_side_by_side_keeping_their_co
         assert node.inputs["Atlas"].default_value == mat["specgen_atlas_groups"][0]
 
 
-def test_cancelled_generate_leaves_no_files_of_its_set(tmp_path):
-    from specgen_addon.model import DEFAULT_WEIGHTS
-
+def test_cancelled_generate_leaves_no_files_of_its_set(tmp_path, default_weights):
     Cancelled = addon_module("specgen_addon.common.errors").Cancelled
-
-    if not Path(DEFAULT_WEIGHTS).is_file():
-        pytest.skip(f"no shipped weights at {DEFAULT_WEIGHTS}")
     (tmp_path / "other_lookup.json").write_text("{}")                  # someone else's file stays
     seen = []
     with pytest.raises(Cancelled):
