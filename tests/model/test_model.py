@@ -90,9 +90,9 @@ def test_aff_branch_weights_are_a_softmax_over_six(tiny_network):
     assert torch.allclose(w.sum(-1), torch.ones(7, 11), atol=1e-6)
 
 
-def test_aff_statistic_is_the_gap_of_the_summed_branch_convs():
+def test_aff_statistic_is_the_gap_of_the_summed_branch_convs(tiny_config):
     """Eq. (6)-(7) literally (3×3 conv per branch on the 1×H×W view, sum, GAP) vs the fast form."""
-    aff = AFF(Config(**SMALL))
+    aff = AFF(tiny_config)
     torch.nn.init.normal_(aff.branch_convs.weight)
     feats = torch.randn(40, 6, 16)
     maps = feats.reshape(40, 6, 4, 4)
@@ -120,8 +120,8 @@ def test_hadamard_fusion_is_the_elementwise_product(tiny_network):
     assert torch.isfinite(model(torch.rand(1, 3, 32, 32), th, td, pd, lam)).all()
 
 
-def test_theta_h_is_sqrt_warped_like_merl():
-    cfg = Config(**SMALL)
+def test_theta_h_is_sqrt_warped_like_merl(tiny_config):
+    cfg = tiny_config
     rows = cfg.res_theta_h
     plane = torch.arange(rows, dtype=torch.float32).reshape(1, 1, rows, 1).expand(1, 1, rows, 3).contiguous()
     i = torch.arange(rows, dtype=torch.float32)
@@ -131,15 +131,15 @@ def test_theta_h_is_sqrt_warped_like_merl():
     assert torch.allclose(got, i, atol=1e-4)
 
 
-def test_phi_d_folds_by_reciprocity():
-    cfg = Config(**SMALL)
+def test_phi_d_folds_by_reciprocity(tiny_config):
+    cfg = tiny_config
     pd = torch.tensor([[0.3, 0.3 + math.pi, 0.3 - math.pi]])
     u = normalized_coords(pd * 0, pd * 0, pd, None, cfg)["phi_d"]
     assert torch.allclose(u, u[:, :1].expand_as(u), atol=1e-6)
 
 
-def test_rgb_features_are_the_mean_of_features_at_the_lambda_texels():
-    cfg = Config(**SMALL)
+def test_rgb_features_are_the_mean_of_features_at_the_lambda_texels(tiny_config):
+    cfg = tiny_config
     torch.manual_seed(1)
     planes = {n: torch.randn(1, 16, *s) for n, s in cfg.plane_shapes.items()}
     th, td, pd, _ = random_queries(1, 9)

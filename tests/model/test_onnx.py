@@ -20,10 +20,9 @@ SMALL = TINY_MODEL
 
 
 @pytest.fixture(scope="module")
-def exported(tmp_path_factory):
+def exported(tmp_path_factory, tiny_network):
     d = tmp_path_factory.mktemp("onnx")
-    torch.manual_seed(0)
-    model = SpecGen(Config(**SMALL))
+    model = tiny_network()
     torch.nn.init.normal_(model.fusion.branch_convs.weight, std=0.5)
     torch.nn.init.normal_(model.fusion.expand.weight, std=2.0)
     weights = save_weights(model, d / "w.pt")
@@ -146,9 +145,8 @@ def test_a_graph_that_is_no_specgen_head_is_refused_by_name(exported, tmp_path):
         infer.get_backend(w, "onnx")
 
 
-def test_onnx_backend_without_exported_graphs_says_how_to_make_them(tmp_path):
-    torch.manual_seed(0)
-    weights = save_weights(SpecGen(Config(**SMALL)), tmp_path / "lonely.pt")
+def test_onnx_backend_without_exported_graphs_says_how_to_make_them(tmp_path, tiny_network):
+    weights = save_weights(tiny_network(), tmp_path / "lonely.pt")
     with pytest.raises(WeightsError, match="export-onnx"):
         infer.get_backend(weights, "onnx")
 
@@ -197,9 +195,8 @@ def _graph_tables(weights) -> tuple[np.ndarray, ...]:
     return infer.get_backend(weights, "onnx").make_tables(x, u)
 
 
-def test_float16_storage_is_lossless_and_halves_the_graph(tmp_path):
-    torch.manual_seed(0)
-    model = SpecGen(Config(**SMALL))
+def test_float16_storage_is_lossless_and_halves_the_graph(tmp_path, tiny_network):
+    model = tiny_network()
     weights = save_weights(model, tmp_path / "h.pt", half=True)       # as the shipped weights
     wide = save_weights(load_weights(weights), tmp_path / "wide.pt")  # the same numbers, float32 file
     export_onnx(weights, half=True)
@@ -209,9 +206,8 @@ def test_float16_storage_is_lossless_and_halves_the_graph(tmp_path):
     assert all(np.array_equal(a, b) for a, b in zip(_graph_tables(weights), _graph_tables(wide)))
 
 
-def test_float16_storage_changes_no_output_of_float32_weights(tmp_path):
-    torch.manual_seed(0)
-    model = SpecGen(Config(**SMALL))
+def test_float16_storage_changes_no_output_of_float32_weights(tmp_path, tiny_network):
+    model = tiny_network()
     a = save_weights(model, tmp_path / "a.pt")            # float32 numbers float16 cannot hold
     b = save_weights(model, tmp_path / "b.pt")
     export_onnx(a, half=True)
@@ -219,10 +215,9 @@ def test_float16_storage_changes_no_output_of_float32_weights(tmp_path):
     assert all(np.array_equal(ta, tb) for ta, tb in zip(_graph_tables(a), _graph_tables(b)))
 
 
-def test_onnx_backend_needs_only_the_graphs(tmp_path):
+def test_onnx_backend_needs_only_the_graphs(tmp_path, tiny_network):
     # the extension ships the graphs without the .pt (torch reads only the .pt)
-    torch.manual_seed(0)
-    weights = save_weights(SpecGen(Config(**SMALL)), tmp_path / "alone.pt")
+    weights = save_weights(tiny_network(), tmp_path / "alone.pt")
     export_onnx(weights)
     before = _graph_tables(weights)
     weights.unlink()
