@@ -3,7 +3,7 @@
 The bpy module has no UI (and no Blender binary is available here to run under Xvfb), so this is
 not a screenshot: it runs the panel's real ``draw()`` against a layout that records every call
 (columns, properties with their RNA labels and current values, operator buttons), then paints the
-recorded rows in Blender's dark theme with matplotlib. ``tests/test_blender_addon.py`` checks the
+recorded rows in Blender's dark theme with matplotlib. ``tests/ops/test_blender_addon.py`` checks the
 same recording.
 
     .venv/bin/python scripts/draw_panel.py docs/figures/panel.png

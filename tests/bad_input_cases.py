@@ -2,7 +2,7 @@
 would, each case one fresh subprocess (``python -m specgen_addon …``, ``python batch.py …`` or a
 ``python -c`` call of the Python API) in its own folder, with ``TMPDIR`` pointed inside it.
 
-:func:`run_case` records, and ``tests/test_bad_input.py`` asserts for every case:
+:func:`run_case` records, and ``tests/house/test_bad_input.py`` asserts for every case:
 
 - the exit status and the last line of stderr (the message);
 - ``traceback``: "Traceback" anywhere in stdout/stderr;

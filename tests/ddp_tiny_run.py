@@ -1,4 +1,4 @@
-"""Tiny training runs for tests/test_train_distributed.py: ``python ddp_tiny_run.py OUT`` or under
+"""Tiny training runs for tests/train/test_train_distributed.py: ``python ddp_tiny_run.py OUT`` or under
 ``torchrun``. Each rank writes into OUT/rank<r>/: ``full`` (4 steps) and ``resumed`` (2 steps, then
 resumed to 4). Only rank 0 should leave files there."""
 
@@ -13,7 +13,7 @@ sys.path[:0] = [str(HERE.parent), str(HERE)]
 from specgen_addon.model import Config  # noqa: E402
 from specgen_addon.train import distributed as ddp  # noqa: E402
 from specgen_addon.train.loop import TrainConfig, train  # noqa: E402
-from test_train import FAST, SMALL, sets  # noqa: E402
+from tiny_training import FAST_TRAIN as FAST, TRAIN_MODEL as SMALL, material_sets as sets  # noqa: E402
 
 TINY = TrainConfig(**{**FAST, "steps": 4, "spectral_materials_per_step": 4, "rgb_materials_per_step": 2})
 

@@ -56,7 +56,7 @@ SEEDS = (0, 1)
 #: Fields added to the model / training configs after arms were first cached. At their defaults
 #: they leave a run unchanged, so :meth:`AblationSettings.key` leaves them out and the arms cached
 #: before they existed keep their keys (a documented table's command then trains nothing). A field
-#: added later belongs here too: tests/test_ablation_study.py checks the recorded keys and fails until it is.
+#: added later belongs here too: tests/evaluation/test_ablation_study.py checks the recorded keys and fails until it is.
 KEY_NEUTRAL_AT_DEFAULT = {"m": ("encoder_negative_slope", "boost_channels", "boost_width"),
                           "t": ("recycle_dormant", "recycle_mode", "fresh_encoder", "frozen", "family_draw",
                                 "recolour_p", "material_balance", "balance_floor", "real_materials_per_step",

@@ -9,7 +9,7 @@ that give the mean plus components exactly its CIE XYZ under D65:
 
 This is colour-science's ``colour.recovery.XYZ_to_sd_Otsu2018`` on the tables it ships
 (precomputed into ``data/colour_tables.npz``), written again with numpy only so that the
-refinement can use it inside a stock Blender. ``tests/test_spectral_recovery.py`` checks it
+refinement can use it inside a stock Blender. ``tests/spectral/test_spectral_recovery.py`` checks it
 against colour-science.
 """
 

@@ -34,7 +34,7 @@ With numba installed (the command line's requirements), the logits, the gather w
 the output layer run as three compiled loops (:mod:`specgen_addon.model.runtime.gather_kernels`), about
 1.2–1.6× faster over the grid (docs/model.md); ``SPECGEN_KERNELS=torch`` keeps the torch ops.
 
-Same output as :class:`~specgen_addon.model.runtime.fast.GridHead` to float rounding (tests/test_infer.py).
+Same output as :class:`~specgen_addon.model.runtime.fast.GridHead` to float rounding (tests/model/test_infer.py).
 """
 
 from __future__ import annotations

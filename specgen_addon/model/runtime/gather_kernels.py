@@ -11,7 +11,7 @@ a (points × k) temporary:
 Here each is one loop over the points (numba, ``nogil``: the grid's worker threads run them side by
 side). The ``exp`` and the second layer's matrix product stay in torch (its vectorised ``exp`` and
 oneDNN's matrix product beat a plain loop). Same arithmetic in float32, summed in another order:
-the values agree to float rounding (tests/test_infer.py).
+the values agree to float rounding (tests/model/test_infer.py).
 
 numba is a requirement of the command line (requirements.txt), not of the Blender panel, whose
 onnx backend never reaches this module. Without numba, or with ``SPECGEN_KERNELS=torch`` in the

@@ -1,0 +1,78 @@
+"""A SpecGen material travels with its .blend (headless, bpy module).
+
+Generate in an unsaved file puts the lookups in a temporary folder; the first save moves them into
+``specgen/`` beside the .blend and stores relative (``//``) paths. The .blend moved with that
+folder, opened in a new process, renders the same spectral stack; with a lookup missing, the
+load and the render name the material and the file."""
+
+from __future__ import annotations
+
+import json
+import shutil
+import tempfile
+from pathlib import Path
+
+import numpy as np
+import pytest
+
+bpy = pytest.importorskip("bpy")
+
+from addon_modules import addon_module
+
+bake = addon_module("specgen_addon.generate.lookup")
+render = addon_module("ops.render")
+scene_mod = addon_module("ops.scene")
+properties = addon_module("ops.properties")
+
+from blend_reopen import reopen_and_render as _reopen
+from blend_reopen import small_table as _table
+
+
+@pytest.mark.slow
+@pytest.mark.blender
+def test_lookups_move_beside_the_saved_blend_and_a_moved_blend_renders_the_same(tmp_path, monkeypatch,
+                                                                               registered_addon):
+    monkeypatch.setattr(tempfile, "tempdir", str(tmp_path / "temp"))
+    sc = bpy.context.scene
+    scene_mod.add_camera(sc)
+    obj = scene_mod.add_mesh(sc, "sphere")
+    scene_mod.add_sun(sc, (0.0, 0.3, 1.0))
+    unsaved = Path(properties.output_dir(sc.specgen))            # the unsaved file's folder
+    assert str(unsaved).startswith(str(tmp_path / "temp"))
+    unsaved.mkdir(parents=True)
+    info = bake.bake_atlas(_table(), unsaved / "ball_lookup.exr")
+    bake.save_atlas_info(info, unsaved / "ball_lookup.json")
+    _table().save(unsaved / "ball.npz", compact=True)            # what Generate writes beside them
+    mat = render.make_material("SpecGen ball", info)
+    obj.data.materials.append(mat)
+    before = render.SpectralRenderJob(sc, None, samples=1, resolution=(16, 16)).run()
+
+    blend = tmp_path / "project" / "scene.blend"
+    blend.parent.mkdir()
+    bpy.ops.wm.save_as_mainfile(filepath=str(blend))
+    moved = sorted(p.name for p in (blend.parent / "specgen").iterdir())
+    assert "ball_lookup.json" in moved and any(n.startswith("ball_lookup.g") for n in moved)
+    assert not any(unsaved.iterdir())                             # moved, not copied
+    stored = list(bpy.data.materials["SpecGen ball"]["specgen_atlas_groups"])
+    assert all(p.startswith("//specgen/ball_lookup.g") for p in stored), stored
+
+    elsewhere = tmp_path / "elsewhere" / "project moved ü"              # spaces and non-ASCII
+    elsewhere.parent.mkdir()
+    shutil.move(str(blend.parent), str(elsewhere))
+    out = _reopen(elsewhere / "scene.blend", tmp_path / "after.npy")
+    assert "RENDERED" in out, out
+    np.testing.assert_allclose(np.load(tmp_path / "after.npy"), before, rtol=1e-5, atol=1e-7)
+
+    gone = next((elsewhere / "specgen").glob("ball_lookup.g*.exr"))
+    gone.unlink()                                                      # rebuilt from the compact file
+    out = _reopen(elsewhere / "scene.blend", tmp_path / "rebuilt.npy")
+    assert "were missing and were baked again from" in out and "RENDERED" in out, out
+    rebuilt = np.load(tmp_path / "rebuilt.npy")
+    assert 10 * np.log10(before.max() ** 2 / np.mean((rebuilt - before) ** 2)) >= 60.0
+
+    gone.unlink()
+    (elsewhere / "specgen" / "ball.npz").unlink()                      # nothing to rebuild from
+    out = _reopen(elsewhere / "scene.blend", tmp_path / "never.npy")
+    assert f"material 'SpecGen ball': baked lookup {gone} is missing" in out, out
+    assert "REFUSED" in out and not (tmp_path / "never.npy").exists()
+    assert json.loads((elsewhere / "specgen" / "ball_lookup.json").read_text())
