@@ -17,7 +17,7 @@ from addon_modules import PKG, addon_module
 
 from specgen_addon.cli.model import add_refine_arguments, input_lighting_from_args, photo_source_from_args
 
-EXAMPLE = Path(__file__).resolve().parents[1] / "examples" / "sphere.png"
+EXAMPLE = Path(__file__).resolve().parents[2] / "examples" / "sphere.png"
 photo_inputs = addon_module("ops.photo_inputs")
 pytestmark = pytest.mark.blender
 

@@ -3,7 +3,7 @@
 From the panel, the Full Scene job's exact render (direct light on SpecGen surfaces, after the
 band renders) runs its Cycles renders as Blender render jobs, like the band renders, so Esc stops
 Cycles inside them. The bpy module has no event loop: the test delivers the cancel the way
-Blender does (its ``render_cancel`` handler, as ``tests/test_render_settings.py``) to the first
+Blender does (its ``render_cancel`` handler, as ``tests/ops/test_render_settings.py``) to the first
 exact render and checks that the job stops there, puts the scene back and writes nothing.
 """
 

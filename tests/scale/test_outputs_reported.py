@@ -15,7 +15,7 @@ from specgen_addon.scale import items as items_mod
 from specgen_addon.scale.batch_many import format_summary
 from specgen_addon.scale.worker import PYTHON, run_item
 
-REPO = Path(__file__).resolve().parents[1]
+REPO = Path(__file__).resolve().parents[2]
 
 #: batch.py whose spectral render fails after its first step (as a Cycles crash would).
 FAILING_RENDER = r"""

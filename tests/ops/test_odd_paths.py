@@ -17,7 +17,7 @@ import pytest
 
 from specgen_addon.model import SpecGen, save_weights
 
-REPO = Path(__file__).resolve().parents[1]
+REPO = Path(__file__).resolve().parents[2]
 ODD = "mat\u00e9riaux d\u2019\u00e9t\u00e9 \\ \u7d20\u6750"    # spaces, a backslash, é, ’ and CJK
 POSIX_ONLY = pytest.mark.skipif(sys.platform == "win32", reason="a backslash separates folders on Windows")
 
