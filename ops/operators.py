@@ -23,7 +23,8 @@ import numpy as np
 
 from specgen_addon.common.errors import OutputExistsError, SpecGenError
 from specgen_addon.spectral.spectra import wavelength_grid
-from specgen_addon.generate import lookup as bake
+from specgen_addon.bake import lookup as bake
+from specgen_addon.generate.pipeline import generate
 from specgen_addon.photo.image_checks import check_pixel_count
 from specgen_addon.render.cycles_time_estimate import format_duration
 from . import naming
@@ -164,7 +165,7 @@ class SPECGEN_OT_generate_brdf(_Modal, bpy.types.Operator):
 
     def execute(self, context):
         try:
-            info = bake.generate_lookup(**self._job_args(context))
+            info = generate(**self._job_args(context), backend=None).lookup
             self._done(context, info)
         except BaseException as exc:  # Ctrl-C in a headless run included: one sentence, no traceback
             return report_exception(self, exc, "BRDF generation")
@@ -181,9 +182,9 @@ class SPECGEN_OT_generate_brdf(_Modal, bpy.types.Operator):
 
         def work() -> None:
             try:
-                self._result.append(bake.generate_lookup(
-                    **args, progress=lambda f: setattr(self, "_fraction", f),
-                    cancel=self._cancel.is_set))
+                self._result.append(generate(
+                    **args, backend=None, progress=lambda f: setattr(self, "_fraction", f),
+                    cancel=self._cancel.is_set).lookup)
             except BaseException as exc:  # handed to the main thread, reported there
                 self._result.append(exc)
 

@@ -127,7 +127,7 @@ def rebuild(mat) -> str | None:
     beside them, which Generate writes) and rebuild the material; what was done, or None."""
     import numpy as np
 
-    from specgen_addon.generate import lookup as bake
+    from specgen_addon.bake import lookup as bake
     from specgen_addon.brdf.table import BRDFTable
 
     from .render import make_material, script_node

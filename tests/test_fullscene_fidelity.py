@@ -81,7 +81,7 @@ def _sphere_render(table: BRDFTable, tmp_path: Path, res: int = 40, samples: int
 
     from specgen_addon.render import DistantLight, render_spectral, sphere_geometry
 
-    bake = addon_module("specgen_addon.generate.lookup")
+    bake = addon_module("specgen_addon.bake.lookup")
     render = addon_module("ops.render")
     fullscene = addon_module("ops.render_fullscene")
     scene_mod = addon_module("ops.scene")
@@ -145,7 +145,7 @@ def test_exact_direct_light_changes_only_the_specgen_surface_of_an_ordinary_scen
     from bpy_extras.object_utils import world_to_camera_view
     from mathutils import Vector
 
-    bake = addon_module("specgen_addon.generate.lookup")
+    bake = addon_module("specgen_addon.bake.lookup")
     render = addon_module("ops.render")
     fullscene = addon_module("ops.render_fullscene")
     convert = addon_module("ops.scene_convert")
@@ -183,7 +183,7 @@ def test_exact_mode_matches_the_reference_with_the_sun_behind_the_camera(tmp_pat
 
     from specgen_addon.render import DistantLight, render_spectral, sphere_geometry
 
-    bake = addon_module("specgen_addon.generate.lookup")
+    bake = addon_module("specgen_addon.bake.lookup")
     render = addon_module("ops.render")
     scene_mod = addon_module("ops.scene")
     table = BRDFTable.tabulate(_inside_the_model, WL)
@@ -205,7 +205,7 @@ def test_other_materials_of_a_specgen_object_keep_their_own_light(outside_table,
     bpy = pytest.importorskip("bpy")
     from addon_modules import addon_module
 
-    bake = addon_module("specgen_addon.generate.lookup")
+    bake = addon_module("specgen_addon.bake.lookup")
     render = addon_module("ops.render")
     fullscene = addon_module("ops.render_fullscene")
     scene_mod = addon_module("ops.scene")

@@ -1,4 +1,5 @@
-"""Photo → spectral BRDF, the way every front end runs it (CLI ``infer``, batch.py, the panel).
+"""Photo → spectral BRDF: :func:`generate` is Generate's one front door (CLI ``infer``, batch.py, the
+panel).
 
 1. the photo is read and its sphere cropped to the canonical frame
    (:func:`specgen_addon.photo.sphere_image.load_sphere_image`);
@@ -17,17 +18,22 @@ With ``model="thin-film"`` steps 2–4 are replaced by the thin-film family's fi
 (:func:`specgen_addon.generate.thin_film.fit_thin_film`): for interference films (soap, oil, anodised
 metal) whose angle-dependent colour the network's prior does not place. Where the crop resampled the
 sphere, the fit models the photo's blur as the refinement does.
+
+With ``out_dir`` the table is then baked into what Blender reads
+(:func:`specgen_addon.bake.lookup.bake_lookup`), as the panel and batch.py ask.
 """
 
 from __future__ import annotations
 
+import os
 from dataclasses import dataclass
 from pathlib import Path
 from typing import TYPE_CHECKING, Callable
 
 import numpy as np
 
-from specgen_addon.brdf.table import BRDFTable
+from specgen_addon.bake.lookup import DEFAULT_TOLERANCE, AtlasInfo, bake_lookup, check_lookup_outputs
+from specgen_addon.brdf.table import N_PHI_D, BRDFTable
 
 if TYPE_CHECKING:
     from specgen_addon.photo.sphere_image import SphereCrop
@@ -51,6 +57,7 @@ class Generated:
     film_fit: object | None = None     # specgen_addon.generate.thin_film.ThinFilmFit (model="thin-film")
     crop: object | None = None         # specgen_addon.photo.sphere_image.SphereCrop: the circle used, saturation
     network_reproduction: object | None = None   # refine.report.Reproduction of the network alone (no refinement)
+    lookup: AtlasInfo | None = None    # what Blender reads, baked into ``out_dir`` (generate(out_dir=…))
 
     @property
     def warnings(self) -> list[str]:
@@ -78,16 +85,81 @@ def load_photo_crop(image) -> tuple[SphereCrop, bool]:
 
 
 def generate(image, lighting=None, refine: bool = True, weights=None, wavelengths_nm=None,
-             backend: str = "torch", progress: ProgressFn | None = None,
-             cancel: CancelFn | None = None, model: str = "network", latent_fit: bool = False) -> Generated:
+             backend: str | None = "torch", progress: ProgressFn | None = None,
+             cancel: CancelFn | None = None, model: str = "network", latent_fit: bool = False, *,
+             out_dir: str | os.PathLike | None = None, name: str = "brdf", n_phi_d: int = N_PHI_D,
+             tolerance: float = DEFAULT_TOLERANCE, save_table: bool = False, preview: bool = False,
+             overwrite: bool = True) -> Generated:
     """Generate (and by default refine) the spectral BRDF of the sphere in ``image``.
 
     ``lighting`` is an :class:`~specgen_addon.photo.photo_lighting.InputLighting` (default: canonical).
     ``model`` is one of :data:`MODELS` (``"thin-film"`` ignores ``refine``, ``weights``, ``backend``).
+    ``backend`` ``None`` picks onnx when onnxruntime is importable (a stock Blender ships no torch)
+    and says so when it has to fall back to torch.
     ``latent_fit`` fits the network's latent to the photo before any refinement (torch backend only).
     ``progress(fraction)`` and ``cancel()`` are passed down; cancelling raises
     :class:`~specgen_addon.common.errors.Cancelled` and returns nothing.
+
+    With ``out_dir``, the table is also baked into what Blender reads, ``<name>_lookup.*`` (and
+    with ``save_table`` ``<name>.npz``, with ``preview`` ``<name>_preview.png``): see
+    :func:`specgen_addon.bake.lookup.bake_lookup`; ``result.lookup`` describes it and carries the
+    refinement's and the thin-film fit's reports. Progress is then 0–0.8 generation, 0.8–1 bake.
+    Without ``overwrite`` existing outputs of ``name`` are refused up front; whatever fails or is
+    cancelled leaves nothing new in ``out_dir``.
     """
+    kwargs = {"lighting": lighting, "refine": refine, "weights": weights, "wavelengths_nm": wavelengths_nm,
+              "cancel": cancel, "model": model, "latent_fit": latent_fit}
+    if out_dir is None:
+        return _generate_any_backend(image, backend, progress=progress, **kwargs)
+    from specgen_addon.common.atomic_io import make_dirs
+    from specgen_addon.common.interrupts import OutputGuard
+
+    out = check_lookup_outputs(out_dir, name, overwrite)
+    sub = (lambda lo, hi: (lambda f: progress(lo + (hi - lo) * f))) if progress else (lambda lo, hi: None)
+    with OutputGuard([out]):  # failed, cancelled or interrupted: nothing it made stays in out_dir
+        make_dirs(out)
+        generated = _generate_any_backend(image, backend, progress=sub(0.0, 0.8), **kwargs)
+        info = bake_lookup(generated.table, out, name, n_phi_d=n_phi_d, tolerance=tolerance,
+                           save_table=save_table, preview=preview, progress=sub(0.8, 1.0), cancel=cancel)
+    info.refinement = generated.refinement
+    info.film_fit = generated.film_fit
+    generated.lookup = info
+    return generated
+
+
+def choose_backend() -> str:
+    """``"onnx"`` when onnxruntime is importable (a stock Blender ships no torch), else ``"torch"``."""
+    import importlib.util
+
+    return "onnx" if importlib.util.find_spec("onnxruntime") is not None else "torch"
+
+
+def _generate_any_backend(image, backend: str | None, **kwargs) -> Generated:
+    """:func:`_generate` with ``backend``, or with ``None`` the one :func:`choose_backend` picks:
+    onnx, or torch with a warning where the onnx graphs are missing or unusable."""
+    from specgen_addon.common.errors import WeightsError
+
+    chosen = backend or choose_backend()
+    try:
+        return _generate(image, backend=chosen, **kwargs)
+    except WeightsError as exc:
+        import importlib.util
+        import warnings
+
+        from specgen_addon.model.checksums import DamagedWeightsError
+
+        if backend is not None or chosen != "onnx" or importlib.util.find_spec("torch") is None \
+                or isinstance(exc, DamagedWeightsError):
+            raise
+        # the graphs are missing or unusable: say so, the backend never changes silently
+        warnings.warn(f"the onnx backend cannot run ({exc}); using the torch backend", stacklevel=3)
+        return _generate(image, backend="torch", **kwargs)
+
+
+def _generate(image, lighting=None, refine: bool = True, weights=None, wavelengths_nm=None,
+              backend: str = "torch", progress: ProgressFn | None = None,
+              cancel: CancelFn | None = None, model: str = "network", latent_fit: bool = False) -> Generated:
+    """:func:`generate`'s table, without the bake, with one ``backend``."""
     from specgen_addon.common.errors import SpecGenError
     from specgen_addon.model.runtime.inference import generate_brdf
     from specgen_addon.photo.sphere_image import SphereCrop

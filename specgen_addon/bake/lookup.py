@@ -463,7 +463,7 @@ def bake_environment(env: EnvironmentLight, map_path: str | os.PathLike,
     return Path(map_path), Path(list_path)
 
 
-# ---------------------------------------------------------------------------------- pipeline
+# ---------------------------------------------------------------------------------- files
 def save_atlas_info(info: AtlasInfo, path: str | os.PathLike) -> Path:
     """Write the atlas description (JSON beside the textures) so a later session can apply it."""
     import json
@@ -505,34 +505,10 @@ def load_atlas_info(path: str | os.PathLike) -> AtlasInfo:
     return info
 
 
-def choose_backend() -> str:
-    """``"onnx"`` when onnxruntime is importable (a stock Blender ships no torch), else ``"torch"``."""
-    import importlib.util
-
-    return "onnx" if importlib.util.find_spec("onnxruntime") is not None else "torch"
-
-
-def generate_lookup(image, out_dir: str | os.PathLike, wavelengths_nm: np.ndarray,
-                    weights=None, n_phi_d: int = N_PHI_D, tolerance: float = DEFAULT_TOLERANCE,
-                    backend: str | None = None, name: str = "brdf",
-                    progress: Callable[[float], None] | None = None,
-                    cancel: Callable[[], bool] | None = None, overwrite: bool = True,
-                    lighting=None, refine: bool = True, save_table: bool = False,
-                    preview: bool = False, model: str = "network") -> AtlasInfo:
-    """Image of a sphere → spectral BRDF table, refined against the photo under ``lighting``
-    unless ``refine`` is False → coefficient atlas + JSON (``<name>_lookup.*``). ``model``
-    ``"thin-film"`` fits the thin-film family to the photo instead of running the network
-    (:mod:`specgen_addon.generate.pipeline`); its report is ``info.film_fit``.
-
-    Runs without bpy (the Generate operator calls it on a worker thread). Progress: 0–0.8 network
-    and refinement (:func:`specgen_addon.generate.pipeline.generate`), 0.8–1 bake. The refinement's report
-    is ``info.refinement``. ``save_table`` also writes the BRDF as ``<name>.npz`` (the compact
-    material file, a few MB: :mod:`specgen_addon.brdf.material_file`); ``preview`` writes ``<name>_preview.png``
-    (:mod:`specgen_addon.bake.preview`). Without ``overwrite`` existing outputs of ``name`` are refused
-    up front; whatever fails or is cancelled leaves nothing new in ``out_dir``.
-    """
-    from specgen_addon.common.interrupts import OutputGuard
-    from specgen_addon.common.limits import check_output_dir, safe_name
+def check_lookup_outputs(out_dir: str | os.PathLike, name: str, overwrite: bool) -> Path:
+    """Refuse up front what :func:`bake_lookup` could not write: a bad ``name``, an output folder
+    that is a file or not writable, or (without ``overwrite``) existing outputs of ``name``."""
+    from specgen_addon.common.limits import safe_name
 
     out = Path(out_dir)
     safe_name(name, "BRDF name")
@@ -542,38 +518,18 @@ def generate_lookup(image, out_dir: str | os.PathLike, wavelengths_nm: np.ndarra
         existing += sorted(out.glob(f"{name}_lookup.g*.exr"))
         if existing:
             raise OutputExistsError(f"{existing[0]}: already exists (turn on Overwrite to replace it)")
-    from specgen_addon.common.atomic_io import make_dirs
-
-    with OutputGuard([out]):  # failed, cancelled or interrupted: nothing it made stays in out_dir
-        make_dirs(out)
-        return _generate_lookup(image, out, wavelengths_nm, weights, n_phi_d, tolerance, backend,
-                                name, progress, cancel, lighting, refine, save_table, preview, model)
+    return out
 
 
-def _generate_lookup(image, out: Path, wavelengths_nm, weights, n_phi_d, tolerance, backend, name,
-                     progress, cancel, lighting, refine, save_table, preview, model) -> AtlasInfo:
-    from specgen_addon.common.errors import WeightsError
-    from specgen_addon.generate.pipeline import generate
-
-    sub = (lambda lo, hi: (lambda f: progress(lo + (hi - lo) * f))) if progress else (lambda lo, hi: None)
-    chosen = backend or choose_backend()
-    kwargs = dict(lighting=lighting, refine=refine, weights=weights, wavelengths_nm=wavelengths_nm,
-                  progress=sub(0.0, 0.8), cancel=cancel, model=model)
-    try:
-        generated = generate(image, backend=chosen, **kwargs)
-    except WeightsError as exc:
-        import importlib.util
-        import warnings
-
-        from specgen_addon.model.checksums import DamagedWeightsError
-
-        if backend is not None or chosen != "onnx" or importlib.util.find_spec("torch") is None \
-                or isinstance(exc, DamagedWeightsError):
-            raise
-        # the graphs are missing or unusable: say so, the backend never changes silently
-        warnings.warn(f"the onnx backend cannot run ({exc}); using the torch backend", stacklevel=2)
-        generated = generate(image, backend="torch", **kwargs)
-    table = generated.table
+def bake_lookup(table, out: Path, name: str, n_phi_d: int = N_PHI_D,
+                tolerance: float = DEFAULT_TOLERANCE, save_table: bool = False, preview: bool = False,
+                progress: Callable[[float], None] | None = None,
+                cancel: Callable[[], bool] | None = None) -> AtlasInfo:
+    """Everything Blender reads of one spectral table, in ``out``: the coefficient atlas and its
+    JSON (``<name>_lookup.*``), with ``save_table`` the compact material file ``<name>.npz``
+    (:mod:`specgen_addon.brdf.material_file`), with ``preview`` ``<name>_preview.png``
+    (:mod:`specgen_addon.bake.preview`). Outputs are replaced; check them first with
+    :func:`check_lookup_outputs`."""
     if save_table:
         table.save(out / f"{name}.npz", overwrite=True, compact=True)
     if preview:
@@ -581,8 +537,6 @@ def _generate_lookup(image, out: Path, wavelengths_nm, weights, n_phi_d, toleran
 
         write_preview(table, out / f"{name}_preview.png")
     info = bake_atlas(table, out / f"{name}_lookup.exr", n_phi_d=n_phi_d, tolerance=tolerance,
-                      progress=sub(0.8, 1.0), cancel=cancel)
+                      progress=progress, cancel=cancel)
     save_atlas_info(info, out / f"{name}_lookup.json")
-    info.refinement = generated.refinement
-    info.film_fit = generated.film_fit
     return info
