@@ -24,12 +24,9 @@ CORE = REPO / "specgen_addon"
 RANK = {"common": 0, "spectral": 1, "brdf": 2, "render": 3, "corpus": 3, "photo": 4, "model": 5,
         "bake": 5, "generate": 6, "train": 7, "evaluation": 8, "scale": 9, "cli": 10}
 #: __init__ files that still define things (to be emptied into modules); new ones fail
-INIT_WITH_DEFINITIONS = {"specgen_addon/brdf/formats/__init__.py", "specgen_addon/corpus/families/__init__.py",
-                         "specgen_addon/generate/refine/__init__.py", "specgen_addon/model/__init__.py",
-                         "specgen_addon/train/__init__.py"}
+INIT_WITH_DEFINITIONS: set[str] = set()
 #: imports against the order that remain to be undone by moving one function down; new ones fail
-KNOWN_UPWARD = {("specgen_addon/scale/prepare.py", "specgen_addon.cli.brdf"),
-                ("specgen_addon/train/augment.py", "specgen_addon.evaluation.trained_network")}
+KNOWN_UPWARD: set[tuple[str, str]] = set()
 
 
 def _modules() -> list[Path]:
@@ -109,7 +106,8 @@ def _defines(tree: ast.Module) -> list[str]:
     names = []
     for node in tree.body:
         if isinstance(node, (ast.FunctionDef, ast.AsyncFunctionDef, ast.ClassDef)):
-            names.append(node.name)
+            if not node.name.startswith("__"):   # a module __getattr__ (PEP 562) only re-exports lazily
+                names.append(node.name)
         elif isinstance(node, (ast.Assign, ast.AnnAssign)):
             targets = node.targets if isinstance(node, ast.Assign) else [node.target]
             names += [t.id for t in targets if isinstance(t, ast.Name) and not t.id.startswith("__")]

@@ -19,6 +19,8 @@ from typing import Any, Callable
 
 import numpy as np
 
+from specgen_addon.train.augment import displaced_input
+
 RESOLUTION = 128
 
 
@@ -134,19 +136,6 @@ def mixed_split_materials(per_family: int, families: list[str] | None = None, sp
                 out.append(m)
             count[f] += 1
     return out
-
-
-def displaced_input(image: np.ndarray, shift_px: float | tuple[float, float],
-                    border_px: int = 16) -> np.ndarray:
-    """``image`` (H×W×C) inside a black border of ``border_px``, moved by ``shift_px`` pixels right
-    and down, or by (down, right) pixels given a pair (bilinear): a sphere that sits off the pixel
-    grid, as in a photograph."""
-    from scipy.ndimage import shift as nd_shift
-
-    dy, dx = (shift_px, shift_px) if np.isscalar(shift_px) else shift_px
-    b = border_px
-    padded = np.pad(np.asarray(image, dtype=np.float64), ((b, b), (b, b), (0, 0)))
-    return nd_shift(padded, (dy, dx, 0.0), order=1, mode="constant", cval=0.0).astype(np.float32)
 
 
 def antialiased_input(brdf, shift_px: float = 0.0, supersample: int = 4, border_px: int = 16,
