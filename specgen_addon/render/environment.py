@@ -31,6 +31,7 @@ import numpy as np
 
 from specgen_addon.spectral import spectra
 from specgen_addon.common.errors import SpecGenError
+from specgen_addon.spectral.rgb_to_spectrum import rgb_to_spectrum
 
 MALLETT2019 = "mallett2019"
 #: Rec. 709 / sRGB luminance weights (row Y of the sRGB → XYZ matrix), from colour-science.
@@ -51,12 +52,10 @@ def srgb_luminance_weights() -> np.ndarray:
 def _uplift_basis_cached(method: str, key: tuple[float, ...]) -> np.ndarray:
     w = np.asarray(key)
     if method == MALLETT2019:
-        from specgen_addon.spectral.colour_tables import mallett2019_basis
-
-        # colour-science's basis, precomputed (specgen_addon.spectral.colour_tables). Outside its 380–780 nm
-        # support the nearest value is held (a smooth continuation of the flat reflectance that
-        # white uplifts to).
-        return mallett2019_basis(w).T * spectra.illuminant_spd("D65", w)[None, :]
+        # colour-science's basis, precomputed (specgen_addon.spectral.colour_tables): the uplifts of
+        # the three sRGB primaries. Outside its 380–780 nm support the nearest value is held (a
+        # smooth continuation of the flat reflectance that white uplifts to).
+        return rgb_to_spectrum(np.eye(3), w, method="Mallett 2019") * spectra.illuminant_spd("D65", w)[None, :]
     return srgb_luminance_weights()[:, None] * spectra.illuminant_spd(method, w)[None, :]
 
 
