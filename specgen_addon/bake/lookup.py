@@ -41,7 +41,7 @@ import os
 from concurrent.futures import ThreadPoolExecutor
 from dataclasses import dataclass, field
 from pathlib import Path
-from typing import TYPE_CHECKING, Callable
+from typing import Callable
 
 import numpy as np
 
@@ -49,9 +49,13 @@ from specgen_addon.common.errors import Cancelled, OutputExistsError, SpecGenErr
 from specgen_addon.common.atomic_io import atomic_write
 from specgen_addon.common.limits import check_output_dir
 from specgen_addon.brdf.table import N_PHI_D, N_THETA_D, N_THETA_H
-
-if TYPE_CHECKING:  # for the annotation only; the baker imports the fit where it reads one back
-    from specgen_addon.bake.closure_fit import ClosureFit
+from specgen_addon.bake.closure_fit import ClosureFit, fit_closures
+from specgen_addon.bake.preview import write_preview
+from specgen_addon.brdf.rusinkiewicz import io_from_half_diff
+from specgen_addon.brdf.table import grid_angles, phi_d_index, theta_d_index, theta_h_index
+from specgen_addon.common.image_io import read_exr, write_exr
+from specgen_addon.common.limits import safe_name
+from specgen_addon.render.environment import srgb_luminance_weights
 
 COEFFS_PER_RENDER = 4   # coefficient slots per Cycles render: one RGBA lookup group, 4 passes
 #: Atlas layout: 2 = slots c_k + o_k c_0 (1 had a constant slot 0 and absolute shifts).
@@ -65,7 +69,6 @@ ENV_LIST_WIDTH = 256
 def _write_exr(path: Path, channels: dict[str, np.ndarray], overwrite: bool = True,
                attributes: dict[str, str] | None = None, tiled: bool = False) -> Path:
     # tiled: OIIO's texture cache reads tiles directly instead of re-tiling scanlines
-    from specgen_addon.common.image_io import write_exr
 
     return write_exr(path, channels, overwrite=overwrite, attributes=attributes, tiled=tiled,
                      compression="none" if tiled else "zip")
@@ -206,9 +209,6 @@ def reachable_entries(n_phi_d: int = N_PHI_D) -> np.ndarray:
 
     A constant of the lookup resolution, so it is made once per resolution (0.4 s) and returned
     read-only."""
-    from specgen_addon.brdf.rusinkiewicz import io_from_half_diff
-    from specgen_addon.brdf.table import grid_angles
-
     th, td, _ = grid_angles()
     pd = np.arange(n_phi_d) / n_phi_d * np.pi
     wi, wo = io_from_half_diff(th[:, None, None], td[None, :, None], pd[None, None, :])
@@ -269,8 +269,6 @@ def bake_atlas(table, path: str | os.PathLike, wavelengths_nm: np.ndarray | None
     The native closure fit (:func:`specgen_addon.bake.closure_fit.fit_closures`) at the same bands is stored
     in the returned info.
     """
-    from specgen_addon.bake.closure_fit import fit_closures
-
     if not getattr(table, "is_spectral", False):
         raise SpecGenError("the Blender bake needs a spectral BRDF table (wavelengths in nm)")
     if not (isinstance(tolerance, (int, float, np.floating)) and 0.0 <= tolerance <= 1.0):
@@ -320,8 +318,6 @@ def atlas_lookup_reference(atlas: np.ndarray, info: AtlasInfo, theta_h: np.ndarr
                            theta_d: np.ndarray, phi_d: np.ndarray) -> np.ndarray:
     """NumPy twin of the shader's lookup on :func:`read_atlas` (two bilinear taps), projected back
     onto the bands with the basis: ``f_r`` (N, Λ)."""
-    from specgen_addon.brdf.table import phi_d_index, theta_d_index, theta_h_index
-
     x = np.clip(theta_h_index(np.ravel(theta_h)), 0, N_THETA_H - 1)
     y = np.clip(theta_d_index(np.ravel(theta_d)), 0, N_THETA_D - 1)
     kf = phi_d_index(np.ravel(phi_d)) * info.n_phi_d / N_PHI_D
@@ -348,8 +344,6 @@ def atlas_lookup_reference(atlas: np.ndarray, info: AtlasInfo, theta_h: np.ndarr
 
 def read_atlas(info: AtlasInfo) -> np.ndarray:
     """All slot planes stacked (H, W, 4 × groups) (for tests and checks)."""
-    from specgen_addon.common.image_io import read_exr
-
     planes = []
     for p in info.group_paths:
         ch, _ = read_exr(p)
@@ -416,8 +410,6 @@ def light_socket_values(light: Light | None) -> dict[str, object]:
 
 def environment_density(rgb: np.ndarray) -> np.ndarray:
     """Texel probabilities ∝ luminance · cos(elevation) (sum 1), as the reference renderer samples."""
-    from specgen_addon.render.environment import srgb_luminance_weights
-
     h = rgb.shape[0]
     cos_el = np.cos(((1.0 - (np.arange(h) + 0.5) / h) - 0.5) * np.pi)
     weight = np.clip(rgb @ srgb_luminance_weights(), 0, None) * cos_el[:, None]
@@ -494,8 +486,6 @@ def load_atlas_info(path: str | os.PathLike) -> AtlasInfo:
                          int(data["n_phi_d"]), int(data["tiles_x"]),
                          int(data["tiles_y"]), float(data["rel_error"]))
         if data.get("closures"):
-            from specgen_addon.bake.closure_fit import ClosureFit
-
             info.closures = ClosureFit.from_json(data["closures"])
     except (OSError, ValueError, KeyError, TypeError, SpecGenError) as exc:
         raise SpecGenError(f"{path}: cannot read the baked lookup description ({exc})") from None
@@ -508,8 +498,6 @@ def load_atlas_info(path: str | os.PathLike) -> AtlasInfo:
 def check_lookup_outputs(out_dir: str | os.PathLike, name: str, overwrite: bool) -> Path:
     """Refuse up front what :func:`bake_lookup` could not write: a bad ``name``, an output folder
     that is a file or not writable, or (without ``overwrite``) existing outputs of ``name``."""
-    from specgen_addon.common.limits import safe_name
-
     out = Path(out_dir)
     safe_name(name, "BRDF name")
     check_output_dir(out, create=False)
@@ -533,8 +521,6 @@ def bake_lookup(table, out: Path, name: str, n_phi_d: int = N_PHI_D,
     if save_table:
         table.save(out / f"{name}.npz", overwrite=True, compact=True)
     if preview:
-        from specgen_addon.bake.preview import write_preview
-
         write_preview(table, out / f"{name}_preview.png")
     info = bake_atlas(table, out / f"{name}_lookup.exr", n_phi_d=n_phi_d, tolerance=tolerance,
                       progress=progress, cancel=cancel)

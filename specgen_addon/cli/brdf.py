@@ -11,6 +11,7 @@ from specgen_addon.brdf.formats import detect_format, load_brdf, tabulate_file
 from specgen_addon.common.progress import progress_bar
 from specgen_addon.spectral.spectra import DEFAULT_RANGE_NM, DEFAULT_BAND_COUNT, wavelength_grid
 from specgen_addon.brdf.table import BRDFTable
+from specgen_addon.brdf.formats.export import check_output, write_output
 
 
 def add_parser(sub: argparse._SubParsersAction) -> None:
@@ -60,8 +61,6 @@ def run_info(args: argparse.Namespace) -> int:
 
 
 def run_tabulate(args: argparse.Namespace) -> int:
-    from specgen_addon.brdf.formats.export import check_output, write_output
-
     check_output(args.out)
     if args.out.exists() and not args.overwrite:
         raise SpecGenError(f"{args.out}: already exists (use --overwrite)")

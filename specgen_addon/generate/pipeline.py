@@ -28,15 +28,26 @@ from __future__ import annotations
 import os
 from dataclasses import dataclass
 from pathlib import Path
-from typing import TYPE_CHECKING, Callable
+from typing import Callable
 
 import numpy as np
 
 from specgen_addon.bake.lookup import DEFAULT_TOLERANCE, AtlasInfo, bake_lookup, check_lookup_outputs
 from specgen_addon.brdf.table import N_PHI_D, BRDFTable
-
-if TYPE_CHECKING:
-    from specgen_addon.photo.sphere_image import SphereCrop
+from specgen_addon.common.atomic_io import make_dirs
+from specgen_addon.common.errors import SpecGenError, WeightsError
+from specgen_addon.common.interrupts import OutputGuard
+from specgen_addon.generate.latent_fit import fit_latent
+from specgen_addon.generate.refine import CLIP_LEVEL, RefineOptions, refine_brdf, render_under
+from specgen_addon.generate.refine.blur import BLUR_CANDIDATES_PX
+from specgen_addon.generate.thin_film import fit_thin_film
+from specgen_addon.model.checksums import DamagedWeightsError
+from specgen_addon.model.runtime.inference import generate_brdf, sphere_crop
+from specgen_addon.photo.photo_lighting import InputLighting
+from specgen_addon.photo.sphere_image import PhotoSource, SphereCrop
+from specgen_addon.render import sphere_geometry
+from specgen_addon.render.photo_reproduction import reproduction
+from specgen_addon.spectral.spectra import DEFAULT_WAVELENGTHS_NM
 
 ProgressFn = Callable[[float], None]
 CancelFn = Callable[[], bool]
@@ -75,9 +86,6 @@ def load_photo(image) -> tuple[np.ndarray, bool]:
 def load_photo_crop(image) -> tuple[SphereCrop, bool]:
     """:func:`load_photo` as a :class:`~specgen_addon.photo.sphere_image.SphereCrop` (which also says
     whether the sphere was copied or resampled, and so which shipped network it gets)."""
-    from specgen_addon.model.runtime.inference import sphere_crop
-    from specgen_addon.photo.sphere_image import PhotoSource
-
     if isinstance(image, PhotoSource):
         return sphere_crop(image), image.linear
     linear = not isinstance(image, (str, Path)) or Path(image).suffix.lower() == ".exr"
@@ -111,8 +119,6 @@ def generate(image, lighting=None, refine: bool = True, weights=None, wavelength
               "cancel": cancel, "model": model, "latent_fit": latent_fit}
     if out_dir is None:
         return _generate_any_backend(image, backend, progress=progress, **kwargs)
-    from specgen_addon.common.atomic_io import make_dirs
-    from specgen_addon.common.interrupts import OutputGuard
 
     out = check_lookup_outputs(out_dir, name, overwrite)
     sub = (lambda lo, hi: (lambda f: progress(lo + (hi - lo) * f))) if progress else (lambda lo, hi: None)
@@ -137,16 +143,12 @@ def choose_backend() -> str:
 def _generate_any_backend(image, backend: str | None, **kwargs) -> Generated:
     """:func:`_generate` with ``backend``, or with ``None`` the one :func:`choose_backend` picks:
     onnx, or torch with a warning where the onnx graphs are missing or unusable."""
-    from specgen_addon.common.errors import WeightsError
-
     chosen = backend or choose_backend()
     try:
         return _generate(image, backend=chosen, **kwargs)
     except WeightsError as exc:
         import importlib.util
         import warnings
-
-        from specgen_addon.model.checksums import DamagedWeightsError
 
         if backend is not None or chosen != "onnx" or importlib.util.find_spec("torch") is None \
                 or isinstance(exc, DamagedWeightsError):
@@ -160,11 +162,6 @@ def _generate(image, lighting=None, refine: bool = True, weights=None, wavelengt
               backend: str = "torch", progress: ProgressFn | None = None,
               cancel: CancelFn | None = None, model: str = "network", latent_fit: bool = False) -> Generated:
     """:func:`generate`'s table, without the bake, with one ``backend``."""
-    from specgen_addon.common.errors import SpecGenError
-    from specgen_addon.model.runtime.inference import generate_brdf
-    from specgen_addon.photo.sphere_image import SphereCrop
-    from specgen_addon.photo.photo_lighting import InputLighting
-
     if model not in MODELS:
         raise SpecGenError(f"unknown model {model!r}; choose one of {', '.join(MODELS)}")
     if latent_fit and model != "network":
@@ -181,11 +178,6 @@ def _generate(image, lighting=None, refine: bool = True, weights=None, wavelengt
         return None if progress is None else (lambda f: progress(lo + (hi - lo) * f))
 
     if model == "thin-film":
-        from specgen_addon.generate.thin_film import fit_thin_film
-        from specgen_addon.generate.refine import CLIP_LEVEL
-        from specgen_addon.generate.refine.blur import BLUR_CANDIDATES_PX
-        from specgen_addon.spectral.spectra import DEFAULT_WAVELENGTHS_NM
-
         wl = DEFAULT_WAVELENGTHS_NM if wavelengths_nm is None else np.asarray(wavelengths_nm, np.float64)
         # a resampled crop spreads the highlight: the fit models that blur (docs/thin_film_fit.md)
         fit = fit_thin_film(photo, lighting, clip_level=None if linear else CLIP_LEVEL,
@@ -194,7 +186,6 @@ def _generate(image, lighting=None, refine: bool = True, weights=None, wavelengt
         table = fit.table(wl, progress=sub(0.8, 1.0), cancel=cancel)
         table.metadata = {**table.metadata, "input_image": src, "input_lighting": lighting.label}
         return Generated(table, film_fit=fit)
-    from specgen_addon.generate.refine import CLIP_LEVEL
 
     clip_level = None if linear else CLIP_LEVEL
     # progress: the network, then the latent fit (about 4× the network's time), then refinement
@@ -207,8 +198,6 @@ def _generate(image, lighting=None, refine: bool = True, weights=None, wavelengt
                           backend=backend, progress=sub(0.0, ends[0]), cancel=cancel)
     fitted = None
     if latent_fit:
-        from specgen_addon.generate.latent_fit import fit_latent
-
         fitted = fit_latent(network_input, photo, lighting, weights, wavelengths_nm, clip_level=clip_level,
                             network_table=table, progress=sub(ends[0], ends[1]), cancel=cancel)
         table = fitted.table
@@ -216,7 +205,6 @@ def _generate(image, lighting=None, refine: bool = True, weights=None, wavelengt
     if not refine:
         return Generated(table, latent_fit=fitted, crop=crop,
                          network_reproduction=network_reproduction(table, photo, lighting, clip_level, crop.saturated))
-    from specgen_addon.generate.refine import RefineOptions, refine_brdf
 
     options = RefineOptions(clip_level=clip_level, exclude=crop.saturated)
     result = refine_brdf(table, photo, lighting, options, progress=sub(ends[1], 1.0), cancel=cancel)
@@ -227,15 +215,11 @@ def network_reproduction(table: BRDFTable, photo: np.ndarray, lighting, clip_lev
                          exclude: np.ndarray | None = None):
     """How well a table alone reproduces the photo under its lighting (RGB PSNR, ΔE2000 over the
     sphere's unsaturated pixels): the figure a run without refinement reports."""
-    from specgen_addon.generate.refine import render_under
-    from specgen_addon.render.photo_reproduction import reproduction
-
     scene = lighting.scene(photo.shape[0])
     img = render_under(table, scene, lighting.image_exposure)
     if clip_level is not None:
         img = np.minimum(img, 1.0)
     inside = np.any(photo > 0, axis=-1) | np.any(img > 0, axis=-1)
-    from specgen_addon.render import sphere_geometry
 
     inside &= sphere_geometry(photo.shape[0]).mask
     if exclude is not None:

@@ -32,6 +32,8 @@ import numpy as np
 from specgen_addon.spectral import spectra
 from specgen_addon.common.errors import SpecGenError
 from specgen_addon.spectral.rgb_to_spectrum import rgb_to_spectrum
+from specgen_addon.common.image_io import ImageIOError, read_exr
+from specgen_addon.spectral.colour_tables import tables
 
 MALLETT2019 = "mallett2019"
 #: Rec. 709 / sRGB luminance weights (row Y of the sRGB → XYZ matrix), from colour-science.
@@ -42,8 +44,6 @@ def srgb_luminance_weights() -> np.ndarray:
     """(3,) weights giving CIE Y from linear sRGB (colour-science's sRGB matrix)."""
     global _SRGB_Y_WEIGHTS
     if _SRGB_Y_WEIGHTS is None:
-        from specgen_addon.spectral.colour_tables import tables
-
         _SRGB_Y_WEIGHTS = np.asarray(tables()["srgb_rgb_to_xyz"][1], float)
     return _SRGB_Y_WEIGHTS
 
@@ -67,8 +67,6 @@ def uplift_basis(wavelengths_nm: np.ndarray, method: str = MALLETT2019) -> np.nd
 def read_exr_rgb(path: str | Path) -> np.ndarray:
     """Read the R, G, B channels of an OpenEXR file as float32 (H, W, 3), row 0 on top
     (OpenEXR, or Blender's bundled OpenImageIO: :mod:`specgen_addon.common.image_io`)."""
-    from specgen_addon.common.image_io import ImageIOError, read_exr
-
     path = Path(path)
     if not path.is_file():
         raise SpecGenError(f"{path}: environment map not found")

@@ -19,6 +19,7 @@ from __future__ import annotations
 import numpy as np
 from scipy.ndimage import affine_transform
 from scipy.ndimage import shift as nd_shift
+from specgen_addon.photo.sphere_image import _resample_circle
 
 
 def reframe(img: np.ndarray, dy_px: float, dx_px: float, scale: float = 1.0) -> np.ndarray:
@@ -59,8 +60,6 @@ def offgrid_photo_crop(img: np.ndarray, rng: np.random.Generator, finder_error_p
     a pixel (uniform in [0, 1)² pixels, bilinear): found with a Gaussian error of ``finder_error_px``
     (standard deviation, each of centre x, y and radius) and resampled by
     :func:`specgen_addon.photo.sphere_image._resample_circle`."""
-    from specgen_addon.photo.sphere_image import _resample_circle
-
     img = np.asarray(img, dtype=np.float32)
     s = img.shape[-1]
     border = 4

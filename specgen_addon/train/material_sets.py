@@ -21,21 +21,22 @@ import numpy as np
 from specgen_addon.model import Config
 from specgen_addon.train.data import InputImageCache, TrainingMaterial, find_brdf_files, load_file_materials
 from specgen_addon.train.loop import MaterialSet, TrainConfig
+from specgen_addon.corpus import generate_corpus
+from specgen_addon.corpus.generate import generate_mixed_corpus
+from specgen_addon.photo import sphere_image as input_image
+from specgen_addon.photo.resample import resample_square
+from specgen_addon.spectral.spectra import srgb_decode, srgb_encode
 
 SHARED_RGL_DIR = Path(__file__).resolve().parents[3] / "shared" / "data" / "rgl"
 
 
 def render_input_variant(brdf, variant: int) -> np.ndarray:
     """Canonical sphere render ``(128, 128, 3)`` of ``brdf`` under training lighting ``variant``."""
-    from specgen_addon.photo import sphere_image as input_image
-
     return input_image.render_training_input(brdf, variant)
 
 
 def png_like(image: np.ndarray) -> np.ndarray:
     """What an 8-bit sRGB PNG of a linear render holds once read back: clipped to [0, 1], quantised."""
-    from specgen_addon.spectral.spectra import srgb_decode, srgb_encode
-
     q = np.round(srgb_encode(np.clip(image, 0.0, 1.0)) * 255.0) / 255.0
     return srgb_decode(q).astype(np.float32)
 
@@ -46,9 +47,6 @@ def network_inputs(images: list[np.ndarray], image_size: int, png_augment: bool 
     With ``png_augment`` each render also appears as its 8-bit PNG version (highlights clipped),
     so the network copes with PNG/JPEG inputs as well as linear EXR (2K images).
     """
-    from specgen_addon.photo import sphere_image as input_image
-    from specgen_addon.photo.resample import resample_square
-
     if png_augment:
         images = list(images) + [png_like(im) for im in images]
     return np.stack([resample_square(input_image.prepare_sphere_array(im), image_size) for im in images])
@@ -58,9 +56,6 @@ def build_material_sets(mcfg: Config, tcfg: TrainConfig, cache_dir: str | Path,
                         log: Callable[[str], None] = print, progress: bool = False
                         ) -> tuple[MaterialSet, MaterialSet, MaterialSet]:
     """(spectral, rgb, validation) material sets with cached input renders."""
-    from specgen_addon.corpus import generate_corpus
-    from specgen_addon.corpus.generate import generate_mixed_corpus
-
     cache_dir = Path(cache_dir)
     if tcfg.families is None:
         corpus = generate_corpus(tcfg.corpus_size, tcfg.corpus_seed)

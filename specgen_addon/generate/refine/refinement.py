@@ -46,6 +46,8 @@ from specgen_addon.generate.refine.body import BODY_PRIORS, blended_body, blind_
 from specgen_addon.generate.refine.operator import PhotoOperator, render_grid
 from specgen_addon.render.photo_reproduction import Reproduction, checked_photo, photo_scale, reproduction
 from specgen_addon.generate.refine.solve import difference_operator, nonneg_ridge
+from specgen_addon.photo.photo_lighting import InputLighting
+from specgen_addon.render.sampling import diffuse_floor
 
 ProgressFn = Callable[[float], None]
 CancelFn = Callable[[], bool]
@@ -207,8 +209,6 @@ class RefineResult:
 
 def diffuse_floor_of(table: BRDFTable) -> np.ndarray:
     """The renderer's control-variate floor ``c(λ)`` of a table (its Lambertian part), (Λ,)."""
-    from specgen_addon.render.sampling import diffuse_floor
-
     return diffuse_floor(lambda wi, wo: table.eval(wi, wo))
 
 
@@ -245,8 +245,6 @@ def refine_brdf(table: BRDFTable, photo: np.ndarray, lighting=None, options: Ref
     progress, cancel
         ``progress(fraction)``; ``cancel()`` returning True raises :class:`Cancelled`.
     """
-    from specgen_addon.photo.photo_lighting import InputLighting
-
     t0 = time.perf_counter()
     if not isinstance(table, BRDFTable) or not table.is_spectral:
         raise SpecGenError("refinement needs a spectral BRDFTable (the network's output), "
