@@ -32,7 +32,7 @@ import numpy as np
 from specgen_addon.spectral import spectra
 from specgen_addon.common.errors import SpecGenError
 from specgen_addon.spectral.rgb_to_spectrum import rgb_to_spectrum
-from specgen_addon.common.image_io import ImageIOError, read_exr
+from specgen_addon.common.image_io import ImageIOError, read_exr, read_float_image
 from specgen_addon.spectral.colour_tables import tables
 
 MALLETT2019 = "mallett2019"
@@ -85,18 +85,8 @@ def read_hdr_rgb(path: str | Path) -> np.ndarray:
     path = Path(path)
     if not path.is_file():
         raise SpecGenError(f"{path}: environment map not found")
-    try:
-        import OpenImageIO as oiio
-    except ImportError:
-        raise SpecGenError(f"{path}: reading .hdr files needs OpenImageIO (bundled with Blender)") from None
-    inp = oiio.ImageInput.open(str(path))
-    if inp is None:
-        raise SpecGenError(f"{path}: cannot read Radiance HDR ({oiio.geterror().strip() or 'unreadable'})")
-    try:
-        px = inp.read_image(oiio.FLOAT)
-    finally:
-        inp.close()
-    if px is None or px.ndim != 3 or px.shape[2] < 3:
+    px = read_float_image(path, SpecGenError, "Radiance HDR")
+    if px.shape[2] < 3:
         raise SpecGenError(f"{path}: Radiance HDR has no RGB pixels")
     return np.ascontiguousarray(px[..., :3], dtype=np.float32)
 
