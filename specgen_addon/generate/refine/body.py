@@ -4,7 +4,7 @@ A photo fixes three numbers of the body's spectrum (its colour); the other degre
 from a prior. Measured on the validation split, the network's body spectra are a weak prior there
 (spectral PSNR of the body shape, after a tint matched to the colour: 23 dB), while a natural
 reflectance of the same colour — Otsu et al.'s (2018) clustered basis of measured reflectances,
-:mod:`specgen_addon.spectral.recovery` — is a strong one (34 dB; docs/refinement.md). So the
+:mod:`specgen_addon.spectral.otsu2018` — is a strong one (34 dB; docs/refinement.md). So the
 refinement keeps the network's colour and lobe, and takes the body's *shape* from that basis.
 
 That holds for a diffuse body under an interface (plastics, paints, coated materials). A metal has
