@@ -167,7 +167,8 @@ def run(args) -> Path:
             raise errors.OutputExistsError(f"{p}: already exists (pass --overwrite to replace it)")
     wavelengths = spectra.wavelength_grid(args.wl_min, args.wl_max, args.bands)
 
-    bake = import_module("specgen_addon.generate.lookup")
+    bake = import_module("specgen_addon.bake.lookup")
+    pipeline = import_module("specgen_addon.generate.pipeline")
     t0 = time.perf_counter()
     last = [-1]
 
@@ -180,10 +181,10 @@ def run(args) -> Path:
     PHASE[0] = "BRDF generation"
     before = _files_in(out / "lookup")
     if args.image:
-        info = bake.generate_lookup(str(source), out / "lookup", wavelengths, weights=args.weights,
-                                    backend=args.backend, name=source.stem, progress=progress,
-                                    lighting=photo_lighting, refine=args.refine,
-                                    save_table=args.keep_lookups, model=args.model)
+        info = pipeline.generate(str(source), out_dir=out / "lookup", wavelengths_nm=wavelengths,
+                                 weights=args.weights, backend=args.backend, name=source.stem,
+                                 progress=progress, lighting=photo_lighting, refine=args.refine,
+                                 save_table=args.keep_lookups, model=args.model).lookup
         if info.film_fit is not None:
             print(cli_model.film_fit_summary(info.film_fit, photo_lighting.label), flush=True)
             for w in info.film_fit.warnings:
@@ -419,13 +420,13 @@ def _generate(spec, lighting, stem: str, lookup: Path, wavelengths, args):
     """Generate and bake one ``--apply`` photo's BRDF (printing what refinement reached)."""
     from importlib import import_module
 
-    bake = import_module("specgen_addon.generate.lookup")
+    pipeline = import_module("specgen_addon.generate.pipeline")
     cli_model = import_module("specgen_addon.cli.model")
     t0 = time.perf_counter()
     source = cli_model.photo_source_from_args(args, spec.image)   # --linear, --circle, --mask, --white-level
-    info = bake.generate_lookup(source, lookup, wavelengths, weights=args.weights,
-                                backend=args.backend, name=stem, lighting=lighting,
-                                refine=args.refine, model=args.model, overwrite=args.overwrite)
+    info = pipeline.generate(source, out_dir=lookup, wavelengths_nm=wavelengths, weights=args.weights,
+                             backend=args.backend, name=stem, lighting=lighting,
+                             refine=args.refine, model=args.model, overwrite=args.overwrite).lookup
     if info.film_fit is not None:
         print(cli_model.film_fit_summary(info.film_fit, lighting.label), flush=True)
     if info.refinement is not None:

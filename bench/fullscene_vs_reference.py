@@ -186,7 +186,7 @@ def main() -> int:
     from specgen_addon.brdf.table import BRDFTable
 
     pkg = batch.load_package()
-    bake = import_module("specgen_addon.generate.lookup")
+    bake = import_module("specgen_addon.bake.lookup")
     render = import_module(f"{pkg.__name__}.ops.render")
     fullscene = import_module(f"{pkg.__name__}.ops.render_fullscene")
     scene_mod = import_module(f"{pkg.__name__}.ops.scene")

@@ -4,7 +4,7 @@ Usage: ``python bench/generate.py [IMAGE] [--bands 21] [--lookup 180] [--repeat 
 
 Registers the add-on as Blender does, then times ``bpy.ops.specgen.generate_brdf()`` (what the
 button runs: image → network → spectral basis → lookup textures, then the material and its
-preview) with the backend a stock Blender uses (onnxruntime), and :func:`specgen_addon.generate.lookup.generate_lookup`
+preview) with the backend a stock Blender uses (onnxruntime), and :func:`specgen_addon.generate.pipeline.generate`
 alone (inference + bake, target ≤ 5 s) for onnx and torch. Runs are interleaved
 so a busy machine slows all alike; the load average is printed with the machine, and the
 process CPU time (all threads) beside the wall time, which a shared machine inflates less.
@@ -39,7 +39,7 @@ def main() -> int:
     import batch
 
     pkg = batch.load_package()
-    bake = import_module("specgen_addon.generate.lookup")
+    pipeline = import_module("specgen_addon.generate.pipeline")
     from specgen_addon.spectral.spectra import wavelength_grid
 
     wl = wavelength_grid(380.0, 780.0, args.bands)
@@ -50,8 +50,8 @@ def main() -> int:
     s.image_path, s.output_dir, s.bands, s.lookup_resolution = str(args.image), str(out), args.bands, args.lookup
     s.overwrite = True
     s.refine = False  # Generate is timed without refinement (bench/refine.py times that)
-    bake.generate_lookup(str(args.image), out, wl, n_phi_d=int(args.lookup), backend="onnx", refine=False)  # warm-up:
-    bake.generate_lookup(str(args.image), out, wl, n_phi_d=int(args.lookup), backend="torch", refine=False)  # model loads
+    pipeline.generate(str(args.image), out_dir=out, wavelengths_nm=wl, n_phi_d=int(args.lookup), backend="onnx", refine=False)  # warm-up:
+    pipeline.generate(str(args.image), out_dir=out, wavelengths_nm=wl, n_phi_d=int(args.lookup), backend="torch", refine=False)  # model loads
     times: dict[str, list[float]] = {"operator (onnx)": [], "onnx": [], "torch": []}
     cpu: dict[str, list[float]] = {k: [] for k in times}
     for _ in range(args.repeat):
@@ -61,7 +61,7 @@ def main() -> int:
         cpu["operator (onnx)"].append(time.process_time() - c0)
         for backend in ("onnx", "torch"):
             t0, c0 = time.perf_counter(), time.process_time()
-            bake.generate_lookup(str(args.image), out, wl, n_phi_d=int(args.lookup), backend=backend, refine=False)
+            pipeline.generate(str(args.image), out_dir=out, wavelengths_nm=wl, n_phi_d=int(args.lookup), backend=backend, refine=False)
             times[backend].append(time.perf_counter() - t0)
             cpu[backend].append(time.process_time() - c0)
     pkg.unregister()

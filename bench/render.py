@@ -48,7 +48,7 @@ def main(argv: list[str] | None = None) -> int:
     from importlib import import_module
 
     render = import_module(f"{pkg.__name__}.ops.render")
-    bake = import_module("specgen_addon.generate.lookup")
+    bake = import_module("specgen_addon.bake.lookup")
     scene_mod = import_module(f"{pkg.__name__}.ops.scene")
     from specgen_addon.corpus import generate_corpus
 
@@ -126,7 +126,7 @@ def bench_fullscene(args) -> int:
     import numpy as np
     from importlib import import_module
 
-    bake = import_module("specgen_addon.generate.lookup")
+    bake = import_module("specgen_addon.bake.lookup")
     render = import_module(f"{pkg.__name__}.ops.render")
     fullscene = import_module(f"{pkg.__name__}.ops.render_fullscene")
     demo = import_module(f"{pkg.__name__}.ops.demo_scenes")

@@ -2,7 +2,7 @@
 
 ``register``/``unregister`` add and remove exactly the classes and the ``Scene.specgen`` property of
 :mod:`.properties`, :mod:`.operators` and :mod:`.panel`; the numerics live in the bpy-free core
-(:mod:`specgen_addon.generate.lookup`, :mod:`specgen_addon.bake.scene_uplift`, :mod:`specgen_addon.bake.closure_fit`)
+(:mod:`specgen_addon.bake.lookup`, :mod:`specgen_addon.bake.scene_uplift`, :mod:`specgen_addon.bake.closure_fit`)
 and the core package.
 """
 

@@ -29,7 +29,7 @@ from typing import Callable, Generator
 import bpy
 import numpy as np
 
-from specgen_addon.generate import lookup as bake
+from specgen_addon.bake import lookup as bake
 from specgen_addon.common.errors import Cancelled, SpecGenError
 from .render import (SavedAttributes, SpectralRenderJob, is_specgen_material, script_node,
                      specgen_materials)

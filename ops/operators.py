@@ -24,7 +24,8 @@ import numpy as np
 
 from specgen_addon.common.errors import OutputExistsError, SpecGenError
 from specgen_addon.spectral.spectra import wavelength_grid
-from specgen_addon.generate import lookup as bake
+from specgen_addon.bake import lookup as bake
+from specgen_addon.generate.pipeline import generate
 from specgen_addon.photo.image_checks import check_pixel_count
 from specgen_addon.render.cycles_time_estimate import format_duration
 from . import naming
@@ -128,7 +129,7 @@ def generate_with_photo_lighting(args: dict, lighting, circle_png: Path | None =
     with OutputGuard([args["out_dir"]]):
         make_dirs(Path(args["out_dir"]))
         photo_lighting, notes = lighting(args["image"])
-        info = bake.generate_lookup(**args, lighting=photo_lighting, **kwargs)
+        info = generate(**args, lighting=photo_lighting, backend=None, **kwargs).lookup
         if circle_png is not None and info.crop is not None and info.crop.circle is not None:
             write_circle_preview(circle_png, args["image"], info.crop.circle, overwrite=args["overwrite"])
         else:

@@ -9,7 +9,7 @@ import bpy
 from bpy.props import (BoolProperty, EnumProperty, FloatProperty, IntProperty, PointerProperty,
                        StringProperty)
 
-from specgen_addon.generate.lookup import DEFAULT_TOLERANCE
+from specgen_addon.bake.lookup import DEFAULT_TOLERANCE
 from specgen_addon.spectral.spectra import DEFAULT_BAND_COUNT, DEFAULT_RANGE_NM
 from .photo_properties import CLASSES as PHOTO_CLASSES
 from .photo_properties import SpecGenPhotoSettings

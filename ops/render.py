@@ -3,7 +3,7 @@
 The exact mode evaluates the tabulated BRDF itself (direct light, SpecGen objects only; the
 full-scene mode is :mod:`.render_fullscene`). This module also builds the SpecGen material.
 
-Cycles (CPU, OSL) renders images of spectral-basis coefficients, not bands (see :mod:`specgen_addon.generate.lookup`):
+Cycles (CPU, OSL) renders images of spectral-basis coefficients, not bands (see :mod:`specgen_addon.bake.lookup`):
 each render carries four coefficient slots × RGB lighting, which the shader
 (``ops/osl/specgen_brdf.osl``) writes as closure weights and Cycles stores in the Emission,
 Diffuse Color, Glossy Color and Transmission Color passes; one compositor File Output node per pass
@@ -35,7 +35,7 @@ import bpy
 import numpy as np
 
 from specgen_addon.common.errors import Cancelled, OutputExistsError, SpecGenError
-from specgen_addon.generate import lookup as bake
+from specgen_addon.bake import lookup as bake
 from specgen_addon.common.interrupts import private_tempdir
 
 SHADER_PATH = Path(__file__).resolve().parent / "osl" / "specgen_brdf.osl"

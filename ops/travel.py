@@ -213,8 +213,8 @@ def rebuild(mat) -> str | None:
     material; what was done, or None."""
     import numpy as np
 
+    from specgen_addon.bake import lookup as bake
     from specgen_addon.brdf.table import BRDFTable
-    from specgen_addon.generate import lookup as bake
 
     from .render import make_material, script_node
 

@@ -67,7 +67,7 @@ def main(argv=None) -> int:
     import matplotlib.pyplot as plt
     from bpy_extras.object_utils import world_to_camera_view
 
-    bake = import_module("specgen_addon.generate.lookup")
+    bake = import_module("specgen_addon.bake.lookup")
     render = import_module(f"{pkg.__name__}.ops.render")
     fullscene = import_module(f"{pkg.__name__}.ops.render_fullscene")
     demo = import_module(f"{pkg.__name__}.ops.demo_scenes")

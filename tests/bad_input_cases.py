@@ -694,35 +694,35 @@ def cases(have_rgl: bool, big: bool) -> list[Case]:
         from specgen_addon.generate.refine import refine_brdf
         refine_brdf('table.npz', np.full((128, 128, 3), 0.1))""")))
     add(C("api bake_atlas not a table", api("""
-        from specgen_addon.generate.lookup import bake_atlas
+        from specgen_addon.bake.lookup import bake_atlas
         bake_atlas(np.ones(3), '{out}/a.exr')""")))
     add(C("api bake_atlas path under a file", api("""
         from specgen_addon.brdf.table import BRDFTable
-        from specgen_addon.generate.lookup import bake_atlas
+        from specgen_addon.bake.lookup import bake_atlas
         bake_atlas(BRDFTable.load('{fx}/good.npz'), '{fx}/a_file/a.exr')""")))
     add(C("api bake_atlas max_coeffs 0", api("""
         from specgen_addon.brdf.table import BRDFTable
-        from specgen_addon.generate.lookup import bake_atlas
+        from specgen_addon.bake.lookup import bake_atlas
         bake_atlas(BRDFTable.load('{fx}/good.npz'), '{out}/a.exr', max_coeffs=0)""")))
     add(C("api bake_atlas n_phi_d 0", api("""
         from specgen_addon.brdf.table import BRDFTable
-        from specgen_addon.generate.lookup import bake_atlas
+        from specgen_addon.bake.lookup import bake_atlas
         bake_atlas(BRDFTable.load('{fx}/good.npz'), '{out}/a.exr', n_phi_d=0)""")))
     add(C("api bake_atlas tolerance -1", api("""
         from specgen_addon.brdf.table import BRDFTable
-        from specgen_addon.generate.lookup import bake_atlas
+        from specgen_addon.bake.lookup import bake_atlas
         bake_atlas(BRDFTable.load('{fx}/good.npz'), '{out}/a.exr', tolerance=-1)""")))
     add(C("api bake_atlas wavelengths 2000 nm", api("""
         from specgen_addon.brdf.table import BRDFTable
-        from specgen_addon.generate.lookup import bake_atlas
+        from specgen_addon.bake.lookup import bake_atlas
         bake_atlas(BRDFTable.load('{fx}/good.npz'), '{out}/a.exr', wavelengths_nm=np.array([2000.0]))""")))
     add(C("api bake_atlas wavelengths NaN", api("""
         from specgen_addon.brdf.table import BRDFTable
-        from specgen_addon.generate.lookup import bake_atlas
+        from specgen_addon.bake.lookup import bake_atlas
         bake_atlas(BRDFTable.load('{fx}/good.npz'), '{out}/a.exr', wavelengths_nm=np.array([np.nan, 500.0]))""")))
     add(C("api bake_atlas existing no overwrite", api("""
         from specgen_addon.brdf.table import BRDFTable
-        from specgen_addon.generate.lookup import bake_atlas
+        from specgen_addon.bake.lookup import bake_atlas
         bake_atlas(BRDFTable.load('{fx}/good.npz'), '{out}/a.exr', overwrite=False)"""),
         prepare="a_file->a.exr", expect="either"))
     # ordinary photos: must be accepted (converted, with a note)

@@ -59,7 +59,7 @@ def sphere_scene_with_material(folder: Path, stem: str, table: BRDFTable):
     Returns (material, its spectral stack rendered now at 16², 1 spp). Needs bpy."""
     from addon_modules import addon_module
 
-    bake, render, scene_mod = (addon_module(m) for m in ("specgen_addon.generate.lookup", "ops.render",
+    bake, render, scene_mod = (addon_module(m) for m in ("specgen_addon.bake.lookup", "ops.render",
                                                          "ops.scene"))
     import bpy
 

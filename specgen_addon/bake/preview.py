@@ -13,6 +13,9 @@ import os
 from pathlib import Path
 
 import numpy as np
+from specgen_addon.photo.sphere_image import EXPOSURE, KEY_LIGHT_DIRECTION, KEY_LIGHT_IRRADIANCE
+from specgen_addon.render import DistantLight, render_spectral, sphere_geometry
+from specgen_addon.render.spectral_exr import write_preview_png
 
 PREVIEW_SIZE = 96
 FILL_IRRADIANCE = 0.3 * np.pi
@@ -20,9 +23,6 @@ FILL_IRRADIANCE = 0.3 * np.pi
 
 def preview_rgb(table, size: int = PREVIEW_SIZE) -> np.ndarray:
     """Linear sRGB (size, size, 3) of ``table`` (a spectral :class:`BRDFTable`) on the preview sphere."""
-    from specgen_addon.photo.sphere_image import EXPOSURE, KEY_LIGHT_DIRECTION, KEY_LIGHT_IRRADIANCE
-    from specgen_addon.render import DistantLight, render_spectral, sphere_geometry
-
     lights = [DistantLight(KEY_LIGHT_DIRECTION, KEY_LIGHT_IRRADIANCE), DistantLight((0.0, 0.0, 1.0), FILL_IRRADIANCE)]
     result = render_spectral(table, sphere_geometry(size), lights=lights, wavelengths_nm=table.wavelengths)
     return np.clip(result.rgb, 0.0, None) * EXPOSURE
@@ -30,6 +30,4 @@ def preview_rgb(table, size: int = PREVIEW_SIZE) -> np.ndarray:
 
 def write_preview(table, path: str | os.PathLike, size: int = PREVIEW_SIZE, overwrite: bool = True) -> Path:
     """Render :func:`preview_rgb` and write it as an sRGB PNG, atomically."""
-    from specgen_addon.render.spectral_exr import write_preview_png
-
     return write_preview_png(path, preview_rgb(table, size), overwrite=overwrite)

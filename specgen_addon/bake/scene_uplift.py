@@ -26,6 +26,7 @@ import numpy as np
 
 from specgen_addon.spectral import spectra
 from specgen_addon.common.errors import SpecGenError
+from specgen_addon.render.environment import uplift_basis
 
 #: Planck's second radiation constant c₂ = h c / k_B (m·K).
 PLANCK_C2_M_K = 1.438776877e-2
@@ -33,8 +34,6 @@ PLANCK_C2_M_K = 1.438776877e-2
 
 def emission_basis(wavelengths_nm: np.ndarray) -> np.ndarray:
     """``U`` (3, Λ): emitted spectral radiance ``L(λ) = rgb @ U`` for linear-sRGB radiance ``rgb``."""
-    from specgen_addon.render.environment import uplift_basis
-
     return uplift_basis(np.asarray(wavelengths_nm, np.float64))
 
 

@@ -21,6 +21,8 @@ from specgen_addon.spectral import spectra
 from specgen_addon.common.errors import BRDFFormatError, Cancelled, SpecGenError
 from specgen_addon.common.atomic_io import atomic_write, write_npz
 from specgen_addon.brdf.rusinkiewicz import fold_phi_d, half_diff_from_io
+from specgen_addon.common.limits import bad_values
+from specgen_addon.spectral.spectra import reflectance_to_linear_srgb
 
 N_THETA_H = 90
 N_THETA_D = 90
@@ -166,8 +168,6 @@ class BRDFTable:
     def eval_rgb(self, wi: np.ndarray, wo: np.ndarray) -> np.ndarray:
         """Linear sRGB ``f_r`` (N, 3): the RGB columns, or the spectrum projected under D65."""
         if self.is_spectral:
-            from specgen_addon.spectral.spectra import reflectance_to_linear_srgb
-
             return reflectance_to_linear_srgb(self.eval(wi, wo), self.wavelengths)
         return self.eval(wi, wo)
 
@@ -216,7 +216,6 @@ class BRDFTable:
         """RGB projection of a spectral table (linear sRGB BRDF under ``illuminant``)."""
         if not self.is_spectral:
             return self
-        from specgen_addon.spectral.spectra import reflectance_to_linear_srgb
 
         rgb = reflectance_to_linear_srgb(self.values.reshape(-1, self.n_channels), self.wavelengths,
                                          illuminant).reshape(GRID_SHAPE + (3,))
@@ -272,7 +271,6 @@ class BRDFTable:
             raise BRDFFormatError(path, "not a SpecGen BRDF table")
         if header.get("version") != TABLE_FORMAT_VERSION:
             raise BRDFFormatError(path, f"unsupported table version {header.get('version')}")
-        from specgen_addon.common.limits import bad_values
 
         reason = bad_values(values) if values.dtype.kind == "f" else f"values of type {values.dtype}"
         if reason:

@@ -14,6 +14,11 @@ from typing import Callable, Sequence
 
 from specgen_addon import __version__
 from specgen_addon.common.errors import SpecGenError, one_line_warnings
+from specgen_addon.common.atomic_io import (OutputLock, created_since, ledger_mark, make_lock_folders,
+                                            remove_created)
+from specgen_addon.common.interrupts import (EXIT_ERROR, OutputGuard, as_interrupted, on_hard_stop,
+                                             print_traceback_if, raise_if_stopped, stop_on_signals)
+from specgen_addon.scale.preflight import check_command, output_folders
 
 #: Modules (relative to this package) that contribute sub-commands, in help order.
 COMMAND_MODULES = [
@@ -55,15 +60,11 @@ def main(argv: Sequence[str] | None = None) -> int:
 
 
 def _run(args: argparse.Namespace) -> int:
-    from specgen_addon.scale.preflight import check_command
-
     check_command(args)  # every argument, file, folder and size, before any work
     return int(args.func(args) or 0)
 
 
 def folders_of(args: argparse.Namespace):
-    from specgen_addon.scale.preflight import output_folders
-
     return output_folders(args)
 
 
@@ -74,11 +75,6 @@ def run_guarded(what: str | Callable[[], str], work, outputs=([], []), verbose: 
     Returns the exit status: 0, 2 for an error (one line on stderr), 130/143 for SIGINT/SIGTERM
     (one line saying what was stopped and what, if anything, was left).
     """
-    from specgen_addon.common.interrupts import (EXIT_ERROR, OutputGuard, as_interrupted, on_hard_stop, print_traceback_if,
-                             raise_if_stopped, stop_on_signals)
-
-    from specgen_addon.common.atomic_io import OutputLock, created_since, ledger_mark, make_lock_folders, remove_created
-
     folders, files = outputs
     guard = OutputGuard(folders, keep=keep)
     made = make_lock_folders(folders)  # a new output folder's parents: its lock goes beside it

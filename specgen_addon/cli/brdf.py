@@ -6,13 +6,12 @@ import argparse
 import json
 from pathlib import Path
 
-import numpy as np
-
 from specgen_addon.common.errors import SpecGenError
-from specgen_addon.brdf.formats import detect_format, load_brdf
+from specgen_addon.brdf.formats import detect_format, load_brdf, tabulate_file
 from specgen_addon.common.progress import progress_bar
 from specgen_addon.spectral.spectra import DEFAULT_RANGE_NM, DEFAULT_BAND_COUNT, wavelength_grid
 from specgen_addon.brdf.table import BRDFTable
+from specgen_addon.brdf.formats.export import check_output, write_output
 
 
 def add_parser(sub: argparse._SubParsersAction) -> None:
@@ -61,19 +60,7 @@ def run_info(args: argparse.Namespace) -> int:
     return 0
 
 
-def tabulate_file(path: Path, wavelengths_nm: np.ndarray, progress=None) -> BRDFTable:
-    """Load any BRDF file and return it on the MERL grid (spectral files at ``wavelengths_nm``)."""
-    brdf = load_brdf(path)
-    if isinstance(brdf, BRDFTable):
-        return brdf
-    from specgen_addon.brdf.formats.rgl import tabulate_rgl
-
-    return tabulate_rgl(brdf, wavelengths_nm if brdf.is_spectral else None, progress=progress)
-
-
 def run_tabulate(args: argparse.Namespace) -> int:
-    from specgen_addon.brdf.formats.export import check_output, write_output
-
     check_output(args.out)
     if args.out.exists() and not args.overwrite:
         raise SpecGenError(f"{args.out}: already exists (use --overwrite)")

@@ -10,6 +10,8 @@ from specgen_addon.common.errors import OutputExistsError, SpecGenError
 from specgen_addon.common.limits import check_number
 from specgen_addon.common.progress import progress_bar
 from specgen_addon.spectral.spectra import DEFAULT_BAND_COUNT, DEFAULT_RANGE_NM, wavelength_grid
+from specgen_addon.common.cache import cache_root
+from specgen_addon.corpus.generate import FAMILY_MIX, check_mix, generate_mixed_corpus, material_family
 
 MANIFEST_NAME = "manifest.json"
 
@@ -47,8 +49,6 @@ MAX_MATERIALS = 50_000
 
 def parse_mix(text: str) -> dict[str, float] | None:
     """``--families`` → mix (None: the classic recipe); SpecGenError if malformed or unknown."""
-    from specgen_addon.corpus.generate import FAMILY_MIX, check_mix
-
     if text == "classic":
         return None
     if text == "default":
@@ -65,8 +65,6 @@ def parse_mix(text: str) -> dict[str, float] | None:
 
 
 def run(args: argparse.Namespace) -> int:
-    from specgen_addon.corpus.generate import generate_mixed_corpus
-
     if not 1 <= args.n <= MAX_MATERIALS:
         raise SpecGenError(f"--n must be between 1 and {MAX_MATERIALS}, got {args.n}")
     if args.seed < 0:
@@ -98,8 +96,6 @@ def run(args: argparse.Namespace) -> int:
     print(f"{manifest}: {len(materials)} materials "
           f"({', '.join(f'{k} {v}' for k, v in counts.items())})")
     if mix is not None:
-        from specgen_addon.corpus.generate import material_family
-
         fams = sorted({material_family(m) for m in materials})
         print("families (train/val/test): " + ", ".join(
             f"{f} {'/'.join(str(sum(material_family(m) == f and m.split == s for m in materials)) for s in ('train', 'val', 'test'))}"
@@ -120,7 +116,6 @@ def _render_inputs(materials, workers: int, show: bool) -> None:
     """Render the train/val materials' lighting components into the training cache (resumable)."""
     import time
 
-    from specgen_addon.common.cache import cache_root
     from specgen_addon.train.data import TrainingMaterial
     from specgen_addon.train.lighting_mix import ComponentCache
 

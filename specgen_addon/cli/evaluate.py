@@ -4,11 +4,14 @@ from __future__ import annotations
 
 import argparse
 from pathlib import Path
+from specgen_addon.common.atomic_io import atomic_write
+from specgen_addon.evaluation.ablation_study import (STUDY_ARMS, STUDY_SEEDS, format_markdown, load_records,
+                                                     plot_study, pool_records, run_study, summarise)
+from specgen_addon.evaluation.runner import run_paper_tables
+from specgen_addon.evaluation.tables import INPUT_PHOTOS
 
 
 def add_parser(subparsers: argparse._SubParsersAction) -> argparse.ArgumentParser:
-    from specgen_addon.evaluation.tables import INPUT_PHOTOS
-
     p = subparsers.add_parser(
         "paper-tables", help="reproduce the paper's evaluation tables, plots and real-data check",
         description="Evaluate SpecGen against photo-only baselines (an analytic BRDF fitted to the same "
@@ -57,8 +60,6 @@ def add_parser(subparsers: argparse._SubParsersAction) -> argparse.ArgumentParse
 
 
 def add_ablate_parser(subparsers: argparse._SubParsersAction) -> argparse.ArgumentParser:
-    from specgen_addon.evaluation.ablation_study import STUDY_ARMS, STUDY_SEEDS
-
     p = subparsers.add_parser(
         "ablate", help="seeded ablations: AFF vs Hadamard, joint vs spectral-only (mean ± std over seeds)",
         description="Train the ablation arms from scratch at one equal step budget with several seeds, "
@@ -89,10 +90,6 @@ def add_ablate_parser(subparsers: argparse._SubParsersAction) -> argparse.Argume
 def run_ablate(args: argparse.Namespace) -> int:
     import json
 
-    from specgen_addon.evaluation.ablation_study import (format_markdown, load_records, plot_study, pool_records, run_study,
-                                            summarise)
-    from specgen_addon.common.atomic_io import atomic_write
-
     earlier = [r for path in args.with_records for r in load_records(path, args.steps)]
     study = run_study(args.steps, seeds=args.seeds, arms=args.arms, workers=args.workers,
                       sign_bar=args.sign_bar, failure_below=args.failure_below)
@@ -115,8 +112,6 @@ def run_ablate(args: argparse.Namespace) -> int:
 
 
 def run(args: argparse.Namespace) -> int:
-    from specgen_addon.evaluation.runner import run_paper_tables
-
     run_paper_tables(out=args.out, img_dir=args.img_dir, smoke=args.smoke, materials=args.materials,
                      budget_minutes=args.budget_minutes, ablation_steps=args.ablation_steps,
                      ablation=not args.no_ablation, weights=args.weights, resolution=args.resolution,

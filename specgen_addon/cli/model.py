@@ -9,6 +9,16 @@ from pathlib import Path
 
 from specgen_addon.common.errors import OutputExistsError, SpecGenError
 from specgen_addon.common.progress import progress_bar
+from specgen_addon.brdf.formats.export import check_output, write_output
+from specgen_addon.common.atomic_io import atomic_write
+from specgen_addon.common.cache import cache_root
+from specgen_addon.generate.pipeline import generate
+from specgen_addon.model import DEFAULT_WEIGHTS, RESAMPLED_WEIGHTS
+from specgen_addon.photo.light_estimate import estimated_lighting as estimate
+from specgen_addon.photo.light_probe import lighting_from_probe
+from specgen_addon.photo.photo_lighting import parse_light, parse_lighting
+from specgen_addon.photo.sphere_image import PhotoSource, parse_circle, write_circle_preview
+from specgen_addon.spectral.spectra import wavelength_grid
 
 
 def add_parser(sub: argparse._SubParsersAction) -> argparse.ArgumentParser:
@@ -193,8 +203,6 @@ def add_refine_arguments(p: argparse.ArgumentParser) -> None:
 
 def input_lighting_from_args(args: argparse.Namespace):
     """The validated :class:`InputLighting` of :func:`add_refine_arguments`' options."""
-    from specgen_addon.photo.photo_lighting import parse_light, parse_lighting
-
     lights = tuple(parse_light(t) for t in getattr(args, "light", None) or []) + \
         tuple(parse_light(t, vector=True) for t in getattr(args, "light_vector", None) or [])
     return parse_lighting(args.input_env, args.input_rotation, args.input_exposure, args.input_key_light,
@@ -204,8 +212,6 @@ def input_lighting_from_args(args: argparse.Namespace):
 
 def photo_source_from_args(args: argparse.Namespace, image: Path):
     """The :class:`~specgen_addon.photo.sphere_image.PhotoSource` of a photo and the photo options."""
-    from specgen_addon.photo.sphere_image import PhotoSource, parse_circle
-
     circle = getattr(args, "circle", None)
     return PhotoSource(Path(image), encoding="linear" if getattr(args, "linear", False) else "auto",
                        white_level=getattr(args, "white_level", None),
@@ -215,8 +221,6 @@ def photo_source_from_args(args: argparse.Namespace, image: Path):
 def estimated_lighting(args: argparse.Namespace, source):
     """``--input-env estimate``: distant lights + ambient estimated from the ball itself
     (:mod:`specgen_addon.photo.light_estimate`); the run says so, with the model's residual."""
-    from specgen_addon.photo.light_estimate import estimated_lighting as estimate
-
     if args.light or args.light_vector or getattr(args, "light_probe", None) is not None:
         raise SpecGenError("--input-env estimate finds the light itself: leave out --light, --light-vector "
                            "and --light-probe")
@@ -228,9 +232,6 @@ def estimated_lighting(args: argparse.Namespace, source):
 def probe_lighting_from_args(args: argparse.Namespace, source, env_path: Path):
     """The lighting unwrapped from ``--light-probe`` (:mod:`specgen_addon.photo.light_probe`), its
     environment written to ``env_path``; the run's notes about it printed."""
-    from specgen_addon.photo.light_probe import lighting_from_probe
-    from specgen_addon.photo.sphere_image import parse_circle
-
     if env_path.exists() and not args.overwrite:
         raise OutputExistsError(f"{env_path}: already exists (pass --overwrite to replace it)")
     if args.light or args.light_vector or args.input_env not in (None, "", "canonical"):
@@ -253,8 +254,6 @@ def print_photo_report(generated, args: argparse.Namespace, source) -> None:
         print(crop.describe())
         preview = getattr(args, "circle_preview", None)
         if preview is not None and crop.circle is not None:
-            from specgen_addon.photo.sphere_image import write_circle_preview
-
             write_circle_preview(preview, source, crop.circle, overwrite=getattr(args, "overwrite", False))
             print(f"{preview}: the photo with the circle used")
     if generated.network_reproduction is not None:
@@ -321,7 +320,6 @@ def run_train(args: argparse.Namespace) -> int:
     out.mkdir(parents=True, exist_ok=True)
     dctx = ddp.init_from_env(tcfg.device)  # under torchrun: join the process group; else one process
     say = print if dctx.is_main else ddp.silent  # rank 0 speaks for the job
-    from specgen_addon.common.cache import cache_root
 
     cache = cache_root() / "train-data"
     t0 = time.perf_counter()
@@ -355,10 +353,6 @@ def train_summary(res, parameters: int) -> str:
 
 
 def run_infer(args: argparse.Namespace) -> int:
-    from specgen_addon.brdf.formats.export import check_output, write_output
-    from specgen_addon.generate.pipeline import generate
-    from specgen_addon.spectral.spectra import wavelength_grid
-
     out: Path = args.output
     check_output(out)
     rgb_out = out.with_name(out.stem + "_rgb.npz")
@@ -429,8 +423,6 @@ def run_evaluate(args: argparse.Namespace) -> int:
                                                  input_antialias=args.input_antialias)
         print(format_family_results(res["by_family"]))
     if args.json:
-        from specgen_addon.common.atomic_io import atomic_write
-
         with atomic_write(args.json, overwrite=True) as tmp:
             tmp.write_text(json.dumps(res, indent=1))
     return 0
@@ -447,7 +439,6 @@ def run_average(args: argparse.Namespace) -> int:
 
 
 def run_export(args: argparse.Namespace) -> int:
-    from specgen_addon.model import DEFAULT_WEIGHTS, RESAMPLED_WEIGHTS
     from specgen_addon.model.runtime.export_onnx import export_onnx
 
     sources = [args.weights] if args.weights is not None else [DEFAULT_WEIGHTS, RESAMPLED_WEIGHTS]

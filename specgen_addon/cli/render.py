@@ -8,6 +8,9 @@ from pathlib import Path
 
 from specgen_addon.common.errors import SpecGenError
 from specgen_addon.common.progress import progress_bar
+from specgen_addon.brdf.formats import load_brdf
+from specgen_addon.corpus import find_material, generate_corpus, load_manifest
+from specgen_addon.photo import sphere_image as input_image
 
 #: Corpus used to resolve material names and indices (the project's standard corpus).
 CORPUS_SIZE = 200
@@ -41,10 +44,7 @@ def resolve_material(spec: str, manifest: Path | None = None):
     """A BRDF object from a file path, or a corpus material by name or index."""
     path = Path(spec)
     if path.is_file():
-        from specgen_addon.brdf.formats import load_brdf
-
         return load_brdf(path)
-    from specgen_addon.corpus import find_material, generate_corpus, load_manifest
 
     if manifest is not None:
         materials = load_manifest(manifest)
@@ -63,8 +63,6 @@ def resolve_material(spec: str, manifest: Path | None = None):
 
 
 def run(args: argparse.Namespace) -> int:
-    from specgen_addon.photo import sphere_image as input_image
-
     input_image.output_paths(args.out, args.overwrite)  # fail before rendering
     if args.size < 16:
         raise SpecGenError(f"--size must be at least 16, got {args.size}")

@@ -5,6 +5,8 @@ from __future__ import annotations
 import argparse
 import shlex
 from pathlib import Path
+from specgen_addon.common.errors import SpecGenError
+from specgen_addon.scale.batch_many import BatchManyOptions, DEFAULT_BATCH_SCRIPT, run_batch_many
 
 
 def add_parser(sub: argparse._SubParsersAction) -> argparse.ArgumentParser:
@@ -47,9 +49,6 @@ def add_parser(sub: argparse._SubParsersAction) -> argparse.ArgumentParser:
 
 
 def run(args: argparse.Namespace) -> int:
-    from specgen_addon.common.errors import SpecGenError
-    from specgen_addon.scale.batch_many import DEFAULT_BATCH_SCRIPT, BatchManyOptions, run_batch_many
-
     try:
         batch_args = shlex.split(args.batch_args)
     except ValueError as exc:

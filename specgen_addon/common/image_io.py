@@ -154,15 +154,33 @@ def read_ldr(path: str | os.PathLike) -> np.ndarray:
         else:
             arr = arr.astype(np.float32)
         return arr[..., None] if arr.ndim == 2 else arr
-    oiio = _oiio()
+    _oiio()
+    return read_float_image(path, ImageIOError)
+
+
+def read_float_image(path: str | os.PathLike, error: type[SpecGenError] = ImageIOError,
+                     what: str = "image") -> np.ndarray:
+    """Every channel of an image file as float32 (H, W, C), row 0 on top, integers normalised to
+    [0, 1], via OpenImageIO (bundled with Blender, so this also works inside a stock Blender).
+
+    Whatever fails raises the caller's ``error`` (a :class:`SpecGenError` subclass) with one
+    sentence naming ``path``; ``what`` names the kind of file in it ("image", "Radiance HDR").
+    """
+    path = Path(path)
+    try:
+        import OpenImageIO as oiio
+    except ImportError:
+        raise error(f"{path}: reading {path.suffix} files needs OpenImageIO (bundled with Blender)") from None
     inp = oiio.ImageInput.open(str(path))
     if inp is None:
-        raise ImageIOError(f"{path}: cannot read image ({oiio.geterror()})")
+        raise error(f"{path}: cannot read {what} ({oiio.geterror().strip() or 'unreadable'})")
     try:
         spec = inp.spec()
         data = inp.read_image(0, 0, 0, spec.nchannels, "float")  # integers normalised to [0, 1]
     finally:
         inp.close()
+    if data is None:
+        raise error(f"{path}: cannot read {what} ({oiio.geterror().strip() or 'unreadable'})")
     return np.asarray(data, dtype=np.float32).reshape(spec.height, spec.width, spec.nchannels)
 
 

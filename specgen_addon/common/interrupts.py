@@ -24,6 +24,7 @@ import time
 import traceback
 from pathlib import Path
 from typing import Iterable, Iterator
+from specgen_addon.common.atomic_io import created_since, is_ours, ledger_mark, remove_created
 
 EXIT_ERROR = 2
 EXIT_SIGINT = 128 + signal.SIGINT    # 130
@@ -371,8 +372,6 @@ class OutputGuard:
         self._mark = 0
 
     def __enter__(self) -> "OutputGuard":
-        from specgen_addon.common.atomic_io import ledger_mark
-
         self._missing = [f for f in self.folders if not f.exists()]
         self._mark = ledger_mark()
         _cleanups.append(self.clean)
@@ -393,8 +392,6 @@ class OutputGuard:
 
     def clean(self) -> None:
         """Remove what this process made in the folders since entry (except ``keep``)."""
-        from specgen_addon.common.atomic_io import created_since, is_ours, remove_created
-
         mine = created_since(self._mark, self.folders)
         keep = {os.path.abspath(k) for k in self.keep}
         self.kept += [p for p in mine if os.path.abspath(p) in keep and is_ours(p)

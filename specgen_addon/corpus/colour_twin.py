@@ -4,7 +4,7 @@ SpecGen sees an RGB photo, and the test split holds out whole spectra (:mod:`.sp
 so of a held-out reflectance a method can know its colour, not its spectrum (metamerism). The twin
 keeps every parameter of the material (roughness, films, coats, lobe shapes, metals) and replaces
 each reflectance ``ρ(λ)`` by the Otsu, Yamamoto & Hachisuka (2018) reflectance of its own CIE XYZ
-under D65 (:func:`..spectral_recovery.otsu2018_reflectance`): the same colour, a smooth spectrum.
+under D65 (:func:`specgen_addon.spectral.rgb_to_spectrum.xyz_to_spectrum`, ``"Otsu 2018"``): the same colour, a smooth spectrum.
 
 Rendering the twin against the material (``bench/colour_ceiling.py``) measures how much spectral
 PSNR a method loses that gets every colour right and guesses spectra as Otsu 2018 does. It is a
@@ -21,7 +21,8 @@ from collections.abc import Callable
 
 import numpy as np
 
-from specgen_addon.spectral.recovery import otsu2018_reflectance, xyz_of_reflectance
+from specgen_addon.spectral.otsu2018 import xyz_of_reflectance
+from specgen_addon.spectral.rgb_to_spectrum import xyz_to_spectrum
 from specgen_addon.corpus.material import Reflectance
 from specgen_addon.corpus.spectra_sources import REFLECTANCE_GRID_NM
 
@@ -52,7 +53,7 @@ def reflectance_twin(reflectance: Reflectance) -> Reflectance:
     xyz = np.asarray(reflectance.values, np.float64) @ m
     if xyz[1] <= 0.0:
         return reflectance                  # black: no colour to recover, and nothing to lose
-    values = otsu2018_reflectance(xyz, REFLECTANCE_GRID_NM)
+    values = xyz_to_spectrum(xyz, REFLECTANCE_GRID_NM, method="Otsu 2018")
     gram = np.linalg.inv(m.T @ m)
     for _ in range(_COLOUR_STEPS):
         values = np.clip(values + m @ (gram @ (xyz - values @ m)), 0.0, 1.0)

@@ -34,6 +34,7 @@ from specgen_addon.corpus.metals import METALS, metal_ior
 from specgen_addon.corpus.microfacet import (cosine_weighted_mean, lookup_mu, specular_albedo_curves,
                          specular_geometry)
 from specgen_addon.corpus.spectra_sources import REFLECTANCE_GRID_NM, SPLITS
+from specgen_addon.brdf.table import BRDFTable
 
 #: Cosine nodes of the Fresnel lookup (linear interpolation in cos θd).
 COS_NODES = np.linspace(0.0, 1.0, 1025)
@@ -231,8 +232,6 @@ class Material:
                  progress: Callable[[float], None] | None = None,
                  cancel: Callable[[], bool] | None = None):
         """The material on the MERL grid as a spectral :class:`~specgen_addon.brdf.table.BRDFTable`."""
-        from specgen_addon.brdf.table import BRDFTable
-
         w = np.asarray(wavelengths_nm, dtype=np.float64)
         meta = {"source": "specgen corpus", "material": self.to_dict(), "description": self.kind}
         return BRDFTable.tabulate(lambda th, td, pd: self.eval_hd(th, td, pd, w), w,

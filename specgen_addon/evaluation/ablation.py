@@ -29,6 +29,9 @@ from pathlib import Path
 from typing import Any, Callable
 
 from specgen_addon.common.cache import read_json, write_json
+from specgen_addon.common.cache import cache_root
+from specgen_addon.evaluation import report
+from specgen_addon.model import Config
 
 
 @dataclass(frozen=True)
@@ -77,7 +80,6 @@ class AblationSettings:
 
     def configs(self, arm: Arm, seed: int):
         """(model Config, TrainConfig) of ``arm`` trained with ``seed``."""
-        from specgen_addon.model import Config
         from specgen_addon.train.loop import TrainConfig
 
         mcfg = Config.from_dict({**self.model, "fusion": arm.fusion})
@@ -105,8 +107,6 @@ class AblationSettings:
         return f"{arm.name}-{hashlib.sha1(blob.encode()).hexdigest()[:10]}"
 
     def describe_markdown(self, results: dict[str, "ArmResult"]) -> str:
-        from specgen_addon.evaluation import report
-
         rows = [[r.label, r.fusion.upper() if r.fusion == "aff" else "Hadamard",
                  "corpus spectral + RGB" if r.joint else "corpus spectral", str(r.steps), str(r.seed),
                  f"{r.wall_seconds / 60:.1f} min"] for r in results.values()]
@@ -142,7 +142,6 @@ def _default_configs() -> tuple[dict[str, Any], dict[str, Any]]:
 
     Ablation arms train from scratch: the config's ``init_weights`` (a warm start from the shipped
     weights) is dropped, so every arm starts equal and arms of another architecture can train."""
-    from specgen_addon.model import Config
     from specgen_addon.train.loop import TrainConfig, load_config
 
     if DEFAULT_CONFIG.is_file():
@@ -208,8 +207,6 @@ def time_steps(settings: AblationSettings, n: int = 12, log: Callable[[str], Non
 
 def _data_cache() -> Path:
     """The cache of training input renders shared with the training runs (nothing rendered twice)."""
-    from specgen_addon.common.cache import cache_root
-
     return cache_root() / "train-data"
 
 

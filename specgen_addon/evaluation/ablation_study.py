@@ -29,6 +29,8 @@ import numpy as np
 
 from specgen_addon.evaluation import ablation as abl
 from specgen_addon.common.cache import cache_root, read_json, write_json
+from specgen_addon.common.errors import SpecGenError
+from specgen_addon.evaluation.ablation import ARMS_BY_NAME
 
 #: Arms of the study: the shipped configuration (joint AFF) and one change each.
 STUDY_ARMS = ("joint-aff", "joint-hadamard", "spectral-aff")
@@ -242,9 +244,6 @@ def load_records(path: str | Path, steps: int) -> list[dict[str, Any]]:
     at ``steps`` steps with known arms: pooling different budgets would mix two experiments."""
     import json
 
-    from specgen_addon.common.errors import SpecGenError
-    from specgen_addon.evaluation.ablation import ARMS_BY_NAME
-
     path = Path(path)
     try:
         data = json.loads(path.read_text(encoding="utf-8"))
@@ -271,8 +270,6 @@ def pool_records(new: Sequence[dict[str, Any]], earlier: Sequence[dict[str, Any]
     """This run's records with an earlier study's. Where both scored one (arm, seed) the two must
     agree to :data:`SAME_SCORE_DB` (training and scoring are deterministic, so a retrained arm is a
     check of the earlier figure) and this run's is kept; a disagreement is an error."""
-    from specgen_addon.common.errors import SpecGenError
-
     pooled = {(r["arm"], int(r["seed"])): r for r in earlier}
     for r in new:
         key = (r["arm"], int(r["seed"]))

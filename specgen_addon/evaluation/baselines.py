@@ -41,6 +41,7 @@ import numpy as np
 from specgen_addon.spectral import spectra
 from specgen_addon.common.errors import SpecGenError
 from specgen_addon.common.cache import cache_root
+from specgen_addon.common.atomic_io import atomic_write
 
 MALLETT2019 = "mallett2019"
 SMITS1999 = "smits1999"
@@ -148,7 +149,6 @@ def face_table(method: str, n: int | None = None) -> np.ndarray:
             if np.array_equal(data["wavelengths"], LUT_WAVELENGTHS_NM) and data["table"].shape[1] == n:
                 return data["table"]
     table = build_face_table(method, n)
-    from specgen_addon.common.atomic_io import atomic_write
 
     with atomic_write(path, overwrite=True) as tmp:
         np.savez(tmp, table=table, wavelengths=LUT_WAVELENGTHS_NM)

@@ -14,6 +14,7 @@ import numpy as np
 
 from specgen_addon.brdf.rusinkiewicz import half_diff_from_io
 from specgen_addon.brdf.table import mu_law_decode_inplace
+from specgen_addon.model.runtime.inference import network_input
 
 #: Points per network call (bounded memory).
 CHUNK = 262_144
@@ -33,7 +34,6 @@ class NetworkBRDF:
     def __init__(self, weights: str | Path, image: np.ndarray):
         import torch
 
-        from specgen_addon.model.runtime.inference import network_input
         from specgen_addon.model import load_weights
 
         self.torch = torch

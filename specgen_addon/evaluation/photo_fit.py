@@ -41,6 +41,7 @@ from specgen_addon.corpus.microfacet import specular_geometry
 from specgen_addon.common.errors import Cancelled, SpecGenError
 from specgen_addon.generate.refine.operator import RIM_COS
 from specgen_addon.generate.refine.solve import nonneg_ridge
+from specgen_addon.evaluation.baselines import uplift_albedo
 
 ProgressFn = Callable[[float], None]
 CancelFn = Callable[[], bool]
@@ -350,8 +351,6 @@ def fit_photo(photo: np.ndarray, scene, exposure: float, *, alphas: tuple[float,
 def uplift_fit(brdf: AnalyticRGB, method: str, wavelengths_nm: np.ndarray) -> AnalyticSpectral:
     """The spectral BRDF of a fit: its diffuse and F0 colours uplifted by ``method``
     (:func:`specgen_addon.evaluation.baselines.uplift_albedo`; colour-science, so not for Blender)."""
-    from specgen_addon.evaluation.baselines import uplift_albedo
-
     wl = np.atleast_1d(np.asarray(wavelengths_nm, dtype=np.float64))
     spectra = uplift_albedo(np.array([brdf.diffuse, brdf.f0]), method, wl)
     return AnalyticSpectral(wl, spectra[0], spectra[1], brdf.alpha, brdf.edge, brdf.coat, brdf.coat_alpha)

@@ -32,6 +32,11 @@ from specgen_addon.spectral import spectra
 from specgen_addon.common.errors import SpecGenError
 from specgen_addon.render import DistantLight, Environment, Geometry, sphere_geometry
 from specgen_addon.common.cache import cache_root
+from specgen_addon.corpus import generate_corpus
+from specgen_addon.photo import sphere_image as input_image
+from specgen_addon.photo.photo_lighting import InputLighting
+from specgen_addon.render import environment_maps as lighting
+from specgen_addon.render.geometry import pixel_grid
 
 #: Evaluation bands: 20 wavelengths, 400–780 nm in 20 nm steps (paper Table 2 uses 20).
 WAVELENGTHS_NM = spectra.wavelength_grid(400.0, 780.0, 20)
@@ -83,9 +88,6 @@ def env_choice() -> EnvChoice:
     """The map of training input variant 1 (every training run with ≥ 2 input variants sees it;
     variant 0 is the canonical input's own map) and the two held-out maps of
     :mod:`specgen_addon.render.environment_maps` (outdoor, indoor)."""
-    from specgen_addon.photo import sphere_image as input_image
-    from specgen_addon.render import environment_maps as lighting
-
     held = list(lighting.HELDOUT_ENVS)
     if len(held) < 2:
         raise SpecGenError("the evaluation needs two held-out environment maps")
@@ -96,8 +98,6 @@ def input_lighting_under(env: str):
     """The :class:`~specgen_addon.photo.photo_lighting.InputLighting` of :func:`input_under_environment`:
     map ``env`` (unit mean luminance, unrotated) plus the canonical key light. A score of a table
     against such a photo renders it in this same lighting."""
-    from specgen_addon.photo.photo_lighting import InputLighting
-
     return InputLighting(env, key_light=True)
 
 
@@ -107,8 +107,6 @@ def input_under_environment(brdf, env: str, independent: bool = False) -> np.nda
     :func:`specgen_addon.photo.sphere_image.render_input` (linear sRGB, float32); with ``independent``
     rendered with :func:`specgen_addon.photo.sphere_image.independent_sampling` instead, as a photograph
     shares no samples with the refinement's operator."""
-    from specgen_addon.photo import sphere_image as input_image
-
     light = input_lighting_under(env)
     scene = light.scene(input_image.CANONICAL_SIZE)
     if independent:
@@ -131,15 +129,11 @@ def scene_list(envs: EnvChoice) -> dict[str, Scene]:
 
 def load_environment(name: str) -> Environment:
     """An environment map by name, normalised as the training renders normalise it."""
-    from specgen_addon.render import environment_maps as lighting
-
     return lighting.load_environment(name)
 
 
 def test_materials(count: int | None = None, names: Sequence[str] | None = None) -> list:
     """Held-out corpus materials (split ``test``), in corpus order: the first ``count``, or ``names``."""
-    from specgen_addon.corpus import generate_corpus
-
     test = [m for m in generate_corpus(CORPUS_SIZE, CORPUS_SEED) if m.split == "test"]
     if names:
         by_name = {m.name: m for m in test}
@@ -190,8 +184,6 @@ def suzanne_normal_map(resolution: int) -> tuple[np.ndarray, np.ndarray] | None:
 
 def superellipsoid_normal_map(resolution: int, power: float = 4.0) -> tuple[np.ndarray, np.ndarray]:
     """Analytic stand-in shape ``|x|^p + |y|^p + |z|^p = 1`` seen from +z (normal ∝ ∇)."""
-    from specgen_addon.render.geometry import pixel_grid
-
     x, y = pixel_grid(resolution)
     x, y = x / 0.95, y / 0.95
     rest = 1.0 - np.abs(x) ** power - np.abs(y) ** power

@@ -25,22 +25,22 @@ from typing import Any
 import numpy as np
 
 from specgen_addon.common.cache import cache_root
+from specgen_addon.brdf.formats import load_brdf
+from specgen_addon.evaluation.protocol import DISTANT_LIGHTS, WAVELENGTHS_NM
+from specgen_addon.generate.refine import RefineOptions, refine_brdf
+from specgen_addon.model.runtime.inference import generate_brdf
+from specgen_addon.render import (environment_maps as lighting, metrics, render_rgb, render_spectral,
+                                  sphere_geometry)
 
 
 def scenes() -> list[tuple[str, dict[str, Any]]]:
     """(label, render keywords) of the scored scenes: ``distant`` and ``env-<map>`` per held-out map."""
-    from specgen_addon.render import environment_maps as lighting
-    from specgen_addon.evaluation.protocol import DISTANT_LIGHTS
-
     return [("distant", {"lights": DISTANT_LIGHTS})] + [
         (f"env-{e}", {"environment": lighting.load_environment(e)}) for e in lighting.HELDOUT_ENVS]
 
 
 def _measured_render(path: Path, label: str, kw: dict[str, Any], resolution: int) -> np.ndarray:
     """The measured file's RGB render in one scene (cached by file, scene and resolution)."""
-    from specgen_addon.brdf.formats import load_brdf
-    from specgen_addon.render import render_rgb, sphere_geometry
-
     cached = cache_root() / "real-files" / f"{path.stem}_{path.stat().st_size}_{label}_{resolution}.npy"
     if cached.is_file():
         return np.load(cached)
@@ -55,10 +55,6 @@ def _measured_render(path: Path, label: str, kw: dict[str, Any], resolution: int
 def score_table(path: Path, table: Any, resolution: int = 64,
                 scene_list: Sequence[tuple[str, dict[str, Any]]] | None = None) -> dict[str, float]:
     """``{"psnr_<scene>": dB}`` of a table (spectral or RGB) against the measured file ``path``."""
-    from specgen_addon.render import metrics
-    from specgen_addon.render import render_rgb, render_spectral, sphere_geometry
-    from specgen_addon.evaluation.protocol import WAVELENGTHS_NM
-
     geo = sphere_geometry(resolution)
     out = {}
     for label, kw in scene_list if scene_list is not None else scenes():
@@ -75,9 +71,7 @@ def score_real_file(path: Path, weights: str | Path | None, resolution: int = 64
                     scene_list: Sequence[tuple[str, dict[str, Any]]] | None = None) -> dict[str, Any]:
     """Network alone (``psnr_<scene>``) and, with ``refine``, refined (``psnr_refined_<scene>``) on
     one real file, from its canonical input photo."""
-    from specgen_addon.model.runtime.inference import generate_brdf
     from specgen_addon.train.real_rgb import canonical_photo
-    from specgen_addon.evaluation.protocol import WAVELENGTHS_NM
 
     path = Path(path)
     scene_list = scenes() if scene_list is None else scene_list
@@ -86,8 +80,6 @@ def score_real_file(path: Path, weights: str | Path | None, resolution: int = 64
     table = generate_brdf(photo, weights=weights, wavelengths_nm=WAVELENGTHS_NM)
     row: dict[str, Any] = {"material": path.stem, **score_table(path, table, resolution, scene_list)}
     if refine:
-        from specgen_addon.generate.refine import RefineOptions, refine_brdf
-
         fit = refine_brdf(table, photo, options=RefineOptions(clip_level=None))
         row |= {f"psnr_refined_{k[5:]}": v for k, v in score_table(path, fit.table, resolution, scene_list).items()}
     row["seconds"] = round(time.perf_counter() - t0, 1)

@@ -12,6 +12,7 @@ from pathlib import Path
 from typing import Any, Sequence
 
 from specgen_addon.evaluation import baselines, protocol, report, report_photo, tables
+from specgen_addon.render import metrics
 
 BASELINE_ORDER = baselines.METHODS
 
@@ -24,8 +25,6 @@ def compose(h: tables.Harness, mats: Sequence[Any], specgen_arm: str, weights: P
             abl_settings: Any, real: dict, real_note: str, figures: dict[str, Path], out: Path,
             smoke: bool, runs: list[dict], machine: str, commit: str, photo_only: bool = False,
             families: dict | None = None) -> str:
-    from specgen_addon.render import metrics
-
     names = [m.name for m in mats]
     labels = {specgen_arm: "**SpecGen**", **baselines.LABELS}
     methods = list(h.s.baselines) + [specgen_arm]

@@ -23,6 +23,9 @@ from specgen_addon.common.atomic_io import atomic_write
 from specgen_addon.evaluation import ablation as abl
 from specgen_addon.evaluation import baselines, plots, protocol, tables
 from specgen_addon.common.cache import read_json, write_json
+from specgen_addon.evaluation.report_text import compose
+from specgen_addon.model import DEFAULT_WEIGHTS
+from specgen_addon.spectral import spectra
 
 #: Full configuration (docs/results.md) and the CI smoke configuration.
 FULL = {"resolution": 128, "n_materials": 10, "env_sampling_scale": 1.0, "lut_size": None, "band_count": 20}
@@ -103,7 +106,6 @@ def run_paper_tables(out: Path, img_dir: Path | None = None, smoke: bool = False
     if resolution is not None:
         conf["resolution"] = int(resolution)
     n_mat, names = _parse_materials(materials, conf["n_materials"])
-    from specgen_addon.model import DEFAULT_WEIGHTS
 
     weights_path = Path(weights) if weights is not None else DEFAULT_WEIGHTS
     if not weights_path.is_file() and not prepare:
@@ -258,7 +260,6 @@ def make_figures(h: tables.Harness, mats: Sequence[Any], specgen_arm: str, img_d
                 if p.is_file():
                     with np.load(p) as d:
                         by_method[b] = d["spectral"]
-            from specgen_addon.spectral import spectra
 
             preview = spectra.srgb_encode(np.clip(gt.rgb / max(np.percentile(gt.rgb[gt.mask], 99), 1e-9), 0, 1))
             curves_fig = plots.plot_spectral_curves(
@@ -287,8 +288,6 @@ def build_report(h: tables.Harness, mats: Sequence[Any], specgen_arm: str, weigh
                  figures: dict[str, Path], out: Path, smoke: bool, runs: list[dict],
                  photo_only: bool = False, families: dict | None = None) -> str:
     """The markdown of docs/results.md (or of the photo-only part alone)."""
-    from specgen_addon.evaluation.report_text import compose
-
     return compose(h, mats, specgen_arm, weights, arms, abl_settings, real, real_note, figures, out,
                    smoke, runs, machine_description(), git_commit(), photo_only, families)
 

@@ -19,14 +19,23 @@ from typing import Any, Callable, Sequence
 import numpy as np
 
 from specgen_addon.render import metrics
+from specgen_addon.brdf.formats import load_brdf
+from specgen_addon.evaluation.photo_fit import observed_pixels
+from specgen_addon.evaluation.protocol import DISTANT_LIGHTS, WAVELENGTHS_NM, test_materials
+from specgen_addon.generate.refine import RefineOptions, refine_brdf
+from specgen_addon.model.runtime.inference import generate_brdf
+from specgen_addon.photo import sphere_image as input_image
+from specgen_addon.render import Scene, sphere_geometry
+from specgen_addon.render.environment_maps import load_environment
+from specgen_addon.render.photo_reproduction import reproduction
+from specgen_addon.render.sampling import EnvSampling
+from specgen_addon.spectral import spectra
 
 RESOLUTION = 128
 
 
 def photo_under(brdf, lighting) -> np.ndarray:
     """The input photo of ``brdf`` under ``lighting`` (linear sRGB, canonical sphere crop)."""
-    from specgen_addon.photo import sphere_image as input_image
-
     if lighting.is_canonical:
         return input_image.render_input(brdf).astype(np.float64)
     scene = lighting.scene(input_image.CANONICAL_SIZE)
@@ -39,10 +48,6 @@ def self_reproduction(brdf, photo: np.ndarray, lighting) -> Any:
     the photo (linear sRGB, canonical sphere crop), over the sphere without its grazing rim as the
     refinement scores it. Returns a :class:`specgen_addon.render.photo_reproduction.Reproduction` (RGB PSNR in
     dB, mean ΔE2000). A table renders at its own bands, an analytic material at the default ones."""
-    from specgen_addon.spectral import spectra
-    from specgen_addon.render.photo_reproduction import reproduction
-    from specgen_addon.evaluation.photo_fit import observed_pixels
-
     photo = np.asarray(photo, np.float64)
     scene = lighting.scene(photo.shape[0])
     wl = getattr(brdf, "wavelengths", None)
@@ -54,11 +59,6 @@ def self_reproduction(brdf, photo: np.ndarray, lighting) -> Any:
 
 def _novel_scores(truth, network, refined, rgb_only: bool, envs: Sequence[str]) -> dict[str, dict]:
     """Spectral (or RGB) PSNR of network and refined tables against the truth in novel lighting."""
-    from specgen_addon.evaluation.protocol import DISTANT_LIGHTS, WAVELENGTHS_NM
-    from specgen_addon.render.environment_maps import load_environment
-    from specgen_addon.render import Scene, sphere_geometry
-    from specgen_addon.render.sampling import EnvSampling
-
     geo = sphere_geometry(RESOLUTION)
     scenes = {"distant": Scene(geo, DISTANT_LIGHTS)}
     for env in envs:
@@ -79,10 +79,6 @@ def _novel_scores(truth, network, refined, rgb_only: bool, envs: Sequence[str]) 
 def study_one(name: str, brdf, lighting, weights=None, novel_envs: Sequence[str] = (),
               novel: bool = True) -> dict[str, Any]:
     """One row: self-reproduction before/after refinement (+ novel-lighting PSNR if ``novel``)."""
-    from specgen_addon.photo import sphere_image as input_image
-    from specgen_addon.model.runtime.inference import generate_brdf
-    from specgen_addon.generate.refine import RefineOptions, refine_brdf
-
     photo = photo_under(brdf, lighting)
     t0 = time.perf_counter()
     table = generate_brdf(photo * lighting.network_gain(), weights=weights)
@@ -122,9 +118,6 @@ def _f(x) -> str:
 
 def study_items(limit: int | None = None, rgl_dir: Path | None = None) -> list[tuple[str, Any]]:
     """The held-out corpus test materials (first ``limit``) and the real RGL RGB files."""
-    from specgen_addon.evaluation.protocol import test_materials
-    from specgen_addon.brdf.formats import load_brdf
-
     items: list[tuple[str, Any]] = [(m.name, m) for m in test_materials(limit)]
     if rgl_dir is not None and rgl_dir.is_dir():
         items += [(p.stem, load_brdf(p)) for p in sorted(rgl_dir.glob("*.bsdf"))]

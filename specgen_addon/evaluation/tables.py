@@ -21,6 +21,17 @@ from specgen_addon.common.errors import SpecGenError
 from specgen_addon.render import EnvSampling, RenderResult, Scene
 from specgen_addon.evaluation import baselines, protocol
 from specgen_addon.common.cache import read_json, write_json
+from specgen_addon.brdf.formats import load_brdf
+from specgen_addon.common.atomic_io import atomic_write
+from specgen_addon.evaluation import photo_fit
+from specgen_addon.evaluation.network_brdf import NetworkBRDF
+from specgen_addon.evaluation.self_reproduction import self_reproduction
+from specgen_addon.generate.pipeline import generate
+from specgen_addon.generate.refine import RefineOptions, refine_brdf
+from specgen_addon.model.runtime import inference as infer
+from specgen_addon.photo import sphere_image as input_image
+from specgen_addon.photo.photo_lighting import InputLighting
+from specgen_addon.render import metrics
 
 SPECGEN = "specgen"
 #: Pseudo-role of a cell holding an arm's *self-reproduction*: its BRDF rendered under the input's
@@ -129,8 +140,6 @@ class Settings:
 
     def photo_fit_options(self) -> dict[str, Any]:
         """Keyword arguments of :func:`.photo_fit.fit_photo` (a coarser search for the smoke run)."""
-        from specgen_addon.evaluation import photo_fit
-
         if not self.smoke:
             return {}
         return {"alphas": photo_fit.ALPHA_GRID[::4], "coat_alphas": photo_fit.COAT_ALPHA_GRID[::7],
@@ -149,8 +158,6 @@ class Settings:
 
 def score(gt: np.ndarray, pred: np.ndarray, mask: np.ndarray) -> dict[str, Any]:
     """Per-band and mean PSNR (dB) / SSIM of ``pred`` against ``gt`` (H×W×C) inside ``mask``."""
-    from specgen_addon.render import metrics
-
     res = metrics.spectral_metrics(gt, pred, mask)
     return {"psnr": [float(x) for x in res.psnr], "ssim": [float(x) for x in res.ssim],
             "psnr_mean": float(res.psnr_mean), "ssim_mean": float(res.ssim_mean)}
@@ -204,7 +211,6 @@ class Harness:
                                     wavelengths_nm=d["wavelengths_nm"])
         res = self._render(material, role)
         path.parent.mkdir(parents=True, exist_ok=True)
-        from specgen_addon.common.atomic_io import atomic_write
 
         with atomic_write(path, overwrite=True) as tmp:
             np.savez(tmp, rgb=res.rgb.astype(np.float32), mask=res.mask,
@@ -247,27 +253,18 @@ class Harness:
             return
         t0 = time.perf_counter()
         if direct:
-            from specgen_addon.evaluation.network_brdf import NetworkBRDF
-
             table = NetworkBRDF(weights, self.input_photo(material))
         elif input_env is None:
             photo = self.input_photo(material)
             table = generate_from_photo(photo, weights, self.wl)
             if refine:
-                from specgen_addon.generate.refine import RefineOptions, refine_brdf
-
                 table = refine_brdf(table, photo,
                                     options=RefineOptions(clip_level=None)).table
         elif lighting_given:
-            from specgen_addon.photo.photo_lighting import InputLighting
-            from specgen_addon.generate.pipeline import generate
-
             table = generate(self.input_photo(material, input_env),
                              lighting=InputLighting(input_env, key_light=True), refine=True,
                              weights=weights, wavelengths_nm=self.wl).table
         else:
-            from specgen_addon.model.runtime import inference as infer
-
             table = infer.generate_brdf(self.input_photo(material, input_env),
                                         weights=weights, wavelengths_nm=self.wl)
         t_gen = time.perf_counter() - t0
@@ -288,8 +285,6 @@ class Harness:
         """The material's sphere photo that SpecGen and the photo fits see: under the canonical
         lighting, or with ``env`` under that map and the key light (table (b)); rendered with
         independent samples or the input renders' own (:data:`INPUT_PHOTOS`). Kept per material."""
-        from specgen_addon.photo import sphere_image as input_image
-
         name = getattr(material, "name", None)
         key = (name, env)
         if name is None or key not in self._photos:
@@ -313,9 +308,6 @@ class Harness:
         the sphere without its grazing rim, as the refinement scores it;
         :func:`specgen_addon.render.photo_reproduction.reproduction`). Another SpecGen variant (e.g.
         the refined table) gets its column by calling this with its own arm and BRDF."""
-        from specgen_addon.photo.photo_lighting import InputLighting
-        from specgen_addon.evaluation.self_reproduction import self_reproduction
-
         t0 = time.perf_counter()
         rep = self_reproduction(brdf, self.input_photo(material), InputLighting())
         cell = {"rgb_psnr": rep.psnr_db, "delta_e2000": rep.delta_e2000,
@@ -333,9 +325,6 @@ class Harness:
     def photo_fit(self, material: Any) -> dict:
         """The analytic RGB BRDF fitted to the material's input photo (:func:`.photo_fit.fit_photo`
         under the canonical input lighting), cached as JSON: ``{"brdf", "residual", "seconds", ...}``."""
-        from specgen_addon.photo.photo_lighting import InputLighting
-        from specgen_addon.evaluation import photo_fit
-
         cached = self.cell_fit(material.name)
         if cached is not None:
             return cached
@@ -354,8 +343,6 @@ class Harness:
         """The photo-only baselines: fit an analytic RGB BRDF to the input photo, uplift its colours
         with each method, render that spectral BRDF in ``roles`` as SpecGen's is rendered, and score
         its self-reproduction (:data:`SELF_ROLE`)."""
-        from specgen_addon.evaluation import photo_fit
-
         arms = {m: photo_arm(m) for m in self.s.photo_baselines}
         todo = {m: [r for r in list(roles) + [SELF_ROLE] if self.cell(arm, material.name, r) is None]
                 for m, arm in arms.items()}
@@ -391,7 +378,6 @@ class Harness:
         todo = [r for r in roles if out[r] is None]
         if not todo:
             return out
-        from specgen_addon.brdf.formats import load_brdf
 
         measured = load_brdf(path)
         t0 = time.perf_counter()
@@ -458,8 +444,6 @@ class Harness:
 
 def generate_from_photo(photo: np.ndarray, weights: Path | None, wavelengths_nm: np.ndarray):
     """SpecGen's spectral BRDF table generated from a sphere photo (linear sRGB, H×W×3)."""
-    from specgen_addon.model.runtime import inference as infer
-
     return infer.generate_brdf(photo, weights=weights, wavelengths_nm=wavelengths_nm)
 
 

@@ -19,6 +19,23 @@ from typing import Any, Callable
 
 import numpy as np
 
+from specgen_addon.train.augment import displaced_input
+from specgen_addon.brdf.formats import load_brdf
+from specgen_addon.common.errors import SpecGenError
+from specgen_addon.corpus import generate_corpus
+from specgen_addon.corpus.families import FAMILY_NAMES
+from specgen_addon.corpus.generate import generate_mixed_corpus, material_family
+from specgen_addon.corpus.spectra_sources import SPLITS
+from specgen_addon.evaluation.protocol import (CORPUS_SEED, CORPUS_SIZE, DISTANT_LIGHTS, WAVELENGTHS_NM,
+                                               input_lighting_under, input_under_environment)
+from specgen_addon.evaluation.self_reproduction import self_reproduction as reproduce
+from specgen_addon.generate.refine import RefineOptions, refine_brdf
+from specgen_addon.model.runtime.inference import generate_brdf
+from specgen_addon.photo import sphere_image as input_image
+from specgen_addon.photo.photo_lighting import InputLighting
+from specgen_addon.render import (environment_maps as lighting, metrics, render_rgb, render_spectral,
+                                  sphere_geometry)
+
 RESOLUTION = 128
 
 
@@ -28,13 +45,6 @@ def evaluate_test_split(weights: str | Path | None = None, limit: int | None = N
                         refine: bool = False) -> dict[str, Any]:
     """Per-material and mean PSNR (dB) / SSIM over the test split; returns a JSON-able dict
     (with ``refine``: also the refined table's PSNR/SSIM and both tables' self-reproduction)."""
-    from specgen_addon.photo import sphere_image as input_image
-    from specgen_addon.render import metrics
-    from specgen_addon.corpus import generate_corpus
-    from specgen_addon.evaluation.protocol import CORPUS_SEED, CORPUS_SIZE, DISTANT_LIGHTS, WAVELENGTHS_NM
-    from specgen_addon.model.runtime.inference import generate_brdf
-    from specgen_addon.render import render_spectral, sphere_geometry
-
     test = [m for m in generate_corpus(CORPUS_SIZE, CORPUS_SEED) if m.split == "test"]
     if limit is not None:
         test = test[:limit]
@@ -52,8 +62,6 @@ def evaluate_test_split(weights: str | Path | None = None, limit: int | None = N
         row = {"material": mat.name, "kind": mat.kind, "psnr": float(res.psnr_mean),
                "ssim": float(res.ssim_mean)}
         if refine:
-            from specgen_addon.generate.refine import RefineOptions, refine_brdf
-
             fit = refine_brdf(table, image, options=RefineOptions(clip_level=None))
             ref = render_spectral(fit.table, geo, lights=DISTANT_LIGHTS, wavelengths_nm=WAVELENGTHS_NM).spectral
             res_r = metrics.spectral_metrics(gt, ref, geo.mask)
@@ -118,11 +126,6 @@ def mixed_split_materials(per_family: int, families: list[str] | None = None, sp
     """``per_family`` materials of ``split`` (train, val or test) of each family of the mixed corpus,
     after its first ``skip`` (fresh materials for a new study), in corpus order (settings are chosen on
     ``val``, figures reported on ``test``)."""
-    from specgen_addon.corpus.generate import generate_mixed_corpus, material_family
-    from specgen_addon.corpus.families import FAMILY_NAMES
-    from specgen_addon.corpus.spectra_sources import SPLITS
-    from specgen_addon.common.errors import SpecGenError
-
     if split not in SPLITS:
         raise SpecGenError(f"unknown split {split!r} (choose from {', '.join(SPLITS)})")
     wanted = list(FAMILY_NAMES if families is None else families)
@@ -136,27 +139,12 @@ def mixed_split_materials(per_family: int, families: list[str] | None = None, sp
     return out
 
 
-def displaced_input(image: np.ndarray, shift_px: float | tuple[float, float],
-                    border_px: int = 16) -> np.ndarray:
-    """``image`` (H×W×C) inside a black border of ``border_px``, moved by ``shift_px`` pixels right
-    and down, or by (down, right) pixels given a pair (bilinear): a sphere that sits off the pixel
-    grid, as in a photograph."""
-    from scipy.ndimage import shift as nd_shift
-
-    dy, dx = (shift_px, shift_px) if np.isscalar(shift_px) else shift_px
-    b = border_px
-    padded = np.pad(np.asarray(image, dtype=np.float64), ((b, b), (b, b), (0, 0)))
-    return nd_shift(padded, (dy, dx, 0.0), order=1, mode="constant", cval=0.0).astype(np.float32)
-
-
 def antialiased_input(brdf, shift_px: float = 0.0, supersample: int = 4, border_px: int = 16,
                       size: int | None = None) -> np.ndarray:
     """The canonical input of ``brdf`` as a camera or an antialiased render takes it: rendered at
     ``supersample``× the size and box-filtered (each pixel the mean over its area), inside a black
     border of ``border_px``, moved by ``shift_px`` pixels right and down (rounded to
     1/``supersample`` of a pixel)."""
-    from specgen_addon.photo import sphere_image as input_image
-
     size = int(size or input_image.CANONICAL_SIZE)
     hi = input_image.render_input(brdf, size=size * supersample)
     k, b = int(round(shift_px * supersample)), border_px * supersample
@@ -195,14 +183,6 @@ def evaluate_families(weights: str | Path | None = None, per_family: int = 4, en
     :func:`specgen_addon.evaluation.self_reproduction.self_reproduction`). Not for a moved or
     area-sampled input, whose photo is not the renderer's frame.
     """
-    from specgen_addon.photo import sphere_image as input_image
-    from specgen_addon.render import environment_maps as lighting
-    from specgen_addon.render import metrics
-    from specgen_addon.evaluation.protocol import DISTANT_LIGHTS, WAVELENGTHS_NM
-    from specgen_addon.corpus.generate import material_family
-    from specgen_addon.model.runtime.inference import generate_brdf
-    from specgen_addon.render import render_rgb, render_spectral, sphere_geometry
-
     geo = sphere_geometry(resolution)
     scenes: list[tuple[str, dict]] = [("distant", {"lights": DISTANT_LIGHTS})]
     if envs:
@@ -216,17 +196,11 @@ def evaluate_families(weights: str | Path | None = None, per_family: int = 4, en
         if input_env is None:
             image = input_image.render_input(brdf)
         else:
-            from specgen_addon.evaluation.protocol import input_under_environment
-
             image = input_under_environment(brdf, input_env)
         return displaced_input(image, input_shift_px) if input_shift_px else image
 
     photo_lighting = None
     if self_reproduction and not input_shift_px and not input_antialias:
-        from specgen_addon.evaluation.protocol import input_lighting_under
-        from specgen_addon.evaluation.self_reproduction import self_reproduction as reproduce
-        from specgen_addon.photo.photo_lighting import InputLighting
-
         photo_lighting = InputLighting() if input_env is None else input_lighting_under(input_env)
 
     def scored_reproduction(table, photo: np.ndarray) -> dict[str, Any]:
@@ -256,8 +230,6 @@ def evaluate_families(weights: str | Path | None = None, per_family: int = 4, en
         if progress is not None:
             progress((i + 1) / total)
     for j, path in enumerate(rgl_files):
-        from specgen_addon.brdf.formats import load_brdf
-
         brdf = load_brdf(path)
         photo = input_of(brdf)
         table = generate_brdf(photo, weights=weights, wavelengths_nm=WAVELENGTHS_NM, backend=backend)

@@ -66,6 +66,15 @@ import numpy as np
 from specgen_addon.common.errors import Cancelled, SpecGenError
 from specgen_addon.spectral.spectra import interpolation_matrix
 from specgen_addon.brdf.table import N_PHI_D, N_THETA_D, N_THETA_H, BRDFTable, theta_h_index
+from specgen_addon.generate.refine import diffuse_floor_of, render_under
+from specgen_addon.generate.refine.blur import BLUR_CANDIDATES_PX, blur_image, rows_inside
+from specgen_addon.generate.refine.holdout import block_folds
+from specgen_addon.generate.refine.operator import PhotoOperator
+from specgen_addon.model import shipped_weights
+from specgen_addon.model.runtime.inference import evaluate_grid, get_backend, resample_square, sphere_crop
+from specgen_addon.photo.photo_lighting import InputLighting
+from specgen_addon.render.photo_reproduction import checked_photo, photo_scale, rgb_psnr
+from specgen_addon.spectral.spectra import DEFAULT_WAVELENGTHS_NM
 
 ProgressFn = Callable[[float], None]
 CancelFn = Callable[[], bool]
@@ -242,7 +251,6 @@ class CheapRender:
 def decode_table(backend, z, colour, wavelengths_nm: np.ndarray, cancel: CancelFn | None = None) -> np.ndarray:
     """The full table ``f_r`` (90, 90, 180, Λ) of a latent and colour, as :func:`generate_brdf`
     decodes the encoder's (the torch backend's fast grid path)."""
-    from specgen_addon.model.runtime.inference import evaluate_grid
     from specgen_addon.model.runtime.fast import lambda_coords
 
     torch = backend.torch
@@ -282,23 +290,13 @@ def fit_latent(image, photo: np.ndarray, lighting=None, weights=None, wavelength
     """
     import torch
 
-    from specgen_addon.model.runtime.inference import get_backend, resample_square, sphere_crop
-    from specgen_addon.photo.photo_lighting import InputLighting
     from specgen_addon.model.runtime.fast import lambda_coords
-    from specgen_addon.generate.refine import diffuse_floor_of, render_under
-    from specgen_addon.generate.refine.blur import blur_image, rows_inside
-    from specgen_addon.generate.refine.holdout import block_folds
-    from specgen_addon.generate.refine.operator import PhotoOperator
-    from specgen_addon.render.photo_reproduction import checked_photo, photo_scale, rgb_psnr
-    from specgen_addon.spectral.spectra import DEFAULT_WAVELENGTHS_NM
 
     t_start = time.perf_counter()
     lighting = lighting or InputLighting()
     photo = checked_photo(photo)
     crop = sphere_crop(image)
     if weights is None:
-        from specgen_addon.model import shipped_weights
-
         weights = shipped_weights(crop.copied)
     be = get_backend(weights, "torch")
     if be.cfg.fusion != "aff":
@@ -452,9 +450,6 @@ def fit_latent(image, photo: np.ndarray, lighting=None, weights=None, wavelength
 def _photo_blur(op, image: np.ndarray, photo_rows: np.ndarray, clipped: np.ndarray, level: float) -> float:
     """The blur σ (px) of :data:`~specgen_addon.generate.refine.blur.BLUR_CANDIDATES_PX` under which the
     network's own render ``image`` reproduces the photo best, on the pixels every candidate keeps."""
-    from specgen_addon.generate.refine.blur import BLUR_CANDIDATES_PX, blur_image, rows_inside
-    from specgen_addon.render.photo_reproduction import rgb_psnr
-
     common = rows_inside(op.shape, op.pixel_ids, max(BLUR_CANDIDATES_PX), clipped)
     if not np.any(common):
         return 0.0

@@ -1,4 +1,5 @@
-"""Photo → spectral BRDF, the way every front end runs it (CLI ``infer``, batch.py, the panel).
+"""Photo → spectral BRDF: :func:`generate` is Generate's one front door (CLI ``infer``, batch.py, the
+panel).
 
 1. the photo is read and its sphere cropped to the canonical frame
    (:func:`specgen_addon.photo.sphere_image.load_sphere_image`);
@@ -17,20 +18,36 @@ With ``model="thin-film"`` steps 2–4 are replaced by the thin-film family's fi
 (:func:`specgen_addon.generate.thin_film.fit_thin_film`): for interference films (soap, oil, anodised
 metal) whose angle-dependent colour the network's prior does not place. Where the crop resampled the
 sphere, the fit models the photo's blur as the refinement does.
+
+With ``out_dir`` the table is then baked into what Blender reads
+(:func:`specgen_addon.bake.lookup.bake_lookup`), as the panel and batch.py ask.
 """
 
 from __future__ import annotations
 
+import os
 from dataclasses import dataclass
 from pathlib import Path
-from typing import TYPE_CHECKING, Callable
+from typing import Callable
 
 import numpy as np
 
-from specgen_addon.brdf.table import BRDFTable
-
-if TYPE_CHECKING:
-    from specgen_addon.photo.sphere_image import SphereCrop
+from specgen_addon.bake.lookup import DEFAULT_TOLERANCE, AtlasInfo, bake_lookup, check_lookup_outputs
+from specgen_addon.brdf.table import N_PHI_D, BRDFTable
+from specgen_addon.common.atomic_io import make_dirs
+from specgen_addon.common.errors import SpecGenError, WeightsError
+from specgen_addon.common.interrupts import OutputGuard
+from specgen_addon.generate.latent_fit import fit_latent
+from specgen_addon.generate.refine import CLIP_LEVEL, RefineOptions, refine_brdf, render_under
+from specgen_addon.generate.refine.blur import BLUR_CANDIDATES_PX
+from specgen_addon.generate.thin_film import fit_thin_film
+from specgen_addon.model.checksums import DamagedWeightsError
+from specgen_addon.model.runtime.inference import generate_brdf, sphere_crop
+from specgen_addon.photo.photo_lighting import InputLighting
+from specgen_addon.photo.sphere_image import PhotoSource, SphereCrop
+from specgen_addon.render import sphere_geometry
+from specgen_addon.render.photo_reproduction import reproduction
+from specgen_addon.spectral.spectra import DEFAULT_WAVELENGTHS_NM
 
 ProgressFn = Callable[[float], None]
 CancelFn = Callable[[], bool]
@@ -51,6 +68,7 @@ class Generated:
     film_fit: object | None = None     # specgen_addon.generate.thin_film.ThinFilmFit (model="thin-film")
     crop: object | None = None         # specgen_addon.photo.sphere_image.SphereCrop: the circle used, saturation
     network_reproduction: object | None = None   # refine.report.Reproduction of the network alone (no refinement)
+    lookup: AtlasInfo | None = None    # what Blender reads, baked into ``out_dir`` (generate(out_dir=…))
 
     @property
     def warnings(self) -> list[str]:
@@ -68,9 +86,6 @@ def load_photo(image) -> tuple[np.ndarray, bool]:
 def load_photo_crop(image) -> tuple[SphereCrop, bool]:
     """:func:`load_photo` as a :class:`~specgen_addon.photo.sphere_image.SphereCrop` (which also says
     whether the sphere was copied or resampled, and so which shipped network it gets)."""
-    from specgen_addon.model.runtime.inference import sphere_crop
-    from specgen_addon.photo.sphere_image import PhotoSource
-
     if isinstance(image, PhotoSource):
         return sphere_crop(image), image.linear
     linear = not isinstance(image, (str, Path)) or Path(image).suffix.lower() == ".exr"
@@ -78,21 +93,76 @@ def load_photo_crop(image) -> tuple[SphereCrop, bool]:
 
 
 def generate(image, lighting=None, refine: bool = True, weights=None, wavelengths_nm=None,
-             backend: str = "torch", progress: ProgressFn | None = None,
-             cancel: CancelFn | None = None, model: str = "network", latent_fit: bool = False) -> Generated:
+             backend: str | None = "torch", progress: ProgressFn | None = None,
+             cancel: CancelFn | None = None, model: str = "network", latent_fit: bool = False, *,
+             out_dir: str | os.PathLike | None = None, name: str = "brdf", n_phi_d: int = N_PHI_D,
+             tolerance: float = DEFAULT_TOLERANCE, save_table: bool = False, preview: bool = False,
+             overwrite: bool = True) -> Generated:
     """Generate (and by default refine) the spectral BRDF of the sphere in ``image``.
 
     ``lighting`` is an :class:`~specgen_addon.photo.photo_lighting.InputLighting` (default: canonical).
     ``model`` is one of :data:`MODELS` (``"thin-film"`` ignores ``refine``, ``weights``, ``backend``).
+    ``backend`` ``None`` picks onnx when onnxruntime is importable (a stock Blender ships no torch)
+    and says so when it has to fall back to torch.
     ``latent_fit`` fits the network's latent to the photo before any refinement (torch backend only).
     ``progress(fraction)`` and ``cancel()`` are passed down; cancelling raises
     :class:`~specgen_addon.common.errors.Cancelled` and returns nothing.
-    """
-    from specgen_addon.common.errors import SpecGenError
-    from specgen_addon.model.runtime.inference import generate_brdf
-    from specgen_addon.photo.sphere_image import SphereCrop
-    from specgen_addon.photo.photo_lighting import InputLighting
 
+    With ``out_dir``, the table is also baked into what Blender reads, ``<name>_lookup.*`` (and
+    with ``save_table`` ``<name>.npz``, with ``preview`` ``<name>_preview.png``): see
+    :func:`specgen_addon.bake.lookup.bake_lookup`; ``result.lookup`` describes it and carries the
+    refinement's and the thin-film fit's reports. Progress is then 0–0.8 generation, 0.8–1 bake.
+    Without ``overwrite`` existing outputs of ``name`` are refused up front; whatever fails or is
+    cancelled leaves nothing new in ``out_dir``.
+    """
+    kwargs = {"lighting": lighting, "refine": refine, "weights": weights, "wavelengths_nm": wavelengths_nm,
+              "cancel": cancel, "model": model, "latent_fit": latent_fit}
+    if out_dir is None:
+        return _generate_any_backend(image, backend, progress=progress, **kwargs)
+
+    out = check_lookup_outputs(out_dir, name, overwrite)
+    sub = (lambda lo, hi: (lambda f: progress(lo + (hi - lo) * f))) if progress else (lambda lo, hi: None)
+    with OutputGuard([out]):  # failed, cancelled or interrupted: nothing it made stays in out_dir
+        make_dirs(out)
+        generated = _generate_any_backend(image, backend, progress=sub(0.0, 0.8), **kwargs)
+        info = bake_lookup(generated.table, out, name, n_phi_d=n_phi_d, tolerance=tolerance,
+                           save_table=save_table, preview=preview, progress=sub(0.8, 1.0), cancel=cancel)
+    info.refinement = generated.refinement
+    info.film_fit = generated.film_fit
+    info.crop = generated.crop
+    generated.lookup = info
+    return generated
+
+
+def choose_backend() -> str:
+    """``"onnx"`` when onnxruntime is importable (a stock Blender ships no torch), else ``"torch"``."""
+    import importlib.util
+
+    return "onnx" if importlib.util.find_spec("onnxruntime") is not None else "torch"
+
+
+def _generate_any_backend(image, backend: str | None, **kwargs) -> Generated:
+    """:func:`_generate` with ``backend``, or with ``None`` the one :func:`choose_backend` picks:
+    onnx, or torch with a warning where the onnx graphs are missing or unusable."""
+    chosen = backend or choose_backend()
+    try:
+        return _generate(image, backend=chosen, **kwargs)
+    except WeightsError as exc:
+        import importlib.util
+        import warnings
+
+        if backend is not None or chosen != "onnx" or importlib.util.find_spec("torch") is None \
+                or isinstance(exc, DamagedWeightsError):
+            raise
+        # the graphs are missing or unusable: say so, the backend never changes silently
+        warnings.warn(f"the onnx backend cannot run ({exc}); using the torch backend", stacklevel=3)
+        return _generate(image, backend="torch", **kwargs)
+
+
+def _generate(image, lighting=None, refine: bool = True, weights=None, wavelengths_nm=None,
+              backend: str = "torch", progress: ProgressFn | None = None,
+              cancel: CancelFn | None = None, model: str = "network", latent_fit: bool = False) -> Generated:
+    """:func:`generate`'s table, without the bake, with one ``backend``."""
     if model not in MODELS:
         raise SpecGenError(f"unknown model {model!r}; choose one of {', '.join(MODELS)}")
     if latent_fit and model != "network":
@@ -109,11 +179,6 @@ def generate(image, lighting=None, refine: bool = True, weights=None, wavelength
         return None if progress is None else (lambda f: progress(lo + (hi - lo) * f))
 
     if model == "thin-film":
-        from specgen_addon.generate.thin_film import fit_thin_film
-        from specgen_addon.generate.refine import CLIP_LEVEL
-        from specgen_addon.generate.refine.blur import BLUR_CANDIDATES_PX
-        from specgen_addon.spectral.spectra import DEFAULT_WAVELENGTHS_NM
-
         wl = DEFAULT_WAVELENGTHS_NM if wavelengths_nm is None else np.asarray(wavelengths_nm, np.float64)
         # a resampled crop spreads the highlight: the fit models that blur (docs/thin_film_fit.md)
         fit = fit_thin_film(photo, lighting, clip_level=None if linear else CLIP_LEVEL,
@@ -122,7 +187,6 @@ def generate(image, lighting=None, refine: bool = True, weights=None, wavelength
         table = fit.table(wl, progress=sub(0.8, 1.0), cancel=cancel)
         table.metadata = {**table.metadata, "input_image": src, "input_lighting": lighting.label}
         return Generated(table, film_fit=fit)
-    from specgen_addon.generate.refine import CLIP_LEVEL
 
     clip_level = None if linear else CLIP_LEVEL
     # progress: the network, then the latent fit (about 4× the network's time), then refinement
@@ -135,8 +199,6 @@ def generate(image, lighting=None, refine: bool = True, weights=None, wavelength
                           backend=backend, progress=sub(0.0, ends[0]), cancel=cancel)
     fitted = None
     if latent_fit:
-        from specgen_addon.generate.latent_fit import fit_latent
-
         fitted = fit_latent(network_input, photo, lighting, weights, wavelengths_nm, clip_level=clip_level,
                             network_table=table, progress=sub(ends[0], ends[1]), cancel=cancel)
         table = fitted.table
@@ -144,7 +206,6 @@ def generate(image, lighting=None, refine: bool = True, weights=None, wavelength
     if not refine:
         return Generated(table, latent_fit=fitted, crop=crop,
                          network_reproduction=network_reproduction(table, photo, lighting, clip_level, crop.saturated))
-    from specgen_addon.generate.refine import RefineOptions, refine_brdf
 
     options = RefineOptions(clip_level=clip_level, exclude=crop.saturated)
     result = refine_brdf(table, photo, lighting, options, progress=sub(ends[1], 1.0), cancel=cancel)
@@ -155,15 +216,11 @@ def network_reproduction(table: BRDFTable, photo: np.ndarray, lighting, clip_lev
                          exclude: np.ndarray | None = None):
     """How well a table alone reproduces the photo under its lighting (RGB PSNR, ΔE2000 over the
     sphere's unsaturated pixels): the figure a run without refinement reports."""
-    from specgen_addon.generate.refine import render_under
-    from specgen_addon.render.photo_reproduction import reproduction
-
     scene = lighting.scene(photo.shape[0])
     img = render_under(table, scene, lighting.image_exposure)
     if clip_level is not None:
         img = np.minimum(img, 1.0)
     inside = np.any(photo > 0, axis=-1) | np.any(img > 0, axis=-1)
-    from specgen_addon.render import sphere_geometry
 
     inside &= sphere_geometry(photo.shape[0]).mask
     if exclude is not None:

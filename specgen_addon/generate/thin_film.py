@@ -51,6 +51,9 @@ from specgen_addon.generate.refine.operator import PhotoOperator
 from specgen_addon.render.photo_reproduction import Reproduction, reproduction
 from specgen_addon.generate.refine.solve import nonneg_ridge
 from specgen_addon.brdf.table import N_PHI_D, N_THETA_D, N_THETA_H, BRDFTable, grid_angles
+from specgen_addon.generate.refine import render_under
+from specgen_addon.photo.photo_lighting import InputLighting
+from specgen_addon.render.photo_reproduction import checked_photo
 
 ProgressFn = Callable[[float], None]
 CancelFn = Callable[[], bool]
@@ -324,10 +327,6 @@ def fit_thin_film(photo: np.ndarray, lighting=None, clip_level: float | None = 0
     fitted as sharp it reads as a rougher lobe. ``(0,)`` models no blur. Raises
     :class:`SpecGenError` on a malformed photo or blur and :class:`Cancelled` when ``cancel()`` is true.
     """
-    from specgen_addon.photo.photo_lighting import InputLighting
-    from specgen_addon.generate.refine import render_under
-    from specgen_addon.render.photo_reproduction import checked_photo
-
     photo = checked_photo(photo)
     lighting = lighting or InputLighting()
     sigmas = tuple(float(x) for x in np.atleast_1d(np.asarray(blur_px, dtype=np.float64)))

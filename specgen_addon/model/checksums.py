@@ -17,6 +17,7 @@ import os
 from pathlib import Path
 
 from specgen_addon.common.errors import WeightsError
+from specgen_addon.common.atomic_io import atomic_write
 
 SUMS_NAME = "SHA256SUMS"
 #: (path, size, mtime_ns) -> sha256 hex, so a file is hashed once per process while unchanged.
@@ -67,8 +68,6 @@ def verify(path: str | os.PathLike) -> None:
 
 def record(path: str | os.PathLike) -> None:
     """After writing ``path``: update its line where its folder keeps a ``SHA256SUMS``."""
-    from specgen_addon.common.atomic_io import atomic_write
-
     path = Path(path)
     sums_path = path.parent / SUMS_NAME
     if not sums_path.is_file():

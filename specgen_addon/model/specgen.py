@@ -25,7 +25,7 @@ from specgen_addon.model.planes import PlaneGenerator, normalized_coords, projec
 
 WEIGHTS_FORMAT = "specgen-weights"
 WEIGHTS_VERSION = 1
-from specgen_addon.model import DEFAULT_WEIGHTS  # noqa: E402  (one definition, torch-free)
+from specgen_addon.model.shipped import DEFAULT_WEIGHTS  # noqa: E402  (one definition, torch-free)
 
 
 class SpecGen(nn.Module):

@@ -31,6 +31,7 @@ from specgen_addon.photo import image_checks
 from specgen_addon.spectral import spectra
 from specgen_addon.common.errors import ImageInputError
 from specgen_addon.common.limits import MAX_WORK_SIDE
+from specgen_addon.common.image_io import read_float_image
 
 #: How integer codes become linear values: "auto" (sRGB for 8/16-bit files), "srgb", "linear".
 ENCODINGS = ("auto", "srgb", "linear")
@@ -105,20 +106,7 @@ def _read_float(path: Path) -> Photo:
 
 
 def _read_oiio_float(path: Path) -> np.ndarray:
-    try:
-        import OpenImageIO as oiio
-    except ImportError:
-        raise ImageInputError(f"{path}: reading {path.suffix} needs OpenImageIO (bundled with Blender)") from None
-    inp = oiio.ImageInput.open(str(path))
-    if inp is None:
-        raise ImageInputError(f"{path}: cannot read image ({oiio.geterror()})")
-    try:
-        spec = inp.spec()
-        data = np.asarray(inp.read_image(0, 0, 0, spec.nchannels, "float"), np.float32)
-    finally:
-        inp.close()
-    data = data.reshape(spec.height, spec.width, spec.nchannels)
-    return _as_rgba(data, path)
+    return _as_rgba(read_float_image(path, ImageInputError), path)
 
 
 def _as_rgba(data: np.ndarray, path: Path) -> np.ndarray:

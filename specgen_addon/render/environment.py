@@ -31,6 +31,9 @@ import numpy as np
 
 from specgen_addon.spectral import spectra
 from specgen_addon.common.errors import SpecGenError
+from specgen_addon.spectral.rgb_to_spectrum import rgb_to_spectrum
+from specgen_addon.common.image_io import ImageIOError, read_exr, read_float_image
+from specgen_addon.spectral.colour_tables import tables
 
 MALLETT2019 = "mallett2019"
 #: Rec. 709 / sRGB luminance weights (row Y of the sRGB → XYZ matrix), from colour-science.
@@ -41,8 +44,6 @@ def srgb_luminance_weights() -> np.ndarray:
     """(3,) weights giving CIE Y from linear sRGB (colour-science's sRGB matrix)."""
     global _SRGB_Y_WEIGHTS
     if _SRGB_Y_WEIGHTS is None:
-        from specgen_addon.spectral.colour_tables import tables
-
         _SRGB_Y_WEIGHTS = np.asarray(tables()["srgb_rgb_to_xyz"][1], float)
     return _SRGB_Y_WEIGHTS
 
@@ -51,12 +52,10 @@ def srgb_luminance_weights() -> np.ndarray:
 def _uplift_basis_cached(method: str, key: tuple[float, ...]) -> np.ndarray:
     w = np.asarray(key)
     if method == MALLETT2019:
-        from specgen_addon.spectral.colour_tables import mallett2019_basis
-
-        # colour-science's basis, precomputed (specgen_addon.spectral.colour_tables). Outside its 380–780 nm
-        # support the nearest value is held (a smooth continuation of the flat reflectance that
-        # white uplifts to).
-        return mallett2019_basis(w).T * spectra.illuminant_spd("D65", w)[None, :]
+        # colour-science's basis, precomputed (specgen_addon.spectral.colour_tables): the uplifts of
+        # the three sRGB primaries. Outside its 380–780 nm support the nearest value is held (a
+        # smooth continuation of the flat reflectance that white uplifts to).
+        return rgb_to_spectrum(np.eye(3), w, method="Mallett 2019") * spectra.illuminant_spd("D65", w)[None, :]
     return srgb_luminance_weights()[:, None] * spectra.illuminant_spd(method, w)[None, :]
 
 
@@ -68,8 +67,6 @@ def uplift_basis(wavelengths_nm: np.ndarray, method: str = MALLETT2019) -> np.nd
 def read_exr_rgb(path: str | Path) -> np.ndarray:
     """Read the R, G, B channels of an OpenEXR file as float32 (H, W, 3), row 0 on top
     (OpenEXR, or Blender's bundled OpenImageIO: :mod:`specgen_addon.common.image_io`)."""
-    from specgen_addon.common.image_io import ImageIOError, read_exr
-
     path = Path(path)
     if not path.is_file():
         raise SpecGenError(f"{path}: environment map not found")
@@ -88,18 +85,8 @@ def read_hdr_rgb(path: str | Path) -> np.ndarray:
     path = Path(path)
     if not path.is_file():
         raise SpecGenError(f"{path}: environment map not found")
-    try:
-        import OpenImageIO as oiio
-    except ImportError:
-        raise SpecGenError(f"{path}: reading .hdr files needs OpenImageIO (bundled with Blender)") from None
-    inp = oiio.ImageInput.open(str(path))
-    if inp is None:
-        raise SpecGenError(f"{path}: cannot read Radiance HDR ({oiio.geterror().strip() or 'unreadable'})")
-    try:
-        px = inp.read_image(oiio.FLOAT)
-    finally:
-        inp.close()
-    if px is None or px.ndim != 3 or px.shape[2] < 3:
+    px = read_float_image(path, SpecGenError, "Radiance HDR")
+    if px.shape[2] < 3:
         raise SpecGenError(f"{path}: Radiance HDR has no RGB pixels")
     return np.ascontiguousarray(px[..., :3], dtype=np.float32)
 

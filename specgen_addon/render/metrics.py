@@ -22,6 +22,7 @@ from dataclasses import dataclass
 import numpy as np
 
 from specgen_addon.common.errors import SpecGenError
+from specgen_addon.spectral.colour_tables import mallett2019_basis
 
 #: Percentile of the ground truth (covered pixels, all bands) that maps to 1.
 PEAK_PERCENTILE = 99.9
@@ -200,8 +201,6 @@ def colour_fitted_psnr(gt: np.ndarray, pred: np.ndarray, wavelengths_nm: np.ndar
     brightness fit's score, itself never below ``pred``'s (the basis sums to 1, so every constant
     gain is in its span).
     """
-    from specgen_addon.spectral.colour_tables import mallett2019_basis
-
     gt, pred, mask = _checked(gt, pred, mask)
     w = np.asarray(wavelengths_nm, dtype=np.float64).reshape(-1)
     if w.size != gt.shape[-1]:

@@ -23,6 +23,8 @@ from collections.abc import Callable
 import numpy as np
 
 from specgen_addon.common.errors import SpecGenError
+from specgen_addon.common.image_io import ImageIOError, read_exr, write_exr, write_png8
+from specgen_addon.spectral.spectra import spectral_to_linear_srgb, srgb_encode
 
 SPECTRAL_LAYOUT_VERSION = "1.0"
 EMISSIVE_UNITS = "W.m^-2.sr^-1"
@@ -60,8 +62,6 @@ def parse_channel_name(name: str) -> float | None:
 
 def linear_srgb_preview(values: np.ndarray, wavelengths_nm: np.ndarray) -> np.ndarray:
     """CMF-integrated linear sRGB of a spectral image (H, W, Λ) -> (H, W, 3), float32."""
-    from specgen_addon.spectral.spectra import spectral_to_linear_srgb
-
     return np.asarray(spectral_to_linear_srgb(values, wavelengths_nm), dtype=np.float32)
 
 
@@ -93,8 +93,6 @@ def write_spectral_exr(path: str | os.PathLike, values: np.ndarray, wavelengths_
     Path
         The written file.
     """
-    from specgen_addon.common.image_io import write_exr
-
     values = np.asarray(values, dtype=np.float32)
     wavelengths = np.asarray(wavelengths_nm, dtype=np.float64).reshape(-1)
     if values.ndim != 3 or values.shape[2] != wavelengths.size:
@@ -128,8 +126,6 @@ def read_spectral_exr(path: str | os.PathLike) -> SpectralImage:
     Raises :class:`SpectralEXRError` when the file is missing, unreadable, has no ``S0.<λ>nm``
     channel, or lacks the ``spectralLayoutVersion`` attribute.
     """
-    from specgen_addon.common.image_io import ImageIOError, read_exr
-
     path = Path(path)
     if not path.is_file():
         raise SpectralEXRError(f"{path}: no such file")
@@ -154,9 +150,6 @@ def write_preview_png(path: str | os.PathLike, rgb_linear: np.ndarray, overwrite
     """Write a linear-sRGB image (H, W, 3) as an 8-bit PNG, atomically: through ``view`` (scene
     linear -> display values in [0, 1], e.g. Blender's view transform from
     :mod:`specgen_addon.render.view_transform`) when given, else the plain sRGB transfer curve."""
-    from specgen_addon.common.image_io import write_png8
-    from specgen_addon.spectral.spectra import srgb_encode
-
     scaled = np.asarray(rgb_linear, dtype=np.float64) * exposure
     encoded = srgb_encode(np.clip(scaled, 0.0, 1.0)) if view is None else view(scaled)
     pixels = np.round(np.clip(encoded, 0.0, 1.0) * 255.0).astype(np.uint8)

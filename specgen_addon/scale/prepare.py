@@ -23,8 +23,7 @@ EXIT_BAD_INPUT = 2
 
 def prepare(src: Path, work: Path) -> tuple[str, Path]:
     """(``"brdf"`` or ``"image"``, path to hand to ``batch.py``) for the BRDF file ``src``."""
-    from specgen_addon.cli.brdf import tabulate_file
-    from specgen_addon.brdf.formats import load_brdf
+    from specgen_addon.brdf.formats import load_brdf, tabulate_file
     from specgen_addon.spectral.spectra import wavelength_grid
     from specgen_addon.brdf.table import BRDFTable
 

@@ -12,7 +12,7 @@ the file and compares it with the shipped one. The tables are stored at their na
   (``colour.recovery.MSDS_BASIS_FUNCTIONS_sRGB_MALLETT2019``);
 * ``otsu2018_*``: Otsu, Yamamoto & Hachisuka's (2018) clustered reflectance basis
   (``colour.recovery.BASIS_FUNCTIONS_OTSU2018``, ``CLUSTER_MEANS_OTSU2018``,
-  ``SELECTOR_ARRAY_OTSU2018`` on ``SPECTRAL_SHAPE_OTSU2018``), read by :mod:`.spectral_recovery`;
+  ``SELECTOR_ARRAY_OTSU2018`` on ``SPECTRAL_SHAPE_OTSU2018``), read by :mod:`.otsu2018`;
 * ``srgb_*``: the sRGB colourspace's XYZ ↔ RGB matrices and white point (XYZ);
 * ``bradford``: the Bradford chromatic adaptation matrix (``CAT_BRADFORD``).
 """

@@ -7,6 +7,8 @@ pixels mix with the background. Measurements (lab/notebook) show what that costs
 network trained on exact framing (docs/model.md, ``evaluate --input-shift``).
 
 * :func:`jitter_framing` moves and scales the sphere by up to the old whole-pixel crop's error.
+* :func:`displaced_input` moves an image by a fraction of a pixel inside a black border (an
+  off-grid sphere, as in a photograph).
 * :func:`offgrid_photo_crop` hands the network what the pipeline makes of a photo whose sphere
   lies off the grid: the canonical image moved by a random fraction of a pixel (bilinear, black
   around it), then cropped by the pipeline's own resampler with the sphere finder's measured error.
@@ -16,6 +18,8 @@ from __future__ import annotations
 
 import numpy as np
 from scipy.ndimage import affine_transform
+from scipy.ndimage import shift as nd_shift
+from specgen_addon.photo.sphere_image import _resample_circle
 
 
 def reframe(img: np.ndarray, dy_px: float, dx_px: float, scale: float = 1.0) -> np.ndarray:
@@ -40,14 +44,22 @@ def jitter_framing(img: np.ndarray, rng: np.random.Generator, max_shift_px: floa
     return reframe(img, float(dy), float(dx), float(scale))
 
 
+def displaced_input(image: np.ndarray, shift_px: float | tuple[float, float],
+                    border_px: int = 16) -> np.ndarray:
+    """``image`` (H×W×C) inside a black border of ``border_px``, moved by ``shift_px`` pixels right
+    and down, or by (down, right) pixels given a pair (bilinear): a sphere that sits off the pixel
+    grid, as in a photograph."""
+    dy, dx = (shift_px, shift_px) if np.isscalar(shift_px) else shift_px
+    b = border_px
+    padded = np.pad(np.asarray(image, dtype=np.float64), ((b, b), (b, b), (0, 0)))
+    return nd_shift(padded, (dy, dx, 0.0), order=1, mode="constant", cval=0.0).astype(np.float32)
+
+
 def offgrid_photo_crop(img: np.ndarray, rng: np.random.Generator, finder_error_px: float) -> np.ndarray:
     """``(C, S, S)`` canonical input as the pipeline passes on a photo of it moved by a fraction of
     a pixel (uniform in [0, 1)² pixels, bilinear): found with a Gaussian error of ``finder_error_px``
     (standard deviation, each of centre x, y and radius) and resampled by
     :func:`specgen_addon.photo.sphere_image._resample_circle`."""
-    from specgen_addon.photo.sphere_image import _resample_circle
-    from specgen_addon.evaluation.trained_network import displaced_input
-
     img = np.asarray(img, dtype=np.float32)
     s = img.shape[-1]
     border = 4

@@ -25,6 +25,9 @@ import numpy as np
 from specgen_addon.common.errors import SpecGenError
 from specgen_addon.brdf.rusinkiewicz import io_from_half_diff
 from specgen_addon.brdf.table import mu_law_encode
+from specgen_addon.brdf.formats import detect_format, load_brdf
+from specgen_addon.brdf.table import BRDFTable
+from specgen_addon.common.processes import context, pool_workers, quiet_worker
 
 BRDF_SUFFIXES = (".binary", ".bsdf")
 
@@ -120,8 +123,6 @@ def render_all(make: Callable[[Any], None], todo: Sequence[Any], workers: int = 
     """``make(item)`` for every item, on ``workers`` processes (in order when 1), reporting the
     fraction done: the render caches' fill. Inside a pool worker (an ablation arm), or where
     ``make`` cannot be pickled to a worker, the items are made in this process."""
-    from specgen_addon.common.processes import context, pool_workers, quiet_worker
-
     workers = pool_workers(workers, make, per_task=True)
     if workers <= 1:
         for i, item in enumerate(todo):
@@ -152,9 +153,6 @@ def load_file_materials(files: Sequence[Path], cache_dir: Path,
 
     RGB files supervise the RGB branch; spectral RGL files the spectral branch.
     """
-    from specgen_addon.brdf.formats import detect_format, load_brdf
-    from specgen_addon.brdf.table import BRDFTable
-
     out = []
     for path in files:
         brdf = load_brdf(path)

@@ -30,6 +30,8 @@ import numpy as np
 from specgen_addon.photo import sphere_image as input_image
 from specgen_addon.spectral import spectra
 from specgen_addon.photo.resample import aa_bilinear_weights
+from specgen_addon.render import DistantLight, Scene, environment_maps as lighting, sphere_geometry
+from specgen_addon.train.data import material_key, render_all
 
 #: Unit directions (world; camera looks down −z, +y up) of the six synthetic suns.
 SUN_DIRECTIONS = ((-0.6, 0.6, 0.53), (0.7, 0.5, 0.5), (0.0, 0.9, 0.44), (-0.85, -0.1, 0.52),
@@ -54,8 +56,6 @@ def env_variant(name: str) -> int:
 
 
 def _light_scene(directions, irradiance: float):
-    from specgen_addon.render import DistantLight, Scene, sphere_geometry
-
     lights = [DistantLight(d, irradiance, spectra.DEFAULT_ILLUMINANT) for d in directions]
     return Scene(sphere_geometry(input_image.CANONICAL_SIZE), lights)
 
@@ -92,9 +92,6 @@ def _render(brdf, scene, exposure: float) -> np.ndarray:
 def _env_scene(env_name: str, rotation_rad: float):
     """A training map with the key light, at a quarter of the input sampling (:data:`ENV_SAMPLING_SCALE`):
     an augmentation image, whose extra noise is far below the 8-bit quantisation it may get."""
-    from specgen_addon.render import environment_maps as lighting
-    from specgen_addon.render import Scene, sphere_geometry
-
     env = lighting.load_environment(env_name, rotation_rad=rotation_rad)
     return Scene(sphere_geometry(input_image.CANONICAL_SIZE), [input_image._key_light()], env,
                  sampling=input_image.input_sampling().scaled(ENV_SAMPLING_SCALE / 0.5))
@@ -147,8 +144,6 @@ class ComponentCache:
         self.cache_dir = Path(cache_dir)
 
     def path(self, mat):
-        from specgen_addon.train.data import material_key
-
         return self.cache_dir / f"mix_{mat.name.replace('/', '_')}_{material_key(mat)}.npy"
 
     def missing(self, mats):
@@ -168,8 +163,6 @@ class ComponentCache:
 
     def fill(self, mats, workers: int = 2, progress=None) -> None:
         """Render what is missing, grouped by environment variant (prepared scenes are reused)."""
-        from specgen_addon.train.data import render_all
-
         todo = sorted(self.missing(mats), key=lambda m: env_variant(m.name))
         if todo:
             render_all(self.make, todo, workers, progress)

@@ -38,6 +38,11 @@ from specgen_addon.spectral.spectra import wavelength_grid
 from specgen_addon.train import distributed as ddp
 from specgen_addon.train.data import Batch, TrainingMaterial, make_batch
 from specgen_addon.train.prefetch import step_batches
+from specgen_addon.common.cache import cache_root
+from specgen_addon.corpus.generate import check_mix, material_family
+from specgen_addon.model import load_weights
+from specgen_addon.model.grow import can_grow, grow_state_dict
+from specgen_addon.model.recycle import STAGES, recycle_dormant, revive_at_boundary
 
 #: Band grid (nm) the spectral targets are evaluated on: 10 nm steps over the visible range.
 TARGET_WAVELENGTHS_NM = wavelength_grid(380.0, 780.0, 41)
@@ -222,12 +227,8 @@ class TrainConfig:
         if self.spectral_materials_per_step + self.rgb_materials_per_step == 0:
             raise SpecGenError("training config: no materials per step")
         if self.families is not None:
-            from specgen_addon.corpus.generate import check_mix
-
             check_mix(self.families)
         if self.family_draw is not None:
-            from specgen_addon.corpus.generate import check_mix
-
             check_mix(self.family_draw)
             if self.families is not None and not set(self.family_draw) & set(self.families):
                 raise SpecGenError("training config: family_draw names no family of the corpus mix "
@@ -235,8 +236,6 @@ class TrainConfig:
         if self.init_weights is not None and not Path(self.init_weights).is_file():
             raise SpecGenError(f"training config: init_weights {self.init_weights}: file not found")
         if self.recycle_dormant:
-            from specgen_addon.model.recycle import STAGES
-
             bad = [s for s in self.recycle_dormant if s not in STAGES] if isinstance(
                 self.recycle_dormant, list) else [self.recycle_dormant]
             if bad:
@@ -318,8 +317,6 @@ def family_draw_probabilities(materials: Sequence[TrainingMaterial], weights: di
 
     SpecGenError when no material belongs to a weighted family.
     """
-    from specgen_addon.corpus.generate import check_mix, material_family
-
     share = check_mix(weights)
     families = [material_family(m.brdf) for m in materials]
     counts = collections.Counter(families)
@@ -557,7 +554,6 @@ def train(mcfg: Config, tcfg: TrainConfig, spectral: MaterialSet, rgb: MaterialS
     if len(spectral) == 0 and len(rgb) == 0:
         raise SpecGenError("no training materials")
     if real is None and tcfg.real_materials_per_step > 0:
-        from specgen_addon.common.cache import cache_root
         from specgen_addon.train.real_rgb import real_source
 
         real = real_source(tcfg, cache_root() / "train-data", log=print if show_progress else (lambda _m: None))
@@ -577,18 +573,12 @@ def train(mcfg: Config, tcfg: TrainConfig, spectral: MaterialSet, rgb: MaterialS
     torch.manual_seed(tcfg.seed)
     model = SpecGen(mcfg)
     if tcfg.init_weights is not None and not (resume and (out / "checkpoint.pt").is_file()):
-        from specgen_addon.model import load_weights
-
-        from specgen_addon.model.grow import can_grow, grow_state_dict
-
         init = load_weights(tcfg.init_weights)
         if not can_grow(init.cfg, mcfg, fresh_encoder=tcfg.fresh_encoder):
             raise SpecGenError(f"{tcfg.init_weights}: weights were made with a different model config")
         model.load_state_dict(grow_state_dict(init.state_dict(), init.cfg, mcfg, fresh=model.state_dict(),
                                               fresh_encoder=tcfg.fresh_encoder))
         if tcfg.recycle_dormant:
-            from specgen_addon.model.recycle import recycle_dormant, revive_at_boundary
-
             census, stages = recycle_census(spectral, rgb, tcfg), tuple(tcfg.recycle_dormant)
             renewed = (recycle_dormant(model, census, stages=stages, seed=tcfg.seed)
                        if tcfg.recycle_mode == "redo" else revive_at_boundary(model, census, stages=stages))

@@ -12,6 +12,7 @@ from __future__ import annotations
 import collections
 import signal
 from typing import Any, Callable, Iterator
+from specgen_addon.common.processes import can_pool, context
 
 #: The batch maker a worker calls (set by :func:`_start_worker` in each worker).
 _MAKE: Callable[[int], Any] | None = None
@@ -46,7 +47,6 @@ def step_batches(make: Callable[[int], Any], start: int, stop: int, workers: int
         for step in range(start, stop):
             yield make(step)
         return
-    from specgen_addon.common.processes import can_pool, context
 
     if not can_pool(make):  # inside a pool worker, or spawn and ``make`` cannot travel
         for step in range(start, stop):

@@ -40,6 +40,12 @@ import torch
 from specgen_addon.common.errors import SpecGenError
 from specgen_addon.spectral.spectra import reflectance_to_linear_srgb, wavelength_grid
 from specgen_addon.train.data import TrainingMaterial, load_file_materials, sample_angles
+from specgen_addon.brdf.formats import load_brdf
+from specgen_addon.brdf.rusinkiewicz import io_from_half_diff
+from specgen_addon.brdf.table import mu_law_encode
+from specgen_addon.photo import sphere_image as input_image
+from specgen_addon.train import network_inputs, png_like
+from specgen_addon.train.loop import _masked_mse, inverse_mu_law
 
 #: Bands (nm) at which the spectral branch is queried and projected to RGB for a real material.
 REAL_BANDS_NM = wavelength_grid(380.0, 780.0, 16)
@@ -117,10 +123,6 @@ class RealSource:
     def batch(self, seed: int, step: int, image_size: int, n_angles: int, mu: float) -> RealBatch:
         """The real batch of ``step``: a pure function of ``(seed, step)`` (its own stream, so the
         corpus draws of a run stay as they were without real files)."""
-        from specgen_addon.brdf.rusinkiewicz import io_from_half_diff
-        from specgen_addon.brdf.table import mu_law_encode
-        from specgen_addon.train import network_inputs, png_like
-
         rng = np.random.default_rng([seed, step, 0x2EA1])
         idx = np.sort(rng.choice(len(self), size=min(self.per_step, len(self)), replace=False))
         imgs, ths, tds, pds, rgbs, greys, vals = [], [], [], [], [], [], []
@@ -146,8 +148,6 @@ class RealSource:
 def real_loss(model: Any, b: RealBatch, projection: torch.Tensor | None = None,
               bands_nm: np.ndarray = REAL_BANDS_NM) -> tuple[torch.Tensor, torch.Tensor]:
     """``(L_colour + L_grey, TV of the planes)`` of a real batch (module docstring)."""
-    from specgen_addon.train.loop import _masked_mse, inverse_mu_law
-
     dev = next(model.parameters()).device
     t = lambda a: torch.from_numpy(np.ascontiguousarray(a)).to(dev)
     th, td, pd, valid = t(b.theta_h), t(b.theta_d), t(b.phi_d), t(b.valid.astype(np.float32))
@@ -188,9 +188,6 @@ def real_source(tcfg: Any, cache_dir: str | Path, log: Callable[[str], None] = p
 def canonical_photo(path: Path, cache_dir: Path, log: Callable[[str], None] = print) -> np.ndarray:
     """The canonical input photo ``(128, 128, 3)`` of a measured file, as the evaluation renders it
     (:func:`specgen_addon.photo.sphere_image.render_input` of the file itself), cached by content."""
-    from specgen_addon.photo import sphere_image as input_image
-    from specgen_addon.brdf.formats import load_brdf
-
     key = hashlib.sha1(f"{path.resolve()}:{path.stat().st_size}:{path.stat().st_mtime_ns}".encode()).hexdigest()[:16]
     cached = Path(cache_dir) / f"real_input_{path.stem}_{key}.npy"
     if cached.is_file():

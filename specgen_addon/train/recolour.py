@@ -32,6 +32,10 @@ from specgen_addon.spectral import spectra
 from specgen_addon.corpus.material import Reflectance
 from specgen_addon.corpus.spectra_sources import REFLECTANCE_GRID_NM
 from specgen_addon.train.data import TrainingMaterial, material_key
+from specgen_addon.brdf.rusinkiewicz import io_from_half_diff
+from specgen_addon.photo import sphere_image as input_image
+from specgen_addon.train.data import render_all
+from specgen_addon.train.lighting_mix import quantise, resample_stack
 
 #: Bands (nm) the canonical input is rendered in (the input renderer's grid).
 BANDS_NM = spectra.DEFAULT_WAVELENGTHS_NM
@@ -70,7 +74,6 @@ def reflectance_at(obj: Any, path: tuple[str, ...]) -> Reflectance:
 
 def _probe_points(n: int = 256) -> tuple[np.ndarray, np.ndarray]:
     rng = np.random.default_rng(12345)
-    from specgen_addon.brdf.rusinkiewicz import io_from_half_diff
 
     u = rng.random((3, n))
     return io_from_half_diff(u[0] ** 2 * (np.pi / 2), u[1] * (np.pi / 2), u[2] * np.pi)
@@ -126,8 +129,6 @@ def recoloured(mat: TrainingMaterial, path: tuple[str, ...], values: np.ndarray)
 def render_affine_pair(brdf: Any, path: tuple[str, ...]) -> np.ndarray:
     """``(2, Λ, 128, 128)`` float32: the canonical input's spectral radiance (× the input exposure)
     with ρ ≡ 0, and with ρ ≡ 1 minus that (:data:`BANDS_NM`; the canonical scene and its samples)."""
-    from specgen_addon.photo import sphere_image as input_image
-
     scene = input_image._scene(input_image.CANONICAL_ENV, 0.0, input_image.CANONICAL_SIZE)
     l0, l1 = (np.asarray(scene.render_spectral(with_reflectance(brdf, path, value), BANDS_NM).spectral,
                          np.float64) * input_image.EXPOSURE for value in (_ZERO, _ONE))
@@ -146,8 +147,6 @@ def combine(pair: np.ndarray, values: np.ndarray) -> np.ndarray:
 def recoloured_input(pair: np.ndarray, values: np.ndarray, png: bool, size: int) -> np.ndarray:
     """The network's input ``(3, size, size)``: :func:`combine`, 8-bit PNG-quantised at full size when
     ``png`` (as the cached ``canonical_png`` component is), then resampled as the component cache is."""
-    from specgen_addon.train.lighting_mix import quantise, resample_stack
-
     image = combine(pair, values)
     if png:
         image = quantise(image)
@@ -200,8 +199,6 @@ class AffinePairCache:
 
     def fill(self, mats: Sequence[TrainingMaterial], workers: int = 2, progress=None) -> None:
         """Render what is missing on ``workers`` processes."""
-        from specgen_addon.train.data import render_all
-
         todo = self.missing(mats)
         if todo:
             render_all(self.make, todo, workers, progress)

@@ -1,4 +1,4 @@
-"""Bake numerics in the core (specgen_addon.generate.lookup): spectral basis, lookup atlas, environment
+"""Bake numerics in the core (specgen_addon.bake.lookup): spectral basis, lookup atlas, environment
 sampling density, closure fit stored with the atlas. No bpy."""
 
 from __future__ import annotations
@@ -6,7 +6,7 @@ from __future__ import annotations
 import numpy as np
 import pytest
 
-from specgen_addon.generate import lookup as bake
+from specgen_addon.bake import lookup as bake
 from specgen_addon.render.environment import srgb_luminance_weights
 from specgen_addon.brdf.rusinkiewicz import io_from_half_diff
 from specgen_addon.brdf.table import BRDFTable

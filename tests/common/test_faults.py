@@ -291,15 +291,15 @@ def test_flipped_bytes_in_shipped_weights_are_refused_with_the_file_named(tmp_pa
 def test_a_truncated_shipped_graph_is_refused_not_replaced_by_torch(tmp_path):
     """batch.py's onnx→torch fallback used to take a damaged graph silently."""
     pytest.importorskip("onnxruntime")
-    from specgen_addon.generate import lookup as bake
+    from specgen_addon.generate.pipeline import generate
     from specgen_addon.model.checksums import DamagedWeightsError
 
     pt = _copy_shipped(tmp_path)
     graph = tmp_path / "specgen_default.tables.onnx"
     graph.write_bytes(graph.read_bytes()[: graph.stat().st_size // 2])
     with pytest.raises(DamagedWeightsError, match="specgen_default.tables.onnx: damaged"):
-        bake.generate_lookup(str(EXAMPLE), tmp_path / "lookup", np.linspace(400, 700, 4), weights=pt,
-                             refine=False)
+        generate(str(EXAMPLE), out_dir=tmp_path / "lookup", wavelengths_nm=np.linspace(400, 700, 4), weights=pt,
+                 backend=None, refine=False)
     assert not (tmp_path / "lookup").exists()
 
 
@@ -307,7 +307,6 @@ def test_a_fallback_to_torch_is_said(tmp_path, monkeypatch):
     """Graphs missing beside the user's own weights: the torch backend runs, with a warning."""
     pytest.importorskip("onnxruntime")
     pytest.importorskip("torch")
-    from specgen_addon.generate import lookup as bake
     from specgen_addon.generate import pipeline
     from specgen_addon.common.errors import WeightsError
 
@@ -319,10 +318,11 @@ def test_a_fallback_to_torch_is_said(tmp_path, monkeypatch):
             raise WeightsError("w.tables.onnx: ONNX graph not found")
         raise RuntimeError("stop here")
 
-    monkeypatch.setattr(pipeline, "generate", fake_generate)
+    monkeypatch.setattr(pipeline, "_generate", fake_generate)
     with pytest.warns(UserWarning, match="onnx backend cannot run .*using the torch backend"):
         with pytest.raises(RuntimeError, match="stop here"):
-            bake.generate_lookup(str(EXAMPLE), tmp_path / "lookup", np.linspace(400, 700, 4))
+            pipeline.generate(str(EXAMPLE), out_dir=tmp_path / "lookup", wavelengths_nm=np.linspace(400, 700, 4),
+                              backend=None)
     assert calls == ["onnx", "torch"]
 
 

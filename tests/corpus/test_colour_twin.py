@@ -11,7 +11,7 @@ from specgen_addon.corpus.generate import generate_mixed_corpus
 from specgen_addon.corpus.material import Conductor, Reflectance
 from specgen_addon.corpus.spectra_sources import REFLECTANCE_GRID_NM, measured_spectra
 from specgen_addon.spectral.spectra import reflectance_to_linear_srgb
-from specgen_addon.spectral.recovery import otsu2018_reflectance, xyz_of_reflectance
+from specgen_addon.spectral.otsu2018 import otsu2018_reflectance, xyz_of_reflectance
 
 GRID = np.arange(360.0, 831.0, 5.0)
 

@@ -266,7 +266,7 @@ def ramp_table_21() -> BRDFTable:
 def _ochre_body_photo(table: BRDFTable):
     """An ochre Otsu-basis reflectance (Λ,), the canonical lighting, and the photo of ``table``
     with that body."""
-    from specgen_addon.spectral.recovery import otsu2018_reflectance
+    from specgen_addon.spectral.otsu2018 import otsu2018_reflectance
 
     rho = otsu2018_reflectance(np.array([0.25, 0.20, 0.08]), table.wavelengths)
     light = InputLighting()

@@ -8,7 +8,7 @@ import pytest
 
 from specgen_addon.common.errors import SpecGenError
 from specgen_addon.generate.refine import CorrectionBasis, RefineOptions
-from specgen_addon.generate.refine import _normal_equations
+from specgen_addon.generate.refine.refinement import _normal_equations
 from specgen_addon.generate.refine.holdout import block_folds, holdout_error
 
 

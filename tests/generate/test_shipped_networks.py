@@ -106,7 +106,6 @@ def test_the_thin_film_fit_models_the_blur_of_a_resampled_sphere_only(canonical,
     """``model="thin-film"``: a copied sphere is fitted without a blur model (its pixels are the
     frame's), a resampled one with the refinement's blur candidates (docs/thin_film_fit.md)."""
     from specgen_addon.generate import pipeline
-    from specgen_addon.generate import thin_film
     from specgen_addon.generate.refine.blur import BLUR_CANDIDATES_PX
 
     seen = []
@@ -118,7 +117,7 @@ def test_the_thin_film_fit_models_the_blur_of_a_resampled_sphere_only(canonical,
         seen.append(tuple(blur_px))
         raise Stop
 
-    monkeypatch.setattr(thin_film, "fit_thin_film", fake_fit)
+    monkeypatch.setattr(pipeline, "fit_thin_film", fake_fit)
     for image in (canonical, displaced_input(canonical, 0.5)):
         with pytest.raises(Stop):
             pipeline.generate(image, model="thin-film")

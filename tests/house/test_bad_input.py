@@ -569,9 +569,9 @@ API_CASES = {
     # found by the campaign (tests/bad_input_cases.py)
     "table-load-nan-wavelengths": (lambda w: BRDFTable.load(w.npz_wl_nan), SpecGenError, "finite"),
     "refine-not-a-table": (lambda w: _api("generate.refine").refine_brdf("t.npz", np.full((64, 64, 3), 0.1)), SpecGenError, "BRDFTable"),
-    "bake-negative-tolerance": (lambda w: _api("generate.lookup").bake_atlas(BRDFTable.load(w.npz_good), w.out / "a.exr", tolerance=-1), SpecGenError, "tolerance"),
-    "bake-nan-wavelengths": (lambda w: _api("generate.lookup").bake_atlas(BRDFTable.load(w.npz_good), w.out / "a.exr", wavelengths_nm=np.array([np.nan, 500.0])), SpecGenError, "finite"),
-    "bake-path-under-file": (lambda w: _api("generate.lookup").bake_atlas(BRDFTable.load(w.npz_good), w.blocker / "a.exr"), SpecGenError, "is a file"),
+    "bake-negative-tolerance": (lambda w: _api("bake.lookup").bake_atlas(BRDFTable.load(w.npz_good), w.out / "a.exr", tolerance=-1), SpecGenError, "tolerance"),
+    "bake-nan-wavelengths": (lambda w: _api("bake.lookup").bake_atlas(BRDFTable.load(w.npz_good), w.out / "a.exr", wavelengths_nm=np.array([np.nan, 500.0])), SpecGenError, "finite"),
+    "bake-path-under-file": (lambda w: _api("bake.lookup").bake_atlas(BRDFTable.load(w.npz_good), w.blocker / "a.exr"), SpecGenError, "is a file"),
     "sphere-array-empty": (lambda w: _api("photo.sphere_image").prepare_sphere_array(np.zeros((0, 0, 3))), ImageInputError, "too small"),
     "sphere-array-strings": (lambda w: _api("photo.sphere_image").prepare_sphere_array(np.array([["a"]])), ImageInputError, "array of numbers"),
 }
@@ -868,7 +868,7 @@ def test_cancelled_generate_leaves_nothing_in_the_lookup_folder(after_calls, sta
     pytest.importorskip("bpy")
     from importlib import import_module
 
-    bake = import_module("specgen_addon.generate.lookup")
+    pipeline = import_module("specgen_addon.generate.pipeline")
     errors = import_module("specgen_addon.common.errors")
     out = tmp_path / "lookup"
     calls = []
@@ -878,7 +878,7 @@ def test_cancelled_generate_leaves_nothing_in_the_lookup_folder(after_calls, sta
         return len(calls) > after_calls
 
     with pytest.raises(errors.Cancelled) as info:
-        bake.generate_lookup(str(EXAMPLE), out, np.linspace(400, 700, 4), cancel=cancel)
+        pipeline.generate(str(EXAMPLE), out_dir=out, wavelengths_nm=np.linspace(400, 700, 4), backend=None, cancel=cancel)
     assert stage in str(info.value)
     assert not out.exists()
 

@@ -13,7 +13,7 @@ bpy = pytest.importorskip("bpy")
 
 from addon_modules import PKG, addon_module
 
-bake = addon_module("specgen_addon.generate.lookup")
+bake = addon_module("specgen_addon.bake.lookup")
 render = addon_module("ops.render")
 travel = addon_module("ops.travel")
 

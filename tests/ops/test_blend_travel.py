@@ -19,7 +19,7 @@ bpy = pytest.importorskip("bpy")
 
 from addon_modules import addon_module
 
-bake = addon_module("specgen_addon.generate.lookup")
+bake = addon_module("specgen_addon.bake.lookup")
 render = addon_module("ops.render")
 scene_mod = addon_module("ops.scene")
 properties = addon_module("ops.properties")

@@ -20,7 +20,7 @@ bpy = pytest.importorskip("bpy")
 
 import batch  # noqa: E402
 from addon_modules import PKG, addon_module, psnr as _psnr  # noqa: E402  (after the bpy skip)
-bake = addon_module("specgen_addon.generate.lookup")
+bake = addon_module("specgen_addon.bake.lookup")
 render = addon_module("ops.render")
 scene_mod = addon_module("ops.scene")
 core_errors = addon_module("specgen_addon.common.errors")
@@ -240,7 +240,7 @@ def test_extension_zip_installs_and_registers(tmp_path):
         "import bl_ext.user_default.specgen as ext\n"
         "assert 'bl_ext.user_default.specgen.ops.render' not in sys.modules or True\n"
         "assert hasattr(bpy.types, 'SPECGEN_PT_main') and hasattr(bpy.types.Scene, 'specgen')\n"
-        "from specgen_addon.generate import lookup as bake\n"
+        "from specgen_addon.bake import lookup as bake\n"
         "assert bake.__file__.startswith(ext.__file__.rsplit('__init__', 1)[0]), bake.__file__\n"
         "from bl_ext.user_default.specgen.ops import reporting\n"
         "from specgen_addon.common import errors\n"

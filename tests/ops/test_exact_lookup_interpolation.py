@@ -35,7 +35,7 @@ def _render(table: BRDFTable, tmp_path, sun) -> tuple[np.ndarray, np.ndarray]:
 
     from specgen_addon.render import DistantLight, render_spectral, sphere_geometry
 
-    bake = addon_module("specgen_addon.generate.lookup")
+    bake = addon_module("specgen_addon.bake.lookup")
     render = addon_module("ops.render")
     scene_mod = addon_module("ops.scene")
     info = bake.bake_atlas(table, tmp_path / "t.exr", tolerance=0.0)
@@ -69,7 +69,7 @@ def test_a_material_compiled_by_an_older_version_renders_with_this_versions_shad
     bpy = pytest.importorskip("bpy")
     from addon_modules import addon_module
 
-    bake = addon_module("specgen_addon.generate.lookup")
+    bake = addon_module("specgen_addon.bake.lookup")
     render = addon_module("ops.render")
     scene_mod = addon_module("ops.scene")
     info = bake.bake_atlas(BRDFTable.tabulate(_mirror_like, WL), tmp_path / "t.exr")

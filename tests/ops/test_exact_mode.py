@@ -11,7 +11,7 @@ import pytest
 bpy = pytest.importorskip("bpy")
 
 from addon_modules import addon_module  # noqa: E402  (after the bpy skip)
-bake = addon_module("specgen_addon.generate.lookup")
+bake = addon_module("specgen_addon.bake.lookup")
 render = addon_module("ops.render")
 scene_mod = addon_module("ops.scene")
 core_errors = addon_module("specgen_addon.common.errors")

@@ -10,7 +10,7 @@ bpy = pytest.importorskip("bpy")
 
 from addon_modules import addon_module
 
-bake = addon_module("specgen_addon.generate.lookup")
+bake = addon_module("specgen_addon.bake.lookup")
 render = addon_module("ops.render")
 
 from specgen_addon.brdf.formats import load_brdf

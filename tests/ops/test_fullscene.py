@@ -18,7 +18,7 @@ bpy = pytest.importorskip("bpy")
 
 import batch  # noqa: E402
 from addon_modules import addon_module, psnr as _psnr  # noqa: E402  (after the bpy skip)
-bake = addon_module("specgen_addon.generate.lookup")
+bake = addon_module("specgen_addon.bake.lookup")
 render = addon_module("ops.render")
 fullscene = addon_module("ops.render_fullscene")
 convert = addon_module("ops.scene_convert")

@@ -23,7 +23,7 @@ from specgen_addon.common.errors import Cancelled
 
 pytestmark = pytest.mark.blender
 
-bake = addon_module("specgen_addon.generate.lookup")
+bake = addon_module("specgen_addon.bake.lookup")
 render = addon_module("ops.render")
 fullscene = addon_module("ops.render_fullscene")
 exact_direct = addon_module("ops.exact_direct")

@@ -82,7 +82,7 @@ def addon() -> SimpleNamespace:
     bpy = pytest.importorskip("bpy")
     from addon_modules import addon_module
 
-    return SimpleNamespace(bpy=bpy, bake=addon_module("specgen_addon.generate.lookup"),
+    return SimpleNamespace(bpy=bpy, bake=addon_module("specgen_addon.bake.lookup"),
                            render=addon_module("ops.render"), scene=addon_module("ops.scene"),
                            fullscene=addon_module("ops.render_fullscene"),
                            convert=addon_module("ops.scene_convert"), demo=addon_module("ops.demo_scenes"))

@@ -11,13 +11,14 @@ import pytest
 bpy = pytest.importorskip("bpy")
 
 from addon_modules import PKG, addon_module  # noqa: E402  (after the bpy skip)
-bake = addon_module("specgen_addon.generate.lookup")
+bake = addon_module("specgen_addon.bake.lookup")
 naming = addon_module("ops.naming")
 render = addon_module("ops.render")
 scene_mod = addon_module("ops.scene")
 
 from specgen_addon.brdf.rusinkiewicz import io_from_half_diff  # noqa: E402
 from specgen_addon.brdf.table import BRDFTable  # noqa: E402
+from specgen_addon.generate.pipeline import generate  # noqa: E402
 
 REPO = Path(__file__).resolve().parents[2]
 WL = np.array([420.0, 480.0, 540.0, 600.0, 660.0])
@@ -168,8 +169,8 @@ def test_cancelled_generate_leaves_no_files_of_its_set(tmp_path, default_weights
     (tmp_path / "other_lookup.json").write_text("{}")                  # someone else's file stays
     seen = []
     with pytest.raises(Cancelled):
-        bake.generate_lookup(str(REPO / "examples" / "sphere.png"), tmp_path, WL[:3], n_phi_d=45,
-                             name="sphere", preview=True, progress=seen.append,
-                             cancel=lambda: bool(seen) and seen[-1] >= 0.8)   # stop in the bake
+        generate(str(REPO / "examples" / "sphere.png"), out_dir=tmp_path, wavelengths_nm=WL[:3], n_phi_d=45,
+                 backend=None, name="sphere", preview=True, progress=seen.append,
+                 cancel=lambda: bool(seen) and seen[-1] >= 0.8)   # stop in the bake
     assert max(seen) >= 0.8
     assert sorted(p.name for p in tmp_path.iterdir()) == ["other_lookup.json"]

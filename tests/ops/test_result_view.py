@@ -19,7 +19,7 @@ from addon_modules import addon_module, psnr  # after the bpy skip
 fullscene = addon_module("ops.render_fullscene")
 result_view = addon_module("ops.result_view")
 render = addon_module("ops.render")
-bake = addon_module("specgen_addon.generate.lookup")
+bake = addon_module("specgen_addon.bake.lookup")
 demo = addon_module("ops.demo_scenes")
 vt = addon_module("specgen_addon.render.view_transform")
 

@@ -6,7 +6,7 @@ import numpy as np
 import pytest
 
 from specgen_addon.common.errors import SpecGenError
-from specgen_addon.spectral.recovery import otsu2018_cluster, otsu2018_reflectance, xyz_of_reflectance
+from specgen_addon.spectral.otsu2018 import otsu2018_cluster, otsu2018_reflectance, xyz_of_reflectance
 
 OTSU_GRID_NM = np.arange(380.0, 731.0, 10.0)
 

@@ -50,6 +50,7 @@ import numpy as np
 from specgen_addon.common.errors import SpecGenError
 from specgen_addon.brdf.rusinkiewicz import io_from_half_diff
 from specgen_addon.brdf.table import N_THETA_H, grid_angles
+from specgen_addon.spectral.spectra import reflectance_to_linear_srgb
 
 #: Roughness candidates (Blender's roughness, α = r²): near-mirror to fully rough.
 ROUGHNESS_GRID = np.geomspace(0.04, 1.0, 30)
@@ -285,8 +286,6 @@ def group_closures(fit: ClosureFit, group: np.ndarray,
 
 def srgb_weights(wavelengths_nm: np.ndarray) -> np.ndarray | None:
     """(Λ, 3) linear-sRGB weights of a reflectance's bands under D65 (None off the visible range)."""
-    from specgen_addon.spectral.spectra import reflectance_to_linear_srgb
-
     wl = np.asarray(wavelengths_nm, np.float64)
     if wl.size < 3 or wl.min() > 450 or wl.max() < 650:
         return None

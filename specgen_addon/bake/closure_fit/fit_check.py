@@ -11,6 +11,9 @@ two sRGB images (colour-science). The Full Scene render reports it per material 
 from __future__ import annotations
 
 import numpy as np
+from specgen_addon.render import DistantLight, render_spectral, sphere_geometry
+from specgen_addon.render.photo_reproduction import delta_e2000, photo_scale
+from specgen_addon.render.spectral_exr import linear_srgb_preview
 
 #: Directions towards the check lights (camera along +z): the bench's sun, head-on, and a raking
 #: light from the side, so small, medium and large half angles θd are all seen.
@@ -35,10 +38,6 @@ def rendered_fit_error(fit, table, resolution: int = CHECK_RESOLUTION) -> float:
     """Worst mean ΔE2000 over :data:`CHECK_LIGHTS` between ``table`` (a spectral
     :class:`~specgen_addon.brdf.table.BRDFTable`) and its closure ``fit``, each rendered on a sphere
     under one D65 sun at the fit's bands; the level is the table render's (0 for a black table)."""
-    from specgen_addon.render.photo_reproduction import delta_e2000, photo_scale
-    from specgen_addon.render import DistantLight, render_spectral, sphere_geometry
-    from specgen_addon.render.spectral_exr import linear_srgb_preview
-
     wl = np.asarray(fit.wavelengths_nm, np.float64)
     geo = sphere_geometry(resolution)
     worst = 0.0

@@ -16,6 +16,8 @@ import numpy as np
 
 from specgen_addon.common.errors import SpecGenError
 from specgen_addon.brdf.table import BRDFTable
+from specgen_addon.brdf.formats.merl import write_merl
+from specgen_addon.brdf.formats.rgl import write_rgl
 
 #: What ``tabulate`` and ``infer`` write: a SpecGen table, RGL, MERL.
 OUTPUT_SUFFIXES = (".npz", ".bsdf", ".binary")
@@ -46,8 +48,6 @@ def table_to_rgl(table: BRDFTable, path: str | os.PathLike, overwrite: bool = Fa
     direction pair it stands for (what the format stores), ``θi`` at ``slices`` elevations from 0
     to 87°, on a ``grid``² square.
     """
-    from specgen_addon.brdf.formats.rgl import write_rgl
-
     theta_i = np.linspace(0.0, np.radians(87.0), slices)
     u = np.linspace(0.0, 1.0, grid)
     theta_m = u ** 2 * (np.pi / 2)
@@ -86,8 +86,6 @@ def write_output(table: BRDFTable, path: Path, overwrite: bool = False, full_tab
         table_to_rgl(table, path, overwrite=overwrite)
         kind = f"RGL .bsdf, {'spectral' if table.is_spectral else 'RGB'}"
     else:
-        from specgen_addon.brdf.formats.merl import write_merl
-
         write_merl(path, table.to_rgb(), overwrite=overwrite)
         kind = "MERL .binary, RGB" + (" (D65 projection)" if table.is_spectral else "")
     return f"wrote {path} ({kind}, {size_text(path.stat().st_size)})"

@@ -40,6 +40,7 @@ from specgen_addon.common.atomic_io import atomic_write
 from specgen_addon.common.limits import bad_values
 from specgen_addon.brdf.rusinkiewicz import io_from_half_diff
 from specgen_addon.brdf.table import BRDFTable, CancelFn, ProgressFn
+from specgen_addon.spectral import spectra
 
 # --------------------------------------------------------------------------------------------
 # Tensor file I/O
@@ -506,7 +507,6 @@ class RGLBSDF:
         """Linear sRGB ``fr`` (sr⁻¹), (N, 3); spectral files are integrated under D65."""
         if not self.is_spectral:
             return self.eval_native(wi, wo)
-        from specgen_addon.spectral import spectra
 
         visible = (self.wavelengths >= 360.0) & (self.wavelengths <= 830.0)
         wl = self.wavelengths[visible]

@@ -12,9 +12,7 @@ from specgen_addon.corpus.families.lobes import Lobes
 from specgen_addon.corpus.families.sheen import Sheen
 from specgen_addon.corpus.families.thin_film import ThinFilm, airy_reflectance
 from specgen_addon.corpus.families.tinted_coat import TintedCoat
-
-#: Every family name, the classic recipe first.
-FAMILY_NAMES: tuple[str, ...] = family_names()
+from specgen_addon.corpus.families.catalogue import FAMILY_NAMES
 
 __all__ = ["CarPaint", "FAMILIES", "FAMILY_NAMES", "FamilyMaterial", "Lobes", "Sheen", "ThinFilm",
            "TintedCoat", "airy_reflectance", "check_family_names", "directional_albedo", "family_names", "halfvector_quadrature",

@@ -29,6 +29,7 @@ from specgen_addon.corpus.material import (ALPHA_RANGE, CHUNK_ROWS, RGB_WAVELENG
                         Material, Reflectance, _rgb_projection)
 from specgen_addon.corpus.microfacet import MU_NODES, smith_lambda
 from specgen_addon.corpus.spectra_sources import REFLECTANCE_GRID_NM, SPLITS
+from specgen_addon.brdf.table import BRDFTable
 
 #: Wavelength grid (nm) on which per-material albedo curves are integrated, then interpolated.
 ALBEDO_WAVELENGTHS_NM = wavelength_grid(380.0, 780.0, 41)
@@ -86,8 +87,6 @@ class FamilyMaterial:
 
     def tabulate(self, wavelengths_nm: np.ndarray = DEFAULT_WAVELENGTHS_NM, progress=None, cancel=None):
         """The material on the MERL grid as a spectral :class:`~specgen_addon.brdf.table.BRDFTable`."""
-        from specgen_addon.brdf.table import BRDFTable
-
         w = np.asarray(wavelengths_nm, dtype=np.float64)
         meta = {"source": "specgen corpus", "material": self.to_dict(), "description": self.kind}
         return BRDFTable.tabulate(lambda th, td, pd: self.eval_hd(th, td, pd, w), w,

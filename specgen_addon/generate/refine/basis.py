@@ -31,6 +31,7 @@ import numpy as np
 
 from specgen_addon.common.errors import SpecGenError
 from specgen_addon.brdf.table import N_THETA_D, N_THETA_H
+from specgen_addon.spectral.colour_tables import mallett2019_basis
 
 #: θh knots as MERL grid indices (index i ↔ θh = (i/90)² · π/2): 0°, 0.5°, 1.1°, 2.2°, 4°, 6.9°,
 #: 11.4°, 18.7°, 28.9°, 46.9°, 88°. The first step spans a peak the photo cannot resolve: one pixel
@@ -104,7 +105,6 @@ class CorrectionBasis:
         Mallett basis in the order blue, green, red (like the hat knots), held beyond 380–780 nm."""
         if self.spectral == "hats":
             return hat_matrix(wavelengths_nm, self.wavelength_knots_nm)
-        from specgen_addon.spectral.colour_tables import mallett2019_basis
 
         return mallett2019_basis(wavelengths_nm)[:, ::-1]
 

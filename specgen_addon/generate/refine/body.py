@@ -4,7 +4,7 @@ A photo fixes three numbers of the body's spectrum (its colour); the other degre
 from a prior. Measured on the validation split, the network's body spectra are a weak prior there
 (spectral PSNR of the body shape, after a tint matched to the colour: 23 dB), while a natural
 reflectance of the same colour — Otsu et al.'s (2018) clustered basis of measured reflectances,
-:mod:`specgen_addon.spectral.recovery` — is a strong one (34 dB; docs/refinement.md). So the
+:mod:`specgen_addon.spectral.otsu2018` — is a strong one (34 dB; docs/refinement.md). So the
 refinement keeps the network's colour and lobe, and takes the body's *shape* from that basis.
 
 That holds for a diffuse body under an interface (plastics, paints, coated materials). A metal has
@@ -23,7 +23,8 @@ import numpy as np
 
 from specgen_addon.common.errors import SpecGenError
 from specgen_addon.spectral import spectra
-from specgen_addon.spectral.recovery import otsu2018_reflectance, xyz_of_reflectance
+from specgen_addon.spectral.otsu2018 import xyz_of_reflectance
+from specgen_addon.spectral.rgb_to_spectrum import xyz_to_spectrum
 
 #: Body priors of :class:`~specgen_addon.generate.refine.RefineOptions`: Otsu 2018 (default), the network's, or
 #: a convex blend of the two (:func:`blended_body`), or Otsu 2018's where the eye sees and the network's in
@@ -60,7 +61,7 @@ def natural_body(body: np.ndarray, wavelengths_nm: np.ndarray) -> np.ndarray | N
         xyz = xyz_of_reflectance(reflectance, wavelengths_nm)
         if xyz[1] < 1e-4:
             return None
-        return otsu2018_reflectance(xyz, wavelengths_nm) / np.pi
+        return xyz_to_spectrum(xyz, wavelengths_nm, method="Otsu 2018") / np.pi
     except SpecGenError:
         return None
 

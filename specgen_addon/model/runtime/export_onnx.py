@@ -33,6 +33,9 @@ from specgen_addon.common.atomic_io import atomic_write
 from specgen_addon.model import checksums
 from specgen_addon.model.runtime.fast import GridHead, GridHeadLowRank, GridTables, lambda_coords
 from specgen_addon.model.specgen import load_weights
+from specgen_addon.model.runtime.inference import LOW_RANK_INPUTS, low_rank_block, low_rank_tables, onnx_paths
+from specgen_addon.model.specgen import DEFAULT_WEIGHTS
+from specgen_addon.spectral.spectra import DEFAULT_WAVELENGTHS_NM
 
 OPSET = 17
 #: Smaller initializers stay float32 (:func:`store_weights_half`): a Cast node would outweigh them.
@@ -89,14 +92,9 @@ def export_onnx(weights: str | Path | None = None, out_stem: str | Path | None =
 
     ``half`` stores the graphs' large weights as float16 where that is exact
     (:func:`store_weights_half`); computing stays float32."""
-    from specgen_addon.model.runtime.inference import LOW_RANK_INPUTS, low_rank_block, low_rank_tables, onnx_paths
-    from specgen_addon.spectral.spectra import DEFAULT_WAVELENGTHS_NM
-
     model = load_weights(weights)
     src = Path(weights) if weights is not None else None
     if out_stem is None:
-        from specgen_addon.model.specgen import DEFAULT_WEIGHTS
-
         out_stem = (src or DEFAULT_WEIGHTS).with_suffix("")
     tables_path, head_path = onnx_paths(Path(f"{out_stem}.pt"))
     cfg_json = json.dumps(model.cfg.to_dict())

@@ -49,6 +49,7 @@ import torch.nn.functional as F
 
 from specgen_addon.brdf.lookup_reach import phi_d_reach
 from specgen_addon.brdf.table import N_PHI_D, N_THETA_D
+from specgen_addon.model.runtime import gather_kernels
 
 
 @torch.no_grad()
@@ -146,7 +147,6 @@ class GatherGridHead:
         o2, o4 = o1 + N_THETA_D, o1 + N_THETA_D + N_PHI_D
         self.offsets = np.array([o1, o2, o3, o4, o5, o6], dtype=np.int64)
         self._local = threading.local()
-        from specgen_addon.model.runtime import gather_kernels
 
         self.kernels = gather_kernels.load()            # numba loops for three stretches, or None
         if self.kernels is not None:                     # their arguments, as numpy arrays, once

@@ -25,6 +25,10 @@ from specgen_addon.brdf.lookup_reach import extend_beyond_reach, phi_d_reach
 from specgen_addon.photo.resample import resample_square
 from specgen_addon.spectral.spectra import DEFAULT_WAVELENGTHS_NM
 from specgen_addon.brdf.table import GRID_SHAPE, N_PHI_D, N_THETA_D, N_THETA_H, BRDFTable, mu_law_decode_inplace
+from specgen_addon.common.limits import bad_values
+from specgen_addon.model import DEFAULT_WEIGHTS, Config, shipped_weights
+from specgen_addon.model.checksums import verify
+from specgen_addon.photo import sphere_image as input_image
 
 if TYPE_CHECKING:
     from specgen_addon.photo.sphere_image import SphereCrop
@@ -54,8 +58,6 @@ def network_input(image, image_size: int) -> np.ndarray:
 def sphere_crop(image) -> SphereCrop:
     """The canonical crop of an image (path, or array H×W×3/4 linear RGB), and how it was cut
     (:class:`specgen_addon.photo.sphere_image.SphereCrop`); a crop already made is returned as it is."""
-    from specgen_addon.photo import sphere_image as input_image
-
     if isinstance(image, input_image.SphereCrop):
         return image
     if isinstance(image, input_image.PhotoSource):
@@ -71,8 +73,6 @@ _LOCK = threading.Lock()
 
 
 def _weights_path(weights) -> Path:
-    from specgen_addon.model import DEFAULT_WEIGHTS
-
     return Path(weights) if weights is not None else DEFAULT_WEIGHTS
 
 
@@ -132,7 +132,6 @@ class _OnnxBackend:
         import json
 
         tables_path, head_path = onnx_paths(weights)
-        from specgen_addon.model.checksums import verify
 
         for p in (tables_path, head_path):
             if not p.is_file():
@@ -164,8 +163,6 @@ class _OnnxBackend:
             self.head.get_inputs()[names.index("f2")].shape[3], int)
         meta = self.tables.get_modelmeta().custom_metadata_map
         try:
-            from specgen_addon.model import Config
-
             self.cfg = Config.from_dict(json.loads(meta["specgen_config"]))
         except Exception:
             raise WeightsError(f"{tables_path}: ONNX graph carries no SpecGen config") from None
@@ -334,8 +331,6 @@ def generate_brdf(image, weights=None, wavelengths_nm=None, backend: str = "torc
     """
     crop = sphere_crop(image)
     if weights is None:
-        from specgen_addon.model import shipped_weights
-
         weights = shipped_weights(crop.copied)
     be = get_backend(weights, backend)
     cfg = be.cfg
@@ -349,7 +344,6 @@ def generate_brdf(image, weights=None, wavelengths_nm=None, backend: str = "torc
     u_lambda = cfg.lambda_coordinates(wl)
     tables = be.make_tables(x, u_lambda)
     values = evaluate_grid(be, tables, wl.size, progress=progress, cancel=cancel, decode_mu=cfg.mu)
-    from specgen_addon.common.limits import bad_values
 
     reason = bad_values(values)
     if reason:

@@ -41,7 +41,7 @@ import os
 from concurrent.futures import ThreadPoolExecutor
 from dataclasses import dataclass, field
 from pathlib import Path
-from typing import TYPE_CHECKING, Callable
+from typing import Callable
 
 import numpy as np
 
@@ -49,9 +49,14 @@ from specgen_addon.common.errors import Cancelled, OutputExistsError, SpecGenErr
 from specgen_addon.common.atomic_io import atomic_write
 from specgen_addon.common.limits import check_output_dir
 from specgen_addon.brdf.table import N_PHI_D, N_THETA_D, N_THETA_H
-
-if TYPE_CHECKING:  # for the annotation only; the baker imports the fit where it reads one back
-    from specgen_addon.bake.closure_fit import ClosureFit
+from specgen_addon.bake.closure_fit import ClosureFit, fit_closures
+from specgen_addon.bake.closure_fit.sheen import fit_sheen
+from specgen_addon.bake.preview import write_preview
+from specgen_addon.brdf.rusinkiewicz import io_from_half_diff
+from specgen_addon.brdf.table import grid_angles, phi_d_index, theta_d_index, theta_h_index
+from specgen_addon.common.image_io import read_exr, write_exr
+from specgen_addon.common.limits import safe_name
+from specgen_addon.render.environment import srgb_luminance_weights
 
 COEFFS_PER_RENDER = 4   # coefficient slots per Cycles render: one RGBA lookup group, 4 passes
 #: Atlas layout: 2 = slots c_k + o_k c_0 (1 had a constant slot 0 and absolute shifts).
@@ -65,7 +70,6 @@ ENV_LIST_WIDTH = 256
 def _write_exr(path: Path, channels: dict[str, np.ndarray], overwrite: bool = True,
                attributes: dict[str, str] | None = None, tiled: bool = False) -> Path:
     # tiled: OIIO's texture cache reads tiles directly instead of re-tiling scanlines
-    from specgen_addon.common.image_io import write_exr
 
     return write_exr(path, channels, overwrite=overwrite, attributes=attributes, tiled=tiled,
                      compression="none" if tiled else "zip")
@@ -80,8 +84,6 @@ def group_path(base: Path, group: int) -> Path:
 def _fit_standins(table, wavelengths_nm: np.ndarray | None):
     """The native closure fit of ``table`` (its rendered error checked) with the Principled
     stand-in's sheen where the material needs one."""
-    from specgen_addon.bake.closure_fit import fit_closures
-    from specgen_addon.bake.closure_fit.sheen import fit_sheen
 
     fit = fit_closures(table, wavelengths_nm, check=True)
     sheen = fit_sheen(lambda wi, wo: table.eval(wi, wo, fit.wavelengths_nm), fit)
@@ -219,9 +221,6 @@ def reachable_entries(n_phi_d: int = N_PHI_D) -> np.ndarray:
 
     A constant of the lookup resolution, so it is made once per resolution (0.4 s) and returned
     read-only."""
-    from specgen_addon.brdf.rusinkiewicz import io_from_half_diff
-    from specgen_addon.brdf.table import grid_angles
-
     th, td, _ = grid_angles()
     pd = np.arange(n_phi_d) / n_phi_d * np.pi
     wi, wo = io_from_half_diff(th[:, None, None], td[None, :, None], pd[None, None, :])
@@ -331,8 +330,6 @@ def atlas_lookup_reference(atlas: np.ndarray, info: AtlasInfo, theta_h: np.ndarr
                            theta_d: np.ndarray, phi_d: np.ndarray) -> np.ndarray:
     """NumPy twin of the shader's lookup on :func:`read_atlas` (two bilinear taps), projected back
     onto the bands with the basis: ``f_r`` (N, Λ)."""
-    from specgen_addon.brdf.table import phi_d_index, theta_d_index, theta_h_index
-
     x = np.clip(theta_h_index(np.ravel(theta_h)), 0, N_THETA_H - 1)
     y = np.clip(theta_d_index(np.ravel(theta_d)), 0, N_THETA_D - 1)
     kf = phi_d_index(np.ravel(phi_d)) * info.n_phi_d / N_PHI_D
@@ -359,8 +356,6 @@ def atlas_lookup_reference(atlas: np.ndarray, info: AtlasInfo, theta_h: np.ndarr
 
 def read_atlas(info: AtlasInfo) -> np.ndarray:
     """All slot planes stacked (H, W, 4 × groups) (for tests and checks)."""
-    from specgen_addon.common.image_io import read_exr
-
     planes = []
     for p in info.group_paths:
         ch, _ = read_exr(p)
@@ -427,8 +422,6 @@ def light_socket_values(light: Light | None) -> dict[str, object]:
 
 def environment_density(rgb: np.ndarray) -> np.ndarray:
     """Texel probabilities ∝ luminance · cos(elevation) (sum 1), as the reference renderer samples."""
-    from specgen_addon.render.environment import srgb_luminance_weights
-
     h = rgb.shape[0]
     cos_el = np.cos(((1.0 - (np.arange(h) + 0.5) / h) - 0.5) * np.pi)
     weight = np.clip(rgb @ srgb_luminance_weights(), 0, None) * cos_el[:, None]
@@ -474,7 +467,7 @@ def bake_environment(env: EnvironmentLight, map_path: str | os.PathLike,
     return Path(map_path), Path(list_path)
 
 
-# ---------------------------------------------------------------------------------- pipeline
+# ---------------------------------------------------------------------------------- files
 def save_atlas_info(info: AtlasInfo, path: str | os.PathLike) -> Path:
     """Write the atlas description (JSON beside the textures) so a later session can apply it."""
     import json
@@ -505,8 +498,6 @@ def load_atlas_info(path: str | os.PathLike) -> AtlasInfo:
                          int(data["n_phi_d"]), int(data["tiles_x"]),
                          int(data["tiles_y"]), float(data["rel_error"]))
         if data.get("closures"):
-            from specgen_addon.bake.closure_fit import ClosureFit
-
             info.closures = ClosureFit.from_json(data["closures"])
     except (OSError, ValueError, KeyError, TypeError, SpecGenError) as exc:
         raise SpecGenError(f"{path}: cannot read the baked lookup description ({exc})") from None
@@ -516,35 +507,9 @@ def load_atlas_info(path: str | os.PathLike) -> AtlasInfo:
     return info
 
 
-def choose_backend() -> str:
-    """``"onnx"`` when onnxruntime is importable (a stock Blender ships no torch), else ``"torch"``."""
-    import importlib.util
-
-    return "onnx" if importlib.util.find_spec("onnxruntime") is not None else "torch"
-
-
-def generate_lookup(image, out_dir: str | os.PathLike, wavelengths_nm: np.ndarray,
-                    weights=None, n_phi_d: int = N_PHI_D, tolerance: float = DEFAULT_TOLERANCE,
-                    backend: str | None = None, name: str = "brdf",
-                    progress: Callable[[float], None] | None = None,
-                    cancel: Callable[[], bool] | None = None, overwrite: bool = True,
-                    lighting=None, refine: bool = True, save_table: bool = False,
-                    preview: bool = False, model: str = "network") -> AtlasInfo:
-    """Image of a sphere → spectral BRDF table, refined against the photo under ``lighting``
-    unless ``refine`` is False → coefficient atlas + JSON (``<name>_lookup.*``). ``model``
-    ``"thin-film"`` fits the thin-film family to the photo instead of running the network
-    (:mod:`specgen_addon.generate.pipeline`); its report is ``info.film_fit``.
-
-    Runs without bpy (the Generate operator calls it on a worker thread). Progress: 0–0.8 network
-    and refinement (:func:`specgen_addon.generate.pipeline.generate`), 0.8–1 bake. The refinement's report
-    is ``info.refinement``. ``save_table`` also writes the BRDF as ``<name>.npz`` (the compact
-    material file, a few MB: :mod:`specgen_addon.brdf.material_file`); ``preview`` writes ``<name>_preview.png``
-    (:mod:`specgen_addon.bake.preview`). Without ``overwrite`` existing outputs of ``name`` are refused
-    up front; whatever fails or is cancelled leaves nothing new in ``out_dir``.
-    """
-    from specgen_addon.common.interrupts import OutputGuard
-    from specgen_addon.common.limits import check_output_dir, safe_name
-
+def check_lookup_outputs(out_dir: str | os.PathLike, name: str, overwrite: bool) -> Path:
+    """Refuse up front what :func:`bake_lookup` could not write: a bad ``name``, an output folder
+    that is a file or not writable, or (without ``overwrite``) existing outputs of ``name``."""
     out = Path(out_dir)
     safe_name(name, "BRDF name")
     check_output_dir(out, create=False)
@@ -553,48 +518,23 @@ def generate_lookup(image, out_dir: str | os.PathLike, wavelengths_nm: np.ndarra
         existing += sorted(out.glob(f"{name}_lookup.g*.exr"))
         if existing:
             raise OutputExistsError(f"{existing[0]}: already exists (turn on Overwrite to replace it)")
-    from specgen_addon.common.atomic_io import make_dirs
-
-    with OutputGuard([out]):  # failed, cancelled or interrupted: nothing it made stays in out_dir
-        make_dirs(out)
-        return _generate_lookup(image, out, wavelengths_nm, weights, n_phi_d, tolerance, backend,
-                                name, progress, cancel, lighting, refine, save_table, preview, model)
+    return out
 
 
-def _generate_lookup(image, out: Path, wavelengths_nm, weights, n_phi_d, tolerance, backend, name,
-                     progress, cancel, lighting, refine, save_table, preview, model) -> AtlasInfo:
-    from specgen_addon.common.errors import WeightsError
-    from specgen_addon.generate.pipeline import generate
-
-    sub = (lambda lo, hi: (lambda f: progress(lo + (hi - lo) * f))) if progress else (lambda lo, hi: None)
-    chosen = backend or choose_backend()
-    kwargs = dict(lighting=lighting, refine=refine, weights=weights, wavelengths_nm=wavelengths_nm,
-                  progress=sub(0.0, 0.8), cancel=cancel, model=model)
-    try:
-        generated = generate(image, backend=chosen, **kwargs)
-    except WeightsError as exc:
-        import importlib.util
-        import warnings
-
-        from specgen_addon.model.checksums import DamagedWeightsError
-
-        if backend is not None or chosen != "onnx" or importlib.util.find_spec("torch") is None \
-                or isinstance(exc, DamagedWeightsError):
-            raise
-        # the graphs are missing or unusable: say so, the backend never changes silently
-        warnings.warn(f"the onnx backend cannot run ({exc}); using the torch backend", stacklevel=2)
-        generated = generate(image, backend="torch", **kwargs)
-    table = generated.table
+def bake_lookup(table, out: Path, name: str, n_phi_d: int = N_PHI_D,
+                tolerance: float = DEFAULT_TOLERANCE, save_table: bool = False, preview: bool = False,
+                progress: Callable[[float], None] | None = None,
+                cancel: Callable[[], bool] | None = None) -> AtlasInfo:
+    """Everything Blender reads of one spectral table, in ``out``: the coefficient atlas and its
+    JSON (``<name>_lookup.*``), with ``save_table`` the compact material file ``<name>.npz``
+    (:mod:`specgen_addon.brdf.material_file`), with ``preview`` ``<name>_preview.png``
+    (:mod:`specgen_addon.bake.preview`). Outputs are replaced; check them first with
+    :func:`check_lookup_outputs`."""
     if save_table:
         table.save(out / f"{name}.npz", overwrite=True, compact=True)
     if preview:
-        from specgen_addon.bake.preview import write_preview
-
         write_preview(table, out / f"{name}_preview.png")
     info = bake_atlas(table, out / f"{name}_lookup.exr", n_phi_d=n_phi_d, tolerance=tolerance,
-                      progress=sub(0.8, 1.0), cancel=cancel)
+                      progress=progress, cancel=cancel)
     save_atlas_info(info, out / f"{name}_lookup.json")
-    info.refinement = generated.refinement
-    info.film_fit = generated.film_fit
-    info.crop = generated.crop
     return info
