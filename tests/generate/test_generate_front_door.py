@@ -13,7 +13,7 @@ from specgen_addon.common.errors import OutputExistsError, SpecGenError
 from specgen_addon.generate.pipeline import generate
 from specgen_addon.model import DEFAULT_WEIGHTS
 
-REPO = Path(__file__).resolve().parents[1]
+REPO = Path(__file__).resolve().parents[2]
 PHOTO = str(REPO / "examples" / "sphere.png")
 WL = np.linspace(420.0, 680.0, 3)
 
