@@ -51,6 +51,7 @@ class Generated:
     film_fit: object | None = None     # specgen_addon.generate.thin_film.ThinFilmFit (model="thin-film")
     crop: object | None = None         # specgen_addon.photo.sphere_image.SphereCrop: the circle used, saturation
     network_reproduction: object | None = None   # refine.report.Reproduction of the network alone (no refinement)
+    canonical_input: object | None = None   # generate.canonical_input.CanonicalInput (a non-canonical light)
 
     @property
     def warnings(self) -> list[str]:
@@ -90,7 +91,6 @@ def generate(image, lighting=None, refine: bool = True, weights=None, wavelength
     """
     from specgen_addon.common.errors import SpecGenError
     from specgen_addon.model.runtime.inference import generate_brdf
-    from specgen_addon.photo.sphere_image import SphereCrop
     from specgen_addon.photo.photo_lighting import InputLighting
 
     if model not in MODELS:
@@ -122,6 +122,7 @@ def generate(image, lighting=None, refine: bool = True, weights=None, wavelength
         table = fit.table(wl, progress=sub(0.8, 1.0), cancel=cancel)
         table.metadata = {**table.metadata, "input_image": src, "input_lighting": lighting.label}
         return Generated(table, film_fit=fit)
+    from specgen_addon.generate.canonical_input import network_crop
     from specgen_addon.generate.refine import CLIP_LEVEL
 
     clip_level = None if linear else CLIP_LEVEL
@@ -130,7 +131,8 @@ def generate(image, lighting=None, refine: bool = True, weights=None, wavelength
                       1.0 - NETWORK_SHARE if refine else 0.0])
     ends = ends / ends[-1]
     # the photo's crop, not cut again: how the photo was cut chooses the shipped network
-    network_input = SphereCrop(photo * lighting.network_gain(), crop.copied)
+    # under a given room light the network sees the photo refitted and re-rendered in the studio
+    network_input, canonical = network_crop(crop, photo, lighting, clip_level, cancel)
     table = generate_brdf(network_input, weights=weights, wavelengths_nm=wavelengths_nm,
                           backend=backend, progress=sub(0.0, ends[0]), cancel=cancel)
     fitted = None
@@ -142,13 +144,13 @@ def generate(image, lighting=None, refine: bool = True, weights=None, wavelength
         table = fitted.table
     table.metadata = {**table.metadata, "input_image": src, "input_lighting": lighting.label}
     if not refine:
-        return Generated(table, latent_fit=fitted, crop=crop,
+        return Generated(table, latent_fit=fitted, crop=crop, canonical_input=canonical,
                          network_reproduction=network_reproduction(table, photo, lighting, clip_level, crop.saturated))
     from specgen_addon.generate.refine import RefineOptions, refine_brdf
 
     options = RefineOptions(clip_level=clip_level, exclude=crop.saturated)
     result = refine_brdf(table, photo, lighting, options, progress=sub(ends[1], 1.0), cancel=cancel)
-    return Generated(result.table, result, latent_fit=fitted, crop=crop)
+    return Generated(result.table, result, latent_fit=fitted, crop=crop, canonical_input=canonical)
 
 
 def network_reproduction(table: BRDFTable, photo: np.ndarray, lighting, clip_level: float | None,
