@@ -196,9 +196,9 @@ class _Design:
     """Basis renders of the photo's pixels under one prepared scene, cached by roughness."""
 
     def __init__(self, scene, exposure: float, keep: np.ndarray, cancel: CancelFn | None,
-                 fixed_edge: float | None = None):
+                 max_edge: float | None = None):
         self.scene = scene
-        self.fixed_edge = fixed_edge  # the grazing weight held at this value (None: fitted)
+        self.max_edge = max_edge  # the grazing weight's upper bound (None: unbounded)
         self.exposure = float(exposure)
         self.keep = keep
         self.cancel = cancel
@@ -242,14 +242,12 @@ class _Design:
 
 def _solve(design: _Design, b: np.ndarray, alpha: float, coat_alpha: float | None) -> tuple[np.ndarray, float]:
     a = design.matrix(alpha, coat_alpha)
-    if design.fixed_edge is None:
-        theta = nnls(a, b)
-        r = a @ theta - b
-        return theta, float(r @ r)
-    free = [k for k in range(a.shape[1]) if k != 6]
-    rhs = b - design.fixed_edge * a[:, 6]
-    theta = np.insert(nnls(a[:, free], rhs), 6, design.fixed_edge)
-    r = a[:, free] @ theta[free] - rhs
+    theta = nnls(a, b)
+    if design.max_edge is not None and theta[6] > design.max_edge:
+        # the problem is convex, so with the bound violated the optimum lies on it: e = max_edge
+        free = [k for k in range(a.shape[1]) if k != 6]
+        theta = np.insert(nnls(a[:, free], b - design.max_edge * a[:, 6]), 6, design.max_edge)
+    r = a @ theta - b
     return theta, float(r @ r)
 
 
@@ -274,7 +272,7 @@ def _golden(f: Callable[[float], float], lo: float, hi: float, steps: int) -> fl
 def fit_photo(photo: np.ndarray, scene, exposure: float, *, alphas: tuple[float, ...] = ALPHA_GRID,
               coat_alphas: tuple[float, ...] = COAT_ALPHA_GRID, refine_steps: int = 6, rounds: int = 2,
               clip_level: float | None = None, exclude: np.ndarray | None = None,
-              fixed_edge: float | None = None, progress: ProgressFn | None = None,
+              max_edge: float | None = None, progress: ProgressFn | None = None,
               cancel: CancelFn | None = None) -> PhotoFit:
     """Fit :class:`AnalyticRGB` to a sphere ``photo`` rendered under a prepared renderer ``scene``.
 
@@ -298,10 +296,10 @@ def fit_photo(photo: np.ndarray, scene, exposure: float, *, alphas: tuple[float,
         The silhouette's grazing rim is always left out (:func:`observed_pixels`).
     exclude
         (H, W) bool: further pixels left out (e.g. those that saw a saturated source pixel).
-    fixed_edge
-        Hold the specular lobe's grazing weight ``e`` at this value (1: Schlick's Fresnel proper)
-        instead of fitting it. A photo rarely sees the grazing angles, and a free ``e`` can grow
-        without bound there, which matters wherever the fit is rendered under another light.
+    max_edge
+        Upper bound of the specular lobe's grazing weight ``e`` (1: at most Schlick's Fresnel).
+        A photo rarely sees the grazing angles, and an unbounded ``e`` can grow without limit
+        there, which matters wherever the fit is rendered under another light.
     """
     photo = np.asarray(photo, dtype=np.float64)
     h, w = scene.geometry.shape
@@ -323,7 +321,7 @@ def fit_photo(photo: np.ndarray, scene, exposure: float, *, alphas: tuple[float,
     energy = float(b @ b)
     if not energy > 0:
         raise SpecGenError("the photo is black on the sphere: there is nothing to fit")
-    design = _Design(scene, exposure, keep, cancel, fixed_edge)
+    design = _Design(scene, exposure, keep, cancel, max_edge)
     pairs = [(a, None) for a in alphas] + [(a, c) for a in alphas for c in coat_alphas if c < a]
     grid: dict[tuple[float, float | None], float] = {}
     for i, (a, c) in enumerate(pairs):

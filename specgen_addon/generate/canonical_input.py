@@ -70,7 +70,7 @@ def canonical_input(photo: np.ndarray, lighting, clip_level: float | None = None
     fit_photo_small = resample_square(photo, small).transpose(1, 2, 0)
     bad_small = resample_square(np.repeat(bad[..., None], 3, -1).astype(np.float32), small)[0] > 0
     fit = fit_photo(fit_photo_small, lighting.scene(small), lighting.image_exposure, coat_alphas=COAT_ALPHAS,
-                    fixed_edge=1.0, exclude=bad_small, cancel=cancel)
+                    max_edge=1.0, exclude=bad_small, cancel=cancel)
     image = render_input(fit.brdf, size)   # EXPOSURE × radiance, as every training input
     return CanonicalInput(SphereCrop(image, copied=True), fit, time.perf_counter() - t0)
 
