@@ -16,7 +16,10 @@ the network's table and the refined table are rendered under each held-out photo
 kind of light: file directions for ``file`` and ``canonical``, the held-out chrome ball for
 ``chrome``) and compared with the held-out photos: PSNR after one exposure factor shared by all
 eleven (least squares), and the chromaticity error (angle between mean RGB vectors, degrees). A
-Lambertian fitted to the same input photo under the same light is the floor.
+Lambertian fitted to the same input photo under the same light is the floor. Under a given light
+the network is shown the photo refitted and re-rendered in the canonical studio, as the product
+does (:mod:`specgen_addon.generate.canonical_input`); ``--network-input photo`` shows it the photo
+× ``network_gain`` instead (the way before 2026-12-07).
 
     .venv/bin/python bench/photos_leave_one_out.py --inputs 0 3 6 9 \\
         --json docs/photos_leave_one_out.json
