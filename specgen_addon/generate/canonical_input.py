@@ -3,8 +3,8 @@
 The shipped networks learnt from spheres rendered under the canonical studio
 (:func:`specgen_addon.photo.sphere_image.render_input`: Blender's ``studio`` map and a D65 key light
 from the upper left). A real photo is lit by its room: one lamp from another side, a black
-terminator, an exposure that makes the ball look 2–3 times brighter than anything it was shown
-(lab/notebook/real-photos-network.md). A per-channel gain (:meth:`InputLighting.network_gain`)
+terminator, and at the light's nominal power an albedo above 1, about twice as bright as a white
+ball in the studio (lab/notebook/real-photos-network.md). A per-channel gain (:meth:`InputLighting.network_gain`)
 corrects the colour of the light but not where it comes from.
 
 So when the photo's lighting is given and is not the studio, the photo is first explained by a
