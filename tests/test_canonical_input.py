@@ -47,6 +47,19 @@ def test_the_canonical_studio_never_goes_through_the_refit(monkeypatch):
         assert given.image.tobytes() == (photo * InputLighting().network_gain()).tobytes()
 
 
+def test_without_refit_a_photo_under_a_sun_goes_to_the_network_as_it_was(monkeypatch):
+    # the pipeline's refined runs (refit=False) show the network the photo × gain, untouched
+    def refuse(*args, **kwargs):
+        raise AssertionError("refit=False must not refit the photo")
+
+    monkeypatch.setattr(ci, "fit_photo", refuse)
+    lighting = parse_lighting(None, lights=(SUN,))
+    photo = np.random.default_rng(1).uniform(0, 1, (SIZE, SIZE, 3)).astype(np.float32)
+    given, made = ci.network_crop(SphereCrop(photo, False), photo, lighting, refit=False)
+    assert made is None and given.copied is False
+    assert given.image.tobytes() == (photo * lighting.network_gain()).tobytes()
+
+
 def test_a_photo_already_in_the_studio_is_not_re_rendered():
     with pytest.raises(ValueError, match="canonical studio"):
         ci.canonical_input(np.zeros((SIZE, SIZE, 3)), InputLighting())

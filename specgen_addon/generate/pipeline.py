@@ -131,8 +131,8 @@ def generate(image, lighting=None, refine: bool = True, weights=None, wavelength
                       1.0 - NETWORK_SHARE if refine else 0.0])
     ends = ends / ends[-1]
     # the photo's crop, not cut again: how the photo was cut chooses the shipped network
-    # under a given room light the network sees the photo refitted and re-rendered in the studio
-    network_input, canonical = network_crop(crop, photo, lighting, clip_level, cancel)
+    # under a given room light the network alone sees the photo refitted and re-rendered in the studio
+    network_input, canonical = network_crop(crop, photo, lighting, clip_level, cancel, refit=not refine)
     table = generate_brdf(network_input, weights=weights, wavelengths_nm=wavelengths_nm,
                           backend=backend, progress=sub(0.0, ends[0]), cancel=cancel)
     fitted = None
