@@ -16,7 +16,11 @@ the network's table and the refined table are rendered under each held-out photo
 kind of light: file directions for ``file`` and ``canonical``, the held-out chrome ball for
 ``chrome``) and compared with the held-out photos: PSNR after one exposure factor shared by all
 eleven (least squares), and the chromaticity error (angle between mean RGB vectors, degrees). A
-Lambertian fitted to the same input photo under the same light is the floor.
+Lambertian fitted to the same input photo under the same light is the floor. As the product does,
+under a given light the network alone is shown the photo refitted and re-rendered in the canonical
+studio (:mod:`specgen_addon.generate.canonical_input`), and the refinement starts from the table of
+the photo × ``network_gain``; ``--network-input photo`` shows the network alone that too (the way
+before 2026-12-07). The self-reproduction of the network is that of the network alone.
 
     .venv/bin/python bench/photos_leave_one_out.py --inputs 0 3 6 9 \\
         --json docs/photos_leave_one_out.json
@@ -60,8 +64,8 @@ def file_lighting(direction: np.ndarray):
 def chrome_lighting(i: int, photo: np.ndarray | None, power: float | None, tmp: Path):
     """The lighting of chrome photo ``i``; its highlight's power fitted to ``photo`` (the input) or
     set to ``power`` (a held-out photo: the input's power, so nothing is fitted to what is predicted)."""
-    from specgen_addon.photo.photo_lighting import Light, parse_lighting
     from specgen_addon.photo.light_probe import probe_lighting, read_probe
+    from specgen_addon.photo.photo_lighting import Light, parse_lighting
 
     probe = read_probe(DATA / "chrome" / f"chrome.{i}.tga", mask=DATA / "chrome" / "chrome.mask.tga",
                        encoding="linear")
@@ -107,11 +111,13 @@ def score(preds: list[np.ndarray], photos: list[np.ndarray], masks: list[np.ndar
     return {"psnr_db": round(psnr, 2), "chroma_deg": round(float(np.mean(angles)), 2), "exposure": round(k, 4)}
 
 
-def run(inputs: list[int], modes: list[str], tmp: Path) -> dict:
-    from specgen_addon.model.runtime.inference import generate_brdf
-    from specgen_addon.photo.sphere_image import EXPOSURE, SphereCrop
-    from specgen_addon.photo.photo_lighting import InputLighting
+def run(inputs: list[int], modes: list[str], tmp: Path, network_input: str = "canonical") -> dict:
+    from specgen_addon.generate.canonical_input import network_crop
+    from specgen_addon.generate.pipeline import network_reproduction
     from specgen_addon.generate.refine import CLIP_LEVEL, RefineOptions, refine_brdf, render_under
+    from specgen_addon.model.runtime.inference import generate_brdf
+    from specgen_addon.photo.photo_lighting import InputLighting
+    from specgen_addon.photo.sphere_image import EXPOSURE, SphereCrop
     from specgen_addon.render import sphere_geometry
 
     lights = load_lights(DATA / "lights.txt")
@@ -139,22 +145,30 @@ def run(inputs: list[int], modes: list[str], tmp: Path) -> dict:
                 held_light = {j: chrome_lighting(j, None, power, tmp) for j in held}
             else:
                 held_light = {j: file_lighting(lights[j]) for j in held}
-            net_input = SphereCrop(photo * lighting.network_gain(), crops[i].copied)
-            table = generate_brdf(net_input)
-            res = refine_brdf(table, photo, lighting, RefineOptions(clip_level=CLIP_LEVEL,
+            # as the product: the refinement starts from the photo's own table; the network alone
+            # (no refinement) is shown the photo re-rendered in the studio (generate.canonical_input)
+            start = generate_brdf(SphereCrop(photo * lighting.network_gain(), crops[i].copied))
+            t1 = time.perf_counter()
+            table, input_seconds = start, 0.0
+            if network_input == "canonical" and not lighting.is_canonical:
+                table = generate_brdf(network_crop(crops[i], photo, lighting, CLIP_LEVEL)[0])
+                input_seconds = time.perf_counter() - t1
+            res = refine_brdf(start, photo, lighting, RefineOptions(clip_level=CLIP_LEVEL,
                                                                      exclude=crops[i].saturated))
+            alone = network_reproduction(table, photo, lighting, CLIP_LEVEL, crops[i].saturated)
             white = white_render(lighting)
             ok = masks[i]
             albedo = (photo[ok] * white[ok]).sum(0) / np.maximum((white[ok] ** 2).sum(0), 1e-30)
             photos = [crops[j].image for j in held]
             hm = [masks[j] for j in held]
             out = {"input": i, "mode": mode, "lighting": lighting.label,
-                   "self_reproduction_network_db": round(res.before.psnr_db, 2),
+                   "self_reproduction_network_db": round(alone.psnr_db, 2),
                    "self_reproduction_refined_db": round(res.after.psnr_db, 2)}
             for name, tab in (("network", table), ("refined", res.table)):
                 preds = [render_under(tab, held_light[j].scene(SIZE), EXPOSURE) for j in held]
                 out[name] = score(preds, photos, hm)
             out["lambertian"] = score([white_render(held_light[j]) * albedo for j in held], photos, hm)
+            out["network_input_seconds"] = round(input_seconds, 2)   # fit + re-render + the network
             out["seconds"] = round(time.perf_counter() - t0, 1)
             print(json.dumps(out), flush=True)
             rows.append(out)
@@ -171,6 +185,9 @@ def main(argv=None) -> int:
     ap.add_argument("--inputs", type=int, nargs="+", default=list(range(12)))
     ap.add_argument("--modes", nargs="+", default=["file", "chrome", "estimated", "canonical"],
                     choices=["file", "chrome", "estimated", "canonical"])
+    ap.add_argument("--network-input", choices=["canonical", "photo"], default="canonical",
+                    help="under a given light, the network sees the photo re-rendered in the canonical "
+                         "studio (the product's way, default) or the photo × network_gain (before 2026-12-07)")
     ap.add_argument("--json", type=Path, default=None)
     ap.add_argument("--tmp", type=Path, default=Path("/tmp/specgen_photos_loo"))
     args = ap.parse_args(argv)
@@ -178,7 +195,7 @@ def main(argv=None) -> int:
         print(f"needs the shared photos at {DATA}", file=sys.stderr)
         return 2
     args.tmp.mkdir(parents=True, exist_ok=True)
-    res = run(args.inputs, args.modes, args.tmp)
+    res = run(args.inputs, args.modes, args.tmp, args.network_input)
     print(json.dumps(res["mean_psnr_db"], indent=1))
     if args.json:
         args.json.write_text(json.dumps(res, indent=1))

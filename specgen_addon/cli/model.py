@@ -256,6 +256,8 @@ def print_photo_report(generated, args: argparse.Namespace, source) -> None:
         if preview is not None and crop.circle is not None:
             write_circle_preview(preview, source, crop.circle, overwrite=getattr(args, "overwrite", False))
             print(f"{preview}: the photo with the circle used")
+    if getattr(generated, "canonical_input", None) is not None:
+        print(generated.canonical_input.describe())
     if generated.network_reproduction is not None:
         print(f"self-reproduction of the network alone under {generated.table.metadata.get('input_lighting', 'the input lighting')}: "
               f"{generated.network_reproduction.text()} (no refinement)")

@@ -37,6 +37,7 @@ from specgen_addon.brdf.table import N_PHI_D, BRDFTable
 from specgen_addon.common.atomic_io import make_dirs
 from specgen_addon.common.errors import SpecGenError, WeightsError
 from specgen_addon.common.interrupts import OutputGuard
+from specgen_addon.generate.canonical_input import network_crop
 from specgen_addon.generate.latent_fit import fit_latent
 from specgen_addon.generate.refine import CLIP_LEVEL, RefineOptions, refine_brdf, render_under
 from specgen_addon.generate.refine.blur import BLUR_CANDIDATES_PX
@@ -69,6 +70,7 @@ class Generated:
     crop: object | None = None         # specgen_addon.photo.sphere_image.SphereCrop: the circle used, saturation
     network_reproduction: object | None = None   # refine.report.Reproduction of the network alone (no refinement)
     lookup: AtlasInfo | None = None    # what Blender reads, baked into ``out_dir`` (generate(out_dir=…))
+    canonical_input: object | None = None   # generate.canonical_input.CanonicalInput (a non-canonical light)
 
     @property
     def warnings(self) -> list[str]:
@@ -194,7 +196,8 @@ def _generate(image, lighting=None, refine: bool = True, weights=None, wavelengt
                       1.0 - NETWORK_SHARE if refine else 0.0])
     ends = ends / ends[-1]
     # the photo's crop, not cut again: how the photo was cut chooses the shipped network
-    network_input = SphereCrop(photo * lighting.network_gain(), crop.copied)
+    # under a given room light the network alone sees the photo refitted and re-rendered in the studio
+    network_input, canonical = network_crop(crop, photo, lighting, clip_level, cancel, refit=not refine)
     table = generate_brdf(network_input, weights=weights, wavelengths_nm=wavelengths_nm,
                           backend=backend, progress=sub(0.0, ends[0]), cancel=cancel)
     fitted = None
@@ -204,12 +207,12 @@ def _generate(image, lighting=None, refine: bool = True, weights=None, wavelengt
         table = fitted.table
     table.metadata = {**table.metadata, "input_image": src, "input_lighting": lighting.label}
     if not refine:
-        return Generated(table, latent_fit=fitted, crop=crop,
+        return Generated(table, latent_fit=fitted, crop=crop, canonical_input=canonical,
                          network_reproduction=network_reproduction(table, photo, lighting, clip_level, crop.saturated))
 
     options = RefineOptions(clip_level=clip_level, exclude=crop.saturated)
     result = refine_brdf(table, photo, lighting, options, progress=sub(ends[1], 1.0), cancel=cancel)
-    return Generated(result.table, result, latent_fit=fitted, crop=crop)
+    return Generated(result.table, result, latent_fit=fitted, crop=crop, canonical_input=canonical)
 
 
 def network_reproduction(table: BRDFTable, photo: np.ndarray, lighting, clip_level: float | None,
