@@ -99,6 +99,7 @@ class AtlasInfo:
     closures: ClosureFit | None = None  # native closure fit for the full-scene render
     refinement: object | None = None   # specgen_addon.generate.refine.RefineResult of a generated table
     film_fit: object | None = None     # specgen_addon.generate.thin_film.ThinFilmFit (model "thin-film")
+    generated: object | None = None    # specgen_addon.generate.pipeline.Generated: the whole report
 
     @property
     def n_coeffs(self) -> int:
@@ -518,7 +519,7 @@ def generate_lookup(image, out_dir: str | os.PathLike, wavelengths_nm: np.ndarra
                     progress: Callable[[float], None] | None = None,
                     cancel: Callable[[], bool] | None = None, overwrite: bool = True,
                     lighting=None, refine: bool = True, save_table: bool = False,
-                    preview: bool = False, model: str = "network") -> AtlasInfo:
+                    preview: bool = False, model: str = "network", latent_fit: bool = False) -> AtlasInfo:
     """Image of a sphere → spectral BRDF table, refined against the photo under ``lighting``
     unless ``refine`` is False → coefficient atlas + JSON (``<name>_lookup.*``). ``model``
     ``"thin-film"`` fits the thin-film family to the photo instead of running the network
@@ -547,18 +548,20 @@ def generate_lookup(image, out_dir: str | os.PathLike, wavelengths_nm: np.ndarra
     with OutputGuard([out]):  # failed, cancelled or interrupted: nothing it made stays in out_dir
         make_dirs(out)
         return _generate_lookup(image, out, wavelengths_nm, weights, n_phi_d, tolerance, backend,
-                                name, progress, cancel, lighting, refine, save_table, preview, model)
+                                name, progress, cancel, lighting, refine, save_table, preview, model,
+                                latent_fit)
 
 
 def _generate_lookup(image, out: Path, wavelengths_nm, weights, n_phi_d, tolerance, backend, name,
-                     progress, cancel, lighting, refine, save_table, preview, model) -> AtlasInfo:
+                     progress, cancel, lighting, refine, save_table, preview, model,
+                     latent_fit=False) -> AtlasInfo:
     from specgen_addon.common.errors import WeightsError
     from specgen_addon.generate.pipeline import generate
 
     sub = (lambda lo, hi: (lambda f: progress(lo + (hi - lo) * f))) if progress else (lambda lo, hi: None)
     chosen = backend or choose_backend()
     kwargs = dict(lighting=lighting, refine=refine, weights=weights, wavelengths_nm=wavelengths_nm,
-                  progress=sub(0.0, 0.8), cancel=cancel, model=model)
+                  progress=sub(0.0, 0.8), cancel=cancel, model=model, latent_fit=latent_fit)
     try:
         generated = generate(image, backend=chosen, **kwargs)
     except WeightsError as exc:
@@ -585,4 +588,5 @@ def _generate_lookup(image, out: Path, wavelengths_nm, weights, n_phi_d, toleran
     save_atlas_info(info, out / f"{name}_lookup.json")
     info.refinement = generated.refinement
     info.film_fit = generated.film_fit
+    info.generated = generated
     return info

@@ -132,13 +132,17 @@ def remove_flare(env: np.ndarray, lights: list[tuple[np.ndarray, float]]) -> Non
 
 def read_probe(path: str | Path, circle: tuple[float, float, float] | None = None,
                mask: str | Path | None = None, encoding: str = "auto",
-               reflectance: float = CHROME_REFLECTANCE, width: int = PROBE_WIDTH) -> Probe:
-    """Unwrap a chrome-ball photo (its circle given, from a mask, or found) into a :class:`Probe`."""
+               reflectance: float = CHROME_REFLECTANCE, width: int = PROBE_WIDTH,
+               gains=None) -> Probe:
+    """Unwrap a chrome-ball photo (its circle given, from a mask, or found) into a :class:`Probe`;
+    ``gains`` (3,) are the white-balance gains of the photo it lights (the same camera)."""
     from specgen_addon.common.errors import ImageInputError
     from specgen_addon.photo.sphere_image import PhotoSource
 
+    wb = None if gains is None else tuple(float(g) for g in gains)
     try:
-        crop = PhotoSource(Path(path), encoding=encoding, circle=circle, mask=mask).crop(size=256)
+        crop = PhotoSource(Path(path), encoding=encoding, circle=circle, mask=mask,
+                           white_gains=wb).crop(size=256)
     except ImageInputError as exc:
         raise ProbeError(f"chrome ball not found: {exc} (give --probe-mask or --probe-circle)") from None
     env, sat = unwrap(crop.image.astype(np.float64), reflectance, width, crop.saturated)
