@@ -253,12 +253,22 @@ def check_photo_args(args: argparse.Namespace, image: Path) -> None:
 
     mode = _lighting_mode(args)
     lighting = input_lighting_from_args(args) if mode == "given" else None
-    if mode == "probe":
-        check_image_file(args.light_probe)
     preview = getattr(args, "circle_preview", None)
     if preview is not None and Path(preview).exists() and not getattr(args, "overwrite", False):
         raise OutputExistsError(f"{preview}: already exists (pass --overwrite to replace it)")
-    photo_source_from_args(args, image, _white_target(lighting)).crop()
+    crop = photo_source_from_args(args, image, _white_target(lighting)).crop()
+    if mode == "probe":   # found and unwrapped now (a fraction of a second), not after the scene opens
+        check_image_file(args.light_probe)
+        _read_probe(args, "auto" if not getattr(args, "linear", False) else "linear", crop.white_gains)
+
+
+def _read_probe(args: argparse.Namespace, encoding: str, gains):
+    from specgen_addon.photo.light_probe import CHROME_REFLECTANCE, read_probe
+    from specgen_addon.photo.sphere_image import parse_circle
+
+    return read_probe(args.light_probe, circle=parse_circle(args.probe_circle) if args.probe_circle else None,
+                      mask=args.probe_mask, encoding=encoding,
+                      reflectance=args.probe_reflectance or CHROME_REFLECTANCE, gains=gains)
 
 
 def _white_target(lighting):
@@ -299,15 +309,12 @@ def probe_lighting_from_args(args: argparse.Namespace, source, env_path: Path):
     """The lighting unwrapped from ``--light-probe`` (:mod:`specgen_addon.photo.light_probe`), its
     environment written to ``env_path``; the photo's white-balance gains applied to the probe too
     (same camera); the run's notes about it printed."""
-    from specgen_addon.photo.light_probe import CHROME_REFLECTANCE, probe_lighting, read_probe
-    from specgen_addon.photo.sphere_image import parse_circle
+    from specgen_addon.photo.light_probe import probe_lighting
 
     if env_path.exists() and not getattr(args, "overwrite", False):
         raise OutputExistsError(f"{env_path}: already exists (pass --overwrite to replace it)")
     crop = source.crop()
-    probe = read_probe(args.light_probe, circle=parse_circle(args.probe_circle) if args.probe_circle else None,
-                       mask=args.probe_mask, encoding=source.encoding,
-                       reflectance=args.probe_reflectance or CHROME_REFLECTANCE, gains=crop.white_gains)
+    probe = _read_probe(args, source.encoding, crop.white_gains)
     env_path.parent.mkdir(parents=True, exist_ok=True)
     lighting = probe_lighting(probe, env_path, crop.image.astype("float64"),
                               overwrite=getattr(args, "overwrite", False))
