@@ -133,3 +133,16 @@ def test_estimate_and_a_probe_refuse_lights_given_with_them(tmp_path):
         args = parser.parse_args(["--image", str(PHOTO), "--out", str(tmp_path), *argv])
         with pytest.raises(SpecGenError, match="leave out --light"):
             check_photo_args(args, PHOTO)
+
+
+def test_batch_takes_an_estimated_light_and_a_chrome_ball(tmp_path, capsys):
+    parser = batch.build_parser()
+    for argv in (["--input-env", "estimate"],
+                 ["--light-probe", str(PHOTO), "--probe-circle", "64,64,64", "--white-patch", "50,50,8,8"]):
+        args = parser.parse_args(["--image", str(PHOTO), "--out", str(tmp_path), *argv])
+        check_photo_args(args, PHOTO)
+        source, lighting = photo_inputs(args, PHOTO, tmp_path / "lookup" / "probe.exr")
+        assert source.path == PHOTO and not lighting.is_canonical
+    out = capsys.readouterr().out
+    assert "input lighting estimated from the ball" in out and "unwrapped from the chrome ball" in out
+    assert (tmp_path / "lookup" / "probe.exr").is_file()
