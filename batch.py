@@ -88,8 +88,10 @@ def build_parser() -> argparse.ArgumentParser:
     sc = ap.add_argument_group("whole scene (--scene)")
     sc.add_argument("--apply", nargs="+", metavar="IMG:OBJECT[:OPTS]",
                     help="before rendering, generate each photo's material and give it to that "
-                    "mesh object of the scene; OPTS: the photo's lighting, e.g. "
-                    "env=forest,rotation=30,exposure=2,key-light=on (default: the --input-* options)")
+                    "mesh object of the scene; OPTS: that photo's own photo options, any of the "
+                    "ones below without their '--' (env, rotation, exposure, key-light for the "
+                    "map), e.g. env=forest,rotation=30 or light=30,20,2,3200K,ambient=0.05,linear=on "
+                    "(default: the command's own)")
     sc.add_argument("--frames", metavar="LIST",
                     help="frames to render, e.g. 1-10 or 1,3,5-7 (default: the scene's current "
                     "frame); one <scene>_<camera>_f<frame>.exr each")
@@ -100,7 +102,7 @@ def build_parser() -> argparse.ArgumentParser:
                          "(e.g. 'Saved: ...') through to stdout")
     from importlib import import_module
 
-    import_module("specgen_addon.cli.model").add_refine_arguments(ap)
+    import_module("specgen_addon.cli.photo_args").add_photo_arguments(ap)
     return ap
 
 
@@ -139,20 +141,13 @@ def run(args) -> Path:
         raise errors.ImageInputError(f"{source}: {kind} not found")
     if args.mesh not in ("sphere", "suzanne") and not Path(args.mesh).is_file():
         raise errors.SpecGenError(f"{args.mesh}: mesh file not found (use sphere, suzanne or an .obj path)")
+    photo_args = import_module("specgen_addon.cli.photo_args")
     if args.image:
-        input_image = import_module("specgen_addon.photo.sphere_image")
         with warnings.catch_warnings():  # keep a bad image to the one error line
             warnings.simplefilter("ignore")
-            input_image.load_sphere_image(source)  # no sphere / unreadable -> ImageInputError, early
+            # no sphere / unreadable / bad light, patch or probe -> one sentence, early
+            photo_args.check_photo_args(args, source)
     env = lighting.load_environment(args.env)  # unknown name -> LightingAssetError with the list
-    cli_model = import_module("specgen_addon.cli.model")
-    for flag, given in (("--light-probe", getattr(args, "light_probe", None) is not None),
-                        ("--input-env estimate", args.input_env == "estimate"),
-                        ("--circle-preview", getattr(args, "circle_preview", None) is not None)):
-        if given:
-            raise errors.SpecGenError(f"{flag} is an option of `python -m specgen_addon infer`; batch.py "
-                                      "does not take it yet")
-    photo_lighting = cli_model.input_lighting_from_args(args)  # bad map/file/value -> LightingError
     out = Path(args.out)
     try:
         import_module("specgen_addon.common.atomic_io").make_dirs(out)  # removed if the run fails
@@ -181,18 +176,15 @@ def run(args) -> Path:
     PHASE[0] = "BRDF generation"
     before = _files_in(out / "lookup")
     if args.image:
-        info = pipeline.generate(str(source), out_dir=out / "lookup", wavelengths_nm=wavelengths,
-                                 weights=args.weights, backend=args.backend, name=source.stem,
-                                 progress=progress, lighting=photo_lighting, refine=args.refine,
-                                 save_table=args.keep_lookups, model=args.model).lookup
-        if info.film_fit is not None:
-            print(cli_model.film_fit_summary(info.film_fit, photo_lighting.label), flush=True)
-            for w in info.film_fit.warnings:
-                print(f"warning: {w}", file=sys.stderr)
-        if info.refinement is not None:
-            print(f"refinement under {photo_lighting.label}: {info.refinement.summary()}", flush=True)
-            for w in info.refinement.warnings:
-                print(f"warning: {w}", file=sys.stderr)
+        photo, photo_lighting = photo_args.photo_inputs(args, source,
+                                                        out / "lookup" / f"{source.stem}_probe.exr")
+        generated = pipeline.generate(photo, out_dir=out / "lookup", wavelengths_nm=wavelengths,
+                                      weights=args.weights, backend=args.backend, name=source.stem,
+                                      progress=progress, lighting=photo_lighting, refine=args.refine,
+                                      save_table=args.keep_lookups, model=args.model,
+                                      latent_fit=args.latent_fit)
+        info = generated.lookup
+        _report_generated(generated, args, photo, photo_lighting)
     else:
         table_mod = import_module("specgen_addon.brdf.table")
         table = table_mod.BRDFTable.load(source)
@@ -259,7 +251,7 @@ def run_scene(args) -> Path:
     frames = scene_args.parse_frames(args.frames) if args.frames else None
     applies = [scene_args.parse_apply(a) for a in args.apply or ()]
     wavelengths = spectra.wavelength_grid(args.wl_min, args.wl_max, args.bands)
-    lightings = _check_photos(applies, args) if applies else []
+    photos = _check_photos(applies, args) if applies else []
     if args.scene:
         blend = Path(args.scene).resolve()
         if blend.suffix.lower() != ".blend" or not blend.is_file():
@@ -289,9 +281,9 @@ def run_scene(args) -> Path:
 
     interrupts = core("common.interrupts")
     render = import_module(f"{pkg.__name__}.ops.render")
-    for spec, lighting, stem in zip(applies, lightings, stems):
+    for spec, ns, stem in zip(applies, photos, stems):
         PHASE[0] = f"BRDF generation for {spec.object_name!r}"
-        info = _generate(spec, lighting, stem, out / "lookup", wavelengths, args)
+        info = _generate(spec, ns, stem, out / "lookup", wavelengths, args)
         _assign(scene.objects[spec.object_name], render.make_material(f"SpecGen {stem}", info))
         print(f"material 'SpecGen {stem}' applied to {spec.object_name!r}", flush=True)
     if args.samples is not None:
@@ -350,23 +342,22 @@ def _report_outputs(files: list[Path], lookup: Path | None = None, before: set[P
 
 
 def _check_photos(applies, args) -> list:
-    """Each ``--apply`` photo: readable, holds a sphere, and its lighting options are valid."""
+    """Each ``--apply`` photo: readable, holds a sphere, and its own options (over the command's)
+    valid; returns each photo's options as a namespace."""
     from importlib import import_module
 
     preflight = import_module("specgen_addon.scale.preflight")
-    input_image = import_module("specgen_addon.photo.sphere_image")
-    parse_lighting = import_module("specgen_addon.photo.photo_lighting").parse_lighting
+    photo_args = import_module("specgen_addon.cli.photo_args")
     preflight.check_weights_file(args.weights)
-    defaults = {"env": args.input_env, "rotation_deg": args.input_rotation,
-                "exposure": args.input_exposure, "key_light": args.input_key_light}
-    lightings = []
+    photos = []
     for spec in applies:
         preflight.check_image_file(spec.image)
+        ns = spec.namespace(args)
         with warnings.catch_warnings():  # keep a bad image to the one error line
             warnings.simplefilter("ignore")
-            input_image.load_sphere_image(spec.image)  # no sphere / unreadable -> one sentence
-        lightings.append(parse_lighting(**spec.lighting_args(defaults)))
-    return lightings
+            photo_args.check_photo_args(ns, spec.image)  # no sphere / bad light ... -> one sentence
+        photos.append(ns)
+    return photos
 
 
 def _scene_targets(scene, frames: list[int], out: Path, overwrite: bool) -> list[tuple[int, Path]]:
@@ -416,27 +407,38 @@ def _lookup_stems(applies, lookup: Path, overwrite: bool) -> list[str]:
     return stems
 
 
-def _generate(spec, lighting, stem: str, lookup: Path, wavelengths, args):
-    """Generate and bake one ``--apply`` photo's BRDF (printing what refinement reached)."""
+def _generate(spec, ns, stem: str, lookup: Path, wavelengths, args):
+    """Generate and bake one ``--apply`` photo's BRDF with its options ``ns`` (printing the circle
+    used and what refinement reached)."""
     from importlib import import_module
 
     pipeline = import_module("specgen_addon.generate.pipeline")
-    cli_model = import_module("specgen_addon.cli.model")
+    photo_args = import_module("specgen_addon.cli.photo_args")
     t0 = time.perf_counter()
-    source = cli_model.photo_source_from_args(args, spec.image)   # --linear, --circle, --mask, --white-level
-    info = pipeline.generate(source, out_dir=lookup, wavelengths_nm=wavelengths, weights=args.weights,
-                             backend=args.backend, name=stem, lighting=lighting,
-                             refine=args.refine, model=args.model, overwrite=args.overwrite).lookup
-    if info.film_fit is not None:
-        print(cli_model.film_fit_summary(info.film_fit, lighting.label), flush=True)
-    if info.refinement is not None:
-        print(f"{spec.image.name} under {lighting.label}: {info.refinement.summary()}", flush=True)
-    for w in ([] if info.refinement is None else info.refinement.warnings) + \
-            ([] if info.film_fit is None else info.film_fit.warnings):
-        print(f"warning: {w}", file=sys.stderr)
+    print(f"{spec.image.name}:", flush=True)
+    photo, lighting = photo_args.photo_inputs(ns, spec.image, lookup / f"{stem}_probe.exr")
+    generated = pipeline.generate(photo, out_dir=lookup, wavelengths_nm=wavelengths, weights=args.weights,
+                                  backend=args.backend, name=stem, lighting=lighting,
+                                  refine=ns.refine, model=ns.model, overwrite=args.overwrite,
+                                  latent_fit=ns.latent_fit)
+    info = generated.lookup
+    _report_generated(generated, ns, photo, lighting)
     print(f"{spec.image.name}: BRDF generated and baked in {time.perf_counter() - t0:.1f} s",
           flush=True)
     return info
+
+
+def _report_generated(generated, ns, photo, lighting) -> None:
+    """What ``infer`` prints about a generated BRDF: the circle used (and its preview), the
+    network's or the refined table's self-reproduction, a thin-film fit, the warnings."""
+    from importlib import import_module
+
+    photo_args = import_module("specgen_addon.cli.photo_args")
+    cli_model = import_module("specgen_addon.cli.model")
+    photo_args.print_photo_report(generated, ns, photo)
+    if generated.film_fit is not None:
+        print(cli_model.film_fit_summary(generated.film_fit, lighting.label), flush=True)
+    photo_args.print_refinement(generated)
 
 
 def _assign(obj, material) -> None:

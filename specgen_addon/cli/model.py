@@ -7,6 +7,12 @@ import json
 import time
 from pathlib import Path
 
+from specgen_addon.cli.photo_args import (
+    add_photo_arguments,
+    photo_inputs,
+    print_photo_report,
+    print_refinement,
+)
 from specgen_addon.common.errors import OutputExistsError, SpecGenError
 from specgen_addon.common.progress import progress_bar
 from specgen_addon.brdf.formats.export import check_output, write_output
@@ -14,10 +20,6 @@ from specgen_addon.common.atomic_io import atomic_write
 from specgen_addon.common.cache import cache_root
 from specgen_addon.generate.pipeline import generate
 from specgen_addon.model import DEFAULT_WEIGHTS, RESAMPLED_WEIGHTS
-from specgen_addon.photo.light_estimate import estimated_lighting as estimate
-from specgen_addon.photo.light_probe import lighting_from_probe
-from specgen_addon.photo.photo_lighting import parse_light, parse_lighting
-from specgen_addon.photo.sphere_image import PhotoSource, parse_circle, write_circle_preview
 from specgen_addon.spectral.spectra import wavelength_grid
 
 
@@ -63,11 +65,7 @@ def add_parser(sub: argparse._SubParsersAction) -> argparse.ArgumentParser:
     p.add_argument("--range", type=float, nargs=2, default=(380.0, 780.0), metavar=("START", "END"),
                    help="wavelength range in nm (default 380 780)")
     p.add_argument("--rgb", action="store_true", help="also write OUTPUT_rgb.npz (RGB projection, D65)")
-    add_refine_arguments(p)
-    p.add_argument("--latent-fit", action="store_true",
-                   help="before refinement, fit the network's own latent to the photo and decode the "
-                        "table again (torch backend; about 25 s more on two cores; off by default: on "
-                        "held-out photos it did not beat refinement alone, docs/refinement.md)")
+    add_photo_arguments(p)
     p.add_argument("--overwrite", action="store_true", help="replace existing outputs")
     p.add_argument("--quiet", action="store_true", help="no progress bar")
     p.set_defaults(func=run_infer)
@@ -138,131 +136,6 @@ def add_parser(sub: argparse._SubParsersAction) -> argparse.ArgumentParser:
     return p
 
 
-def add_refine_arguments(p: argparse.ArgumentParser) -> None:
-    """``--model``, ``--refine/--no-refine`` and the input lighting options (shared with batch.py)."""
-    g = p.add_argument_group("photo consistency",
-                             "the lighting the photo was taken under, and the refinement that makes "
-                             "the BRDF reproduce the photo under it")
-    g.add_argument("--model", choices=("network", "thin-film"), default="network",
-                   help="what makes the BRDF: 'network' (SpecGen, then refinement; default) or "
-                        "'thin-film': fit the thin-film interference family (soap, oil, anodised "
-                        "metal) to the photo, for a colour that changes with angle")
-    g.add_argument("--refine", action=argparse.BooleanOptionalAction, default=True,
-                   help="refine the network's BRDF so it reproduces the photo (default: on)")
-    g.add_argument("--input-env", default="canonical", metavar="NAME|FILE",
-                   help="lighting of the photo: 'canonical' (studio map + key light, default), a "
-                        "bundled map name (forest, courtyard, ...), an .exr/.hdr file, or 'estimate': "
-                        "a few distant lights + ambient estimated from the ball's own shading")
-    g.add_argument("--input-rotation", type=float, default=0.0, metavar="DEG",
-                   help="rotation of the input map about the up axis, degrees (default 0)")
-    g.add_argument("--input-exposure", type=float, default=1.0,
-                   help="input map brightness relative to the canonical level (default 1)")
-    g.add_argument("--input-key-light", action=argparse.BooleanOptionalAction, default=None,
-                   help="add the canonical D65 key light to a map (default: only for canonical)")
-    g.add_argument("--input-env-calibrated", action="store_true",
-                   help="the --input-env panorama holds radiance as photographed: use its values as "
-                        "they are (no normalisation to unit mean; --input-exposure still multiplies)")
-    g.add_argument("--light", action="append", default=[], metavar="AZ,EL[,POWER[,COLOUR]]",
-                   help="a distant light (or the sun) of the room, by azimuth and elevation in degrees "
-                        "in the camera's frame (azimuth 0 faces the camera, +90 is to the right; "
-                        "elevation +90 is up), power (1: the canonical key light) and colour (a CIE "
-                        "illuminant such as D65 or A, or a temperature such as 3200K); repeatable. "
-                        "Without --input-env the lights (and --ambient) alone light the photo")
-    g.add_argument("--light-vector", action="append", default=[], metavar="X,Y,Z[,POWER[,COLOUR]]",
-                   help="a distant light by its direction in the camera's frame (x right, y up, z "
-                        "towards the camera), as --light; repeatable")
-    g.add_argument("--ambient", type=float, default=0.0, metavar="L",
-                   help="uniform ambient radiance of the room (1: the radiance of a white surface "
-                        "facing the canonical key light; default 0)")
-    g.add_argument("--light-probe", type=Path, default=None, metavar="CHROME",
-                   help="a photo of a chrome (mirror) ball from the same place under the same light, "
-                        "taken like the photo: unwrapped into the room's environment in the camera's frame "
-                        "(Debevec 1998; written beside the output as OUTPUT_probe.exr), its clipped "
-                        "light sources made distant lights with their power fitted to the photo")
-    g.add_argument("--probe-mask", type=Path, default=None, metavar="FILE",
-                   help="mask of the chrome ball in --light-probe (the ball white)")
-    g.add_argument("--probe-circle", default=None, metavar="X,Y,R",
-                   help="the chrome ball's centre and radius in --light-probe's pixels")
-    g.add_argument("--probe-reflectance", type=float, default=None, metavar="R",
-                   help="the chrome ball's reflectance (default 0.75)")
-    g.add_argument("--linear", action="store_true",
-                   help="the photo's 8/16-bit values are linear light (a linear export of a RAW, a "
-                        "scientific camera); default: sRGB-encoded. EXR/HDR are always linear and "
-                        "camera RAW files are developed linearly")
-    g.add_argument("--white-level", type=float, default=None, metavar="V",
-                   help="values at or above V count as saturated and are left out of every fit (for "
-                        "EXR/HDR; 8/16-bit files and RAW are checked at their own full scale)")
-    g.add_argument("--circle", default=None, metavar="X,Y,R",
-                   help="the sphere's centre and radius in the photo's pixels (x right, y down from the "
-                        "top-left corner) instead of finding it")
-    g.add_argument("--mask", type=Path, default=None, metavar="FILE",
-                   help="a mask image of the photo's size, the sphere white (or opaque): its circle is used")
-    g.add_argument("--circle-preview", type=Path, default=None, metavar="PNG",
-                   help="write the photo with the circle used drawn on it (8-bit sRGB PNG)")
-
-
-def input_lighting_from_args(args: argparse.Namespace):
-    """The validated :class:`InputLighting` of :func:`add_refine_arguments`' options."""
-    lights = tuple(parse_light(t) for t in getattr(args, "light", None) or []) + \
-        tuple(parse_light(t, vector=True) for t in getattr(args, "light_vector", None) or [])
-    return parse_lighting(args.input_env, args.input_rotation, args.input_exposure, args.input_key_light,
-                          lights=lights, ambient=float(getattr(args, "ambient", 0.0) or 0.0),
-                          calibrated=bool(getattr(args, "input_env_calibrated", False)))
-
-
-def photo_source_from_args(args: argparse.Namespace, image: Path):
-    """The :class:`~specgen_addon.photo.sphere_image.PhotoSource` of a photo and the photo options."""
-    circle = getattr(args, "circle", None)
-    return PhotoSource(Path(image), encoding="linear" if getattr(args, "linear", False) else "auto",
-                       white_level=getattr(args, "white_level", None),
-                       circle=parse_circle(circle) if circle else None, mask=getattr(args, "mask", None))
-
-
-def estimated_lighting(args: argparse.Namespace, source):
-    """``--input-env estimate``: distant lights + ambient estimated from the ball itself
-    (:mod:`specgen_addon.photo.light_estimate`); the run says so, with the model's residual."""
-    if args.light or args.light_vector or getattr(args, "light_probe", None) is not None:
-        raise SpecGenError("--input-env estimate finds the light itself: leave out --light, --light-vector "
-                           "and --light-probe")
-    lighting, text = estimate(source)
-    print(f"input lighting {text}")
-    return lighting
-
-
-def probe_lighting_from_args(args: argparse.Namespace, source, env_path: Path):
-    """The lighting unwrapped from ``--light-probe`` (:mod:`specgen_addon.photo.light_probe`), its
-    environment written to ``env_path``; the run's notes about it printed."""
-    if env_path.exists() and not args.overwrite:
-        raise OutputExistsError(f"{env_path}: already exists (pass --overwrite to replace it)")
-    if args.light or args.light_vector or args.input_env not in (None, "", "canonical"):
-        raise SpecGenError("--light-probe gives the room's light: leave out --light, --light-vector and --input-env")
-    lighting, notes = lighting_from_probe(args.light_probe, source, env_path,
-                                          circle=parse_circle(args.probe_circle) if args.probe_circle else None,
-                                          mask=args.probe_mask, reflectance=args.probe_reflectance,
-                                          overwrite=args.overwrite)
-    for note in notes:
-        print(f"light probe: {note}")
-    print(f"{env_path}: the room's environment unwrapped from the chrome ball (camera frame)")
-    return lighting
-
-
-def print_photo_report(generated, args: argparse.Namespace, source) -> None:
-    """The circle used (and the preview with it drawn), and the network's self-reproduction when
-    there was no refinement to report it."""
-    crop = generated.crop
-    if crop is not None:
-        print(crop.describe())
-        preview = getattr(args, "circle_preview", None)
-        if preview is not None and crop.circle is not None:
-            write_circle_preview(preview, source, crop.circle, overwrite=getattr(args, "overwrite", False))
-            print(f"{preview}: the photo with the circle used")
-    if getattr(generated, "canonical_input", None) is not None:
-        print(generated.canonical_input.describe())
-    if generated.network_reproduction is not None:
-        print(f"self-reproduction of the network alone under {generated.table.metadata.get('input_lighting', 'the input lighting')}: "
-              f"{generated.network_reproduction.text()} (no refinement)")
-
-
 def film_fit_summary(fit, lighting_label: str) -> str:
     """One line on a thin-film fit: the film found and its self-reproduction."""
     m = fit.material
@@ -270,19 +143,6 @@ def film_fit_summary(fit, lighting_label: str) -> str:
     blur = f"; {note}" if note else ""
     return (f"thin-film fit: {m.kind}, η_f {m.film_eta:g}, d {m.thickness_nm:g} nm, α {m.alpha:.4g}{blur}; "
             f"self-reproduction under {lighting_label}: {fit.reproduction.text()}")
-
-
-def print_refinement(generated) -> None:
-    """One line on what refinement reached, and its warnings (on stderr)."""
-    import sys
-
-    res = generated.refinement
-    if res is not None:
-        kept = "" if res.improved else " (network's table kept)"
-        print(f"refinement under {res.table.metadata.get('refine_lighting', 'the input lighting')}: "
-              f"{res.summary()}{kept}")
-    for w in generated.warnings:
-        print(f"warning: {w}", file=sys.stderr)
 
 
 def run_train(args: argparse.Namespace) -> int:
@@ -363,13 +223,7 @@ def run_infer(args: argparse.Namespace) -> int:
         if p.exists() and not args.overwrite:
             raise OutputExistsError(f"{p}: already exists (pass --overwrite to replace it)")
     wl = wavelength_grid(args.range[0], args.range[1], args.bands)
-    source = photo_source_from_args(args, args.image)
-    if args.input_env == "estimate":
-        lighting = estimated_lighting(args, source)
-    else:
-        lighting = input_lighting_from_args(args)
-    if getattr(args, "light_probe", None) is not None:
-        lighting = probe_lighting_from_args(args, source, out.with_name(out.stem + "_probe.exr"))
+    source, lighting = photo_inputs(args, args.image, out.with_name(out.stem + "_probe.exr"))
     t0 = time.perf_counter()
     with progress_bar("infer", enabled=not args.quiet) as update:
         generated = generate(source, lighting, refine=args.refine, weights=args.weights,

@@ -1,26 +1,24 @@
 """Command-line values of a whole-scene render: frame ranges and photo-to-object assignments.
 
 ``--frames 1-10`` or ``1,3,5-7`` (:func:`parse_frames`); ``--apply IMG:OBJECT`` with optional
-photo-lighting options per photo, ``IMG:OBJECT:env=forest,rotation=30,exposure=2,key-light=on``
-(:func:`parse_apply`). Both are checked completely before any work, and every error is one
+photo options per photo, any of ``infer``'s (``IMG:OBJECT:env=forest,rotation=30,key-light=on``,
+``IMG:OBJECT:light=30,20,2,3200K,ambient=0.05,linear=on``; :func:`parse_apply`). Both are checked completely before any work, and every error is one
 sentence. No bpy: the object checks against a scene are the caller's (:func:`check_objects`).
 """
 
 from __future__ import annotations
 
+import argparse
 import re
 from collections.abc import Iterable, Mapping
 from dataclasses import dataclass
 from pathlib import Path
 
+from specgen_addon.cli.photo_args import apply_namespace, parse_apply_options, split_apply
 from specgen_addon.common.errors import SpecGenError
 
 MAX_FRAMES = 100_000
 _RANGE = re.compile(r"^\s*(-?\d+)\s*(?:-\s*(-?\d+)\s*)?$")
-#: Per-photo options of ``--apply`` and the lighting argument each one sets.
-APPLY_OPTIONS = {"env": "env", "rotation": "rotation_deg", "exposure": "exposure",
-                 "key-light": "key_light"}
-_TRUE, _FALSE = {"on", "yes", "true", "1"}, {"off", "no", "false", "0"}
 
 
 def parse_frames(text: str) -> list[int]:
@@ -42,65 +40,30 @@ def parse_frames(text: str) -> list[int]:
 
 @dataclass(frozen=True)
 class ApplySpec:
-    """One ``--apply`` value: the photo, the object to give its material, and the photo's lighting
-    (``None`` entries: the command's own ``--input-*`` options)."""
+    """One ``--apply`` value: the photo, the object to give its material, and the photo's own
+    options (``(dest, value)`` pairs of :mod:`specgen_addon.cli.photo_args`; the command's own
+    values for the rest)."""
 
     image: Path
     object_name: str
-    env: str | None = None
-    rotation_deg: float | None = None
-    exposure: float | None = None
-    key_light: bool | None = None
+    options: tuple[tuple[str, object], ...] = ()
 
-    def lighting_args(self, defaults: Mapping[str, object]) -> dict:
-        """Keyword arguments of :func:`specgen_addon.photo.photo_lighting.parse_lighting`, this photo's
-        options over ``defaults`` (keys ``env``, ``rotation_deg``, ``exposure``, ``key_light``)."""
-        out = dict(defaults)
-        for key in ("env", "rotation_deg", "exposure", "key_light"):
-            value = getattr(self, key)
-            if value is not None:
-                out[key] = value
-        return out
-
-
-def _option(spec: str, key: str, value: str):
-    if key not in APPLY_OPTIONS:
-        raise SpecGenError(f"--apply {spec!r}: unknown option {key!r} (known: "
-                           f"{', '.join(APPLY_OPTIONS)})")
-    if key == "env":
-        if not value:
-            raise SpecGenError(f"--apply {spec!r}: env needs a map name or an HDRI file")
-        return value
-    if key == "key-light":
-        if value.lower() not in _TRUE | _FALSE:
-            raise SpecGenError(f"--apply {spec!r}: key-light must be on or off, not {value!r}")
-        return value.lower() in _TRUE
-    try:
-        return float(value)
-    except ValueError:
-        raise SpecGenError(f"--apply {spec!r}: {key} must be a number, not {value!r}") from None
+    def namespace(self, base: argparse.Namespace) -> argparse.Namespace:
+        """The command's values with this photo's options over them."""
+        return apply_namespace(base, self.options)
 
 
 def parse_apply(spec: str) -> ApplySpec:
-    """``IMG:OBJECT`` or ``IMG:OBJECT:key=value,...`` (split from the right, so a Windows drive
-    letter in IMG is fine; an object name may not contain ':')."""
-    head, opts = spec, {}
-    first, sep, last = spec.rpartition(":")
-    if sep and "=" in last:
-        head = first
-        for item in last.split(","):
-            key, eq, value = item.partition("=")
-            key = key.strip().lower()
-            if not eq:
-                raise SpecGenError(f"--apply {spec!r}: options are key=value pairs separated by commas")
-            if APPLY_OPTIONS.get(key) in opts:
-                raise SpecGenError(f"--apply {spec!r}: option {key!r} is given twice")
-            opts[APPLY_OPTIONS.get(key, key)] = _option(spec, key, value.strip())
+    """``IMG:OBJECT`` or ``IMG:OBJECT:key=value,...``, every photo option of ``infer`` a key
+    (``light=30,20,2,3200K``, ``linear=on``, ``light-probe=chrome.png`` ...; ``env``,
+    ``rotation``, ``exposure``, ``key-light`` for the map); an object name may not contain ':'."""
+    head, text = split_apply(spec)
+    options = parse_apply_options(spec, text) if text else ()
     image, sep, obj = head.rpartition(":")
     if not sep or not image or not obj.strip():
         raise SpecGenError(f"--apply {spec!r}: expected IMAGE:OBJECT (optionally "
-                           f":env=NAME,rotation=DEG,exposure=X,key-light=on)")
-    return ApplySpec(Path(image), obj.strip(), **opts)
+                           f":env=NAME,rotation=DEG,light=AZ,EL,... with any photo option of infer)")
+    return ApplySpec(Path(image), obj.strip(), options)
 
 
 def check_objects(specs: Iterable[ApplySpec], object_types: Mapping[str, str],

@@ -132,13 +132,17 @@ def remove_flare(env: np.ndarray, lights: list[tuple[np.ndarray, float]]) -> Non
 
 def read_probe(path: str | Path, circle: tuple[float, float, float] | None = None,
                mask: str | Path | None = None, encoding: str = "auto",
-               reflectance: float = CHROME_REFLECTANCE, width: int = PROBE_WIDTH) -> Probe:
-    """Unwrap a chrome-ball photo (its circle given, from a mask, or found) into a :class:`Probe`."""
+               reflectance: float = CHROME_REFLECTANCE, width: int = PROBE_WIDTH,
+               gains=None) -> Probe:
+    """Unwrap a chrome-ball photo (its circle given, from a mask, or found) into a :class:`Probe`;
+    ``gains`` (3,) are the white-balance gains of the photo it lights (the same camera)."""
     from specgen_addon.common.errors import ImageInputError
     from specgen_addon.photo.sphere_image import PhotoSource
 
+    wb = None if gains is None else tuple(float(g) for g in gains)
     try:
-        crop = PhotoSource(Path(path), encoding=encoding, circle=circle, mask=mask).crop(size=256)
+        crop = PhotoSource(Path(path), encoding=encoding, circle=circle, mask=mask,
+                           white_gains=wb).crop(size=256)
     except ImageInputError as exc:
         raise ProbeError(f"chrome ball not found: {exc} (give its mask or circle)") from None
     env, sat = unwrap(crop.image.astype(np.float64), reflectance, width, crop.saturated)
@@ -228,8 +232,10 @@ def lighting_from_probe(probe_path: str | Path, source, env_path: str | Path,
     ``env_path`` and its clipped sources' powers fitted to the source's ball
     (:func:`probe_lighting`). Returns ``(lighting, notes)`` (the CLI's ``--light-probe`` and the
     panel's Chrome Ball)."""
+    crop = source.crop()
+    # the same camera: the photo's white-balance gains apply to the chrome ball too
     probe = read_probe(probe_path, circle=circle, mask=mask, encoding=source.encoding,
-                       reflectance=reflectance or CHROME_REFLECTANCE)
-    photo = source.crop().image.astype(np.float64)
+                       reflectance=reflectance or CHROME_REFLECTANCE, gains=crop.white_gains)
+    photo = crop.image.astype(np.float64)
     lighting = probe_lighting(probe, env_path, photo, overwrite=overwrite)
     return lighting, list(probe.notes)

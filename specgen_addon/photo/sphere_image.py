@@ -238,6 +238,7 @@ class SphereCrop:
     circle_source: str = ""
     saturated: np.ndarray | None = None   # (size, size) bool
     encoding: str = ""
+    white_gains: np.ndarray | None = None  # (3,) per-channel white-balance gains applied (None: as shot)
 
     def describe(self) -> str:
         """One line for a run's report: the circle, how it was found, and the saturated share."""
@@ -248,25 +249,34 @@ class SphereCrop:
         if self.saturated is not None and self.saturated.any():
             sat = f"; {100 * self.saturated.mean() / (np.pi / 4):.1f} % of the sphere saturated (left out of the fit)"
         enc = f"; decoded {self.encoding}" if self.encoding else ""
-        return f"sphere: centre ({cx:.2f}, {cy:.2f}) px, radius {r:.2f} px ({self.circle_source}){enc}{sat}"
+        wb = ""
+        if self.white_gains is not None:
+            wb = "; white balance from the patch: gains R {:.3f} G {:.3f} B {:.3f}".format(*self.white_gains)
+        return f"sphere: centre ({cx:.2f}, {cy:.2f}) px, radius {r:.2f} px ({self.circle_source}){enc}{wb}{sat}"
 
 
 @dataclass(frozen=True)
 class PhotoSource:
     """A photo file and the user's choices about it: how its codes are encoded
     (:data:`specgen_addon.photo.read.ENCODINGS`), a white level above which values count as
-    saturated, and where the sphere is: a circle (cx, cy, r in pixels, x right, y down, from the
-    top-left corner) or a mask file (the sphere white), else found in the photo."""
+    saturated, where the sphere is: a circle (cx, cy, r in pixels, x right, y down, from the
+    top-left corner) or a mask file (the sphere white), else found in the photo; and its white
+    balance: as shot, a neutral patch (x, y, w, h in pixels) balanced to ``white_target`` (linear
+    RGB, default neutral; :mod:`specgen_addon.photo.white_balance`), or gains given."""
 
     path: Path
     encoding: str = "auto"
     white_level: float | None = None
     circle: tuple[float, float, float] | None = None
     mask: Path | None = None
+    white_patch: tuple[float, float, float, float] | None = None
+    white_target: tuple[float, float, float] | None = None
+    white_gains: tuple[float, float, float] | None = None
 
     def crop(self, size: int = CANONICAL_SIZE) -> SphereCrop:
         return load_sphere_crop(self.path, size, encoding=self.encoding, white_level=self.white_level,
-                                circle=self.circle, mask=self.mask)
+                                circle=self.circle, mask=self.mask, white_patch=self.white_patch,
+                                white_target=self.white_target, white_gains=self.white_gains)
 
     @property
     def linear(self) -> bool:
@@ -322,29 +332,46 @@ def load_sphere_image(path: str | Path, size: int = CANONICAL_SIZE) -> np.ndarra
 
 def load_sphere_crop(path: str | Path, size: int = CANONICAL_SIZE, encoding: str = "auto",
                      white_level: float | None = None, circle: tuple[float, float, float] | None = None,
-                     mask: str | Path | None = None) -> SphereCrop:
-    """:func:`load_sphere_image`, with whether the sphere was copied or resampled, the circle used
-    and the saturated pixels (:class:`PhotoSource` names the choices)."""
+                     mask: str | Path | None = None,
+                     white_patch: tuple[float, float, float, float] | None = None,
+                     white_target: tuple[float, float, float] | None = None,
+                     white_gains: tuple[float, float, float] | None = None) -> SphereCrop:
+    """:func:`load_sphere_image`, with whether the sphere was copied or resampled, the circle used,
+    the saturated pixels and the white balance (:class:`PhotoSource` names the choices)."""
     from specgen_addon.photo.read import read_photo, warn_notes
+    from specgen_addon.photo.white_balance import patch_gains
 
     path = Path(path)
     photo = read_photo(path, encoding=encoding, white_level=white_level)
     warn_notes(photo, path)
     arr = photo.rgb
+    gains = None
     try:
-        if circle is not None or mask is not None:
-            scale = photo.scale   # a photo downsampled on reading: the user's circle is in the file's pixels
-            if mask is not None:
-                cov = read_mask(mask, arr.shape[:2])
-                c = mask_circle(cov)
-                return _crop_at(arr, c, size, f"from the mask {Path(mask).name}", photo)
-            cx, cy, r = (v * scale for v in circle)
-            return _crop_at(arr, (cx, cy, r), size, "given", photo)
-        crop = crop_sphere(arr, size)
-        return replace(crop, saturated=_saturated_in_crop(photo.saturated, crop.circle, size),
-                       encoding=photo.encoding)
+        if white_patch is not None:
+            gains = patch_gains(arr, photo.saturated, white_patch, white_target, photo.scale)
+        if white_gains is not None:
+            gains = np.asarray(white_gains, np.float64) * (1.0 if gains is None else gains)
+        if gains is not None:
+            arr = arr.copy()
+            arr[..., :3] *= gains.astype(arr.dtype)
+        return replace(_crop_photo(arr, photo, size, circle, mask), white_gains=gains)
     except ImageInputError as exc:
         raise ImageInputError(f"{path}: {exc}") from None
+
+
+def _crop_photo(arr: np.ndarray, photo, size: int, circle, mask) -> SphereCrop:
+    """The crop of a read photo's pixels ``arr``: about the circle given, the mask's, or the one found."""
+    if circle is not None or mask is not None:
+        scale = photo.scale   # a photo downsampled on reading: the user's circle is in the file's pixels
+        if mask is not None:
+            cov = read_mask(mask, arr.shape[:2])
+            c = mask_circle(cov)
+            return _crop_at(arr, c, size, f"from the mask {Path(mask).name}", photo)
+        cx, cy, r = (v * scale for v in circle)
+        return _crop_at(arr, (cx, cy, r), size, "given", photo)
+    crop = crop_sphere(arr, size)
+    return replace(crop, saturated=_saturated_in_crop(photo.saturated, crop.circle, size),
+                   encoding=photo.encoding)
 
 
 def write_circle_preview(path: str | Path, source: PhotoSource, circle: tuple[float, float, float],

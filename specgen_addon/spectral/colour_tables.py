@@ -94,6 +94,9 @@ def illuminant(name: str) -> tuple[np.ndarray, np.ndarray]:
     kelvin = blackbody_temperature(name)
     if kelvin is not None:
         return blackbody(kelvin)
+    rgb = rgb_colour(name)
+    if rgb is not None:
+        return rgb_illuminant(rgb)
     t = tables()
     names = [str(n) for n in t["illuminant_names"]]
     if name not in names:
@@ -116,6 +119,33 @@ def blackbody_temperature(name: str) -> float | None:
     if not 1000.0 <= kelvin <= 40000.0:
         raise SpecGenError(f"colour temperature {text} lies outside 1000–40000 K")
     return kelvin
+
+
+def rgb_colour(name: str) -> tuple[float, float, float] | None:
+    """The linear-sRGB colour a name like ``"1/0.8/0.6"`` gives, None for any other name; negative,
+    non-finite or all-zero values are refused."""
+    parts = str(name).strip().split("/")
+    if len(parts) != 3:
+        return None
+    try:
+        rgb = tuple(float(p) for p in parts)
+    except ValueError:
+        return None
+    if not all(np.isfinite(rgb)) or min(rgb) < 0 or max(rgb) <= 0:
+        raise SpecGenError(f"an RGB colour needs three non-negative numbers, not all zero, got {name!r}")
+    return rgb  # type: ignore[return-value]
+
+
+def rgb_illuminant(rgb: tuple[float, float, float]) -> tuple[np.ndarray, np.ndarray]:
+    """(wavelengths nm, relative SPD) of a light of linear-sRGB colour ``rgb``: D65 filtered by
+    Mallett & Yuksel's (2019) reflectance of ``rgb / max(rgb)``, so that the light, seen by a
+    camera balanced to D65, has the colour ``rgb`` (the basis spans the sRGB gamut exactly);
+    380–780 nm, the basis' support."""
+    t = tables()
+    wl = t["mallett2019_wavelengths_nm"]
+    d65_wl, d65 = illuminant("D65")
+    c = np.asarray(rgb, np.float64) / max(rgb)
+    return wl.copy(), np.interp(wl, d65_wl, d65) * (mallett2019_basis(wl) @ c)
 
 
 def blackbody(kelvin: float) -> tuple[np.ndarray, np.ndarray]:

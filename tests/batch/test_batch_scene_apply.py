@@ -8,6 +8,7 @@ import subprocess
 import sys
 from pathlib import Path
 
+import numpy as np
 import pytest
 
 bpy = pytest.importorskip("bpy")
@@ -51,6 +52,26 @@ def test_bad_apply_and_frames_fail_in_one_sentence_before_any_work(blend, tmp_pa
     assert not any(out.rglob("*.exr")) and not (out / "lookup").exists()
 
 
+def test_a_bad_light_of_an_apply_photo_fails_in_one_sentence_before_any_work(blend, tmp_path, capsys):
+    """A light without a direction, a chrome ball not found, a panorama of the wrong aspect."""
+    from PIL import Image
+
+    from specgen_addon.common.image_io import write_exr
+
+    black = tmp_path / "chrome.png"
+    Image.fromarray(np.zeros((64, 64, 3), np.uint8)).save(black)
+    pano = write_exr(tmp_path / "room.exr", {c: np.ones((20, 30), np.float32) for c in "RGB"})
+    out = tmp_path / "out"
+    for opts, message in (("light=2", "a light needs a direction"),
+                          (f"light-probe={black}", "chrome ball not found"),
+                          (f"env={pano}", "twice as wide as it is high")):
+        code = batch.main(["--scene", str(blend), "--out", str(out), "--bands", "4",
+                           "--apply", f"{PHOTO}:Red:{opts}"])
+        err = capsys.readouterr().err.strip()
+        assert code == 2 and err.count("\n") == 0 and message in err, err
+        assert not any(out.rglob("*.exr"))
+
+
 def test_scene_only_options_need_a_scene(tmp_path, capsys):
     code = batch.main(["--image", str(PHOTO), "--out", str(tmp_path), "--frames", "1-2"])
     err = capsys.readouterr().err.strip()
@@ -78,6 +99,21 @@ def test_batch_applies_a_photo_to_an_object_and_renders_each_frame(blend, tmp_pa
     # the same run again: the outputs exist, refused up front unless --overwrite
     again = subprocess.run(cmd, capture_output=True, text=True, timeout=600)
     assert again.returncode == 2 and "already exists" in again.stderr
+
+
+@pytest.mark.slow
+def test_an_apply_photo_takes_infers_photo_options(blend, tmp_path):
+    """The room's lights with colours and ambient, the circle given, its preview: as infer does."""
+    out = tmp_path / "out"
+    preview = tmp_path / "circle.png"
+    cmd = [sys.executable, str(REPO / "batch.py"), "--scene", str(blend), "--out", str(out),
+           "--apply", (f"{PHOTO}:Red:light=30,20,1.5,3200K,light=-40,10,0.3,0.8/0.9/1,ambient=0.05,"
+                       f"circle=64,64,64,circle-preview={preview},refine=off"), "--bands", "4", "--preview"]
+    done = subprocess.run(cmd, capture_output=True, text=True, timeout=900, check=False)
+    assert done.returncode == 0, done.stderr[-2000:]
+    assert "sphere: centre (64.00, 64.00) px, radius 64.00 px (given)" in done.stdout
+    assert "light az 30° el 20° ×1.5 3200K + light az -40° el 10° ×0.3 0.8/0.9/1 + ambient 0.05" in done.stdout
+    assert "self-reproduction of the network alone" in done.stdout and preview.is_file()
 
 
 def test_preview_renders_a_quarter_size_frame_and_leaves_the_file_settings(blend, tmp_path):

@@ -3,6 +3,7 @@ model: all checked without Blender."""
 
 from __future__ import annotations
 
+import argparse
 from pathlib import Path
 
 import pytest
@@ -31,11 +32,12 @@ def test_apply_spec_takes_a_photo_an_object_and_per_photo_lighting():
     assert parse_apply("a/photo.png:Cube") == ApplySpec(Path("a/photo.png"), "Cube")
     spec = parse_apply("C:/pics/ball.jpg:Suzanne:env=forest, rotation=30,exposure=2,key-light=on")
     assert spec.image == Path("C:/pics/ball.jpg") and spec.object_name == "Suzanne"
-    assert (spec.env, spec.rotation_deg, spec.exposure, spec.key_light) == ("forest", 30.0, 2.0, True)
-    defaults = {"env": "canonical", "rotation_deg": 0.0, "exposure": 1.0, "key_light": None}
-    assert spec.lighting_args(defaults) == {"env": "forest", "rotation_deg": 30.0, "exposure": 2.0,
-                                            "key_light": True}
-    assert parse_apply("p.png:Cube:rotation=90").lighting_args(defaults)["env"] == "canonical"
+    base = argparse.Namespace(input_env="canonical", input_rotation=0.0, input_exposure=1.0,
+                              input_key_light=None)
+    ns = spec.namespace(base)
+    assert (ns.input_env, ns.input_rotation, ns.input_exposure, ns.input_key_light) == ("forest", 30.0, 2.0, True)
+    assert parse_apply("p.png:Cube:rotation=90").namespace(base).input_env == "canonical"
+    assert base.input_env == "canonical" and base.input_rotation == 0.0   # the command's own untouched
 
 
 @pytest.mark.parametrize("spec,message", [
@@ -43,8 +45,9 @@ def test_apply_spec_takes_a_photo_an_object_and_per_photo_lighting():
     ("p.png:", "expected IMAGE:OBJECT"), ("p.png:Cube:colour=red", "unknown option 'colour'"),
     ("p.png:Cube:rotation=left", "rotation must be a number"),
     ("p.png:Cube:key-light=maybe", "key-light must be on or off"),
-    ("p.png:Cube:env=", "env needs"), ("p.png:Cube:env=a,env=b", "given twice"),
-    ("p.png:Cube:env=a,rotation", "key=value pairs")])
+    ("p.png:Cube:env=", "env needs a value"), ("p.png:Cube:env=a,env=b", "given twice"),
+    ("p.png:Cube:env=a,rotation", "key=value pairs"),
+    ("p.png:Cube:model=soap", "model must be one of network, thin-film")])
 def test_bad_apply_specs_are_one_sentence(spec, message):
     with pytest.raises(SpecGenError, match=message):
         parse_apply(spec)

@@ -15,7 +15,7 @@ bpy = pytest.importorskip("bpy")
 
 from addon_modules import PKG, addon_module
 
-from specgen_addon.cli.model import add_refine_arguments, input_lighting_from_args, photo_source_from_args
+from specgen_addon.cli.photo_args import add_photo_arguments, input_lighting_from_args, photo_source_from_args
 
 EXAMPLE = Path(__file__).resolve().parents[2] / "examples" / "sphere.png"
 photo_inputs = addon_module("ops.photo_inputs")
@@ -24,7 +24,7 @@ pytestmark = pytest.mark.blender
 
 def _cli(*argv: str) -> argparse.Namespace:
     parser = argparse.ArgumentParser()
-    add_refine_arguments(parser)
+    add_photo_arguments(parser)
     return parser.parse_args(list(argv))
 
 
@@ -287,7 +287,7 @@ def _ball_exr(path: Path, rgb_of_normal) -> Path:
 
 
 def test_estimate_and_chrome_ball_give_the_clis_lighting(panel, tmp_path):
-    from specgen_addon.cli.model import estimated_lighting, probe_lighting_from_args
+    from specgen_addon.cli.photo_args import estimated_lighting, probe_lighting_from_args
 
     scene, _s, photo = panel
     light = np.array([0.4, 0.5, 0.77]) / np.linalg.norm([0.4, 0.5, 0.77])
@@ -297,7 +297,7 @@ def test_estimate_and_chrome_ball_give_the_clis_lighting(panel, tmp_path):
 
     photo.lighting = "ESTIMATE"
     ours, notes = _lighting(scene, photo, tmp_path, source)
-    assert ours == estimated_lighting(_cli("--input-env", "estimate"), source)
+    assert ours == estimated_lighting(source)
     assert notes[0].startswith("lighting estimated from the ball")
 
     photo.lighting, photo.probe_path = "PROBE", str(chrome)

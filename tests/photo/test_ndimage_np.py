@@ -27,3 +27,26 @@ def test_gaussian_filter_equals_scipy_on_matrix_and_tap_axes(shape, sigma, mode)
 
 def test_gaussian_filter_uses_both_strategies_in_these_tests():
     assert 128 <= ndimage_np.MATRIX_AXIS_MAX < 300
+
+
+def _spiral(n: int = 120) -> np.ndarray:
+    """A one-pixel wall wound into a spiral: one component a label must travel far along."""
+    m = np.zeros((n, n), bool)
+    for k in range(0, n // 2 - 2, 4):
+        m[k, k:n - k] = True
+        m[k:n - k, n - k - 1] = True
+        m[n - k - 1, k + 2:n - k] = True
+        m[k + 2:n - k, k + 2] = True
+    return m
+
+
+@pytest.mark.parametrize("seed", range(6))
+def test_label_equals_scipy_on_noise_and_a_spiral(seed):
+    rng = np.random.default_rng(seed)
+    masks = [rng.random(tuple(rng.integers(1, 60, 2))) < rng.random() for _ in range(20)]
+    masks += [_spiral(), ~_spiral(), np.zeros((5, 7), bool), np.ones((3, 4), bool)]
+    for m in masks:
+        ours, n = ndimage_np.label(m)
+        want, count = scipy_ndimage.label(m)
+        assert n == count and np.array_equal(ours, want)
+        np.testing.assert_array_equal(ndimage_np.binary_fill_holes(m), scipy_ndimage.binary_fill_holes(m))
