@@ -17,7 +17,7 @@ from specgen_addon.cli.photo_args import apply_keys, check_photo_args, photo_des
 from specgen_addon.cli.scene_args import parse_apply
 from specgen_addon.common.errors import SpecGenError
 
-REPO = Path(__file__).resolve().parents[1]
+REPO = Path(__file__).resolve().parents[2]
 PHOTO = REPO / "examples" / "sphere.png"
 #: infer's options that are about its output file, not the photo.
 INFER_ONLY = {"image", "output", "full_table", "range", "rgb", "quiet", "bands", "func", "command"}
