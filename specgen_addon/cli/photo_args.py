@@ -19,8 +19,11 @@ from pathlib import Path
 
 from specgen_addon.common.errors import OutputExistsError, SpecGenError
 from specgen_addon.photo.light_estimate import estimated_lighting as estimate
-from specgen_addon.photo.light_probe import lighting_from_probe
-from specgen_addon.photo.sphere_image import parse_circle
+from specgen_addon.photo.light_probe import CHROME_REFLECTANCE, lighting_from_probe, read_probe
+from specgen_addon.photo.photo_lighting import parse_light, parse_lighting
+from specgen_addon.photo.sphere_image import PhotoSource, parse_circle, write_circle_preview
+from specgen_addon.photo.white_balance import parse_patch
+from specgen_addon.scale.preflight import check_image_file
 
 #: ``--apply`` keys kept from before every photo option was a key: short names of the map options.
 APPLY_ALIASES = {"env": "--input-env", "rotation": "--input-rotation", "exposure": "--input-exposure",
@@ -208,8 +211,6 @@ def apply_namespace(base: argparse.Namespace, options) -> argparse.Namespace:
 
 def input_lighting_from_args(args: argparse.Namespace):
     """The validated :class:`InputLighting` of the lighting options (lights, map, ambient)."""
-    from specgen_addon.photo.photo_lighting import parse_light, parse_lighting
-
     lights = tuple(parse_light(t) for t in getattr(args, "light", None) or []) + \
         tuple(parse_light(t, vector=True) for t in getattr(args, "light_vector", None) or [])
     return parse_lighting(args.input_env, args.input_rotation, args.input_exposure, args.input_key_light,
@@ -220,9 +221,6 @@ def input_lighting_from_args(args: argparse.Namespace):
 def photo_source_from_args(args: argparse.Namespace, image: Path, white_target=None):
     """The :class:`~specgen_addon.photo.sphere_image.PhotoSource` of a photo and the photo options;
     ``white_target`` (linear RGB) is the colour ``--white-patch`` is balanced to (default neutral)."""
-    from specgen_addon.photo.sphere_image import PhotoSource, parse_circle
-    from specgen_addon.photo.white_balance import parse_patch
-
     circle = getattr(args, "circle", None)
     patch = getattr(args, "white_patch", None)
     return PhotoSource(Path(image), encoding="linear" if getattr(args, "linear", False) else "auto",
@@ -252,8 +250,6 @@ def check_photo_args(args: argparse.Namespace, image: Path) -> None:
     """Everything about one photo's options that needs no network: the photo read and its ball
     found (with ``--circle``/``--mask``/``--linear``), the white patch in the photo, the light's
     values, the probe file there, the preview not in the way."""
-    from specgen_addon.scale.preflight import check_image_file
-
     mode = _lighting_mode(args)
     lighting = input_lighting_from_args(args) if mode == "given" else None
     preview = getattr(args, "circle_preview", None)
@@ -266,9 +262,6 @@ def check_photo_args(args: argparse.Namespace, image: Path) -> None:
 
 
 def _read_probe(args: argparse.Namespace, encoding: str, gains):
-    from specgen_addon.photo.light_probe import CHROME_REFLECTANCE, read_probe
-    from specgen_addon.photo.sphere_image import parse_circle
-
     return read_probe(args.light_probe, circle=parse_circle(args.probe_circle) if args.probe_circle else None,
                       mask=args.probe_mask, encoding=encoding,
                       reflectance=args.probe_reflectance or CHROME_REFLECTANCE, gains=gains)
@@ -331,8 +324,6 @@ def print_photo_report(generated, args: argparse.Namespace, source) -> None:
         print(crop.describe())
         preview = getattr(args, "circle_preview", None)
         if preview is not None and crop.circle is not None:
-            from specgen_addon.photo.sphere_image import write_circle_preview
-
             write_circle_preview(preview, source, crop.circle, overwrite=getattr(args, "overwrite", False))
             print(f"{preview}: the photo with the circle used")
     if getattr(generated, "canonical_input", None) is not None:

@@ -22,6 +22,10 @@ from dataclasses import dataclass
 
 import numpy as np
 
+from specgen_addon.photo.light_probe import _nnls, ball_normals
+from specgen_addon.photo.photo_lighting import Light, LightingError, parse_lighting
+from specgen_addon.photo.sphere_image import EXPOSURE
+
 #: Spacing (degrees) of the direction grid.
 GRID_DEG = 6.0
 #: Albedo assumed to turn fitted brightness into light power.
@@ -45,14 +49,10 @@ class Estimate:
     residual_db: float   # PSNR (dB) of the Lambertian model against the photo's luminance
 
     def lighting(self):
-        from specgen_addon.photo.photo_lighting import Light, parse_lighting
-
         return parse_lighting(None, lights=tuple(Light(d, p) for d, p in zip(self.directions, self.powers)),
                               ambient=self.ambient)
 
     def text(self) -> str:
-        from specgen_addon.photo.photo_lighting import Light
-
         lights = ", ".join(Light(d, p).label for d, p in zip(self.directions, self.powers))
         return (f"estimated from the ball (nothing given): {lights}, ambient {self.ambient:.3g}; "
                 f"Lambertian residual {self.residual_db:.1f} dB")
@@ -74,7 +74,6 @@ def _fit(columns: list[np.ndarray], y: np.ndarray) -> tuple[np.ndarray, float]:
     gram = a.T @ a + 1e-12 * np.eye(a.shape[1])
     coef = np.linalg.solve(gram, a.T @ y)
     if np.any(coef < 0):   # non-negative least squares, only where the plain solution goes negative
-        from specgen_addon.photo.light_probe import _nnls
 
         coef = _nnls(a, y, iterations=30)
     return coef, float(np.sqrt(np.mean((a @ coef - y) ** 2)))
@@ -83,9 +82,6 @@ def _fit(columns: list[np.ndarray], y: np.ndarray) -> tuple[np.ndarray, float]:
 def estimate_lights(photo: np.ndarray, exclude: np.ndarray | None = None,
                     max_lights: int = MAX_LIGHTS) -> Estimate:
     """Distant lights + ambient explaining a ball crop (S, S, 3, linear; the ball filling it)."""
-    from specgen_addon.photo.sphere_image import EXPOSURE
-    from specgen_addon.photo.light_probe import ball_normals
-
     s = photo.shape[0]
     n, inside = ball_normals(s)
     lum = photo[..., :3] @ np.array([0.2126, 0.7152, 0.0722])
@@ -151,8 +147,6 @@ def _polish(d: np.ndarray, cols: list[np.ndarray], nn: np.ndarray, y: np.ndarray
 def estimated_lighting(source) -> tuple:
     """The lighting estimated from a :class:`~specgen_addon.photo.sphere_image.PhotoSource`'s ball
     and the run's line saying so (the CLI's ``--input-env estimate`` and the panel's Estimate)."""
-    from specgen_addon.photo.photo_lighting import LightingError
-
     crop = source.crop()
     estimate = estimate_lights(crop.image.astype("float64"), crop.saturated)
     if not estimate.directions:

@@ -24,8 +24,12 @@ from pathlib import Path
 
 import numpy as np
 
-from specgen_addon.common.errors import SpecGenError
+from specgen_addon.common.errors import ImageInputError, SpecGenError
+from specgen_addon.common.image_io import write_exr
 from specgen_addon.photo.ndimage_np import label, map_coordinates
+from specgen_addon.photo.photo_lighting import Light, parse_lighting
+from specgen_addon.photo.sphere_image import EXPOSURE, PhotoSource
+from specgen_addon.render.environment import Environment, _texel_directions
 
 #: Width of the unwrapped equirect map (height is half).
 PROBE_WIDTH = 256
@@ -70,8 +74,6 @@ def unwrap(crop: np.ndarray, reflectance: float = CHROME_REFLECTANCE, width: int
     """The equirect environment (width/2, width, 3) seen in a chrome-ball crop (S, S, 3, the ball
     filling it, linear), divided by ``reflectance``; and the map's texels that saw a saturated pixel.
     Directions in the blind cone behind the ball take the mean of the cone's rim."""
-    from specgen_addon.render.environment import _texel_directions
-
     if not 0.0 < reflectance <= 1.0:
         raise ProbeError(f"the chrome ball's reflectance must lie in (0, 1], got {reflectance}")
     s = crop.shape[0]
@@ -95,8 +97,6 @@ def unwrap(crop: np.ndarray, reflectance: float = CHROME_REFLECTANCE, width: int
 
 def clipped_sources(sat: np.ndarray, width: int) -> list[tuple[np.ndarray, float]]:
     """(unit direction, solid angle) of each connected clipped region of an equirect map."""
-    from specgen_addon.render.environment import _texel_directions
-
     if not sat.any():
         return []
     h = sat.shape[0]
@@ -121,8 +121,6 @@ FLARE_DEG = 10.0
 def remove_flare(env: np.ndarray, lights: list[tuple[np.ndarray, float]]) -> None:
     """Replace, in place, the texels within :data:`FLARE_DEG` of each clipped source by the map's
     median radiance."""
-    from specgen_addon.render.environment import _texel_directions
-
     d = _texel_directions(env.shape[0], env.shape[1], 0.0)
     near = np.zeros(env.shape[:2], bool)
     for direction, _ in lights:
@@ -136,9 +134,6 @@ def read_probe(path: str | Path, circle: tuple[float, float, float] | None = Non
                gains=None) -> Probe:
     """Unwrap a chrome-ball photo (its circle given, from a mask, or found) into a :class:`Probe`;
     ``gains`` (3,) are the white-balance gains of the photo it lights (the same camera)."""
-    from specgen_addon.common.errors import ImageInputError
-    from specgen_addon.photo.sphere_image import PhotoSource
-
     wb = None if gains is None else tuple(float(g) for g in gains)
     try:
         crop = PhotoSource(Path(path), encoding=encoding, circle=circle, mask=mask,
@@ -163,8 +158,6 @@ def fit_clipped_powers(probe: Probe, photo: np.ndarray, exposure: float = 1.0) -
     probe's clipped sources that, with the unclipped environment (in the same units: the probe and
     the ball photographed alike), best explain a diffuse ball's photo (S, S, 3, linear): a
     Lambertian model, its albedo at most 1, fitted by non-negative least squares on the luminance."""
-    from specgen_addon.render.environment import Environment
-
     if not probe.clipped_lights:
         return []
     s = photo.shape[0]
@@ -201,10 +194,6 @@ def probe_lighting(probe: Probe, env_path: str | Path, photo: np.ndarray | None 
     to ``env_path`` (an EXR, used calibrated: its values are radiance as photographed) plus a
     distant light per clipped source, powered by :func:`fit_clipped_powers` on the diffuse ball's
     ``photo`` (or at the clipped level, 1/solid angle × the probe's peak, without one)."""
-    from specgen_addon.common.image_io import write_exr
-    from specgen_addon.photo.sphere_image import EXPOSURE
-    from specgen_addon.photo.photo_lighting import Light, parse_lighting
-
     env = probe.env_rgb
     write_exr(env_path, {"R": env[..., 0], "G": env[..., 1], "B": env[..., 2]}, overwrite=overwrite)
     if probe.clipped_lights and photo is not None:

@@ -35,7 +35,13 @@ from pathlib import Path
 
 import numpy as np
 
-from specgen_addon.common.errors import SpecGenError
+from specgen_addon.common.errors import ImageInputError, SpecGenError
+from specgen_addon.photo import sphere_image as input_image
+from specgen_addon.photo.image_checks import ImageNote, check_image_header
+from specgen_addon.render import DistantLight, Scene, sphere_geometry
+from specgen_addon.render import environment_maps as lighting
+from specgen_addon.render.environment import Environment
+from specgen_addon.spectral import colour_tables
 
 CANONICAL = "canonical"
 #: No environment map: the given lights (and ambient) alone.
@@ -65,7 +71,6 @@ class Light:
             raise LightingError(f"a light needs a direction (a non-zero vector), got {self.direction}")
         if not (math.isfinite(self.power) and self.power > 0):
             raise LightingError(f"a light's power must be a positive number, got {self.power}")
-        from specgen_addon.spectral import colour_tables
 
         try:
             colour_tables.illuminant(self.colour)
@@ -81,8 +86,6 @@ class Light:
         return cls((math.cos(el) * math.sin(az), math.sin(el), math.cos(el) * math.cos(az)), power, colour)
 
     def distant_light(self):
-        from specgen_addon.render import DistantLight
-
         return DistantLight(self.direction, float(self.power * np.pi), self.colour)
 
     @property
@@ -203,7 +206,6 @@ class InputLighting:
                 raise LightingError(f"{path}: no such HDRI file")
             check_map_header(path)  # pixel limit and 2:1, from the header alone
             return
-        from specgen_addon.render import environment_maps as lighting
 
         if "/" in self.env or "\\" in self.env or ".." in self.env:
             raise LightingError(f"{self.env!r} is neither a bundled map name nor an .exr/.hdr file")
@@ -214,9 +216,6 @@ class InputLighting:
     # -- renderer objects -----------------------------------------------------------------------
     def environment(self):
         """The :class:`~specgen_addon.render.Environment` (unit mean luminance × exposure, rotated)."""
-        from specgen_addon.photo import sphere_image as input_image
-        from specgen_addon.render import environment_maps as lighting
-
         if self.is_canonical:
             return lighting.load_environment(input_image.CANONICAL_ENV)
         rot = math.radians(self.rotation_deg)
@@ -229,8 +228,6 @@ class InputLighting:
             self.validate()
             env = lighting.load_environment(self.env, exposure=self.exposure, rotation_rad=rot)
         if self.ambient > 0:
-            from specgen_addon.render.environment import Environment
-
             if env is None:
                 return Environment.uniform((self.ambient,) * 3)
             return Environment(env.rgb + np.float32(self.ambient), env.rotation_rad, env.uplift, env.name)
@@ -238,8 +235,6 @@ class InputLighting:
 
     def scene(self, size: int | None = None):
         """Prepared renderer scene of the input photo (canonical sphere geometry), cached."""
-        from specgen_addon.photo import sphere_image as input_image
-
         size = int(size or input_image.CANONICAL_SIZE)
         if self.is_canonical:
             return input_image._scene(input_image.CANONICAL_ENV, 0.0, size)
@@ -248,8 +243,6 @@ class InputLighting:
     @property
     def image_exposure(self) -> float:
         """Photo value per unit radiance (the canonical input's :data:`EXPOSURE`)."""
-        from specgen_addon.photo import sphere_image as input_image
-
         return input_image.EXPOSURE
 
     def white_sphere_rgb(self, size: int | None = None) -> np.ndarray:
@@ -294,9 +287,6 @@ MAP_WORK_WIDTH = 512
 def check_map_header(path: str | Path) -> tuple[int, int] | None:
     """Refuse a panorama from its header alone, before any pixel is read: over the photo pixel
     limit (the same limit and message as photos), empty, or not exactly 2:1 (equirectangular)."""
-    from specgen_addon.common.errors import ImageInputError
-    from specgen_addon.photo.image_checks import check_image_header
-
     try:
         size = check_image_header(path)
     except ImageInputError as exc:
@@ -324,7 +314,6 @@ def read_map_bounded(path: str | Path, max_width: int = MAP_WORK_WIDTH) -> np.nd
         import OpenImageIO as oiio
     except ImportError:
         return None
-    from specgen_addon.photo.image_checks import ImageNote
 
     inp = oiio.ImageInput.open(str(path))
     if inp is None:
@@ -386,8 +375,6 @@ def _file_environment(path: str, exposure: float, rotation_rad: float, calibrate
                       stamp: tuple | None = None):
     """A panorama file as the renderer's environment: unit mean luminance × exposure, or, when
     ``calibrated``, its values as radiance × exposure. Read in strips (:func:`read_map_bounded`)."""
-    from specgen_addon.render.environment import Environment
-
     check_map_header(path)
     try:
         rgb = read_map_bounded(path)
@@ -407,9 +394,6 @@ def _file_environment(path: str, exposure: float, rotation_rad: float, calibrate
 
 @functools.lru_cache(maxsize=4)
 def _scene(light: InputLighting, size: int, stamp: tuple | None = None):
-    from specgen_addon.photo import sphere_image as input_image
-    from specgen_addon.render import Scene, sphere_geometry
-
     lights = ([input_image._key_light()] if light.key_light else []) + [li.distant_light() for li in light.lights]
     return Scene(sphere_geometry(size), lights, light.environment(), sampling=input_image.input_sampling())
 
@@ -417,9 +401,6 @@ def _scene(light: InputLighting, size: int, stamp: tuple | None = None):
 @functools.lru_cache(maxsize=8)
 def _white_rgb(light: InputLighting, size: int, stamp: tuple | None = None) -> np.ndarray:
     """Exact (noise-free) white-Lambertian photo mean: irradiance/π, not a sampled render."""
-    from specgen_addon.photo import sphere_image as input_image
-    from specgen_addon.render import sphere_geometry
-
     geo = sphere_geometry(size or 32)
     n = geo.normals[geo.mask]
     env = light.environment()

@@ -27,11 +27,12 @@ from pathlib import Path
 
 import numpy as np
 
-from specgen_addon.photo import image_checks
-from specgen_addon.spectral import spectra
 from specgen_addon.common.errors import ImageInputError
+from specgen_addon.common.image_io import ImageIOError, read_exr, read_float_image
 from specgen_addon.common.limits import MAX_WORK_SIDE
-from specgen_addon.common.image_io import read_float_image
+from specgen_addon.photo import image_checks
+from specgen_addon.photo.ndimage_np import binary_dilation
+from specgen_addon.spectral import spectra
 
 #: How integer codes become linear values: "auto" (sRGB for 8/16-bit files), "srgb", "linear".
 ENCODINGS = ("auto", "srgb", "linear")
@@ -86,8 +87,6 @@ def read_photo(path: str | Path, encoding: str = "auto", white_level: float | No
 
 
 def _read_float(path: Path) -> Photo:
-    from specgen_addon.common.image_io import ImageIOError, read_exr
-
     if path.suffix.lower() == ".exr":
         try:
             channels, _ = read_exr(path)
@@ -218,8 +217,6 @@ def _read_raw(path: Path) -> Photo:
     arr = rgb.astype(np.float32) / 65535.0
     saturated = np.any(rgb >= 65535, axis=-1)
     if sensor_sat.shape == saturated.shape:
-        from specgen_addon.photo.ndimage_np import binary_dilation
-
         saturated |= binary_dilation(sensor_sat, iterations=1)   # demosaicking spreads a clipped photosite
     width = arr.shape[1]
     arr = image_checks.downsample_linear(arr)

@@ -34,7 +34,14 @@ from pathlib import Path
 
 import numpy as np
 
+from specgen_addon.common.image_io import write_exr
 from specgen_addon.photo.photo_lighting import Light, LightingError, parse_lighting
+from specgen_addon.render.environment import (
+    _bilinear_equirect,
+    _box_downsample,
+    _texel_directions,
+    srgb_luminance_weights,
+)
 
 #: Width of the camera-frame panorama written for the photo's lighting (as the renderer's maps).
 PANORAMA_WIDTH = 512
@@ -93,8 +100,6 @@ def world_in_camera_frame(rgb: np.ndarray, camera_rotation: np.ndarray,
     camera frame at ``width`` × ``width/2`` (bilinear; the source box-averaged first, so a large map
     is not aliased). ``texture_matrix`` is the Mapping node's (:func:`mapping_matrix`): the world
     direction ``w`` reads the image at ``M w``."""
-    from specgen_addon.render.environment import _bilinear_equirect, _box_downsample, _texel_directions
-
     src = np.maximum(np.asarray(rgb, np.float32)[..., :3], 0.0)
     if src.ndim != 3 or src.shape[0] < 2 or src.shape[1] < 2:
         raise LightingError(f"the world's image must be H×W×3, got shape {src.shape}")
@@ -120,8 +125,6 @@ def _blackbody_chromaticities() -> np.ndarray:
 
 
 def _luminance(rgb: np.ndarray) -> np.ndarray:
-    from specgen_addon.render.environment import srgb_luminance_weights
-
     return np.asarray(rgb, np.float64) @ srgb_luminance_weights()
 
 
@@ -231,7 +234,6 @@ class SceneLighting:
         if panorama is not None and float(np.max(panorama)) * self.strength > 0:
             if panorama_path is None:
                 raise LightingError("the world's panorama needs a file to be written to")
-            from specgen_addon.common.image_io import write_exr
 
             write_exr(Path(panorama_path), {c: panorama[..., i] for i, c in enumerate("RGB")},
                       overwrite=overwrite)

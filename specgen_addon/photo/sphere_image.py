@@ -42,9 +42,19 @@ from pathlib import Path
 
 import numpy as np
 
-from specgen_addon.spectral import spectra
-from specgen_addon.common.errors import ImageInputError, SpecGenError
 from specgen_addon.common.atomic_io import atomic_write
+from specgen_addon.common.errors import ImageInputError, OutputExistsError, SpecGenError
+from specgen_addon.common.image_io import write_png8
+from specgen_addon.photo import ndimage_np
+from specgen_addon.photo.ndimage_np import ransac_circle
+from specgen_addon.photo.read import FLOAT_SUFFIXES, read_photo, warn_notes
+from specgen_addon.photo.sphere_detect import find_ball
+from specgen_addon.photo.sphere_edge import refine_circle
+from specgen_addon.photo.white_balance import patch_gains
+from specgen_addon.render import DistantLight, EnvSampling, Scene, sphere_geometry
+from specgen_addon.render import environment_maps as lighting
+from specgen_addon.render.geometry import pixel_grid
+from specgen_addon.spectral import spectra
 
 CANONICAL_SIZE = 128
 EXPOSURE = 0.5
@@ -58,8 +68,6 @@ MIN_SPHERE_RADIUS_PX = 8
 def input_sampling():
     """Environment sampling of input renders: 56 directions per pixel (half the evaluation's);
     the inputs are 128² RGB images and their noise is far below their quantisation."""
-    from specgen_addon.render import EnvSampling
-
     return EnvSampling().scaled(0.5)
 
 
@@ -82,17 +90,12 @@ def with_independent_sampling(scene):
 
 
 def _key_light():
-    from specgen_addon.render import DistantLight
-
     return DistantLight(KEY_LIGHT_DIRECTION, KEY_LIGHT_IRRADIANCE, spectra.DEFAULT_ILLUMINANT)
 
 
 @functools.lru_cache(maxsize=6)
 def _scene(env_name: str, rotation_rad: float, size: int):
     """Prepared scenes are reused across materials (their samples do not depend on the BRDF)."""
-    from specgen_addon.render import environment_maps as lighting
-    from specgen_addon.render import Scene, sphere_geometry
-
     env = lighting.load_environment(env_name, rotation_rad=rotation_rad)
     return Scene(sphere_geometry(size), [_key_light()], env, sampling=input_sampling())
 
@@ -137,8 +140,6 @@ def training_variant(variant: int) -> tuple[str, float, float]:
     Variant 0 is the canonical lighting; others cycle through the training maps with a golden-angle
     rotation (8 distinct per map) and an exposure of 2^u, u ∈ [−0.5, 0.5] drawn from ``variant``.
     """
-    from specgen_addon.render import environment_maps as lighting
-
     if variant < 0:
         raise SpecGenError(f"training variant must be ≥ 0, got {variant}")
     if variant == 0:
@@ -181,8 +182,6 @@ def write_png_srgb(path: str | Path, rgb: np.ndarray, overwrite: bool = False) -
 def output_paths(path: str | Path, overwrite: bool = False) -> tuple[Path, Path]:
     """(.exr, .png) paths of an input image saved at ``path``; raises if either exists and
     ``overwrite`` is false (so a command can check before doing any work)."""
-    from specgen_addon.common.errors import OutputExistsError
-
     path = Path(path)
     if path.suffix.lower() not in (".exr", ".png"):
         raise SpecGenError(f"{path}: output must end in .exr or .png")
@@ -212,8 +211,6 @@ def read_image(path: str | Path, encoding: str = "auto") -> np.ndarray:
     """Read an image as linear float (H, W, C) (:func:`specgen_addon.photo.read.read_photo`): EXR
     values as stored; 8/16-bit PNG/JPEG/TIFF normalised to [0, 1] and sRGB-decoded unless
     ``encoding="linear"`` (alpha kept linear)."""
-    from specgen_addon.photo.read import read_photo, warn_notes
-
     photo = read_photo(path, encoding=encoding)
     warn_notes(photo, path)
     return photo.rgb
@@ -281,8 +278,6 @@ class PhotoSource:
     @property
     def linear(self) -> bool:
         """Whether the photo's values are unclipped linear light (a float file)."""
-        from specgen_addon.photo.read import FLOAT_SUFFIXES
-
         return Path(self.path).suffix.lower() in FLOAT_SUFFIXES
 
 
@@ -300,8 +295,6 @@ def parse_circle(text: str) -> tuple[float, float, float]:
 
 def read_mask(path: str | Path, shape: tuple[int, int]) -> np.ndarray:
     """A mask file as coverage in [0, 1] (H, W): its alpha if it has one, else its brightness."""
-    from specgen_addon.photo.read import read_photo
-
     photo = read_photo(path, encoding="linear")
     arr = photo.rgb
     cov = arr[..., 3] if arr.shape[-1] == 4 and not np.all(arr[..., 3] > 0.999) else arr[..., :3].mean(-1)
@@ -338,9 +331,6 @@ def load_sphere_crop(path: str | Path, size: int = CANONICAL_SIZE, encoding: str
                      white_gains: tuple[float, float, float] | None = None) -> SphereCrop:
     """:func:`load_sphere_image`, with whether the sphere was copied or resampled, the circle used,
     the saturated pixels and the white balance (:class:`PhotoSource` names the choices)."""
-    from specgen_addon.photo.read import read_photo, warn_notes
-    from specgen_addon.photo.white_balance import patch_gains
-
     path = Path(path)
     photo = read_photo(path, encoding=encoding, white_level=white_level)
     warn_notes(photo, path)
@@ -378,9 +368,6 @@ def write_circle_preview(path: str | Path, source: PhotoSource, circle: tuple[fl
                          overwrite: bool = False) -> Path:
     """The photo (sRGB, 8-bit) with ``circle`` (in the read photo's pixels) drawn in red, a line
     about a two-hundredth of the radius wide (at least a pixel), and its centre marked."""
-    from specgen_addon.common.image_io import write_png8
-    from specgen_addon.photo.read import read_photo
-
     rgb = read_photo(source.path, encoding=source.encoding).rgb[..., :3]
     top = float(np.percentile(rgb, 99.9)) or 1.0
     img = np.round(spectra.srgb_encode(np.clip(rgb / top, 0.0, 1.0)) * 255.0).astype(np.uint8)
@@ -480,8 +467,6 @@ def _photo_crop(rgb: np.ndarray, size: int, error: ImageInputError | None, fallb
     """The crop of a camera photo about the ball found from its lit outline
     (:func:`specgen_addon.photo.sphere_detect.find_ball`); where that finds nothing, the foreground's
     circle (``fallback``), else ``error``."""
-    from specgen_addon.photo.sphere_detect import find_ball
-
     try:
         found = find_ball(rgb)
     except ImageInputError as exc:
@@ -497,15 +482,11 @@ def _photo_crop(rgb: np.ndarray, size: int, error: ImageInputError | None, fallb
 def _ndimage():
     """The numpy ndimage twin (:mod:`specgen_addon.photo.ndimage_np`): one implementation on every path,
     the CLI's and a stock Blender's alike (scipy serves the tests as an oracle)."""
-    from specgen_addon.photo import ndimage_np
-
     return ndimage_np
 
 
 def _ransac_circle(pts: np.ndarray, residual_threshold: float, max_trials: int):
     """RANSAC circle fit (numpy, :func:`specgen_addon.photo.ndimage_np.ransac_circle`): (model, inliers)."""
-    from specgen_addon.photo.ndimage_np import ransac_circle
-
     return ransac_circle(pts, residual_threshold=residual_threshold, max_trials=max_trials)
 
 
@@ -587,8 +568,6 @@ def _refined_circle(contrast: np.ndarray, rough: tuple[float, float, float]) -> 
     """``rough`` refined to a fraction of a pixel from the outline's partly covered pixels
     (:func:`specgen_addon.photo.sphere_edge.refine_circle`; ``contrast``, H×W, is proportional to each
     pixel's coverage by the sphere); ``rough`` itself where the outline cannot be measured."""
-    from specgen_addon.photo.sphere_edge import refine_circle
-
     cx, cy, r = rough
     refined = refine_circle(np.asarray(contrast, np.float64), cx, cy, r)
     tol = max(1.5, 0.015 * r)   # relative to the radius: the same at 512 px and at 8000 px
@@ -634,8 +613,6 @@ def _resample_circle(rgb: np.ndarray, cx: float, cy: float, r: float, size: int)
     (Replacing the outline pixels by the sphere's inside colour before resampling was measured and
     cost the shipped network 0.4 dB more than leaving them mixed with the background; docs/model.md.)
     """
-    from specgen_addon.render.geometry import pixel_grid
-
     ndimage = _ndimage()
 
     scale = 2.0 * r / size  # source pixels per output pixel

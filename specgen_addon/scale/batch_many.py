@@ -28,11 +28,12 @@ from pathlib import Path
 from typing import Callable, Iterator
 
 from specgen_addon.brdf.formats.export import size_text
+from specgen_addon.common.atomic_io import OutputLock, atomic_write
 from specgen_addon.common.errors import SpecGenError
 from specgen_addon.common.limits import check_number
-from specgen_addon.common.atomic_io import atomic_write
 from specgen_addon.scale import items as items_mod
 from specgen_addon.scale import worker as worker_mod
+from specgen_addon.scale.preflight import check_batch_settings
 
 REPO = Path(__file__).resolve().parents[2]
 DEFAULT_BATCH_SCRIPT = REPO / "batch.py"
@@ -85,7 +86,6 @@ def check_batch_args(batch_script: Path, batch_args: list[str]) -> None:
     if ns.image != sentinel or ns.out != sentinel or getattr(ns, "overwrite", False):
         raise SpecGenError(f"batch.py arguments: {', '.join(OWN_OPTIONS)} are set by batch-many per item")
     if Path(batch_script).resolve() == Path(DEFAULT_BATCH_SCRIPT).resolve():   # values, as batch.py checks them
-        from specgen_addon.scale.preflight import check_batch_settings
 
         try:
             check_batch_settings(ns)
@@ -164,8 +164,6 @@ def run_batch_many(opts: BatchManyOptions, log: Callable[[str], None] = print) -
     in ``OUT/.work`` is removed first. Items are done exactly once: a published item is skipped
     by every later attempt and run, and the report takes each item's record from ``item.json``.
     """
-    from specgen_addon.common.atomic_io import OutputLock
-
     all_items = _validate(opts)
     with OutputLock([opts.out]):
         _remove_stale_work(opts.out)

@@ -13,9 +13,19 @@ import re
 from pathlib import Path
 from typing import Callable
 
-from specgen_addon.common import limits
-from specgen_addon.common.errors import ImageInputError, OutputExistsError, SpecGenError
 from specgen_addon.brdf.formats.export import OUTPUT_SUFFIXES as BRDF_OUTPUT_SUFFIXES
+from specgen_addon.common import limits
+from specgen_addon.common.errors import ImageInputError, OutputExistsError, SpecGenError, WeightsError
+from specgen_addon.corpus.families import check_family_names
+from specgen_addon.evaluation.ablation import ARMS_BY_NAME
+from specgen_addon.evaluation.ablation_study import load_records
+from specgen_addon.evaluation.protocol import test_materials
+from specgen_addon.model import DEFAULT_WEIGHTS
+from specgen_addon.model.runtime.inference import onnx_paths
+from specgen_addon.photo.image_checks import check_image_header
+from specgen_addon.photo.sphere_image import output_paths
+from specgen_addon.render import environment_maps as lighting
+from specgen_addon.render.mesh_checks import check_obj
 
 #: Corpus materials ``render-input`` accepts by name or index without a manifest (standard corpus).
 STANDARD_CORPUS_SIZE = 200
@@ -23,8 +33,6 @@ STANDARD_CORPUS_SIZE = 200
 
 def check_image_file(path: str | Path) -> Path:
     """An input image that exists, is readable and whose header size is within the pixel limit."""
-    from specgen_addon.photo.image_checks import check_image_header
-
     try:
         path = limits.check_input_file(path, "input image")
     except SpecGenError as exc:
@@ -39,8 +47,6 @@ def check_brdf_file(path: str | Path) -> Path:
 
 def check_weights_file(path: str | Path | None) -> None:
     if path is not None:
-        from specgen_addon.common.errors import WeightsError
-
         try:
             limits.check_input_file(path, "weights file")
         except SpecGenError as exc:
@@ -74,7 +80,6 @@ def _corpus(a) -> None:
 
 def _train(a) -> None:
     from specgen_addon.train.loop import validate_train_config
-    from specgen_addon.model import DEFAULT_WEIGHTS
 
     limits.check_numbers({"steps": a.steps, "max-minutes": a.max_minutes})
     if a.seed is not None and not 0 <= a.seed < 2**32:
@@ -148,7 +153,6 @@ def _evaluate(a) -> None:
         if not a.families:
             raise SpecGenError("--family needs --families N "
                                "(it selects the families of the per-family evaluation)")
-        from specgen_addon.corpus.families import check_family_names
 
         check_family_names(a.family)
     if getattr(a, "input_antialias", False):
@@ -162,8 +166,6 @@ def _evaluate(a) -> None:
 
 def _export(a) -> None:
     check_weights_file(a.weights)
-    from specgen_addon.model.runtime.inference import onnx_paths
-    from specgen_addon.model import DEFAULT_WEIGHTS
 
     for p in onnx_paths(Path(a.weights) if a.weights is not None else DEFAULT_WEIGHTS):
         if p.exists() and not a.overwrite:
@@ -184,7 +186,6 @@ def _render_input(a) -> None:
     elif Path(spec).exists():
         check_brdf_file(spec)
     limits.check_output_file(a.out, True, suffixes=(".exr", ".png"))
-    from specgen_addon.photo.sphere_image import output_paths
 
     output_paths(a.out, a.overwrite)
 
@@ -206,15 +207,11 @@ def _paper_tables(a) -> None:
             names = [s.strip() for s in spec.split(",") if s.strip()]
             for s in names:
                 limits.safe_name(s, "--materials name")
-            from specgen_addon.evaluation.protocol import test_materials
 
             test_materials(None, names)  # unknown names refused before any cache is made
 
 
 def _ablate(a) -> None:
-    from specgen_addon.evaluation.ablation import ARMS_BY_NAME
-    from specgen_addon.evaluation.ablation_study import load_records
-
     for f in (a.out, a.json, a.figure):
         if f is not None:
             limits.check_output_file(f, overwrite=True)
@@ -284,8 +281,6 @@ def output_folders(args: argparse.Namespace) -> tuple[list[Path], list[Path]]:
 # ------------------------------------------------------------------------------------ batch.py
 def check_env_name(name: str) -> None:
     """An environment map name among Blender's studio lights (no path, no '..')."""
-    from specgen_addon.render import environment_maps as lighting
-
     limits.safe_name(name, "environment name")
     names = lighting.available_envs()
     if name not in names:
@@ -295,8 +290,6 @@ def check_env_name(name: str) -> None:
 def check_batch_settings(args: argparse.Namespace) -> None:
     """batch.py's settings other than its input and output: sizes, wavelengths, weights, mesh and
     environment name (also what ``batch-many --batch-args`` is checked with, before any item runs)."""
-    from specgen_addon.render.mesh_checks import check_obj
-
     limits.check_numbers({"resolution": args.resolution, "samples": args.samples,
                           "env-samples": args.env_samples})
     limits.check_wavelength_range(args.wl_min, args.wl_max, args.bands)

@@ -16,17 +16,17 @@ from __future__ import annotations
 import sys
 from pathlib import Path
 
+from specgen_addon.brdf.formats import load_brdf, tabulate_file
+from specgen_addon.brdf.table import BRDFTable
 from specgen_addon.common.errors import SpecGenError
+from specgen_addon.photo import sphere_image as input_image
+from specgen_addon.spectral.spectra import wavelength_grid
 
 EXIT_BAD_INPUT = 2
 
 
 def prepare(src: Path, work: Path) -> tuple[str, Path]:
     """(``"brdf"`` or ``"image"``, path to hand to ``batch.py``) for the BRDF file ``src``."""
-    from specgen_addon.brdf.formats import load_brdf, tabulate_file
-    from specgen_addon.spectral.spectra import wavelength_grid
-    from specgen_addon.brdf.table import BRDFTable
-
     brdf = load_brdf(src)
     spectral = bool(getattr(brdf, "is_spectral", False))
     work.mkdir(parents=True, exist_ok=True)
@@ -37,7 +37,6 @@ def prepare(src: Path, work: Path) -> tuple[str, Path]:
         dst = work / f"{src.stem}.npz"
         table.save(dst, overwrite=True)
         return "brdf", dst
-    from specgen_addon.photo import sphere_image as input_image
 
     dst = work / f"{src.stem}.exr"
     input_image.write_exr_rgb(dst, input_image.render_input(brdf), overwrite=True)

@@ -240,7 +240,7 @@ if PACKAGE != "specgen_addon":       # the core under another package name, as t
     spec.loader.exec_module(module)
 else:
     sys.path.insert(0, REPO)
-kernels = importlib.import_module(PACKAGE + ".model.gather_kernels").load()
+kernels = importlib.import_module(PACKAGE + ".model.runtime.gather_kernels").load()
 f = np.float32
 stats = [np.zeros(shape, f) for shape in ((90, 90), (90, 180), (90, 180), (90, 2), (90, 2), (180, 2))]
 e = np.empty((180 * 2, 6), f)
