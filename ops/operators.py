@@ -33,6 +33,7 @@ from .photo_inputs import lighting_job, photo_source
 from .properties import output_dir
 from .render_settings import PREVIEW_PERCENT, PREVIEW_SAMPLES, band_render
 from .scene_lighting import ball_position
+from .travel import load_image
 from .reporting import check_generate_settings, check_render_settings, report_exception
 
 TIMER_STEP_S = 0.1
@@ -181,12 +182,9 @@ class SPECGEN_OT_generate_brdf(_Modal, bpy.types.Operator):
         if png.is_file():
             name = naming.preview_name(self._stem)
             img = bpy.data.images.get(name)
-            if img is None:
-                img = bpy.data.images.load(str(png))
-                img.name = name
-            else:
-                img.filepath = str(png)
-                img.reload()
+            if img is not None:   # replaced (Replace Materials): read the new file afresh
+                bpy.data.images.remove(img)
+            img = load_image(png, name)
             img.use_fake_user = True   # only the material names it: kept when the .blend is saved
             mat["specgen_preview"] = img.name
         s.material = mat

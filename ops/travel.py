@@ -49,6 +49,24 @@ PACKED_PREFIX = "SpecGen packed "
 PACKED_KEY = "specgen_packed"
 
 
+def load_image(path: Path, name: str):
+    """A new image datablock ``name`` of the file at ``path``. Blender reads a backslash in a POSIX
+    path as a folder separator, so such a file is read from a temporary copy and packed into the
+    .blend (its ``filepath`` still names the file)."""
+    path = Path(path)
+    if os.sep == "/" and "\\" in str(path):
+        with tempfile.TemporaryDirectory(prefix="specgen_image_") as tmp:
+            copy = Path(tmp) / path.name.replace("\\", "_")
+            shutil.copyfile(path, copy)
+            img = bpy.data.images.load(str(copy))
+            img.pack()
+        img.filepath_raw = str(path)
+    else:
+        img = bpy.data.images.load(str(path))
+    img.name = name
+    return img
+
+
 def _specgen_materials() -> list:
     from .render import is_specgen_material
 

@@ -96,3 +96,26 @@ def test_a_packed_blend_in_such_a_folder_rebuilds_its_lookups_and_renders(tmp_pa
     after = np.load(tmp_path / "after.npy")
     assert 10 * np.log10(before.max() ** 2 / np.mean((after - before) ** 2)) >= 60.0
     assert (elsewhere.parent / "specgen" / "boule \u00e9t\u00e9.npz").is_file()
+
+
+@POSIX_ONLY
+@pytest.mark.blender
+def test_a_preview_image_in_a_folder_with_a_backslash_loads_with_its_pixels(tmp_path):
+    bpy = pytest.importorskip("bpy")
+    from addon_modules import addon_module
+
+    from specgen_addon.common.image_io import write_png8
+
+    travel = addon_module("ops.travel")
+    folder = _odd_folder(tmp_path)
+    pixels = np.zeros((4, 6, 3), np.uint8)
+    pixels[..., 0] = 255                                  # pure red: exact in any decoding
+    png = write_png8(folder / "aper\u00e7u \\ preview.png", pixels)
+    img = travel.load_image(png, "SpecGen odd preview")
+    try:
+        assert img.name == "SpecGen odd preview" and tuple(img.size) == (6, 4)
+        rgba = np.array(img.pixels[:]).reshape(4, 6, 4)
+        assert np.allclose(rgba[..., :3], [1.0, 0.0, 0.0])
+        assert Path(img.filepath_raw) == png              # it still names the file
+    finally:
+        bpy.data.images.remove(img)
