@@ -131,9 +131,6 @@ def test_package_init_files_only_re_export(init):
 #: CLI's start stay light. Any other in-function import is listed here with its reason; new ones
 #: fail. ``python3 lab/house-move/lift_imports.py`` lifts what is safe to lift.
 IN_FUNCTION_ALLOWED = {
-    "specgen_addon/photo/": "not lifted yet (run lab/house-move/lift_imports.py)",
-    "specgen_addon/scale/": "not lifted yet (run lab/house-move/lift_imports.py)",
-    "specgen_addon/brdf/material_file.py": "not lifted yet (run lab/house-move/lift_imports.py)",
     ("specgen_addon/brdf/table.py", "specgen_addon.brdf.material_file"): "circle: the material file builds tables",
     ("specgen_addon/brdf/formats/load.py", "specgen_addon.brdf.formats.rgl"): "circle: the formats package re-exports load",
     ("specgen_addon/brdf/formats/load.py", "specgen_addon.brdf.formats.merl"): "circle: the formats package re-exports load",
