@@ -17,6 +17,7 @@ import re
 import sys
 from pathlib import Path
 
+from specgen_addon.brdf.formats.export import size_text
 from specgen_addon.common.errors import OutputExistsError, SpecGenError
 from specgen_addon.photo.light_estimate import estimated_lighting as estimate
 from specgen_addon.photo.light_probe import CHROME_REFLECTANCE, lighting_from_probe, read_probe
@@ -310,7 +311,8 @@ def probe_lighting_from_args(args: argparse.Namespace, source, env_path: Path):
                                           overwrite=overwrite)
     for note in notes:
         print(f"light probe: {note}")
-    print(f"{env_path}: the room's environment unwrapped from the chrome ball (camera frame)")
+    print(f"wrote {env_path} (the room's environment unwrapped from the chrome ball, camera frame, "
+          f"{size_text(env_path.stat().st_size)})")
     return lighting
 
 
@@ -325,7 +327,7 @@ def print_photo_report(generated, args: argparse.Namespace, source) -> None:
         preview = getattr(args, "circle_preview", None)
         if preview is not None and crop.circle is not None:
             write_circle_preview(preview, source, crop.circle, overwrite=getattr(args, "overwrite", False))
-            print(f"{preview}: the photo with the circle used")
+            print(f"wrote {preview} (the photo with the circle used, {size_text(Path(preview).stat().st_size)})")
     if getattr(generated, "canonical_input", None) is not None:
         print(generated.canonical_input.describe())
     if generated.network_reproduction is not None:
