@@ -38,6 +38,9 @@ _LEDGER: dict[str, tuple[tuple, int]] = {}
 _SEQ = itertools.count(1)
 #: Staging files being written: absolute staging path -> absolute target path.
 _STAGING: dict[str, str] = {}
+#: Staging files about to be created (path -> ledger number): a stop that lands between their
+#: creation and their ledger entry still finds and removes them (the names are private and unique).
+_PENDING: dict[str, int] = {}
 
 
 def _current_umask() -> int:
@@ -76,7 +79,7 @@ def is_ours(path: str | os.PathLike) -> bool:
     key = os.path.abspath(path)
     entry = _LEDGER.get(key)
     if entry is None:
-        return False
+        return key in _PENDING and os.path.lexists(key)
     ident = _identity(Path(path))
     if key in _STAGING:
         return ident is not None and ident[:2] == entry[0][:2]
@@ -93,6 +96,9 @@ def created_since(mark: int, under: Iterable[str | os.PathLike] = ()) -> list[Pa
     # a staging file counts as its target's (a hard stop may come while it is being written)
     found = [p for p, (_, t) in _LEDGER.items()
              if t > mark and (not roots or inside(p) or (p in _STAGING and inside(_STAGING[p])))]
+    found += [p for p, t in list(_PENDING.items())
+              if t > mark and p not in _LEDGER and os.path.lexists(p)
+              and (not roots or inside(p) or (p in _STAGING and inside(_STAGING[p])))]
     return [Path(p) for p in sorted(found, key=lambda p: -p.count(os.sep))]
 
 
@@ -112,6 +118,7 @@ def remove_created(paths: Iterable[Path], keep: Iterable[Path] = ()) -> list[Pat
                 os.unlink(p)
             removed.append(Path(p))
             _LEDGER.pop(a, None)
+            _PENDING.pop(a, None)
     return removed
 
 
@@ -211,13 +218,17 @@ def atomic_write(path: str | os.PathLike, overwrite: bool = False) -> Iterator[P
     target = check_output_file(path, overwrite)  # folder exists, writable; no silent overwrite
     parent = target.parent if str(target.parent) else Path(".")
     tmp = parent / _temp_name(target)
+    _STAGING[os.path.abspath(tmp)] = os.path.abspath(target)
+    _PENDING[os.path.abspath(tmp)] = next(_SEQ)
     try:
         fd = os.open(tmp, os.O_WRONLY | os.O_CREAT | os.O_EXCL, 0o600)
     except OSError as exc:
+        _STAGING.pop(os.path.abspath(tmp), None)
+        _PENDING.pop(os.path.abspath(tmp), None)
         raise write_error(target, exc) or exc from None
     os.close(fd)
     record_created(tmp)  # so that a hard stop's clean-up removes it
-    _STAGING[os.path.abspath(tmp)] = os.path.abspath(target)
+    _PENDING.pop(os.path.abspath(tmp), None)
     try:
         try:
             yield tmp

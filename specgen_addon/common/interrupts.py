@@ -95,8 +95,16 @@ class _Parked(BaseException):
         super().__init__(*args)  # pragma: no cover - the process ends first
 
 
+#: Set once the main thread has stopped for the watcher's exit: only then does its clean-up start.
+_MAIN_PARKED = threading.Event()
+#: How long the watcher waits for the main thread to stop before cleaning up anyway (it is in one
+#: long C call then, as a Cycles render, and runs no Python that could write).
+PARK_WAIT_S = 2.0
+
+
 def _wait_for_the_watchers_exit() -> None:
     """Block this (main) thread for good: the watcher owns the stop and ends the process."""
+    _MAIN_PARKED.set()
     threading.Event().wait()
 
 
@@ -245,6 +253,9 @@ def stop_on_signals(message=None) -> Iterator[None]:
             with contextlib.suppress(Exception):
                 sys.stdout.flush()
             _park_main_thread()  # nothing of the command runs on (and writes) while we clean up
+            # a starved main thread may still run a few instructions (create a file) before it
+            # takes the parking: clean up only once it has stopped
+            _MAIN_PARKED.wait(PARK_WAIT_S)
             for cleanup in reversed(list(_cleanups)):
                 with contextlib.suppress(Exception):
                     cleanup()
