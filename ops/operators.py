@@ -29,7 +29,7 @@ from specgen_addon.generate.pipeline import generate
 from specgen_addon.photo.image_checks import check_pixel_count
 from specgen_addon.render.cycles_time_estimate import format_duration
 from . import naming
-from .photo_inputs import lighting_job, photo_source
+from .photo_inputs import balanced_to_the_light, balances_to_the_light, lighting_job, photo_source
 from .properties import output_dir
 from .render_settings import PREVIEW_PERCENT, PREVIEW_SAMPLES, band_render
 from .scene_lighting import ball_position
@@ -119,7 +119,7 @@ class GenerateRun:
 
 
 def generate_with_photo_lighting(args: dict, lighting, circle_png: Path | None = None,
-                                 **kwargs) -> GenerateRun:
+                                 balance_to_light: bool = False, **kwargs) -> GenerateRun:
     """Make the photo's lighting (:func:`.photo_inputs.lighting_job`'s job: an estimate or a
     chrome ball take seconds), then generate and bake; runs on the worker thread, without bpy.
     Whatever it wrote is removed if any step fails or is cancelled."""
@@ -130,6 +130,8 @@ def generate_with_photo_lighting(args: dict, lighting, circle_png: Path | None =
     with OutputGuard([args["out_dir"]]):
         make_dirs(Path(args["out_dir"]))
         photo_lighting, notes = lighting(args["image"])
+        if balance_to_light:   # the white patch balanced to a white surface under the given light
+            args = {**args, "image": balanced_to_the_light(args["image"], photo_lighting)}
         info = generate(**args, lighting=photo_lighting, backend=None, **kwargs).lookup
         if circle_png is not None and info.crop is not None and info.crop.circle is not None:
             write_circle_preview(circle_png, args["image"], info.crop.circle, overwrite=args["overwrite"])
@@ -162,13 +164,14 @@ class SPECGEN_OT_generate_brdf(_Modal, bpy.types.Operator):
         self._lighting = lighting_job(s.photo, context.scene, out, self._stem, s.overwrite,
                                       ball_position(context))
         self._circle_png = naming.circle_png(out, self._stem) if s.photo.circle_preview else None
+        self._balance = balances_to_the_light(s.photo)
         return dict(image=photo_source(s.photo, image), out_dir=out, wavelengths_nm=_wavelengths(s),
                     weights=weights, n_phi_d=int(s.lookup_resolution), tolerance=s.basis_tolerance,
                     name=self._stem, save_table=s.export_table, preview=True, refine=s.refine,
                     overwrite=s.overwrite, model=s.model)
 
     def _run(self, args: dict, **kwargs) -> GenerateRun:
-        return generate_with_photo_lighting(args, self._lighting, self._circle_png, **kwargs)
+        return generate_with_photo_lighting(args, self._lighting, self._circle_png, self._balance, **kwargs)
 
     def _done(self, context, run: GenerateRun) -> None:
         from .render import make_material

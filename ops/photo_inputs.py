@@ -15,6 +15,7 @@ from __future__ import annotations
 import math
 import os
 from collections.abc import Callable
+from dataclasses import replace
 from pathlib import Path
 
 import bpy
@@ -24,6 +25,7 @@ from specgen_addon.photo.light_estimate import estimated_lighting
 from specgen_addon.photo.light_probe import lighting_from_probe
 from specgen_addon.photo.photo_lighting import NO_MAP, Light, parse_lighting
 from specgen_addon.photo.sphere_image import PhotoSource
+from specgen_addon.photo.white_balance import parse_patch
 
 from . import naming
 
@@ -60,6 +62,7 @@ def photo_source(photo, image):
     if not isinstance(image, (str, os.PathLike)):
         custom = [name for name, used in (("the encoding", photo.encoding != "auto"),
                                           ("a white level", photo.white_level > 0),
+                                          ("the white patch", photo.use_white_patch),
                                           ("the sphere's circle or mask", photo.sphere.mode != "AUTO"),
                                           ("the circle preview", photo.circle_preview),
                                           ("the estimated lighting", photo.lighting == "ESTIMATE"),
@@ -67,8 +70,23 @@ def photo_source(photo, image):
         if custom:
             raise SpecGenError(f"{custom[0]} needs the photo as a file: save the image first")
         return image
+    patch = parse_patch(",".join(f"{v:g}" for v in photo.white_patch)) if photo.use_white_patch else None
     return PhotoSource(Path(image), encoding=photo.encoding, white_level=photo.white_level or None,
-                       circle=circle, mask=mask)
+                       circle=circle, mask=mask, white_patch=patch)
+
+
+def balances_to_the_light(photo) -> bool:
+    """Whether the white patch is balanced to a white surface's colour under the given light (as
+    the command line does); an estimated or chrome-ball light, photographed alike, keeps it neutral."""
+    return bool(photo.use_white_patch) and photo.lighting not in ("ESTIMATE", "PROBE")
+
+
+def balanced_to_the_light(source, lighting):
+    """``source`` with its white patch balanced to a white surface's colour under ``lighting``
+    (no bpy: runs on Generate's worker thread)."""
+    if not isinstance(source, PhotoSource) or source.white_patch is None:
+        return source
+    return replace(source, white_target=tuple(float(v) for v in lighting.white_sphere_rgb()))
 
 
 def panel_lights(photo) -> tuple[Light, ...]:

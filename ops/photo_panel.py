@@ -74,6 +74,9 @@ def draw_photo(layout, photo) -> None:
     col = body.column()
     col.prop(photo, "encoding")
     col.prop(photo, "white_level")
+    col.prop(photo, "use_white_patch")
+    if photo.use_white_patch:
+        col.prop(photo, "white_patch")
     _draw_circle(col, photo.sphere, "Sphere")
     col.prop(photo, "circle_preview")
 

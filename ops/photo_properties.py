@@ -12,6 +12,7 @@ from bpy.props import (
     CollectionProperty,
     EnumProperty,
     FloatProperty,
+    FloatVectorProperty,
     IntProperty,
     PointerProperty,
     StringProperty,
@@ -99,6 +100,12 @@ class SpecGenPhotoSettings(bpy.types.PropertyGroup):
                                description="Values at or above this count as saturated and are left "
                                            "out of every fit (EXR/HDR; 0: none; 8/16-bit files and "
                                            "RAW are checked at their own full scale)")
+    use_white_patch: BoolProperty(name="White Patch", default=False,
+                                  description="Balance the photo's white on a neutral patch or grey "
+                                              "card in it (default: as shot)")
+    white_patch: FloatVectorProperty(name="Patch", size=4, default=(0.0, 0.0, 16.0, 16.0), min=0.0,
+                                     description="The patch's left, top, width and height in the "
+                                                 "photo's pixels (y down from the top-left corner)")
     sphere: PointerProperty(type=SpecGenCircle, name="Sphere",
                             description="Where the sphere is in the photo")
     circle_preview: BoolProperty(name="Circle Preview", default=False,

@@ -96,6 +96,26 @@ def test_the_panels_photo_source_is_the_clis(panel):
     assert ours == cli
 
 
+def test_the_panels_white_patch_is_the_clis_balanced_to_the_same_light(panel, tmp_path):
+    scene, _s, photo = panel
+    photo.use_white_patch, photo.white_patch = True, (10.0, 12.0, 20.0, 16.0)
+    photo.lighting = "LIGHTS"
+    light = photo.lights.add()
+    light.azimuth, light.elevation, light.power, light.colour = math.radians(30), math.radians(20), 2.0, "3200K"
+    ours = photo_inputs.photo_source(photo, str(EXAMPLE))
+    args = _cli("--white-patch", "10,12,20,16", "--light", "30,20,2,3200K")
+    assert ours == photo_source_from_args(args, EXAMPLE)          # as read, before the light is known
+    lighting, _ = _lighting(scene, photo, tmp_path, ours)
+    assert photo_inputs.balances_to_the_light(photo)
+    cli_lighting = input_lighting_from_args(args)
+    balanced = photo_inputs.balanced_to_the_light(ours, lighting)
+    cli = photo_source_from_args(args, EXAMPLE, cli_lighting.white_sphere_rgb())
+    assert np.allclose(balanced.white_target, cli.white_target, rtol=1e-6)   # degrees ↔ radians
+    assert not np.allclose(balanced.white_target, balanced.white_target[1])    # a warm light: not grey
+    photo.lighting = "ESTIMATE"                                   # photographed alike: kept neutral
+    assert not photo_inputs.balances_to_the_light(photo)
+
+
 def test_lit_like_this_scene_with_a_sun_is_the_clis_light(panel, tmp_path):
     """A sun of strength π·P seen from the camera at azimuth A, elevation E is ``--light A,E,P``."""
     scene, _s, photo = panel
