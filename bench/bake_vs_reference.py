@@ -33,7 +33,6 @@ def main() -> int:
     ap.add_argument("tables", nargs="+", type=Path)
     ap.add_argument("--resolution", type=int, default=48)
     args = ap.parse_args()
-    import bpy
 
     import batch
     from specgen_addon.render.photo_reproduction import delta_e2000, photo_scale
@@ -58,12 +57,7 @@ def main() -> int:
             ref_rgb = linear_srgb_preview(ref, wl)
             for label, tol in (("default tolerance", bake.DEFAULT_TOLERANCE), ("complete basis", 0.0)):
                 info = bake.bake_atlas(table, Path(tmp) / f"{path.stem}_{tol}.exr", tolerance=tol)
-                bpy.ops.wm.read_factory_settings(use_empty=True)
-                sc = bpy.context.scene
-                scene_mod.add_camera(sc)
-                scene_mod.add_mesh(sc, "sphere").data.materials.append(render.make_material("check", info))
-                sc.cycles.filter_width = 0.01   # pixel centres, as the reference samples them
-                scene_mod.add_sun(sc, SUN, irradiance=np.pi)
+                sc, _ = scene_mod.new_reference_sphere_scene(render.make_material("check", info), SUN)
                 got = render.SpectralRenderJob(sc, None, samples=2, resolution=(res, res)).run()
                 psnr = [10 * np.log10(peak ** 2 / np.mean((got[..., b][mask] - ref[..., b][mask]) ** 2))
                         for b in range(0, wl.size, 4)]

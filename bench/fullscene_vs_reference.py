@@ -66,14 +66,9 @@ def check_tables(cache: Path) -> list[tuple[str, Path]]:
     return out
 
 
-def sphere_scene(bpy, render, scene_mod, info, res: int, samples: int):
+def sphere_scene(render, scene_mod, info, res: int, samples: int):
     """A new scene: the ortho camera, the sphere with the baked material, one D65 sun."""
-    bpy.ops.wm.read_factory_settings(use_empty=True)
-    sc = bpy.context.scene
-    scene_mod.add_camera(sc)
-    scene_mod.add_mesh(sc, "sphere").data.materials.append(render.make_material("check", info))
-    sc.cycles.filter_width = 0.01   # pixel centres, as the reference samples them
-    scene_mod.add_sun(sc, SUN, irradiance=np.pi)
+    sc, _ = scene_mod.new_reference_sphere_scene(render.make_material("check", info), SUN)
     sc.render.resolution_x = sc.render.resolution_y = res
     sc.cycles.samples, sc.cycles.use_denoising = samples, False
     return sc
@@ -178,7 +173,6 @@ def main() -> int:
     if args.before_after:
         before_after(named, args.resolution)
         return 0
-    import bpy
 
     import batch
     from specgen_addon.bake.closure_fit.fit_check import FitBRDF, rendered_fit_error
@@ -211,10 +205,10 @@ def main() -> int:
                                       lights=[DistantLight(SUN, np.pi)], wavelengths_nm=wl).spectral
             got = {}
             for label, exact in (("full", True), ("closures", False)):
-                sc = sphere_scene(bpy, render, scene_mod, info, res, args.samples)
+                sc = sphere_scene(render, scene_mod, info, res, args.samples)
                 got[label] = fullscene.FullSceneRenderJob(sc, None, wl, exact_direct=exact, warn=quiet,
                                                           log=quiet, preview_png=False).run()
-            sc = sphere_scene(bpy, render, scene_mod, info, res, args.samples)
+            sc = sphere_scene(render, scene_mod, info, res, args.samples)
             got["exact"] = render.SpectralRenderJob(sc, None, samples=2, resolution=(res, res),
                                                     warn=quiet).run()
             cells = [f"{fit_de:.2f}"]

@@ -22,6 +22,7 @@ from pathlib import Path
 import bpy
 import numpy as np
 
+from specgen_addon.common.atomic_io import make_output_dir
 from specgen_addon.common.errors import OutputExistsError, SpecGenError
 from specgen_addon.spectral.spectra import wavelength_grid
 from specgen_addon.bake import lookup as bake
@@ -324,13 +325,11 @@ class SPECGEN_OT_render_stack(_Modal, bpy.types.Operator):
     def _job(self, context):
         from .render import SpectralRenderJob
 
-        from specgen_addon.common.limits import check_output_dir
-
         s, sc = context.scene.specgen, context.scene
         name = self.filename or naming.render_output_name(
             sc.name, sc.camera.name if sc.camera else None, sc.frame_current)
         check_render_settings(s, name)  # a plain .exr name: never outside the folder
-        folder = check_output_dir(output_dir(s))
+        folder = make_output_dir(output_dir(s))
         if s.render_mode == "FULL_SCENE":
             from .render_fullscene import FullSceneRenderJob
 

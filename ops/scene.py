@@ -158,6 +158,23 @@ def add_sun(scene: bpy.types.Scene, direction_ref=(0.0, 0.0, 1.0), irradiance: f
     return obj
 
 
+def new_reference_sphere_scene(material: bpy.types.Material, sun_ref=(0.0, 0.0, 1.0),
+                               irradiance: float = math.pi) -> tuple[bpy.types.Scene, bpy.types.Object]:
+    """Reset Blender to an empty file and build the reference renderer's sphere scene: the
+    orthographic camera, the unit sphere wearing ``material``, one sun from ``sun_ref`` of
+    ``irradiance`` (W/m²), pixels sampled at their centres as the reference samples them; gives
+    (scene, sphere). For headless checks against the reference renderer only: it discards the
+    open file."""
+    bpy.ops.wm.read_factory_settings(use_empty=True)
+    scene = bpy.context.scene
+    add_camera(scene)
+    sphere = add_mesh(scene, "sphere")
+    sphere.data.materials.append(material)
+    scene.cycles.filter_width = 0.01
+    add_sun(scene, sun_ref, irradiance=irradiance)
+    return scene, sphere
+
+
 def set_world_environment(scene: bpy.types.Scene, image_path: Path | None, strength: float = 1.0,
                           color=(0.0, 0.0, 0.0)) -> bpy.types.World:
     """World = an equirect Environment Texture × strength (or a plain colour if no image)."""

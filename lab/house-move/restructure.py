@@ -364,11 +364,6 @@ def main() -> int:
     if kept:
         print("sys.path.insert kept (the script imports batch.py from the repository root):", *kept,
               sep="\n  ")
-    layers = Path(__file__).with_name("test_layers.py")
-    if layers.is_file():  # where move_tests.py put it, once it has run
-        dst = next(Path("tests").glob("*/test_layers.py"), Path("tests/test_layers.py"))
-        dst.write_text(layers.read_text())
-        print(f"added {dst}")
     print("modules left where they are (place them by hand):", *unknown or ["none"], sep="\n  ")
     return 0
 

@@ -42,7 +42,8 @@ def main() -> int:
     from specgen_addon.model.specgen import DEFAULT_WEIGHTS, load_weights
     from specgen_addon.train import network_inputs
     from specgen_addon.train.data import TrainingMaterial, make_batch
-    from specgen_addon.train.loop import TARGET_WAVELENGTHS_NM, _masked_mse, _tensors
+    from specgen_addon.train.loop import TARGET_WAVELENGTHS_NM, _tensors
+    from specgen_addon.train.losses import masked_mse
 
     ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     ap.add_argument("scores", type=Path, nargs="+", help="evaluate --families --json files")
@@ -80,7 +81,7 @@ def main() -> int:
         with torch.no_grad():
             pred = model.query(model.planes(t["images"]), t["theta_h"], t["theta_d"], t["phi_d"],
                                t["wavelength_nm"])
-        out.append({"material": m.name, "family": fam, "mu_law_mse": float(_masked_mse(pred, t["target"], t["valid"])),
+        out.append({"material": m.name, "family": fam, "mu_law_mse": float(masked_mse(pred, t["target"], t["valid"])),
                     "psnr": float(rows[m.name]["psnr_distant"])})
     mse = np.log10([o["mu_law_mse"] for o in out])
     psnr = np.array([o["psnr"] for o in out])

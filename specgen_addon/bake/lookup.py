@@ -46,7 +46,7 @@ from typing import Callable
 import numpy as np
 
 from specgen_addon.common.errors import Cancelled, OutputExistsError, SpecGenError
-from specgen_addon.common.atomic_io import atomic_write
+from specgen_addon.common.atomic_io import atomic_write, make_output_dir
 from specgen_addon.common.limits import check_output_dir
 from specgen_addon.brdf.table import N_PHI_D, N_THETA_D, N_THETA_H
 from specgen_addon.bake.closure_fit import ClosureFit, fit_closures
@@ -287,7 +287,7 @@ def bake_atlas(table, path: str | os.PathLike, wavelengths_nm: np.ndarray | None
         raise SpecGenError(f"tolerance must be a number between 0 and 1, got {tolerance!r}")
     if max_coeffs is not None and not (isinstance(max_coeffs, (int, np.integer)) and max_coeffs >= 1):
         raise SpecGenError(f"max_coeffs must be a whole number ≥ 1, got {max_coeffs!r}")
-    check_output_dir(Path(path).parent, create=False)   # a file in the way: refused before the work
+    check_output_dir(Path(path).parent)   # a file in the way: refused before the work
     wl = np.asarray(table.wavelengths if wavelengths_nm is None else wavelengths_nm, dtype=np.float64)
     # the closure fit only reads the table: it runs on a second thread beside the basis
     with ThreadPoolExecutor(max_workers=1) as pool:
@@ -303,7 +303,7 @@ def bake_atlas(table, path: str | os.PathLike, wavelengths_nm: np.ndarray | None
         slots, offsets = shifted_coefficients(values @ basis.T.astype(np.float32))  # (90, 90, P, K)
         tiles_x, tiles_y = atlas_layout(n_phi_d)
         info = AtlasInfo(Path(path), wl, basis, offsets, n_phi_d, tiles_x, tiles_y, rel, closures.result())
-    check_output_dir(info.path.parent, create=True)
+    make_output_dir(info.path.parent)
     shape = (tiles_y * N_THETA_D, tiles_x * N_THETA_H)
     for g, target in enumerate(info.group_paths):
         if cancel is not None and cancel():
@@ -512,7 +512,7 @@ def check_lookup_outputs(out_dir: str | os.PathLike, name: str, overwrite: bool)
     that is a file or not writable, or (without ``overwrite``) existing outputs of ``name``."""
     out = Path(out_dir)
     safe_name(name, "BRDF name")
-    check_output_dir(out, create=False)
+    check_output_dir(out)
     if not overwrite:
         existing = [p for p in (out / f"{name}.npz", out / f"{name}_lookup.json") if p.exists()]
         existing += sorted(out.glob(f"{name}_lookup.g*.exr"))

@@ -24,8 +24,8 @@ import numpy as np
 
 from specgen_addon.common.errors import BRDFFormatError
 from specgen_addon.common.atomic_io import atomic_write, write_npz
-from specgen_addon.brdf.table import COMPACT_FORMAT
-
+#: Header format of the compact material file.
+COMPACT_FORMAT = "specgen-brdf-compact"
 COMPACT_VERSION = 1
 #: Rounding step of ln(f_r): values are kept to within ±(e^(step/2) − 1) ≈ ±0.2 %.
 LOG_STEP = 1.0 / 256.0

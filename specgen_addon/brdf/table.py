@@ -22,6 +22,7 @@ from specgen_addon.common.errors import BRDFFormatError, Cancelled, SpecGenError
 from specgen_addon.common.atomic_io import atomic_write, write_npz
 from specgen_addon.brdf.rusinkiewicz import fold_phi_d, half_diff_from_io
 from specgen_addon.common.limits import bad_values
+from specgen_addon.brdf.material_file import COMPACT_FORMAT, load_compact, save_compact
 from specgen_addon.spectral.spectra import reflectance_to_linear_srgb
 
 N_THETA_H = 90
@@ -30,8 +31,6 @@ N_PHI_D = 180
 GRID_SHAPE = (N_THETA_H, N_THETA_D, N_PHI_D)
 TABLE_FORMAT = "specgen-brdf-table"
 TABLE_FORMAT_VERSION = 1
-#: Header format of the compact material file (:mod:`specgen_addon.brdf.material_file`).
-COMPACT_FORMAT = "specgen-brdf-compact"
 MU_LAW_MU = 255.0
 
 ProgressFn = Callable[[float], None]
@@ -231,8 +230,6 @@ class BRDFTable:
         if path.suffix != ".npz":
             raise SpecGenError(f"{path}: table files use the .npz suffix")
         if compact:
-            from specgen_addon.brdf.material_file import save_compact
-
             return save_compact(self, path, overwrite=overwrite)
         header = {"format": TABLE_FORMAT, "version": TABLE_FORMAT_VERSION,
                   "channels": list(self.channels), "metadata": self.metadata}
@@ -254,8 +251,6 @@ class BRDFTable:
             with np.load(path, allow_pickle=False) as z:
                 header = json.loads(bytes(z["header"]).decode())
                 if isinstance(header, dict) and header.get("format") == COMPACT_FORMAT:
-                    from specgen_addon.brdf.material_file import load_compact
-
                     values, wavelengths = load_compact(path, header, z)
                     header = {**header, "format": TABLE_FORMAT, "version": TABLE_FORMAT_VERSION}
                 else:

@@ -23,6 +23,15 @@ from specgen_addon.model import DEFAULT_WEIGHTS, RESAMPLED_WEIGHTS
 from specgen_addon.spectral.spectra import wavelength_grid
 
 
+
+def add_network_arguments(p: argparse.ArgumentParser) -> None:
+    """``--weights`` and ``--backend``: which network runs, and on what."""
+    p.add_argument("--weights", type=Path, default=None,
+                   help="weights (.pt); default: the shipped network for how the sphere was cut "
+                        "(copied from a canonical frame, or resampled from a photo)")
+    p.add_argument("--backend", choices=("torch", "onnx"), default="torch")
+
+
 def add_parser(sub: argparse._SubParsersAction) -> argparse.ArgumentParser:
     p = sub.add_parser("train", help="train SpecGen on the corpus (+ RGB BRDFs) from a config file",
                        description="Joint spectral + RGB training (paper §3.3), on CPU by default (--device). Writes OUT/"
@@ -57,10 +66,7 @@ def add_parser(sub: argparse._SubParsersAction) -> argparse.ArgumentParser:
                    help="output: .npz (compact material; full table with --full-table), .bsdf or .binary")
     p.add_argument("--full-table", action="store_true",
                    help="write the full float32 table (122 MB at 21 bands) instead of the compact file")
-    p.add_argument("--weights", type=Path, default=None,
-                   help="weights (.pt); default: the shipped network for how the sphere was cut "
-                        "(copied from a canonical frame, or resampled from a photo)")
-    p.add_argument("--backend", choices=("torch", "onnx"), default="torch")
+    add_network_arguments(p)
     p.add_argument("--bands", type=int, default=21, help="wavelength bands (default 21)")
     p.add_argument("--range", type=float, nargs=2, default=(380.0, 780.0), metavar=("START", "END"),
                    help="wavelength range in nm (default 380 780)")
@@ -74,13 +80,10 @@ def add_parser(sub: argparse._SubParsersAction) -> argparse.ArgumentParser:
                        description="Renders each test material's sphere under a distant light at 20 "
                                    "wavelengths from the predicted and the true BRDF; prints per-"
                                    "material and mean PSNR/SSIM.")
-    p.add_argument("--weights", type=Path, default=None,
-                   help="weights (.pt); default: the shipped network for how the sphere was cut "
-                        "(copied from a canonical frame, or resampled from a photo)")
+    add_network_arguments(p)
     p.add_argument("--limit", type=int, default=None, help="only the first N test materials")
     p.add_argument("--json", type=Path, default=None, help="also write the results as JSON")
     p.add_argument("--overwrite", action="store_true", help="replace an existing --json file")
-    p.add_argument("--backend", choices=("torch", "onnx"), default="torch")
     p.add_argument("--refine", action=argparse.BooleanOptionalAction, default=True,
                    help="also refine each table to its input photo and report the refined PSNR/SSIM "
                         "and both tables' self-reproduction (RGB PSNR, ΔE2000 under the input "

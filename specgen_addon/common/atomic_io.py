@@ -31,7 +31,7 @@ from pathlib import Path
 from typing import Iterable, Iterator
 
 from specgen_addon.common.errors import OutputBusyError, OutputExistsError, OutputWriteError, SpecGenError
-from specgen_addon.common.limits import check_output_file, name_max
+from specgen_addon.common.limits import check_output_dir, check_output_file, name_max
 
 #: Files and folders this process created: absolute path -> (identity, sequence number).
 _LEDGER: dict[str, tuple[tuple, int]] = {}
@@ -134,6 +134,17 @@ def make_dirs(path: str | os.PathLike) -> Path:
                 raise
             continue  # another process made it: not ours
         record_created(p)
+    return path
+
+
+def make_output_dir(path: str | os.PathLike) -> Path:
+    """An output folder, checked by :func:`~specgen_addon.common.limits.check_output_dir` and then
+    made (the folders it makes are this run's, removed on failure)."""
+    path = check_output_dir(path)
+    try:
+        make_dirs(path)
+    except OSError as exc:
+        raise SpecGenError(f"{path}: cannot create the output folder ({exc.strerror})") from None
     return path
 
 

@@ -127,11 +127,11 @@ def check_input_file(path: str | os.PathLike, what: str = "input file") -> Path:
     return path
 
 
-def check_output_dir(path: str | os.PathLike, create: bool = True) -> Path:
-    """An output folder that is (or can be made) a writable directory; refuses a file in the way.
+def check_output_dir(path: str | os.PathLike) -> Path:
+    """An output folder that is (or could be made) a writable directory; refuses a file in the way.
 
-    With ``create`` the folder is made only after every check passed (its missing ancestors are
-    checked for a file in the way first), so a refused command leaves nothing behind.
+    Its missing ancestors are checked for a file in the way too, so a refused command leaves
+    nothing behind; :func:`specgen_addon.common.atomic_io.make_output_dir` makes it.
     """
     path = check_name_length(path)
     for parent in [path, *path.parents]:
@@ -141,13 +141,6 @@ def check_output_dir(path: str | os.PathLike, create: bool = True) -> Path:
             if not os.access(parent, os.W_OK | os.X_OK):
                 raise SpecGenError(f"{path}: folder {parent} is not writable")
             break
-    if create:
-        from specgen_addon.common.atomic_io import make_dirs  # folders it makes are this run's (removed on failure)
-
-        try:
-            make_dirs(path)
-        except OSError as exc:
-            raise SpecGenError(f"{path}: cannot create the output folder ({exc.strerror})") from None
     return path
 
 

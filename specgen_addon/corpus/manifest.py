@@ -10,6 +10,7 @@ from typing import Sequence
 from specgen_addon.common.errors import SpecGenError
 from specgen_addon.common.atomic_io import atomic_write
 from specgen_addon.corpus.material import Material
+from specgen_addon.corpus.families import material_from_dict
 
 MANIFEST_FORMAT = "specgen-corpus"
 MANIFEST_VERSION = 1
@@ -39,8 +40,6 @@ def load_manifest(path: str | os.PathLike) -> list[Material]:
         raise SpecGenError(f"{path}: not a SpecGen corpus manifest")
     if doc.get("version") != MANIFEST_VERSION:
         raise SpecGenError(f"{path}: unsupported manifest version {doc.get('version')}")
-    from specgen_addon.corpus.families import material_from_dict
-
     try:
         return [material_from_dict(d) for d in doc["materials"]]
     except SpecGenError as exc:

@@ -70,7 +70,7 @@ def _corpus(a) -> None:
     limits.check_numbers({"n": a.n, "bands": a.bands})
     for name in a.tabulate:
         limits.safe_name(name, "--tabulate material name")
-    limits.check_output_dir(a.out, create=False)
+    limits.check_output_dir(a.out)
     if not a.overwrite:
         for name in a.tabulate:
             if (Path(a.out) / f"{name}.npz").exists():
@@ -100,7 +100,7 @@ def _train(a) -> None:
     for d in a.brdf_dir:
         if not Path(d).is_dir():
             raise SpecGenError(f"{d}: --brdf-dir is not a folder")
-    limits.check_output_dir(a.out, create=False)
+    limits.check_output_dir(a.out)
     out = Path(a.out)
     ckpt = out / "checkpoint.pt"
     if a.resume:
@@ -193,7 +193,7 @@ def _render_input(a) -> None:
 def _paper_tables(a) -> None:
     limits.check_output_file(a.out, overwrite=True)
     if a.img_dir is not None:
-        limits.check_output_dir(a.img_dir, create=False)
+        limits.check_output_dir(a.img_dir)
     check_weights_file(a.weights)
     limits.check_numbers({"resolution": a.resolution, "ablation-steps": a.ablation_steps,
                           "budget-minutes": a.budget_minutes})
@@ -310,7 +310,7 @@ def check_batch(args: argparse.Namespace) -> None:
         limits.check_input_file(args.brdf, "BRDF table")
         source = Path(args.brdf)
     limits.safe_name(source.stem, "input file name")
-    out = limits.check_output_dir(args.out, create=False)
+    out = limits.check_output_dir(args.out)
     mesh_tag = args.mesh if args.mesh in ("sphere", "suzanne") else Path(args.mesh).stem
     target = out / f"{source.stem}_{mesh_tag}_{args.env}.exr"
     lookup = out / "lookup"

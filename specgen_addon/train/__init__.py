@@ -5,8 +5,8 @@
 """
 
 from specgen_addon.train.loop import MaterialSet, TrainConfig
-from specgen_addon.train.material_sets import (SHARED_RGL_DIR, build_material_sets, network_inputs, png_like,
-                                               render_input_variant)
+from specgen_addon.train.material_sets import SHARED_RGL_DIR, build_material_sets, render_input_variant
+from specgen_addon.train.network_input import network_inputs, png_like
 
 __all__ = ["SHARED_RGL_DIR", "MaterialSet", "TrainConfig", "build_material_sets", "network_inputs", "png_like",
            "render_input_variant"]

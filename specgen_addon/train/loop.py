@@ -20,7 +20,6 @@ import contextlib
 import csv
 import dataclasses
 import functools
-import math
 import os
 import time
 from dataclasses import dataclass, field
@@ -37,7 +36,10 @@ from specgen_addon.model import Config, SpecGen, count_parameters, save_weights
 from specgen_addon.spectral.spectra import wavelength_grid
 from specgen_addon.train import distributed as ddp
 from specgen_addon.train.data import Batch, TrainingMaterial, make_batch
+from specgen_addon.train.lighting_mix import mix_lighting
+from specgen_addon.train.losses import balanced_mse, foreshortening, masked_mse, rendered_scale_loss
 from specgen_addon.train.prefetch import step_batches
+from specgen_addon.train.real_rgb import real_loss, real_source
 from specgen_addon.common.cache import cache_root
 from specgen_addon.corpus.generate import check_mix, material_family
 from specgen_addon.model import load_weights
@@ -351,8 +353,6 @@ def _draw(rng: np.random.Generator, mset: MaterialSet, k: int, canonical_fractio
                 imgs.append(drawn[1])
                 continue
         if lighting == "mix":
-            from specgen_addon.train.lighting_mix import mix_lighting
-
             mats.append(mset.materials[i])
             imgs.append(mix_lighting(stack, rng, canonical_p=canonical_fraction))
             continue
@@ -371,8 +371,6 @@ def recycle_census(spectral: MaterialSet, rgb: MaterialSet, tcfg: TrainConfig,
     """The inputs the dead-unit census of a warm start sees: the canonical input of up to
     ``limit`` training materials and, with ``lighting="mix"``, each again under a drawn
     lighting (drawn from the run's seed, so a run stays reproducible)."""
-    from specgen_addon.train.lighting_mix import mix_lighting
-
     seen: set[int] = set()      # an RGB version shares its spectral original's input stack
     stacks = [s for mset in (spectral, rgb) for s in mset.images
               if id(s) not in seen and not seen.add(id(s))][:limit]
@@ -396,62 +394,6 @@ def _device_of(model: torch.nn.Module) -> torch.device:
     return next(model.parameters()).device
 
 
-def _masked_mse(pred: torch.Tensor, target: torch.Tensor, valid: torch.Tensor) -> torch.Tensor:
-    return ((pred - target) ** 2 * valid).sum() / valid.sum().clamp_min(1.0)
-
-
-def balanced_mse(pred: torch.Tensor, target: torch.Tensor, valid: torch.Tensor,
-                 floor: float) -> torch.Tensor:
-    """The masked MSE of ``(B, N)`` arrays in value, with the gradient of
-    M̄ · mean_m log(MSE_m + floor·M̄) over the rows (materials), M̄ the batch's mean MSE held constant.
-
-    The quality figure is a mean over materials of PSNR = −10·log10(MSE_m) (up to each material's
-    normalisation), so a material's error counts relative to its own level: halving a well-fitted
-    material's error gains as many dB as halving a poor one's. The gradient weighs each material's
-    MSE by M̄ / (MSE_m + floor·M̄): the plain MSE's scale (and learning rate) is kept while the step
-    steers as the figure does, and the floor keeps a nearly perfect material from taking the whole
-    step. The value stays the plain MSE, so logged losses compare with the paper loss's.
-    """
-    squared = (pred - target) ** 2 * valid
-    per = squared.sum(dim=1) / valid.sum(dim=1).clamp_min(1.0)
-    level = per.mean().detach().clamp_min(1e-12)
-    weights = (level / (per + floor * level)).detach()
-    steer = (weights * per).mean()
-    pooled = squared.sum() / valid.sum().clamp_min(1.0)   # the value _masked_mse gives
-    return pooled.detach() + steer - steer.detach()
-
-
-def inverse_mu_law(r: torch.Tensor, mu: float) -> torch.Tensor:
-    """f_r (sr⁻¹) from r′ = ln(1 + μ·f_r) / ln(1 + μ), the inverse of the paper's μ-law."""
-    return torch.expm1(r * math.log1p(mu)) / mu
-
-
-def foreshortening(theta_h: torch.Tensor, theta_d: torch.Tensor, phi_d: torch.Tensor) -> torch.Tensor:
-    """min(cos θi, cos θo) of Rusinkiewicz angles (radians), clamped at 0.
-
-    cos θi,o = cos θh·cos θd ∓ sin θh·sin θd·cos φd; the smaller of the two is symmetric in
-    i ↔ o, so the weight needs no convention for which direction is the light.
-    """
-    c = (torch.cos(theta_h) * torch.cos(theta_d)
-         - torch.sin(theta_h) * torch.sin(theta_d) * torch.cos(phi_d).abs())
-    return c.clamp_min(0.0)
-
-
-def rendered_scale_loss(pred: torch.Tensor, target: torch.Tensor, valid: torch.Tensor,
-                        cos_weight: torch.Tensor, mu: float) -> torch.Tensor:
-    """Linear-space error of the radiance a BRDF sends toward a distant light's viewer, relative to
-    each material's brightest sampled point: mean of ((f̂ − f)·cos / max(f·cos))² per row.
-
-    The μ-law MSE weighs a relative error alike at every level; a rendered image's PSNR (normalised
-    by its bright end) weighs the absolute error of the highlight and the body's overall scale.
-    This term puts that weight into training. Arrays are ``(B, N)``; ``pred``/``target`` are r′.
-    """
-    f_true = inverse_mu_law(target, mu) * cos_weight
-    f_pred = inverse_mu_law(pred.clamp(max=3.0), mu) * cos_weight   # r′ ≤ 3: f ≤ 6.6·10⁴ sr⁻¹
-    scale = (f_true * valid).amax(dim=1, keepdim=True).clamp_min(1e-4).detach()
-    return _masked_mse(f_pred / scale, f_true / scale, valid)
-
-
 def group_loss(model: SpecGen, b: Batch, linear_weight: float = 0.0, balance: str = "mean",
                balance_floor: float = 0.1) -> tuple[torch.Tensor, torch.Tensor]:
     """(data term, TV of the generated planes) for one batch group.
@@ -466,7 +408,7 @@ def group_loss(model: SpecGen, b: Batch, linear_weight: float = 0.0, balance: st
     if balance == "log":
         data = balanced_mse(pred, t["target"], t["valid"], balance_floor)
     else:
-        data = _masked_mse(pred, t["target"], t["valid"])
+        data = masked_mse(pred, t["target"], t["valid"])
     if linear_weight > 0:
         cos_w = foreshortening(t["theta_h"], t["theta_d"], t["phi_d"])
         data = data + linear_weight * rendered_scale_loss(pred, t["target"], t["valid"], cos_w,
@@ -554,8 +496,6 @@ def train(mcfg: Config, tcfg: TrainConfig, spectral: MaterialSet, rgb: MaterialS
     if len(spectral) == 0 and len(rgb) == 0:
         raise SpecGenError("no training materials")
     if real is None and tcfg.real_materials_per_step > 0:
-        from specgen_addon.train.real_rgb import real_source
-
         real = real_source(tcfg, cache_root() / "train-data", log=print if show_progress else (lambda _m: None))
     if tcfg.family_draw is not None:  # once, before any output and before data workers fork
         spectral, rgb = (dataclasses.replace(m, draw_p=family_draw_probabilities(m.materials, tcfg.family_draw))
@@ -660,8 +600,6 @@ def train(mcfg: Config, tcfg: TrainConfig, spectral: MaterialSet, rgb: MaterialS
             opt.zero_grad(set_to_none=True)
             g_real = None
             if real is not None:
-                from specgen_addon.train.real_rgb import real_loss
-
                 g_real = real_loss(model, real.batch(tcfg.seed, step, mcfg.image_size,
                                                      tcfg.angles_per_material, mcfg.mu))
             loss, parts = total_loss(tcfg, *step_losses(b_spec, b_rgb), g_real)
@@ -712,7 +650,7 @@ def evaluate_batch(model: SpecGen, b: Batch) -> float:
     t = _tensors(b, _device_of(model))
     pred = model(t["images"], t["theta_h"], t["theta_d"], t["phi_d"], t["wavelength_nm"])
     model.train(was)
-    return float(_masked_mse(pred, t["target"], t["valid"]))
+    return float(masked_mse(pred, t["target"], t["valid"]))
 
 
 def _tdict(tcfg: TrainConfig, ignore_budget: bool = False) -> dict[str, Any]:

@@ -24,8 +24,9 @@ from specgen_addon.train.loop import MaterialSet, TrainConfig
 from specgen_addon.corpus import generate_corpus
 from specgen_addon.corpus.generate import generate_mixed_corpus
 from specgen_addon.photo import sphere_image as input_image
-from specgen_addon.photo.resample import resample_square
-from specgen_addon.spectral.spectra import srgb_decode, srgb_encode
+from specgen_addon.train.lighting_mix import COMPONENTS, ComponentCache
+from specgen_addon.train.network_input import network_inputs
+from specgen_addon.train.recolour import AffinePairCache
 
 SHARED_RGL_DIR = Path(__file__).resolve().parents[3] / "shared" / "data" / "rgl"
 
@@ -33,23 +34,6 @@ SHARED_RGL_DIR = Path(__file__).resolve().parents[3] / "shared" / "data" / "rgl"
 def render_input_variant(brdf, variant: int) -> np.ndarray:
     """Canonical sphere render ``(128, 128, 3)`` of ``brdf`` under training lighting ``variant``."""
     return input_image.render_training_input(brdf, variant)
-
-
-def png_like(image: np.ndarray) -> np.ndarray:
-    """What an 8-bit sRGB PNG of a linear render holds once read back: clipped to [0, 1], quantised."""
-    q = np.round(srgb_encode(np.clip(image, 0.0, 1.0)) * 255.0) / 255.0
-    return srgb_decode(q).astype(np.float32)
-
-
-def network_inputs(images: list[np.ndarray], image_size: int, png_augment: bool = False) -> np.ndarray:
-    """Renders -> network inputs ``(K, 3, S, S)`` exactly as inference prepares a user image.
-
-    With ``png_augment`` each render also appears as its 8-bit PNG version (highlights clipped),
-    so the network copes with PNG/JPEG inputs as well as linear EXR (2K images).
-    """
-    if png_augment:
-        images = list(images) + [png_like(im) for im in images]
-    return np.stack([resample_square(input_image.prepare_sphere_array(im), image_size) for im in images])
 
 
 def build_material_sets(mcfg: Config, tcfg: TrainConfig, cache_dir: str | Path,
@@ -107,8 +91,6 @@ def build_material_sets(mcfg: Config, tcfg: TrainConfig, cache_dir: str | Path,
 def _mixed_lighting_sets(mcfg: Config, tcfg: TrainConfig, cache_dir: Path, spectral, rgb, valset,
                         log: Callable[[str], None], progress: bool):
     """Material sets whose images are lighting-component stacks (:mod:`.lighting_mix`)."""
-    from specgen_addon.train.lighting_mix import COMPONENTS, ComponentCache
-
     cache = ComponentCache(cache_dir)
     valset = valset[: tcfg.val_materials]  # only these are ever used
     everything = spectral + [m for m in rgb if not m.name.endswith("/rgb")] + valset
@@ -144,8 +126,6 @@ def _fill_with_bar(fill: Callable[..., None], mats: list[TrainingMaterial], n_to
 def _recolour_source(tcfg: TrainConfig, cache_dir: Path, mats: list[TrainingMaterial],
                      log: Callable[[str], None], progress: bool):
     """Per-band canonical renders of the corpus's recolourable training materials (:mod:`.recolour`)."""
-    from specgen_addon.train.recolour import AffinePairCache
-
     cache = AffinePairCache(cache_dir)
     todo = cache.missing(mats)
     if todo:

@@ -44,8 +44,8 @@ from specgen_addon.brdf.formats import load_brdf
 from specgen_addon.brdf.rusinkiewicz import io_from_half_diff
 from specgen_addon.brdf.table import mu_law_encode
 from specgen_addon.photo import sphere_image as input_image
-from specgen_addon.train import network_inputs, png_like
-from specgen_addon.train.loop import _masked_mse, inverse_mu_law
+from specgen_addon.train.losses import inverse_mu_law, masked_mse
+from specgen_addon.train.network_input import network_inputs, png_like
 
 #: Bands (nm) at which the spectral branch is queried and projected to RGB for a real material.
 REAL_BANDS_NM = wavelength_grid(380.0, 780.0, 16)
@@ -162,8 +162,8 @@ def real_loss(model: Any, b: RealBatch, projection: torch.Tensor | None = None,
     rgb = (inverse_mu_law(r.clamp(max=3.0), mu) @ m.to(dev)).clamp_min(0.0)               # (B, N, 3)
     pred_rgb = torch.log1p(mu * rgb) / math.log1p(mu)
     v3 = valid.unsqueeze(-1).expand(-1, -1, 3)
-    colour = _masked_mse(pred_rgb, t(b.target_rgb), v3)
-    grey = _masked_mse(model.query(planes, th, td, pd, None), t(b.target_grey), valid)
+    colour = masked_mse(pred_rgb, t(b.target_rgb), v3)
+    grey = masked_mse(model.query(planes, th, td, pd, None), t(b.target_grey), valid)
     return colour + grey, model.tv_loss(planes)
 
 

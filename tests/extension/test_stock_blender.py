@@ -79,8 +79,11 @@ def test_full_zip_validates_bundles_its_wheels_and_stays_under_60_mb(full_zip):
 
 
 # --------------------------------------------------------------------------- stock Blender
-SCRIPT = r'''
-import importlib.abc, json, os, sys
+#: What every script below starts with: the packages a stock Blender lacks are blocked, and
+#: Blender's bundled modules (OpenImageIO, oslquery, ...), which the bpy module keeps in its wheel,
+#: are put on sys.path where a real Blender has them.
+STOCK_PRELUDE = r'''
+import importlib.abc, json, os, runpy, sys
 BLOCKED = set(json.loads(os.environ["SPECGEN_BLOCKED"]))
 
 class Block(importlib.abc.MetaPathFinder):
@@ -91,10 +94,10 @@ class Block(importlib.abc.MetaPathFinder):
 
 sys.meta_path.insert(0, Block())
 import bpy  # noqa: E402
-# A real Blender has its bundled modules (OpenImageIO, oslquery, ...) on sys.path; the bpy module
-# keeps them in the wheel, so put them where Blender would.
-site = os.path.join(bpy.utils.resource_path("LOCAL"), "python", "lib", "python3.11", "site-packages")
-sys.path.append(site)
+sys.path.append(os.path.join(bpy.utils.resource_path("LOCAL"), "python", "lib", "python3.11", "site-packages"))
+'''
+
+SCRIPT = STOCK_PRELUDE + r'''
 zip_path, image, out = sys.argv[1:4]
 r = bpy.ops.extensions.package_install_files(filepath=zip_path, repo="user_default",
                                              enable_on_install=True)
@@ -253,19 +256,7 @@ def test_numpy_ndimage_twins_match_scipy():
                                ndimage.map_coordinates(img[..., 0], [y, x], order=1, mode="nearest"), atol=1e-12)
 
 
-BATCH_SCRIPT = r'''
-import importlib.abc, json, os, runpy, sys
-BLOCKED = set(json.loads(os.environ["SPECGEN_BLOCKED"]))
-
-class Block(importlib.abc.MetaPathFinder):
-    def find_spec(self, name, path=None, target=None):
-        if name.split(".")[0] in BLOCKED:
-            raise ImportError(f"{name} is not in a stock Blender")
-        return None
-
-sys.meta_path.insert(0, Block())
-import bpy  # noqa: E402
-sys.path.append(os.path.join(bpy.utils.resource_path("LOCAL"), "python", "lib", "python3.11", "site-packages"))
+BATCH_SCRIPT = STOCK_PRELUDE + r'''
 script = sys.argv[1]
 sys.argv = ["blender", "--background", "--python", script, "--", *sys.argv[2:]]
 runpy.run_path(script, run_name="__main__")

@@ -130,19 +130,7 @@ def test_package_init_files_only_re_export(init):
 #: that the importing module does not load itself, so the panel's path in a stock Blender and the
 #: CLI's start stay light. Any other in-function import is listed here with its reason; new ones
 #: fail. ``python3 lab/house-move/lift_imports.py`` lifts what is safe to lift.
-IN_FUNCTION_ALLOWED = {
-    ("specgen_addon/brdf/table.py", "specgen_addon.brdf.material_file"): "circle: the material file builds tables",
-    ("specgen_addon/brdf/formats/load.py", "specgen_addon.brdf.formats.rgl"): "circle: the formats package re-exports load",
-    ("specgen_addon/brdf/formats/load.py", "specgen_addon.brdf.formats.merl"): "circle: the formats package re-exports load",
-    ("specgen_addon/bake/closure_fit/closures.py", "specgen_addon.bake.closure_fit.fit_check"):
-        "circle: fit_check evaluates the closures",
-    ("specgen_addon/common/limits.py", "specgen_addon.common.atomic_io"): "circle: atomic writes check limits",
-    ("specgen_addon/corpus/manifest.py", "specgen_addon.corpus.families"): "circle: the families read manifests",
-    ("specgen_addon/train/loop.py", "specgen_addon.train.lighting_mix"): "circle: the lighting mix trains through the loop",
-    ("specgen_addon/train/loop.py", "specgen_addon.train.real_rgb"): "circle: real RGB training reuses the loop's loss",
-    ("specgen_addon/train/material_sets.py", "specgen_addon.train.lighting_mix"): "circle: through train.loop",
-    ("specgen_addon/train/material_sets.py", "specgen_addon.train.recolour"): "circle: through train.loop",
-}
+IN_FUNCTION_ALLOWED: dict = {}
 _STDLIB = set(__import__("sys").stdlib_module_names) | {"__future__"}
 
 
@@ -239,3 +227,71 @@ def test_imports_inside_functions_are_lazy_for_an_optional_package_or_listed():
                 bad.append(f"{rel}:{node.lineno} imports {node.module} inside {fn.name}()")
     assert not bad, ("imports inside functions that could be at module level (or list them with a "
                      "reason in IN_FUNCTION_ALLOWED):\n" + "\n".join(sorted(set(bad))))
+
+
+def _import_graph() -> dict[str, set[str]]:
+    """Module → the ``specgen_addon`` modules it imports, at load or inside a function (with the
+    packages above them, whose ``__init__`` runs first), its own enclosing packages left out: they
+    are already loading when it runs."""
+    known = {_dotted(p) for p in _modules()}
+    graph = {}
+    for p in _modules():
+        m = _dotted(p)
+        own = {".".join(m.split(".")[:i]) for i in range(1, m.count(".") + 2)}
+        targets = set()
+        for _, name in _imports(p):
+            parts = name.split(".")
+            targets |= {".".join(parts[:i]) for i in range(2, len(parts) + 1)} & known
+        graph[m] = targets - own
+    return graph
+
+
+def _a_circle(graph: dict[str, set[str]]) -> list[str] | None:
+    """One import circle of ``graph`` (a list that starts and ends at the same module), or None."""
+    state: dict[str, int] = {}      # 1: on the current path, 2: finished
+    path: list[str] = []
+
+    def visit(m: str) -> list[str] | None:
+        state[m] = 1
+        path.append(m)
+        for n in sorted(graph.get(m, ())):
+            if state.get(n) == 1:
+                return path[path.index(n):] + [n]
+            if n not in state and (found := visit(n)):
+                return found
+        path.pop()
+        state[m] = 2
+        return None
+
+    for m in sorted(graph):
+        if m not in state and (found := visit(m)):
+            return found
+    return None
+
+
+def test_the_circle_finder_finds_a_circle():
+    assert _a_circle({"a": {"b"}, "b": {"c"}, "c": {"a"}}) == ["a", "b", "c", "a"]
+    assert _a_circle({"a": {"b"}, "b": {"c"}, "c": set()}) is None
+
+
+def test_no_import_circle():
+    circle = _a_circle(_import_graph())
+    assert circle is None, "modules import each other: " + " → ".join(circle)
+
+
+def test_no_module_imports_names_from_its_own_package_init():
+    """A module that takes names from the ``__init__`` of a package it is in imports a package
+    that is still loading: it works only in some import orders. It imports the defining module."""
+    known = {_dotted(p) for p in _modules()}
+    bad = []
+    for p in _modules():
+        m = _dotted(p)
+        if p.name == "__init__.py":
+            continue
+        own = {".".join(m.split(".")[:i]) for i in range(2, m.count(".") + 1)}
+        for node in ast.walk(ast.parse(p.read_text(encoding="utf-8"))):
+            if isinstance(node, ast.ImportFrom) and node.module in own:
+                names = [a.name for a in node.names if f"{node.module}.{a.name}" not in known]
+                if names:
+                    bad.append(f"{p.relative_to(REPO)}:{node.lineno} takes {', '.join(names)} from {node.module}")
+    assert not bad, "\n".join(bad)

@@ -30,7 +30,7 @@ def _mirror_like(th, td, pd):
 
 
 def _render(table: BRDFTable, tmp_path, sun) -> tuple[np.ndarray, np.ndarray]:
-    bpy = pytest.importorskip("bpy")
+    pytest.importorskip("bpy")
     from addon_modules import addon_module
 
     from specgen_addon.render import DistantLight, render_spectral, sphere_geometry
@@ -39,12 +39,7 @@ def _render(table: BRDFTable, tmp_path, sun) -> tuple[np.ndarray, np.ndarray]:
     render = addon_module("ops.render")
     scene_mod = addon_module("ops.scene")
     info = bake.bake_atlas(table, tmp_path / "t.exr", tolerance=0.0)
-    bpy.ops.wm.read_factory_settings(use_empty=True)
-    sc = bpy.context.scene
-    scene_mod.add_camera(sc)
-    scene_mod.add_mesh(sc, "sphere").data.materials.append(render.make_material("SpecGen mirror", info))
-    sc.cycles.filter_width = 0.01   # pixel centres, as the reference samples them
-    scene_mod.add_sun(sc, sun, irradiance=np.pi)
+    sc, _ = scene_mod.new_reference_sphere_scene(render.make_material("SpecGen mirror", info), sun)
     got = render.SpectralRenderJob(sc, None, samples=1, resolution=(RES, RES)).run()
     ref = render_spectral(table, sphere_geometry(RES), lights=[DistantLight(sun, np.pi)],
                           wavelengths_nm=WL).spectral

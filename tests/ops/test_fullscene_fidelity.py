@@ -92,14 +92,7 @@ def _sphere_scene(addon: SimpleNamespace, info, name: str, sun, res: int):
     """An empty .blend with the bench's sphere wearing SpecGen material ``name`` of lookup ``info``,
     an orthographic camera sampling pixel centres and a sun of irradiance π from ``sun``; gives
     (scene, sphere)."""
-    bpy = addon.bpy
-    bpy.ops.wm.read_factory_settings(use_empty=True)
-    sc = bpy.context.scene
-    addon.scene.add_camera(sc)
-    sphere = addon.scene.add_mesh(sc, "sphere")
-    sphere.data.materials.append(addon.render.make_material(name, info))
-    sc.cycles.filter_width = 0.01
-    addon.scene.add_sun(sc, sun, irradiance=np.pi)
+    sc, sphere = addon.scene.new_reference_sphere_scene(addon.render.make_material(name, info), sun)
     sc.render.resolution_x = sc.render.resolution_y = res
     return sc, sphere
 

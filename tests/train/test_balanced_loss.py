@@ -6,7 +6,8 @@ import pytest
 import torch
 
 from specgen_addon.common.errors import SpecGenError
-from specgen_addon.train.loop import TrainConfig, _masked_mse, balanced_mse
+from specgen_addon.train.loop import TrainConfig
+from specgen_addon.train.losses import balanced_mse, masked_mse
 
 
 def _rows(seed: int = 0) -> tuple[torch.Tensor, torch.Tensor, torch.Tensor]:
@@ -21,7 +22,7 @@ def _rows(seed: int = 0) -> tuple[torch.Tensor, torch.Tensor, torch.Tensor]:
 
 def test_balanced_mse_has_the_plain_mse_as_its_value() -> None:
     pred, target, valid = _rows()
-    assert torch.allclose(balanced_mse(pred, target, valid, 0.1), _masked_mse(pred, target, valid))
+    assert torch.allclose(balanced_mse(pred, target, valid, 0.1), masked_mse(pred, target, valid))
 
 
 def test_balanced_mse_gradient_is_that_of_the_mean_log_of_each_materials_mse() -> None:
@@ -38,7 +39,7 @@ def test_balanced_mse_gradient_is_that_of_the_mean_log_of_each_materials_mse() -
 def test_balanced_mse_weighs_a_well_fitted_material_more_than_the_plain_mse_does() -> None:
     pred, target, valid = _rows(2)
     grads = []
-    for fn in (lambda p: balanced_mse(p, target, valid, 0.1), lambda p: _masked_mse(p, target, valid)):
+    for fn in (lambda p: balanced_mse(p, target, valid, 0.1), lambda p: masked_mse(p, target, valid)):
         p = pred.clone().requires_grad_(True)
         fn(p).backward()
         grads.append(p.grad.abs().sum(1) / (pred - target).abs().mul(valid).sum(1))

@@ -7,7 +7,7 @@ import torch
 
 from specgen_addon.brdf.rusinkiewicz import io_from_half_diff
 from specgen_addon.brdf.table import mu_law_encode
-from specgen_addon.train.loop import foreshortening, inverse_mu_law, rendered_scale_loss
+from specgen_addon.train.losses import foreshortening, inverse_mu_law, rendered_scale_loss
 from tiny_training import twice_and_without
 
 

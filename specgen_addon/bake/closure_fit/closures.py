@@ -51,6 +51,7 @@ from specgen_addon.common.errors import SpecGenError
 from specgen_addon.brdf.rusinkiewicz import io_from_half_diff
 from specgen_addon.brdf.table import N_THETA_H, grid_angles
 from specgen_addon.spectral.spectra import reflectance_to_linear_srgb
+from specgen_addon.bake.closure_fit.fit_check import rendered_fit_error
 
 #: Roughness candidates (Blender's roughness, α = r²): near-mirror to fully rough.
 ROUGHNESS_GRID = np.geomspace(0.04, 1.0, 30)
@@ -702,8 +703,6 @@ def fit_closures(table, wavelengths_nm: np.ndarray | None = None, max_lobes: int
     if weighting not in WEIGHTINGS:
         raise SpecGenError(f"unknown weighting {weighting!r}; choose one of {', '.join(WEIGHTINGS)}")
     if check:
-        from specgen_addon.bake.closure_fit.fit_check import rendered_fit_error
-
         fits = []
         for w in WEIGHTINGS:
             fits.append(fit_closures(table, wavelengths_nm, max_lobes, roughness_grid, ior, per_band,

@@ -13,6 +13,8 @@ import numpy as np
 
 from specgen_addon.brdf.table import BRDFTable
 from specgen_addon.common.errors import BRDFFormatError
+from specgen_addon.brdf.formats.merl import read_merl
+from specgen_addon.brdf.formats.rgl import read_rgl, tabulate_rgl
 
 RGL_MAGIC = b"tensor_file\0"
 NPZ_MAGIC = b"PK\x03\x04"
@@ -45,12 +47,8 @@ def load_brdf(path: str | Path):
     """Load any supported BRDF file as an evaluable object (table or RGL BSDF)."""
     kind = detect_format(path)
     if kind == "rgl":
-        from specgen_addon.brdf.formats.rgl import read_rgl
-
         return read_rgl(path)
     if kind == "merl":
-        from specgen_addon.brdf.formats.merl import read_merl
-
         return read_merl(path).to_table(source=str(path))
     return BRDFTable.load(path)
 
@@ -60,6 +58,4 @@ def tabulate_file(path: Path, wavelengths_nm: np.ndarray, progress=None) -> BRDF
     brdf = load_brdf(path)
     if isinstance(brdf, BRDFTable):
         return brdf
-    from specgen_addon.brdf.formats.rgl import tabulate_rgl
-
     return tabulate_rgl(brdf, wavelengths_nm if brdf.is_spectral else None, progress=progress)

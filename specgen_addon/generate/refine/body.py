@@ -13,8 +13,7 @@ its lobe, and the network's own metal spectra are the better prior. :func:`has_s
 tells the two apart from the network's table.
 
 Two mixes of the priors are options, not defaults (:func:`blended_body`, :func:`blind_share`): on
-fresh validation photos both lost to Otsu 2018's body alone (docs/refinement.md, "Thirty-seventh
-session").
+fresh validation photos both lost to Otsu 2018's body alone (lab/notebook/refinement-priors.md).
 """
 
 from __future__ import annotations

@@ -101,8 +101,8 @@ class RefineOptions:
     clipped at 1 like the photo before they are scored (``None``: a linear EXR photo, nothing is
     clipped). ``fit_floor`` τ: the fit leaves at least τ × the renderer's own sampling-error variance
     as its residual (measured per photo, :mod:`.discrepancy`), and keeps the network's table where that
-    already does; ``None`` fits as closely as the prior allows (the behaviour before the thirty-fourth
-    session). ``relax_below_db``: below this self-reproduction the smoothness is relaxed and the better
+    already does; ``None`` fits as closely as the prior allows (the behaviour of earlier
+    versions). ``relax_below_db``: below this self-reproduction the smoothness is relaxed and the better
     fit kept, if it reproduces the photo at least ``relax_min_gain_db`` better; with ``relax_holdout`` it
     is tried only if it also predicts held-out pixels better (:mod:`.holdout`); ``relax_axes``: the
     smoothness it loosens (``"both"``, or ``"theta_h"`` only). ``lobe_holdout``: the lobe's

@@ -26,7 +26,8 @@ from specgen_addon.photo.resample import resample_square
 from specgen_addon.spectral.spectra import DEFAULT_WAVELENGTHS_NM
 from specgen_addon.brdf.table import GRID_SHAPE, N_PHI_D, N_THETA_D, N_THETA_H, BRDFTable, mu_law_decode_inplace
 from specgen_addon.common.limits import bad_values
-from specgen_addon.model import DEFAULT_WEIGHTS, Config, shipped_weights
+from specgen_addon.model.config import Config
+from specgen_addon.model.shipped import DEFAULT_WEIGHTS, shipped_weights
 from specgen_addon.model.checksums import verify
 from specgen_addon.photo import sphere_image as input_image
 
@@ -86,7 +87,7 @@ class _TorchBackend:
     def __init__(self, weights: Path):
         import torch
 
-        from specgen_addon.model import load_weights
+        from specgen_addon.model.specgen import load_weights
         from specgen_addon.model.runtime.fast import GridHead, GridTables
 
         self.torch = torch
