@@ -9,10 +9,12 @@ the panel do, values read linearly), and
 * against the **mask's circle** (:func:`mask_circle`: the soft mask's centroid and its
   area-equivalent radius, as ``--mask`` uses it): the centre's distance and the radius' difference
   (found − mask), px;
-* against the **silhouette**: the circle through the photo's own outline, measured where every
-  side of the ball is lit, on the brightest-of-twelve image (for the chrome ball, nearly black
-  but for the lamp's reflection, the brightest-of-twelve shows its rim only in part): the same
-  two figures;
+* against the **silhouette**: the circle through the photo's own outline, measured without a
+  model where every side of the ball is lit, on the brightest-of-twelve image: along 360 rays from
+  the mask's centre, the point where the brightness is halfway between the rim's (3 px inside)
+  and the ground's (3–6 px outside), the stand below left out, a least-squares circle through
+  those points (:func:`half_rise_circle`; its radius reads about 0.2 px small, the rim's shading
+  still falling towards the edge 3 px inside). The same two figures;
 * the time (CPU seconds, process time) the finding took.
 
     .venv/bin/python bench/ball_finding.py [--kinds gray chrome] [--photos 0 1 ...]
@@ -32,11 +34,39 @@ sys.path.insert(0, str(REPO))
 
 from bench.machine import describe_machine
 from specgen_addon.common.errors import ImageInputError
+from specgen_addon.photo.ndimage_np import fit_circle, map_coordinates
 from specgen_addon.photo.read import read_photo
-from specgen_addon.photo.sphere_detect import find_ball
+from specgen_addon.photo.sphere_detect import luminance
 from specgen_addon.photo.sphere_image import crop_sphere, mask_circle, read_mask
 
 DATA = REPO.parent / "shared" / "data" / "photos" / "psm_gray_chrome"
+
+
+def half_rise_circle(lum: np.ndarray, cx: float, cy: float, r: float, rays: int = 360,
+                     below: tuple[float, float] = (30.0, 150.0)) -> tuple[float, float, float] | None:
+    """The silhouette near (cx, cy, r) without a model (module docstring): rays whose angle (degrees,
+    y down) lies in ``below`` (the stand) and rays with under a tenth of the best rim's contrast
+    are left out."""
+    phi = (np.arange(rays) + 0.5) / rays * 2 * np.pi
+    deg = np.degrees(phi)
+    phi = phi[(deg < below[0]) | (deg > below[1])]
+    rho = np.arange(r - 6.0, r + 6.0 + 1e-9, 0.05)
+    x, y = cx + np.cos(phi)[:, None] * rho, cy + np.sin(phi)[:, None] * rho
+    prof = map_coordinates(lum, [y - 0.5, x - 0.5], order=1, mode="nearest")
+    rim = prof[:, np.searchsorted(rho, r - 3.0)]
+    ground = np.median(prof[:, rho > r + 3.0], axis=1)
+    half = 0.5 * (rim + ground)
+    ok = rim - ground > 0.1 * np.max(rim - ground)
+    fall = (prof < half[:, None]) & (rho > r - 3.0)[None]
+    j = np.argmax(fall, axis=1)
+    ok &= fall.any(axis=1) & (j > 0)
+    k = np.nonzero(ok)[0]
+    if k.size < 10:
+        return None
+    a, b = prof[k, j[k] - 1], prof[k, j[k]]
+    edge = rho[j[k] - 1] + (a - half[k]) / (a - b) * (rho[1] - rho[0])
+    fx, fy, fr = fit_circle(np.stack([cx + edge * np.cos(phi[k]), cy + edge * np.sin(phi[k])], -1))
+    return float(fx), float(fy), float(fr)
 
 
 def _offsets(found, ref) -> tuple[float, float]:
@@ -47,10 +77,7 @@ def run(kind: str, photos: list[int]) -> list[dict]:
     rgbs = {i: read_photo(DATA / kind / f"{kind}.{i}.tga", encoding="linear").rgb[..., :3]
             for i in range(12)}
     mask = mask_circle(read_mask(DATA / kind / f"{kind}.mask.tga", rgbs[0].shape[:2]))
-    try:
-        silhouette = find_ball(np.max(list(rgbs.values()), axis=0)).circle
-    except ImageInputError:
-        silhouette = None
+    silhouette = half_rise_circle(luminance(np.max(list(rgbs.values()), axis=0)), *mask)
     print(f"\n{kind}: mask's circle ({mask[0]:.2f}, {mask[1]:.2f}, r {mask[2]:.2f})"
           + ("" if silhouette is None else
              f"; silhouette ({silhouette[0]:.2f}, {silhouette[1]:.2f}, r {silhouette[2]:.2f})"))
