@@ -79,7 +79,7 @@ def run(kind: str, photos: list[int]) -> list[dict]:
     mask = mask_circle(read_mask(DATA / kind / f"{kind}.mask.tga", rgbs[0].shape[:2]))
     silhouette = half_rise_circle(luminance(np.max(list(rgbs.values()), axis=0)), *mask)
     print(f"\n{kind}: mask's circle ({mask[0]:.2f}, {mask[1]:.2f}, r {mask[2]:.2f})"
-          + ("" if silhouette is None else
+          + ("; silhouette not measured (no rim stands out)" if silhouette is None else
              f"; silhouette ({silhouette[0]:.2f}, {silhouette[1]:.2f}, r {silhouette[2]:.2f})"))
     print("photo | found (cx, cy, r) px | vs mask: centre, radius px | vs silhouette: centre, radius px | CPU s")
     rows = []
@@ -97,8 +97,9 @@ def run(kind: str, photos: list[int]) -> list[dict]:
             continue
         dm, rm = _offsets(found, mask)
         ds, rs = _offsets(found, silhouette) if silhouette else (float("nan"), float("nan"))
+        vs_silhouette = f"{ds:.2f}, {rs:+.2f}" if silhouette else "not measured"
         print(f"{i:5d} | ({found[0]:.2f}, {found[1]:.2f}, {found[2]:.2f}) | {dm:.2f}, {rm:+.2f} | "
-              f"{ds:.2f}, {rs:+.2f} | {cpu:.2f}")
+              f"{vs_silhouette} | {cpu:.2f}")
         rows.append({"photo": i, "found": found, "how": how, "mask": (dm, rm), "silhouette": (ds, rs),
                      "cpu_s": cpu})
     ok = [r for r in rows if r["found"] is not None]
