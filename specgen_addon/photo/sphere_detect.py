@@ -60,7 +60,7 @@ class FoundCircle:
     cx: float
     cy: float
     r: float
-    arc: float        # share of the outline where a clear edge was measured (0–1)
+    arc: float        # share of the outline where a clear edge lies on the circle (0–1)
     rms_px: float     # rms distance of those edge points from the circle (pixels)
 
     @property
