@@ -20,7 +20,7 @@ of a circle along which the brightness falls steeply across the silhouette. So:
    points, tolerance a fraction of the radius, so a photo found at 512 px is found the same at
    8000 px), refitted by least squares. On the side away from the light the shading fades at a
    terminator a pixel or more inside the silhouette, which the limb term fits as readily as the
-   silhouette: counted, it pulled the circle up to 0.9 px off on real photos. A ball lit from
+   silhouette: counted, it pulled the circle up to 1 px off on real photos. A ball lit from
    the front, with no rim lit anywhere, is fitted on every clear edge (there the terminator is
    the silhouette). A stand or a shadow lies off the circle.
 
