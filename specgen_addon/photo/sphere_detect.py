@@ -13,11 +13,16 @@ of a circle along which the brightness falls steeply across the silhouette. So:
    each fitted with a model of a lit ball's outline (background, plus a step where light from the
    side keeps the rim lit to the silhouette, plus the Lambertian limb √(1 − (ρ/R)²) of light from
    the front, which fades to nothing at the silhouette; all blurred by one Gaussian shared by the
-   rays): each ray's silhouette radius to a tenth of a pixel. Rays without a clear fall (the unlit
-   side) or that the model does not explain (a stand) are dropped.
-3. **Fit**: the circle most of the edge contrast agrees with (RANSAC over the rays' edge points,
-   tolerance a fraction of the radius, so a photo found at 512 px is found the same at 8000 px),
-   refitted by least squares. A shading terminator, a stand or a shadow lies off it.
+   rays; both integrated over the pixel): each ray's silhouette radius to a tenth of a pixel. Rays
+   without a clear fall (the unlit side) or that the model does not explain (a stand) are dropped.
+3. **Fit**: the circle the lit rim agrees with: the rays whose step (the rim lit up to the
+   silhouette) is at least half the well-lit rim's, weighted by it (RANSAC over their edge
+   points, tolerance a fraction of the radius, so a photo found at 512 px is found the same at
+   8000 px), refitted by least squares. On the side away from the light the shading fades at a
+   terminator a pixel or more inside the silhouette, which the limb term fits as readily as the
+   silhouette: counted, it pulled the circle up to 1 px off on real photos. A ball lit from
+   the front, with no rim lit anywhere, is fitted on every clear edge (there the terminator is
+   the silhouette). A stand or a shadow lies off the circle.
 
 Numpy only (the stock-Blender panel runs it too). Pixel coordinates: x right, y down, pixel
 (i, j)'s centre at (j + 0.5, i + 0.5).
@@ -43,6 +48,9 @@ MIN_RADIUS_FRACTION = 0.06
 OUTLIER_FRACTION = 0.004
 #: At least this share of the outline must show a clear edge.
 MIN_ARC = 0.2
+#: A ray's rim counts as lit when its step is at least this fraction of the well-lit rim's (the
+#: 90th percentile of the rays'): where the light grazes, the terminator nears the silhouette.
+RIM_FRACTION = 0.5
 
 
 @dataclass(frozen=True)
@@ -52,7 +60,7 @@ class FoundCircle:
     cx: float
     cy: float
     r: float
-    arc: float        # share of the outline where a clear edge was measured (0–1)
+    arc: float        # share of the outline where a clear edge lies on the circle (0–1)
     rms_px: float     # rms distance of those edge points from the circle (pixels)
 
     @property
@@ -140,27 +148,52 @@ def _erf(x: np.ndarray) -> np.ndarray:
     return np.sign(x) * y
 
 
+def _pixel_blur(t: np.ndarray, sigma: float) -> np.ndarray:
+    """The edge-spread function of a pixel (a 1 px box) blurred by a Gaussian of ``sigma`` px, at
+    offsets ``t`` (px) past the edge: the share of the pixel's light that comes from beyond it."""
+    def ramp(x):   # ∫ Φ: x Φ(x) + φ(x)
+        return x * 0.5 * (1.0 + _erf(x / np.sqrt(2.0))) + np.exp(-0.5 * x * x) / np.sqrt(2.0 * np.pi)
+    return sigma * (ramp((-t + 0.5) / sigma) - ramp((-t - 0.5) / sigma))
+
+
 def _limb_basis(rho: np.ndarray, radius: float, sigma: float) -> np.ndarray:
     """(n, 3) brightness across a ball's outline at radii ``rho`` for a silhouette at ``radius``,
-    blurred by a Gaussian of ``sigma`` px: background (1), a step (light from the side: the rim
-    stays lit up to the silhouette) and the Lambertian limb √(1 − (ρ/R)²) of light from the front,
-    which falls to 0 at the silhouette."""
-    fine = np.linspace(-4.0 * sigma, 4.0 * sigma, 33)
-    wts = np.exp(-0.5 * (fine / sigma) ** 2)
+    integrated over a pixel and blurred by a Gaussian of ``sigma`` px: background (1), a step
+    (light from the side: the rim stays lit up to the silhouette) and the Lambertian limb
+    √(1 − (ρ/R)²) of light from the front, which falls to 0 at the silhouette."""
+    fine = np.linspace(-4.0 * sigma - 0.5, 4.0 * sigma + 0.5, 49)
+    cdf = _pixel_blur(np.concatenate([[fine[0] - 0.5 * (fine[1] - fine[0])],
+                                      0.5 * (fine[1:] + fine[:-1]),
+                                      [fine[-1] + 0.5 * (fine[1] - fine[0])]]), sigma)
+    wts = -np.diff(cdf)
     wts /= wts.sum()
     q = rho[:, None] + fine[None]
     limb = np.sqrt(np.clip(1.0 - (q / radius) ** 2, 0.0, None)) @ wts
-    step = 0.5 * (1.0 - _erf((rho - radius) / (np.sqrt(2.0) * sigma)))
+    step = _pixel_blur(rho - radius, sigma)
     return np.stack([np.ones_like(rho), step, limb], -1)
 
 
+@dataclass(frozen=True)
+class RayEdges:
+    """The outline measured along rays from a centre (:func:`model_edges`), one entry per ray."""
+
+    edge: np.ndarray       # the silhouette's radius (px)
+    rim: np.ndarray        # the step's height: the brightness kept up to the silhouette
+    limb: np.ndarray       # the Lambertian limb's weight: brightness that fades towards the edge
+    rms: np.ndarray        # rms residual of the ray's fit, relative to rim + limb
+    phi: np.ndarray        # the ray's angle (radians, x right, y down)
+    sigma: float           # the blur shared by all rays (px)
+
+    @property
+    def contrast(self) -> np.ndarray:
+        return self.rim + self.limb
+
+
 def model_edges(lum: np.ndarray, cx: float, cy: float, r: float, rays: int = RAYS,
-                sigmas: tuple[float, ...] | None = None
-                ) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray, float]:
+                sigmas: tuple[float, ...] | None = None) -> RayEdges:
     """The silhouette's radius along each ray, from a model of a lit ball's outline
     (:func:`_limb_basis`) fitted per ray by least squares over candidate radii and a blur shared by
-    all rays. Returns (edge radius px, contrast (rim step + limb weight), rms residual relative to
-    the contrast, ray angle, blur σ px)."""
+    all rays."""
     step = 0.2
     span_in, span_out = max(0.06 * r, 5.0), max(0.03 * r, 4.0)
     rho = np.arange(r - span_in - 2.0, r + span_out + 2.0, step)
@@ -170,7 +203,7 @@ def model_edges(lum: np.ndarray, cx: float, cy: float, r: float, rays: int = RAY
     prof = map_coordinates(lum, [y - 0.5, x - 0.5], order=1, mode="nearest").T   # (n, rays)
     cands = r + np.arange(-0.5 * span_in, 0.5 * span_out + 1e-9, 0.1)
     if sigmas is None:
-        sigmas = tuple(np.geomspace(0.4, max(0.012 * r, 0.8), 4))
+        sigmas = tuple(np.geomspace(0.3, max(0.012 * r, 0.8), 4))
     best = None
     for sigma in sigmas:
         res = np.empty((cands.size, rays))
@@ -183,7 +216,8 @@ def model_edges(lum: np.ndarray, cx: float, cy: float, r: float, rays: int = RAY
             res[k] = np.sum((basis @ c - prof) ** 2, axis=0)
         k = np.argmin(res, axis=0)
         idx = np.arange(rays)
-        contrast = coef[k, 1, idx] + coef[k, 2, idx]
+        rim, limb = coef[k, 1, idx], coef[k, 2, idx]
+        contrast = rim + limb
         total = float(np.sum(np.sort(res[k, idx])[: rays // 3]))   # the best third: sharp silhouettes
         if best is None or total < best[0]:
             # sub-pixel: a parabola through the residuals about the best candidate
@@ -193,9 +227,13 @@ def model_edges(lum: np.ndarray, cx: float, cy: float, r: float, rays: int = RAY
             off = np.where(den > 0, 0.5 * (r0 - r2) / np.where(den > 0, den, 1.0), 0.0)
             edge = cands[k0] + np.clip(off, -1.0, 1.0) * 0.1
             rms = np.sqrt(res[k, idx] / rho.size) / np.maximum(np.abs(contrast), 1e-12)
-            best = (total, edge, contrast, rms, sigma)
-    _, edge, contrast, rms, sigma = best
-    return edge, contrast, rms, phi, float(sigma)
+            best = (total, RayEdges(edge, rim, limb, rms, phi, float(sigma)))
+    return best[1]
+
+
+def _tolerance(r: float) -> float:
+    """Distance (px) from a circle of radius ``r`` within which an edge point lies on it."""
+    return max(OUTLIER_FRACTION * r, 0.3)
 
 
 def _consensus(ex: np.ndarray, ey: np.ndarray, contrast: np.ndarray, good: np.ndarray, r: float,
@@ -205,7 +243,7 @@ def _consensus(ex: np.ndarray, ey: np.ndarray, contrast: np.ndarray, good: np.nd
     inliers. A shading terminator, a stand or a shadow lies off it."""
     idx = np.nonzero(good)[0]
     pts = np.stack([ex, ey], -1)
-    tol = max(OUTLIER_FRACTION * r, 0.3)
+    tol = _tolerance(r)
     rng = np.random.default_rng(0)
     best, best_score = good & False, -1.0
     for _ in range(trials):
@@ -232,6 +270,24 @@ def _consensus(ex: np.ndarray, ey: np.ndarray, contrast: np.ndarray, good: np.nd
     return keep
 
 
+def _rim_lit(rays: RayEdges, contrast: np.ndarray, good: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """The rays whose rim stays lit up to the silhouette, weighted by that rim's brightness, when
+    they cover :data:`MIN_ARC` of the outline; else every good ray, weighted by its contrast.
+
+    Where the light falls on the far side of the ball, the shading fades to nothing at a
+    terminator a pixel or more inside the silhouette, a fade the limb term fits as readily as the
+    silhouette's own; only the rim's step marks the silhouette itself. A ball lit from the front
+    has no step anywhere, but there the terminator is the silhouette."""
+    # the rim's step counts in the ball's own sense (brighter than its ground, or darker): a
+    # stand or a wall brighter than an unlit rim makes a step the other way
+    rim = rays.rim * np.sign(np.median(rays.contrast[good]))
+    top = float(np.percentile(rim[good], 90))
+    lit = good & (rim > RIM_FRACTION * top)
+    if not top > 0 or lit.sum() < MIN_ARC * rim.size:
+        return contrast, good
+    return rim, lit
+
+
 def fit_outline(lum: np.ndarray, cx: float, cy: float, r: float,
                 iterations: int = 2) -> FoundCircle | None:
     """The circle through the sharp, clear edges of the outline near (cx, cy, r), outliers dropped
@@ -239,22 +295,27 @@ def fit_outline(lum: np.ndarray, cx: float, cy: float, r: float,
     rms = math.inf
     keep_share = 0.0
     for _ in range(iterations):
-        edge, contrast, fit_rms, phi, _ = model_edges(lum, cx, cy, r)
-        contrast = np.abs(contrast)   # a bright rim on a dark ground, or a dark ball on a brighter one
+        rays = model_edges(lum, cx, cy, r)
+        edge, phi = rays.edge, rays.phi
+        contrast = np.abs(rays.contrast)   # a bright rim on a dark ground, or a dark ball on a brighter one
         good = np.isfinite(edge) & (contrast > 0)
         if good.sum() >= 3:
             good &= contrast > 0.2 * float(np.percentile(contrast[good], 90))
-            good &= fit_rms < max(3.0 * float(np.percentile(fit_rms[good], 50)), 0.05)
+            good &= rays.rms < max(3.0 * float(np.percentile(rays.rms[good], 50)), 0.05)
         ex, ey = cx + edge * np.cos(phi), cy + edge * np.sin(phi)
         if good.sum() < MIN_ARC * edge.size:
             return None
-        keep = _consensus(ex, ey, contrast, good, r)
+        weight, lit = _rim_lit(rays, contrast, good)
+        keep = _consensus(ex, ey, weight, lit, r)
+        if keep.sum() < MIN_ARC * edge.size and lit is not good:   # too little of a lit rim: every edge
+            keep = _consensus(ex, ey, contrast, good, r)
         if keep.sum() < MIN_ARC * edge.size:
             return None
         cx, cy, r = (float(v) for v in fit_circle(np.stack([ex[keep], ey[keep]], -1)))
         resid = np.hypot(ex[keep] - cx, ey[keep] - cy) - r
         rms = float(np.sqrt(np.mean(resid ** 2)))
-        keep_share = float(keep.mean())
+        # the share of the outline seen on the circle: every clear edge, lit rim or limb, on it
+        keep_share = float(np.mean(good & (np.abs(np.hypot(ex - cx, ey - cy) - r) < _tolerance(r))))
     return FoundCircle(cx, cy, r, keep_share, rms)
 
 
