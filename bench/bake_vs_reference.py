@@ -14,17 +14,17 @@ atlas) and the shader's lookup. Tables, e.g.: ``python -m specgen_addon infer ex
 from __future__ import annotations
 
 import argparse
-import sys
+import runpy
 import tempfile
 from importlib import import_module
 from pathlib import Path
+from types import SimpleNamespace
 
 import numpy as np
 
 from machine import describe_machine  # bench/machine.py, beside this script
 
 REPO = Path(__file__).resolve().parents[1]
-sys.path.insert(0, str(REPO))
 SUN = (0.35, 0.45, 0.82)
 
 
@@ -34,7 +34,7 @@ def main() -> int:
     ap.add_argument("--resolution", type=int, default=48)
     args = ap.parse_args()
 
-    import batch
+    batch = SimpleNamespace(**runpy.run_path(str(REPO / "batch.py"), run_name="batch"))  # the headless entry
     from specgen_addon.render.photo_reproduction import delta_e2000, photo_scale
     from specgen_addon.render import DistantLight, render_spectral, sphere_geometry
     from specgen_addon.render.spectral_exr import linear_srgb_preview
@@ -57,7 +57,7 @@ def main() -> int:
             ref_rgb = linear_srgb_preview(ref, wl)
             for label, tol in (("default tolerance", bake.DEFAULT_TOLERANCE), ("complete basis", 0.0)):
                 info = bake.bake_atlas(table, Path(tmp) / f"{path.stem}_{tol}.exr", tolerance=tol)
-                sc, _ = scene_mod.new_reference_sphere_scene(render.make_material("check", info), SUN)
+                sc, _ = scene_mod.new_reference_sphere_scene(lambda: render.make_material("check", info), SUN)
                 got = render.SpectralRenderJob(sc, None, samples=2, resolution=(res, res)).run()
                 psnr = [10 * np.log10(peak ** 2 / np.mean((got[..., b][mask] - ref[..., b][mask]) ** 2))
                         for b in range(0, wl.size, 4)]

@@ -30,9 +30,8 @@ from pathlib import Path
 import numpy as np
 
 REPO = Path(__file__).resolve().parents[1]
-sys.path.insert(0, str(REPO))
 
-from bench.machine import describe_machine
+from machine import describe_machine  # bench/machine.py, beside this script
 from specgen_addon.common.errors import ImageInputError
 from specgen_addon.photo.ndimage_np import fit_circle, map_coordinates
 from specgen_addon.photo.read import read_photo

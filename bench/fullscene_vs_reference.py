@@ -23,18 +23,18 @@ same fitted model rendered by the reference renderer (how exactly Cycles draws t
 from __future__ import annotations
 
 import argparse
-import sys
+import runpy
 import tempfile
 import time
 from importlib import import_module
 from pathlib import Path
+from types import SimpleNamespace
 
 import numpy as np
 
 from machine import describe_machine  # bench/machine.py, beside this script
 
 REPO = Path(__file__).resolve().parents[1]
-sys.path.insert(0, str(REPO))
 SUN = (0.35, 0.45, 0.82)
 #: The check's target for the Full Scene render against the reference renderer.
 MAX_DELTA_E, MAX_ENERGY_OFF = 1.0, 0.03
@@ -68,7 +68,7 @@ def check_tables(cache: Path) -> list[tuple[str, Path]]:
 
 def sphere_scene(render, scene_mod, info, res: int, samples: int):
     """A new scene: the ortho camera, the sphere with the baked material, one D65 sun."""
-    sc, _ = scene_mod.new_reference_sphere_scene(render.make_material("check", info), SUN)
+    sc, _ = scene_mod.new_reference_sphere_scene(lambda: render.make_material("check", info), SUN)
     sc.render.resolution_x = sc.render.resolution_y = res
     sc.cycles.samples, sc.cycles.use_denoising = samples, False
     return sc
@@ -174,7 +174,7 @@ def main() -> int:
         before_after(named, args.resolution)
         return 0
 
-    import batch
+    batch = SimpleNamespace(**runpy.run_path(str(REPO / "batch.py"), run_name="batch"))  # the headless entry
     from specgen_addon.bake.closure_fit.fit_check import FitBRDF, rendered_fit_error
     from specgen_addon.render import DistantLight, render_spectral, sphere_geometry
     from specgen_addon.brdf.table import BRDFTable

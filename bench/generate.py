@@ -13,16 +13,17 @@ process CPU time (all threads) beside the wall time, which a shared machine infl
 from __future__ import annotations
 
 import argparse
+import runpy
 import sys
 import tempfile
 import time
 from importlib import import_module
 from pathlib import Path
+from types import SimpleNamespace
 
 from machine import describe_machine  # bench/machine.py, beside this script
 
 REPO = Path(__file__).resolve().parents[1]
-sys.path.insert(0, str(REPO))
 
 
 def main() -> int:
@@ -36,7 +37,7 @@ def main() -> int:
     import bpy
     import numpy as np
 
-    import batch
+    batch = SimpleNamespace(**runpy.run_path(str(REPO / "batch.py"), run_name="batch"))  # the headless entry
 
     pkg = batch.load_package()
     pipeline = import_module("specgen_addon.generate.pipeline")

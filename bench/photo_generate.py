@@ -29,9 +29,8 @@ from pathlib import Path
 import numpy as np
 
 REPO = Path(__file__).resolve().parents[1]
-sys.path.insert(0, str(REPO))
 
-from bench.machine import describe_machine
+from machine import describe_machine  # bench/machine.py, beside this script
 
 DATA = REPO.parent / "shared" / "data" / "photos" / "psm_gray_chrome"
 TARGET_S = {"given": 6.0, "estimated": 20.0, "chrome": 20.0}

@@ -37,9 +37,7 @@ from typing import Any
 import numpy as np
 
 REPO = Path(__file__).resolve().parents[1]
-sys.path.insert(0, str(Path(__file__).resolve().parent))
-
-from machine import describe_machine
+from machine import describe_machine  # bench/machine.py, beside this script
 
 
 def _json(path: Path) -> Any | None:

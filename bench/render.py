@@ -15,15 +15,16 @@ from __future__ import annotations
 
 import argparse
 import statistics
+import runpy
 import sys
 import tempfile
 import time
 from pathlib import Path
+from types import SimpleNamespace
 
 from machine import describe_machine  # bench/machine.py, beside this script
 
 REPO = Path(__file__).resolve().parents[1]
-sys.path.insert(0, str(REPO))
 
 
 def main(argv: list[str] | None = None) -> int:
@@ -40,7 +41,7 @@ def main(argv: list[str] | None = None) -> int:
     if args.mode == "fullscene":
         return bench_fullscene(args)
 
-    import batch
+    batch = SimpleNamespace(**runpy.run_path(str(REPO / "batch.py"), run_name="batch"))  # the headless entry
 
     pkg = batch.load_package()
     import bpy
@@ -119,7 +120,7 @@ def main(argv: list[str] | None = None) -> int:
 
 def bench_fullscene(args) -> int:
     """Full-scene job vs one plain RGB render of the ordinary scene (see the module docstring)."""
-    import batch
+    batch = SimpleNamespace(**runpy.run_path(str(REPO / "batch.py"), run_name="batch"))  # the headless entry
 
     pkg = batch.load_package()
     import bpy

@@ -14,15 +14,16 @@ Run: ``.venv/bin/python bench/render_estimate.py [--bands 21 --photo examples/sp
 from __future__ import annotations
 
 import argparse
+import runpy
 import sys
 import tempfile
 import time
 from pathlib import Path
+from types import SimpleNamespace
 
 from machine import describe_machine  # bench/machine.py, beside this script
 
 REPO = Path(__file__).resolve().parents[1]
-sys.path.insert(0, str(REPO))
 
 
 def denoiser_check(bpy, settings, scene_mod) -> None:
@@ -59,7 +60,7 @@ def main(argv: list[str] | None = None) -> int:
 
     import bpy
 
-    import batch
+    batch = SimpleNamespace(**runpy.run_path(str(REPO / "batch.py"), run_name="batch"))  # the headless entry
 
     pkg = batch.load_package()
     from importlib import import_module

@@ -10,6 +10,7 @@ camera sits on −Y looking along +Y (Blender's front view) and frames the unit 
 from __future__ import annotations
 
 import math
+from collections.abc import Callable
 from pathlib import Path
 
 import bpy
@@ -158,10 +159,11 @@ def add_sun(scene: bpy.types.Scene, direction_ref=(0.0, 0.0, 1.0), irradiance: f
     return obj
 
 
-def new_reference_sphere_scene(material: bpy.types.Material, sun_ref=(0.0, 0.0, 1.0),
+def new_reference_sphere_scene(make_material: Callable[[], bpy.types.Material], sun_ref=(0.0, 0.0, 1.0),
                                irradiance: float = math.pi) -> tuple[bpy.types.Scene, bpy.types.Object]:
     """Reset Blender to an empty file and build the reference renderer's sphere scene: the
-    orthographic camera, the unit sphere wearing ``material``, one sun from ``sun_ref`` of
+    orthographic camera, the unit sphere wearing the material ``make_material`` makes (after the
+    reset, which would remove one made before), one sun from ``sun_ref`` of
     ``irradiance`` (W/m²), pixels sampled at their centres as the reference samples them; gives
     (scene, sphere). For headless checks against the reference renderer only: it discards the
     open file."""
@@ -169,7 +171,7 @@ def new_reference_sphere_scene(material: bpy.types.Material, sun_ref=(0.0, 0.0, 
     scene = bpy.context.scene
     add_camera(scene)
     sphere = add_mesh(scene, "sphere")
-    sphere.data.materials.append(material)
+    sphere.data.materials.append(make_material())
     scene.cycles.filter_width = 0.01
     add_sun(scene, sun_ref, irradiance=irradiance)
     return scene, sphere

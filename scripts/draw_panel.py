@@ -12,9 +12,11 @@ same recording.
 
 from __future__ import annotations
 
+import runpy
 import sys
 from dataclasses import dataclass, field
 from pathlib import Path
+from types import SimpleNamespace
 
 REPO = Path(__file__).resolve().parents[1]
 
@@ -177,8 +179,7 @@ def main(argv: list[str] | None = None) -> int:
     argv = sys.argv[1:] if argv is None else argv
     paths = [a for a in argv if not a.startswith("--")]
     out = Path(paths[0]) if paths else REPO / "docs" / "figures" / "panel.png"
-    sys.path.insert(0, str(REPO))
-    import batch
+    batch = SimpleNamespace(**runpy.run_path(str(REPO / "batch.py"), run_name="batch"))  # the headless entry
 
     pkg = batch.load_package()
     import bpy

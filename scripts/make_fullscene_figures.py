@@ -15,16 +15,17 @@ Prints the closure-fit errors, the projection PSNRs and the timings.
 from __future__ import annotations
 
 import argparse
+import runpy
 import sys
 import tempfile
 import time
 from importlib import import_module
 from pathlib import Path
+from types import SimpleNamespace
 
 import numpy as np
 
 REPO = Path(__file__).resolve().parents[1]
-sys.path.insert(0, str(REPO))
 
 
 def _srgb8(linear: np.ndarray) -> np.ndarray:
@@ -57,7 +58,7 @@ def main(argv=None) -> int:
     ap.add_argument("--out", default=str(REPO / "docs" / "figures"))
     args = ap.parse_args(argv)
 
-    import batch
+    batch = SimpleNamespace(**runpy.run_path(str(REPO / "batch.py"), run_name="batch"))  # the headless entry
 
     pkg = batch.load_package()
     import bpy

@@ -113,7 +113,6 @@ def make_fixtures(fx: Path, big: bool) -> None:
     """Write every input file the cases read into ``fx`` (read-only for the cases)."""
     from PIL import Image
 
-    sys.path.insert(0, str(REPO))
     from specgen_addon.brdf.formats.merl import MERLData, write_merl
     from specgen_addon.brdf.formats.rgl import read_tensor_file, write_tensor_file
     from specgen_addon.common.image_io import read_exr, write_exr
@@ -318,8 +317,9 @@ def make_fixtures(fx: Path, big: bool) -> None:
         os.mkfifo(fx / name)
 
     if big:
-        sys.path.insert(0, str(REPO / "bench"))
-        from image_memory import sphere_photo  # bench/image_memory.py: a band-drawn sphere photo
+        from script_modules import load_script
+
+        sphere_photo = load_script("bench/image_memory.py").sphere_photo   # a band-drawn sphere photo
 
         Image.fromarray(sphere_photo(8000)).save(fx / "big8000.png", compress_level=1)
     for p in fx.iterdir():

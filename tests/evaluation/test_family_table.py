@@ -3,22 +3,14 @@ evaluate results, against numpy and scipy."""
 
 from __future__ import annotations
 
-import importlib.util
 import json
-import sys
 from pathlib import Path
 
 import numpy as np
 import pytest
+from script_modules import load_script
 
-BENCH = str(Path(__file__).resolve().parents[2] / "bench")
-sys.path.insert(0, BENCH)              # for its own import of bench/paired_families.py, during the load only
-try:
-    SPEC = importlib.util.spec_from_file_location("family_table", Path(BENCH) / "family_table.py")
-    family_table = importlib.util.module_from_spec(SPEC)
-    SPEC.loader.exec_module(family_table)
-finally:
-    sys.path.remove(BENCH)
+family_table = load_script("bench/family_table.py")
 
 
 def write(path: Path, rows: list[tuple[str, str, float]]) -> Path:

@@ -13,11 +13,11 @@ from pathlib import Path
 
 import numpy as np
 import pytest
+from script_modules import load_script
 
 REPO = Path(__file__).resolve().parents[2]
 BUILD = REPO / "scripts" / "build_extension.py"
-sys.path.insert(0, str(REPO / "scripts"))
-import build_extension
+build_extension = load_script("scripts/build_extension.py")
 
 #: Platform → (wheel platform tag start, onnxruntime version) every zip must carry.
 EXPECTED = {"windows-x64": ("win_amd64", "1.31.1"), "macos-arm64": ("macosx_14_0_arm64", "1.31.1"),

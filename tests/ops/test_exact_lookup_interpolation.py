@@ -39,7 +39,7 @@ def _render(table: BRDFTable, tmp_path, sun) -> tuple[np.ndarray, np.ndarray]:
     render = addon_module("ops.render")
     scene_mod = addon_module("ops.scene")
     info = bake.bake_atlas(table, tmp_path / "t.exr", tolerance=0.0)
-    sc, _ = scene_mod.new_reference_sphere_scene(render.make_material("SpecGen mirror", info), sun)
+    sc, _ = scene_mod.new_reference_sphere_scene(lambda: render.make_material("SpecGen mirror", info), sun)
     got = render.SpectralRenderJob(sc, None, samples=1, resolution=(RES, RES)).run()
     ref = render_spectral(table, sphere_geometry(RES), lights=[DistantLight(sun, np.pi)],
                           wavelengths_nm=WL).spectral

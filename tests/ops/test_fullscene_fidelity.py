@@ -92,7 +92,7 @@ def _sphere_scene(addon: SimpleNamespace, info, name: str, sun, res: int):
     """An empty .blend with the bench's sphere wearing SpecGen material ``name`` of lookup ``info``,
     an orthographic camera sampling pixel centres and a sun of irradiance π from ``sun``; gives
     (scene, sphere)."""
-    sc, sphere = addon.scene.new_reference_sphere_scene(addon.render.make_material(name, info), sun)
+    sc, sphere = addon.scene.new_reference_sphere_scene(lambda: addon.render.make_material(name, info), sun)
     sc.render.resolution_x = sc.render.resolution_y = res
     return sc, sphere
 

@@ -2,8 +2,6 @@
 
 from __future__ import annotations
 
-import importlib.util
-import sys
 from pathlib import Path
 
 import numpy as np
@@ -13,17 +11,14 @@ from specgen_addon.evaluation.real_files import summarise
 from specgen_addon.train import real_rgb
 from specgen_addon.train.data import TrainingMaterial
 from specgen_addon.train.loop import TrainConfig
+from script_modules import load_script
 
 REPO = Path(__file__).resolve().parents[2]
 
 
 @pytest.fixture(scope="module")
 def real_cv():
-    sys.path.insert(0, str(REPO / "bench"))
-    spec = importlib.util.spec_from_file_location("real_cv", REPO / "bench" / "real_cv.py")
-    mod = importlib.util.module_from_spec(spec)
-    spec.loader.exec_module(mod)
-    return mod
+    return load_script("bench/real_cv.py")
 
 
 @pytest.fixture
