@@ -28,18 +28,20 @@ needs_detector = pytest.mark.skipif(importlib.util.find_spec("colour_checker_det
                                            "command line's colour checker cannot be found")
 
 
-def draw_checker(img: np.ndarray, angle_deg: float = 4.0) -> np.ndarray:
-    """``img`` (H, W, 3, linear) with the chart drawn in, turned ``angle_deg`` clockwise."""
+def draw_checker(img: np.ndarray, angle_deg: float = 4.0, centre: tuple[float, float] = CHART_CENTRE,
+                 pitch: float = PITCH, gap: float = GAP) -> np.ndarray:
+    """``img`` (H, W, 3, linear) with the chart drawn in about ``centre`` (pixels), turned
+    ``angle_deg`` clockwise, its swatches ``pitch`` apart with black gaps ``gap`` wide."""
     h, w = img.shape[:2]
     ys, xs = np.mgrid[0:h, 0:w] + 0.5
     a = np.radians(angle_deg)
-    dx, dy = xs - CHART_CENTRE[0], ys - CHART_CENTRE[1]
+    dx, dy = xs - centre[0], ys - centre[1]
     u, v = dx * np.cos(a) + dy * np.sin(a), -dx * np.sin(a) + dy * np.cos(a)
     out = img.copy()
-    out[(np.abs(u) < 3 * PITCH + GAP) & (np.abs(v) < 2 * PITCH + GAP)] = 0.02     # the chart's black frame
-    col, row = np.floor(u / PITCH + 3), np.floor(v / PITCH + 2)
-    fu, fv = u / PITCH + 3 - col, v / PITCH + 2 - row
-    m = GAP / 2 / PITCH
+    out[(np.abs(u) < 3 * pitch + gap) & (np.abs(v) < 2 * pitch + gap)] = 0.02     # the chart's black frame
+    col, row = np.floor(u / pitch + 3), np.floor(v / pitch + 2)
+    fu, fv = u / pitch + 3 - col, v / pitch + 2 - row
+    m = gap / 2 / pitch
     inside = (col >= 0) & (col < 6) & (row >= 0) & (row < 4) & (fu > m) & (fu < 1 - m) & (fv > m) & (fv < 1 - m)
     out[inside] = np.clip(reference_swatches(), 0.0, None)[(row * 6 + col)[inside].astype(int)]   # cyan is out of sRGB
     return out
