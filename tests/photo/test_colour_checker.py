@@ -6,6 +6,7 @@ chart warn; a photo without a chart, or a chart with a white patch too, is one s
 from __future__ import annotations
 
 import re
+import sys
 import warnings
 
 import numpy as np
@@ -128,3 +129,11 @@ def test_a_photo_without_a_checker_is_one_sentence(photos):
 def test_a_checker_and_a_white_patch_together_are_refused(photos):
     with pytest.raises(ImageInputError, match="--white-patch and --colour-checker both set the white balance"):
         PhotoSource(photos["cast"], circle=CIRCLE, colour_checker=True, white_patch=(1, 1, 4, 4)).crop()
+
+
+def test_without_the_detector_the_option_is_one_sentence(photos, monkeypatch):
+    monkeypatch.setitem(sys.modules, "colour_checker_detection", None)    # a stock Blender: no OpenCV
+    monkeypatch.setitem(sys.modules, "cv2", None)
+    with pytest.raises(ImageInputError, match="needs the colour-checker-detection package .* a stock "
+                                              "Blender does not$"):
+        PhotoSource(photos["none"], circle=CIRCLE, colour_checker=True).crop()
