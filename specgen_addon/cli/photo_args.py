@@ -97,6 +97,11 @@ def add_photo_arguments(p: argparse.ArgumentParser) -> None:
                         "top-left corner and size in pixels (x right, y down); the photo is scaled so "
                         "the patch has the colour of the light the run assumes (neutral for D65 or a "
                         "chrome ball; a --light-probe photo gets the same gains). Default: as shot")
+    g.add_argument("--colour-checker", action="store_true",
+                   help="white balance from an X-Rite ColorChecker Classic in the photo: found "
+                        "(colour-checker-detection, OpenCV; command line only), its six greys fitted to "
+                        "the chart's reference greys under the light the run assumes, as --white-patch "
+                        "(not with --white-patch)")
     g.add_argument("--circle", default=None, metavar="X,Y,R",
                    help="the sphere's centre and radius in the photo's pixels (x right, y down from the "
                         "top-left corner) instead of finding it")
@@ -221,14 +226,16 @@ def input_lighting_from_args(args: argparse.Namespace):
 
 def photo_source_from_args(args: argparse.Namespace, image: Path, white_target=None):
     """The :class:`~specgen_addon.photo.sphere_image.PhotoSource` of a photo and the photo options;
-    ``white_target`` (linear RGB) is the colour ``--white-patch`` is balanced to (default neutral)."""
+    ``white_target`` (linear RGB) is the colour ``--white-patch`` or ``--colour-checker`` balances to
+    (default neutral)."""
     circle = getattr(args, "circle", None)
     patch = getattr(args, "white_patch", None)
     return PhotoSource(Path(image), encoding="linear" if getattr(args, "linear", False) else "auto",
                        white_level=getattr(args, "white_level", None),
                        circle=parse_circle(circle) if circle else None, mask=getattr(args, "mask", None),
                        white_patch=parse_patch(patch) if patch else None,
-                       white_target=None if white_target is None else tuple(float(v) for v in white_target))
+                       white_target=None if white_target is None else tuple(float(v) for v in white_target),
+                       colour_checker=bool(getattr(args, "colour_checker", False)))
 
 
 def _lighting_mode(args: argparse.Namespace) -> str:
@@ -324,6 +331,8 @@ def print_photo_report(generated, args: argparse.Namespace, source) -> None:
     crop = generated.crop
     if crop is not None:
         print(crop.describe())
+        if crop.white_note:
+            print(crop.white_note)
         preview = getattr(args, "circle_preview", None)
         if preview is not None and crop.circle is not None:
             write_circle_preview(preview, source, crop.circle, overwrite=getattr(args, "overwrite", False))

@@ -46,6 +46,7 @@ from specgen_addon.common.atomic_io import atomic_write
 from specgen_addon.common.errors import ImageInputError, OutputExistsError, SpecGenError
 from specgen_addon.common.image_io import write_png8
 from specgen_addon.photo import ndimage_np
+from specgen_addon.photo.colour_checker import checker_balance, find_checker
 from specgen_addon.photo.ndimage_np import ransac_circle
 from specgen_addon.photo.read import FLOAT_SUFFIXES, read_photo, warn_notes
 from specgen_addon.photo.sphere_detect import find_ball
@@ -236,6 +237,8 @@ class SphereCrop:
     saturated: np.ndarray | None = None   # (size, size) bool
     encoding: str = ""
     white_gains: np.ndarray | None = None  # (3,) per-channel white-balance gains applied (None: as shot)
+    white_source: str = ""   # where the gains came from: "from the patch", "from the colour checker", "as the photo's"
+    white_note: str = ""     # the colour checker found and its fit, for the run's report ("" without one)
 
     def describe(self) -> str:
         """One line for a run's report: the circle, how it was found, and the saturated share."""
@@ -248,7 +251,8 @@ class SphereCrop:
         enc = f"; decoded {self.encoding}" if self.encoding else ""
         wb = ""
         if self.white_gains is not None:
-            wb = "; white balance from the patch: gains R {:.3f} G {:.3f} B {:.3f}".format(*self.white_gains)
+            wb = f"; white balance {self.white_source or 'from the patch'}: gains " + \
+                "R {:.3f} G {:.3f} B {:.3f}".format(*self.white_gains)
         return f"sphere: centre ({cx:.2f}, {cy:.2f}) px, radius {r:.2f} px ({self.circle_source}){enc}{wb}{sat}"
 
 
@@ -258,8 +262,9 @@ class PhotoSource:
     (:data:`specgen_addon.photo.read.ENCODINGS`), a white level above which values count as
     saturated, where the sphere is: a circle (cx, cy, r in pixels, x right, y down, from the
     top-left corner) or a mask file (the sphere white), else found in the photo; and its white
-    balance: as shot, a neutral patch (x, y, w, h in pixels) balanced to ``white_target`` (linear
-    RGB, default neutral; :mod:`specgen_addon.photo.white_balance`), or gains given."""
+    balance: as shot, a neutral patch (x, y, w, h in pixels) or the greys of a colour checker in the
+    photo (``colour_checker``, :mod:`specgen_addon.photo.colour_checker`) balanced to ``white_target``
+    (linear RGB, default neutral; :mod:`specgen_addon.photo.white_balance`), or gains given."""
 
     path: Path
     encoding: str = "auto"
@@ -269,11 +274,13 @@ class PhotoSource:
     white_patch: tuple[float, float, float, float] | None = None
     white_target: tuple[float, float, float] | None = None
     white_gains: tuple[float, float, float] | None = None
+    colour_checker: bool = False
 
     def crop(self, size: int = CANONICAL_SIZE) -> SphereCrop:
         return load_sphere_crop(self.path, size, encoding=self.encoding, white_level=self.white_level,
                                 circle=self.circle, mask=self.mask, white_patch=self.white_patch,
-                                white_target=self.white_target, white_gains=self.white_gains)
+                                white_target=self.white_target, white_gains=self.white_gains,
+                                colour_checker=self.colour_checker)
 
     @property
     def linear(self) -> bool:
@@ -328,23 +335,34 @@ def load_sphere_crop(path: str | Path, size: int = CANONICAL_SIZE, encoding: str
                      mask: str | Path | None = None,
                      white_patch: tuple[float, float, float, float] | None = None,
                      white_target: tuple[float, float, float] | None = None,
-                     white_gains: tuple[float, float, float] | None = None) -> SphereCrop:
+                     white_gains: tuple[float, float, float] | None = None,
+                     colour_checker: bool = False) -> SphereCrop:
     """:func:`load_sphere_image`, with whether the sphere was copied or resampled, the circle used,
     the saturated pixels and the white balance (:class:`PhotoSource` names the choices)."""
     path = Path(path)
+    if white_patch is not None and colour_checker:
+        raise ImageInputError("--white-patch and --colour-checker both set the white balance: give one")
     photo = read_photo(path, encoding=encoding, white_level=white_level)
     warn_notes(photo, path)
     arr = photo.rgb
-    gains = None
+    gains, source, note = None, "", ""
     try:
         if white_patch is not None:
-            gains = patch_gains(arr, photo.saturated, white_patch, white_target, photo.scale)
+            gains, source = patch_gains(arr, photo.saturated, white_patch, white_target, photo.scale), "from the patch"
+        if colour_checker:
+            stat = path.stat()
+            found = find_checker(arr, photo.saturated, photo.scale,
+                                 key=(str(path.resolve()), stat.st_mtime_ns, stat.st_size, encoding, white_level))
+            balance = checker_balance(found, white_target)
+            gains, source, note = balance.gains, "from the colour checker", balance.describe()
         if white_gains is not None:
             gains = np.asarray(white_gains, np.float64) * (1.0 if gains is None else gains)
+            source = source or "as the photo's"
         if gains is not None:
             arr = arr.copy()
             arr[..., :3] *= gains.astype(arr.dtype)
-        return replace(_crop_photo(arr, photo, size, circle, mask), white_gains=gains)
+        return replace(_crop_photo(arr, photo, size, circle, mask), white_gains=gains, white_source=source,
+                       white_note=note)
     except ImageInputError as exc:
         raise ImageInputError(f"{path}: {exc}") from None
 

@@ -37,7 +37,7 @@ def test_infer_and_batch_take_the_same_photo_options():
     assert photo_dests() <= infer and photo_dests() <= ours
     # every option infer has about the photo and its generation, batch.py has too
     assert infer - INFER_ONLY - ours == set()
-    assert {"light_probe", "white_patch", "circle_preview", "latent_fit"} <= photo_dests()
+    assert {"light_probe", "white_patch", "colour_checker", "circle_preview", "latent_fit"} <= photo_dests()
 
 
 def test_every_photo_option_is_an_apply_key():
@@ -50,12 +50,12 @@ def test_every_photo_option_is_an_apply_key():
 def test_apply_options_read_like_the_command_line():
     argv = ["--light", "30,20,2,3200K", "--light-vector", "0,1,1,0.5,1/0.8/0.6", "--ambient", "0.1",
             "--linear", "--white-level", "0.9", "--circle", "10,20,30", "--mask", "C:/m.png",
-            "--white-patch", "1,2,3,4", "--no-refine", "--model", "thin-film", "--latent-fit",
+            "--white-patch", "1,2,3,4", "--colour-checker", "--no-refine", "--model", "thin-film", "--latent-fit",
             "--light-probe", "chrome.png", "--probe-circle", "5,6,7", "--input-env", "estimate"]
     cli = _infer_parser().parse_args(["photo.png", "-o", "x.npz", *argv])
     spec = parse_apply("D:/photo.png:Cube:light=30,20,2,3200K,light-vector=0,1,1,0.5,1/0.8/0.6,"
                        "ambient=0.1,linear=on,white-level=0.9,circle=10,20,30,mask=C:/m.png,"
-                       "white-patch=1,2,3,4,refine=off,model=thin-film,latent-fit=on,"
+                       "white-patch=1,2,3,4,colour-checker=on,refine=off,model=thin-film,latent-fit=on,"
                        "light-probe=chrome.png,probe-circle=5,6,7,env=estimate")
     assert spec.image == Path("D:/photo.png") and spec.object_name == "Cube"
     base = _infer_parser().parse_args(["photo.png", "-o", "x.npz"])
