@@ -111,7 +111,8 @@ def score(preds: list[np.ndarray], photos: list[np.ndarray], masks: list[np.ndar
     return {"psnr_db": round(psnr, 2), "chroma_deg": round(float(np.mean(angles)), 2), "exposure": round(k, 4)}
 
 
-def run(inputs: list[int], modes: list[str], tmp: Path, network_input: str = "canonical") -> dict:
+def run(inputs: list[int], modes: list[str], tmp: Path, network_input: str = "canonical",
+        estimate_ambient: str | None = None) -> dict:
     from specgen_addon.generate.canonical_input import network_crop
     from specgen_addon.generate.pipeline import network_reproduction
     from specgen_addon.generate.refine import CLIP_LEVEL, RefineOptions, refine_brdf, render_under
@@ -136,7 +137,7 @@ def run(inputs: list[int], modes: list[str], tmp: Path, network_input: str = "ca
             elif mode == "estimated":
                 from specgen_addon.photo.light_estimate import estimate_lights
 
-                lighting = estimate_lights(photo, crops[i].saturated).lighting()
+                lighting = estimate_lights(photo, crops[i].saturated, ambient_from=estimate_ambient).lighting()
             else:
                 lighting = InputLighting()
             power = lighting.lights[0].power if mode == "chrome" and lighting.lights else None
@@ -188,6 +189,9 @@ def main(argv=None) -> int:
     ap.add_argument("--network-input", choices=["canonical", "photo"], default="canonical",
                     help="under a given light, the network sees the photo re-rendered in the canonical "
                          "studio (the product's way, default) or the photo × network_gain (before 2026-12-07)")
+    ap.add_argument("--estimate-ambient", choices=["fit", "unlit"], default=None,
+                    help="where the estimated light's ambient comes from (default: the product's, "
+                         "specgen_addon.photo.light_estimate.AMBIENT_FROM)")
     ap.add_argument("--json", type=Path, default=None)
     ap.add_argument("--tmp", type=Path, default=Path("/tmp/specgen_photos_loo"))
     args = ap.parse_args(argv)
@@ -195,7 +199,7 @@ def main(argv=None) -> int:
         print(f"needs the shared photos at {DATA}", file=sys.stderr)
         return 2
     args.tmp.mkdir(parents=True, exist_ok=True)
-    res = run(args.inputs, args.modes, args.tmp, args.network_input)
+    res = run(args.inputs, args.modes, args.tmp, args.network_input, args.estimate_ambient)
     print(json.dumps(res["mean_psnr_db"], indent=1))
     if args.json:
         args.json.write_text(json.dumps(res, indent=1))
