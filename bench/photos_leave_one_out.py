@@ -112,7 +112,7 @@ def score(preds: list[np.ndarray], photos: list[np.ndarray], masks: list[np.ndar
 
 
 def run(inputs: list[int], modes: list[str], tmp: Path, network_input: str = "canonical",
-        estimate_ambient: str | None = None) -> dict:
+        estimate_ambient: str | None = None, refine: bool = True) -> dict:
     from specgen_addon.generate.canonical_input import network_crop
     from specgen_addon.generate.pipeline import network_reproduction
     from specgen_addon.generate.refine import CLIP_LEVEL, RefineOptions, refine_brdf, render_under
@@ -148,14 +148,16 @@ def run(inputs: list[int], modes: list[str], tmp: Path, network_input: str = "ca
                 held_light = {j: file_lighting(lights[j]) for j in held}
             # as the product: the refinement starts from the photo's own table; the network alone
             # (no refinement) is shown the photo re-rendered in the studio (generate.canonical_input)
-            start = generate_brdf(SphereCrop(photo * lighting.network_gain(), crops[i].copied))
+            refit = network_input == "canonical" and not lighting.is_canonical
+            start = generate_brdf(SphereCrop(photo * lighting.network_gain(), crops[i].copied)) \
+                if refine or not refit else None
             t1 = time.perf_counter()
             table, input_seconds = start, 0.0
-            if network_input == "canonical" and not lighting.is_canonical:
+            if refit:
                 table = generate_brdf(network_crop(crops[i], photo, lighting, CLIP_LEVEL)[0])
                 input_seconds = time.perf_counter() - t1
             res = refine_brdf(start, photo, lighting, RefineOptions(clip_level=CLIP_LEVEL,
-                                                                     exclude=crops[i].saturated))
+                                                                     exclude=crops[i].saturated)) if refine else None
             alone = network_reproduction(table, photo, lighting, CLIP_LEVEL, crops[i].saturated)
             white = white_render(lighting)
             ok = masks[i]
@@ -164,8 +166,10 @@ def run(inputs: list[int], modes: list[str], tmp: Path, network_input: str = "ca
             hm = [masks[j] for j in held]
             out = {"input": i, "mode": mode, "lighting": lighting.label,
                    "self_reproduction_network_db": round(alone.psnr_db, 2),
-                   "self_reproduction_refined_db": round(res.after.psnr_db, 2)}
-            for name, tab in (("network", table), ("refined", res.table)):
+                   "self_reproduction_refined_db": round(res.after.psnr_db, 2) if res else None}
+            for name, tab in (("network", table), ("refined", res.table if res else None)):
+                if tab is None:
+                    continue
                 preds = [render_under(tab, held_light[j].scene(SIZE), EXPOSURE) for j in held]
                 out[name] = score(preds, photos, hm)
             out["lambertian"] = score([white_render(held_light[j]) * albedo for j in held], photos, hm)
@@ -177,7 +181,7 @@ def run(inputs: list[int], modes: list[str], tmp: Path, network_input: str = "ca
     for mode in modes:
         sel = [r for r in rows if r["mode"] == mode]
         summary[mode] = {k: round(float(np.mean([r[k]["psnr_db"] for r in sel])), 2)
-                         for k in ("network", "refined", "lambertian")}
+                         for k in ("network", "refined", "lambertian") if all(k in r for r in sel)}
     return {"rows": rows, "mean_psnr_db": summary}
 
 
@@ -192,6 +196,8 @@ def main(argv=None) -> int:
     ap.add_argument("--estimate-ambient", choices=["fit", "unlit"], default=None,
                     help="where the estimated light's ambient comes from (default: the product's, "
                          "specgen_addon.photo.light_estimate.AMBIENT_FROM)")
+    ap.add_argument("--network-only", action="store_true",
+                    help="score the network alone and the Lambertian floor; skip the refinement (quick)")
     ap.add_argument("--json", type=Path, default=None)
     ap.add_argument("--tmp", type=Path, default=Path("/tmp/specgen_photos_loo"))
     args = ap.parse_args(argv)
@@ -199,7 +205,8 @@ def main(argv=None) -> int:
         print(f"needs the shared photos at {DATA}", file=sys.stderr)
         return 2
     args.tmp.mkdir(parents=True, exist_ok=True)
-    res = run(args.inputs, args.modes, args.tmp, args.network_input, args.estimate_ambient)
+    res = run(args.inputs, args.modes, args.tmp, args.network_input, args.estimate_ambient,
+              refine=not args.network_only)
     print(json.dumps(res["mean_psnr_db"], indent=1))
     if args.json:
         args.json.write_text(json.dumps(res, indent=1))

@@ -9,9 +9,9 @@ corrects the colour of the light but not where it comes from.
 
 So when the photo's lighting is given and is not the studio, the photo is first explained by a
 small analytic BRDF under that lighting (:func:`specgen_addon.generate.analytic_fit.fit_photo`:
-Lambert + one GGX lobe with Schlick Fresnel, optionally a clear coat; a few parameters per
-channel) and that BRDF is rendered under the canonical studio: the network is given the photo it
-would have been trained on for this material. The refinement still fits the real photo under its
+Lambert + one GGX lobe with Schlick Fresnel, no clear coat; a few parameters per channel) and
+that BRDF is rendered under the canonical studio: the network is given the photo it would have
+been trained on for this material. The refinement still fits the real photo under its
 real light. The pipeline shows the network the re-render when the network's table is the result
 (no refinement; :func:`network_crop`). The canonical lighting never goes through here, so its path
 is unchanged bit for bit.
@@ -31,9 +31,11 @@ from specgen_addon.photo.sphere_image import SphereCrop, render_input
 #: Size (pixels) of the photo the analytic BRDF is fitted to: the network's own input size; the
 #: fit needs the shading's shape, not every pixel.
 FIT_SIZE = 64
-#: Clear-coat roughnesses tried by the refit (fewer than the baseline's grid: the re-render needs
-#: the photo's shape, not the last tenth of a dB).
-COAT_ALPHAS = tuple(float(a) for a in np.geomspace(0.01, 0.3, 6))
+#: Clear-coat roughnesses tried by the refit: none. On a matte ball the fit explains the gentle
+#: fall-off with a broad coat (weight 1.3–1.7, α_c ≈ 0.33) over a rough base lobe; re-rendered in
+#: the studio it reads as a gloss, and the network alone predicts the other photos of that ball
+#: 0.3–2.2 dB worse than from the same fit without it (lab/notebook/real-photos-network.md).
+COAT_ALPHAS: tuple[float, ...] = ()
 
 
 @dataclass(frozen=True)
