@@ -19,21 +19,20 @@ it (:class:`~specgen_addon.photo.sphere_image.PhotoSource` with ``colour_checker
 
 from __future__ import annotations
 
-import sys
+import runpy
 import tempfile
 import time
 import warnings
 from pathlib import Path
+from types import SimpleNamespace
 
 import numpy as np
 
 REPO = Path(__file__).resolve().parents[1]
-sys.path.insert(0, str(REPO))
-sys.path.insert(0, str(REPO / "tests"))
+#: the chart drawn as the tests draw it
+checker_photo = SimpleNamespace(**runpy.run_path(str(REPO / "tests" / "checker_photo.py")))
 
-import checker_photo  # the chart drawn as the tests draw it
-
-from bench.machine import describe_machine
+from machine import describe_machine  # bench/machine.py, beside this script
 from specgen_addon.common.image_io import write_exr, write_png8
 from specgen_addon.photo.image_checks import ImageNote
 from specgen_addon.photo.sphere_image import PhotoSource
