@@ -45,7 +45,7 @@ def photo_args(mode: str, i: int, tmp: Path) -> list[str]:
     argv = [str(DATA / "gray" / f"gray.{i}.tga"), "-o", str(tmp / "x.npz"), "--linear", "--overwrite"]
     if mode == "given":
         d = np.loadtxt(DATA / "lights.txt", skiprows=1)[i]
-        return argv + ["--light-vector", ",".join(f"{v:.6f}" for v in d)]
+        return argv + ["--light-vector=" + ",".join(f"{v:.6f}" for v in d)]   # "=": a value may start with "-"
     if mode == "estimated":
         return argv + ["--input-env", "estimate"]
     return argv + ["--light-probe", str(DATA / "chrome" / f"chrome.{i}.tga"),
