@@ -322,8 +322,24 @@ def refine_brdf(table: BRDFTable, photo: np.ndarray, lighting=None, options: Ref
 
         photo_rows = b[keep]
 
+        sigma2 = (options.noise * level) ** 2
+        last: list = [None, None]                                  # the last design solved, its data term
+
+        def design_terms(design: np.ndarray) -> _DataTerms:
+            """The data term of a design made by ``design_for`` (every design solved here is: they
+            differ in the body's columns only): that of the last one solved where it is the same
+            (the relaxed fit), else it with only the body's columns made again (the natural body
+            replacing the network's)."""
+            if last[0] is not design:
+                body_cols = slice(a_lobe.shape[2], a_lobe.shape[2] + nl)
+                terms = (_data_terms(design, photo_rows, sigma2) if last[0] is None
+                         else _with_columns(last[1], design, photo_rows, body_cols))
+                last[:] = [design, terms]
+            return last[1]
+
         def solve(design: np.ndarray, opts: RefineOptions = options) -> np.ndarray:
-            theta, scale = _solve_correction(design, photo_rows, n_lobe, nl, level, basis, opts, floor_residual)
+            theta, scale = _solve_correction(design, photo_rows, n_lobe, nl, level, basis, opts, floor_residual,
+                                             design_terms(design))
             scales.append(scale)
             return theta
 
@@ -542,6 +558,20 @@ def _data_terms(design: np.ndarray, photo: np.ndarray, sigma2: float) -> _DataTe
     a = design.reshape(-1, design.shape[-1])
     y = photo.reshape(-1)
     return _DataTerms(a.T @ a / sigma2, a.T @ y / sigma2, float(y @ y) / sigma2, y.size, sigma2)
+
+
+def _with_columns(terms: _DataTerms, design: np.ndarray, photo: np.ndarray, cols: slice) -> _DataTerms:
+    """:func:`_data_terms` of ``design``, which differs from the design of ``terms`` in the
+    columns ``cols`` only (the body's tint under another body spectrum): those rows and columns
+    of the Gram matrix and right-hand side are made again, the rest kept."""
+    a = design.reshape(-1, design.shape[-1])
+    y = photo.reshape(-1)
+    gram, rhs = terms.gram.copy(), terms.rhs.copy()
+    cross = a.T @ a[:, cols] / terms.sigma2
+    gram[:, cols] = cross
+    gram[cols, :] = cross.T
+    rhs[cols] = a[:, cols].T @ y / terms.sigma2
+    return _DataTerms(gram, rhs, terms.yy, terms.n_obs, terms.sigma2)
 
 
 @dataclass
