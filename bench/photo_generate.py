@@ -14,8 +14,9 @@ resolved by the same code as ``infer`` (:func:`specgen_addon.cli.photo_args.phot
 
 Prints wall and CPU seconds (process time, all threads) per phase: resolving the light, the network
 (the photo's crop and the network over the table), the refinement, the bake. Targets (2 cores):
-≤ 6 s with the light given, ≤ 20 s estimated or from a chrome ball. On a shared machine the wall
-time grows with the load (printed); the CPU time much less.
+≤ 6 s with the light given, ≤ 20 s estimated or from a chrome ball. The targets are wall times:
+compare them on a quiet machine (the load is printed). The CPU time counts every thread, numpy's
+and onnxruntime's waiting included, so it is higher on a quiet machine than on a loaded one.
 """
 
 from __future__ import annotations
