@@ -256,6 +256,20 @@ class SphereCrop:
         return f"sphere: centre ({cx:.2f}, {cy:.2f}) px, radius {r:.2f} px ({self.circle_source}){enc}{wb}{sat}"
 
 
+#: How many of :meth:`PhotoSource.crop`'s crops are kept (a photo and its chrome ball's).
+_CROPS_KEPT = 4
+_CROPS: dict[tuple, tuple[SphereCrop, list]] = {}
+
+
+def _file_stamp(path) -> tuple[int, int] | None:
+    """A file's modification time and size (None where it cannot be read: the load then says why)."""
+    try:
+        st = Path(path).stat()
+    except OSError:
+        return None
+    return st.st_mtime_ns, st.st_size
+
+
 @dataclass(frozen=True)
 class PhotoSource:
     """A photo file and the user's choices about it: how its codes are encoded
@@ -277,10 +291,31 @@ class PhotoSource:
     colour_checker: bool = False
 
     def crop(self, size: int = CANONICAL_SIZE) -> SphereCrop:
-        return load_sphere_crop(self.path, size, encoding=self.encoding, white_level=self.white_level,
-                                circle=self.circle, mask=self.mask, white_patch=self.white_patch,
-                                white_target=self.white_target, white_gains=self.white_gains,
-                                colour_checker=self.colour_checker)
+        """The sphere's crop (:func:`load_sphere_crop`). The last few are kept while their files
+        are unchanged: a run that estimates or unwraps the light crops the photo before the
+        network does (finding the ball is most of a second); the warnings are said again."""
+        key = (self, size, _file_stamp(self.path), None if self.mask is None else _file_stamp(self.mask))
+        try:
+            hit = _CROPS.pop(key, None)
+        except TypeError:                 # a field given as a list: not kept
+            key, hit = None, None
+        if hit is None:
+            with warnings.catch_warnings(record=True) as said:
+                warnings.simplefilter("always")
+                made = load_sphere_crop(self.path, size, encoding=self.encoding, white_level=self.white_level,
+                                        circle=self.circle, mask=self.mask, white_patch=self.white_patch,
+                                        white_target=self.white_target, white_gains=self.white_gains,
+                                        colour_checker=self.colour_checker)
+            hit = (made, [(w.message, w.category) for w in said])
+        if key is not None:
+            _CROPS[key] = hit
+        while len(_CROPS) > _CROPS_KEPT:
+            _CROPS.pop(next(iter(_CROPS)))
+        made, said = hit
+        for message, category in said:
+            warnings.warn(message, category, stacklevel=2)
+        return replace(made, image=made.image.copy(),
+                       saturated=None if made.saturated is None else made.saturated.copy())
 
     @property
     def linear(self) -> bool:

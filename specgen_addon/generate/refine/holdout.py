@@ -36,12 +36,21 @@ def holdout_error(design: np.ndarray, photo: np.ndarray, folds: np.ndarray, solv
 
     ``design`` (P, 3, K) and ``photo`` (P, 3) are the fit's rows; ``solve(design, photo)`` returns
     the coefficients (K,) for a subset of them. ``inf`` when a fold is empty (nothing to hold out)."""
-    total, count = 0.0, 0
+    return holdout_errors(design, photo, folds, [solve])[0]
+
+
+def holdout_errors(design: np.ndarray, photo: np.ndarray, folds: np.ndarray, solvers: list[Solver]) -> list[float]:
+    """:func:`holdout_error` of each of ``solvers``, the folds cut once: every solver is given the
+    same fold arrays, so solvers that share work on a fold (its normal equations) can reuse it."""
+    totals, count = [0.0] * len(solvers), 0
     for k in (0, 1):
         held = folds == k
         if not np.any(held) or np.all(held):
-            return float("inf")
-        theta = solve(design[~held], photo[~held])
-        total += float(np.sum((design[held] @ theta - photo[held]) ** 2))
+            return [float("inf")] * len(solvers)
+        fit_design, fit_photo = design[~held], photo[~held]
+        held_design, held_photo = design[held], photo[held]
+        for i, solve in enumerate(solvers):
+            theta = solve(fit_design, fit_photo)
+            totals[i] += float(np.sum((held_design @ theta - held_photo) ** 2))
         count += int(held.sum()) * photo.shape[1]
-    return total / count
+    return [t / count for t in totals]

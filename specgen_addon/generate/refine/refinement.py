@@ -39,9 +39,9 @@ from specgen_addon.common.errors import Cancelled, SpecGenError
 from specgen_addon.brdf.table import BRDFTable
 from specgen_addon.generate.refine.basis import CorrectionBasis
 from specgen_addon.generate.refine.blur import (BLUR_CANDIDATES_PX, blur_image, blur_rows, embed_rows, gather_rows,
-                   gaussian_blur_stack, rows_inside)
+                   gaussian_blur_stack, rows_inside, search_blur)
 from specgen_addon.generate.refine.discrepancy import difference_variance, discrepancy_scale, twin_scene
-from specgen_addon.generate.refine.holdout import block_folds, holdout_error
+from specgen_addon.generate.refine.holdout import block_folds, holdout_error, holdout_errors
 from specgen_addon.generate.refine.body import BODY_PRIORS, blended_body, blind_share, has_separate_body, natural_body
 from specgen_addon.generate.refine.operator import PhotoOperator, render_grid
 from specgen_addon.render.photo_reproduction import Reproduction, checked_photo, photo_scale, reproduction
@@ -79,6 +79,11 @@ LOBE_HOLDOUT = False
 #: principle, :mod:`.discrepancy`). Off by default: on the validation photos it lowered
 #: the fit of brightness and colour where the sampling error is large (docs/refinement.md).
 FIT_FLOOR: float | None = None
+#: How the photo's blur is searched among :data:`.blur.BLUR_CANDIDATES_PX` (:func:`.blur.search_blur`):
+#: ``"walk"`` from the middle candidate towards the smaller residual until it rises (3–4 solves of
+#: the six; the same σ as ``"all"`` on every shared photo and test, docs/refinement.md), ``"all"``
+#: every candidate.
+BLUR_SEARCH = "walk"
 #: Photo values at or above this fraction of the maximum 8-bit level count as clipped.
 CLIP_LEVEL = 0.995
 
@@ -317,22 +322,50 @@ def refine_brdf(table: BRDFTable, photo: np.ndarray, lighting=None, options: Ref
 
         photo_rows = b[keep]
 
+        sigma2 = (options.noise * level) ** 2
+        last: list = [None, None]                                  # the last design solved, its data term
+
+        def design_terms(design: np.ndarray) -> _DataTerms:
+            """The data term of a design made by ``design_for`` (every design solved here is: they
+            differ in the body's columns only): that of the last one solved where it is the same
+            (the relaxed fit), else it with only the body's columns made again (the natural body
+            replacing the network's)."""
+            if last[0] is not design:
+                body_cols = slice(a_lobe.shape[2], a_lobe.shape[2] + nl)
+                terms = (_data_terms(design, photo_rows, sigma2) if last[0] is None
+                         else _with_columns(last[1], design, photo_rows, body_cols))
+                last[:] = [design, terms]
+            return last[1]
+
         def solve(design: np.ndarray, opts: RefineOptions = options) -> np.ndarray:
-            theta, scale = _solve_correction(design, photo_rows, n_lobe, nl, level, basis, opts, floor_residual)
+            theta, scale = _solve_correction(design, photo_rows, n_lobe, nl, level, basis, opts, floor_residual,
+                                             design_terms(design))
             scales.append(scale)
             return theta
+
+        shared: dict[int, tuple[np.ndarray, np.ndarray, _DataTerms]] = {}
+
+        def data_terms(d: np.ndarray, y: np.ndarray) -> _DataTerms:
+            """The data term of rows ``d``, ``y``, made once while those arrays live: the settings a
+            hold-out compares are fitted to the same fold's rows (:func:`.holdout_errors`)."""
+            kept = shared.get(id(d))
+            if kept is None or kept[0] is not d or kept[1] is not y:
+                kept = shared[id(d)] = (d, y, _data_terms(d, y, (options.noise * level) ** 2))
+            return kept[2]
 
         def fit_rows(opts: RefineOptions, lobe_kept: bool = False):
             """A solver of the correction for a subset of the fitted rows (:func:`.holdout_error`)."""
             if lobe_kept:
-                return lambda d, y: _normal_equations(d, y, n_lobe, nl, level, basis, opts).solve(_PULL_MAX)
-            return lambda d, y: _solve_correction(d, y, n_lobe, nl, level, basis, opts, floor_residual)[0]
+                return lambda d, y: _normal_equations(d, y, n_lobe, nl, level, basis, opts,
+                                                      data_terms(d, y)).solve(_PULL_MAX)
+            return lambda d, y: _solve_correction(d, y, n_lobe, nl, level, basis, opts, floor_residual,
+                                                  data_terms(d, y))[0]
 
         def holdout_db(design: np.ndarray, candidate, reference) -> float:
             """How much better (dB) the fit ``candidate`` predicts held-out pixels than ``reference``."""
             folds = block_folds(op.shape, op.pixel_ids[keep])
-            ref_err = holdout_error(design, photo_rows, folds, reference)
-            cand_err = holdout_error(design, photo_rows, folds, candidate)
+            ref_err, cand_err = holdout_errors(design, photo_rows, folds, [reference, candidate])
+            shared.clear()
             if not (np.isfinite(ref_err) and np.isfinite(cand_err)) or cand_err <= 0 or ref_err <= 0:
                 return -math.inf
             return 10.0 * math.log10(ref_err / cand_err)
@@ -455,7 +488,8 @@ def _photo_blur(op: PhotoOperator, a_lobe: np.ndarray, a_lamb: np.ndarray, a_bod
                 twin_difference: np.ndarray | None = None) -> tuple[float, np.ndarray, np.ndarray]:
     """The photo's blur σ (px) and the lobe and Lambertian designs blurred by it: σ is
     ``options.blur_px``, or the candidate of :data:`.blur.BLUR_CANDIDATES_PX` whose first solve
-    leaves the smallest mean squared residual on the rows every candidate keeps.
+    leaves the smallest mean squared residual on the rows every candidate keeps (searched as
+    :data:`BLUR_SEARCH` says: :func:`.blur.search_blur`).
 
     With ``twin_difference`` (H, W, 3: the network's table rendered with the operator's samples
     minus with independent ones, :mod:`.discrepancy`) each candidate's residual is first reduced
@@ -469,25 +503,35 @@ def _photo_blur(op: PhotoOperator, a_lobe: np.ndarray, a_lamb: np.ndarray, a_bod
     if not np.any(common):              # nothing every candidate sees (a clipped photo): no blur
         return 0.0, a_lobe, a_lamb
     n_lobe_cols, n_body = a_lobe.shape[2], a_body.shape[2]
-    # every candidate blurs one stack of all the design's columns; its rows are read with the
-    # fitted (common) rows first, in their own order, so that each fit reads a contiguous block
-    image = embed_rows(op.shape, op.pixel_ids, np.concatenate([a_lobe, a_body, a_lamb], axis=2))
+    # every candidate blurs one stack of all the design's columns (in float32: half the memory
+    # traffic); its rows are read with the fitted (common) rows first, in their own order, so that
+    # each fit reads a contiguous block
+    columns = (a_lobe, a_body, a_lamb)
+    image = embed_rows(op.shape, op.pixel_ids, np.concatenate(columns, axis=2), dtype=np.float32)
     order = np.concatenate([np.flatnonzero(common), np.flatnonzero(~common)])
     n_common = int(common.sum())
     b_common = b[common]
-    best: tuple[float, float, np.ndarray] | None = None
-    for sigma in BLUR_CANDIDATES_PX:
-        blurred = gaussian_blur_stack(image, sigma) if sigma > 0 else image
-        rows = gather_rows(blurred, op.pixel_ids[order]).reshape(order.size, 3, -1)
-        del blurred
+    best: list = [math.inf, 0.0, None]                           # residual, σ, rows
+
+    def residual_at(k: int) -> float:
+        sigma = BLUR_CANDIDATES_PX[k]
+        if sigma > 0:
+            blurred = gaussian_blur_stack(image, sigma, dtype=np.float32)
+            rows = gather_rows(blurred, op.pixel_ids[order]).reshape(order.size, 3, -1).astype(np.float64)
+            del blurred
+        else:                                                    # unblurred: the design as it is
+            rows = np.concatenate(columns, axis=2)[order]
         design = rows[:n_common]
         theta, _ = _solve_correction(design, b_common, n_lobe, nl, level, basis, options)
         residual = float(np.mean((design @ theta - b_common) ** 2))
         if twin_difference is not None:
             residual -= difference_variance(op.observe(blur_image(twin_difference, sigma))[common])
-        if best is None or residual < best[0]:
-            best = (residual, sigma, rows)
+        if residual < best[0]:
+            best[:] = [residual, sigma, rows]
         check_cancel()
+        return residual
+
+    search_blur(residual_at, len(BLUR_CANDIDATES_PX), BLUR_SEARCH)
     sigma, rows = best[1], best[2]
     in_order = np.empty_like(rows)
     in_order[order] = rows                                       # back to the operator's rows
@@ -496,6 +540,38 @@ def _photo_blur(op: PhotoOperator, a_lobe: np.ndarray, a_lamb: np.ndarray, a_bod
 
 #: The discrepancy pull's largest factor: the lobe's coefficients are then the network's to ~10⁻⁶.
 _PULL_MAX = 1e14
+
+
+@dataclass
+class _DataTerms:
+    """The data term ``‖A θ − y‖² / σ²`` of one design's rows: shared by every setting fitted to them."""
+
+    gram: np.ndarray          # AᵀA / σ²
+    rhs: np.ndarray           # Aᵀy / σ²
+    yy: float                 # yᵀy / σ²
+    n_obs: int
+    sigma2: float
+
+
+def _data_terms(design: np.ndarray, photo: np.ndarray, sigma2: float) -> _DataTerms:
+    """:class:`_DataTerms` of the rows ``design`` (P, 3, K) and ``photo`` (P, 3)."""
+    a = design.reshape(-1, design.shape[-1])
+    y = photo.reshape(-1)
+    return _DataTerms(a.T @ a / sigma2, a.T @ y / sigma2, float(y @ y) / sigma2, y.size, sigma2)
+
+
+def _with_columns(terms: _DataTerms, design: np.ndarray, photo: np.ndarray, cols: slice) -> _DataTerms:
+    """:func:`_data_terms` of ``design``, which differs from the design of ``terms`` in the
+    columns ``cols`` only (the body's tint under another body spectrum): those rows and columns
+    of the Gram matrix and right-hand side are made again, the rest kept."""
+    a = design.reshape(-1, design.shape[-1])
+    y = photo.reshape(-1)
+    gram, rhs = terms.gram.copy(), terms.rhs.copy()
+    cross = a.T @ a[:, cols] / terms.sigma2
+    gram[:, cols] = cross
+    gram[cols, :] = cross.T
+    rhs[cols] = a[:, cols].T @ y / terms.sigma2
+    return _DataTerms(gram, rhs, terms.yy, terms.n_obs, terms.sigma2)
 
 
 @dataclass
@@ -527,16 +603,17 @@ class _NormalEquations:
 
 
 def _normal_equations(design: np.ndarray, photo: np.ndarray, n_lobe: int, nl: int, level: float,
-                      basis: CorrectionBasis, options: RefineOptions) -> _NormalEquations:
+                      basis: CorrectionBasis, options: RefineOptions,
+                      data: _DataTerms | None = None) -> _NormalEquations:
     """The regularised least squares of the module docstring for the observed pixels' design
-    (P, 3, K) and photo (P, 3), coefficients θ = (lobe x, added u, body tint y, Lambertian z)."""
+    (P, 3, K) and photo (P, 3), coefficients θ = (lobe x, added u, body tint y, Lambertian z);
+    ``data``: their data term made already (:func:`_data_terms`, the same noise level)."""
     n_add = design.shape[2] - n_lobe - 2 * nl                    # the added angular term (0 or n_lobe)
     theta0 = np.concatenate([np.ones(n_lobe), np.zeros(n_add), np.ones(nl), np.zeros(nl)])
-    a = design.reshape(-1, theta0.size)
-    y = photo.reshape(-1)
     sigma2 = (options.noise * level) ** 2
-    gram = a.T @ a / sigma2
-    rhs = a.T @ y / sigma2
+    if data is None or data.sigma2 != sigma2:
+        data = _data_terms(design, photo, sigma2)
+    gram, rhs = data.gram, data.rhs
     # prior: each coefficient pulled to θ0 in proportion to its own data weight (plus a floor, so
     # coefficients the photo cannot see stay exactly at the network's value)
     diag = np.diag(gram).copy()
@@ -559,19 +636,19 @@ def _normal_equations(design: np.ndarray, photo: np.ndarray, n_lobe: int, nl: in
         w = strength * np.maximum(w, median)
         smooth[block, block] += smooth_rows.T @ (w[:, None] * smooth_rows)
         pull[block] = 1e-8 * median
-    return _NormalEquations(gram, rhs, float(y @ y) / sigma2, y.size, sigma2, ridge, pull, smooth, theta0)
+    return _NormalEquations(gram, rhs, data.yy, data.n_obs, sigma2, ridge, pull, smooth, theta0)
 
 
 def _solve_correction(design: np.ndarray, photo: np.ndarray, n_lobe: int, nl: int, level: float,
                       basis: CorrectionBasis, options: RefineOptions,
-                      floor_residual: float | None = None) -> tuple[np.ndarray, float]:
+                      floor_residual: float | None = None, data: _DataTerms | None = None) -> tuple[np.ndarray, float]:
     """θ and the factor on the prior's pull that it was solved with.
 
     Without ``floor_residual`` the factor is 0. With it (the photo's expected misfit, mean squared,
     :mod:`.discrepancy`), the pull on the lobe's and the added term's coefficients is strengthened
     until the fit leaves at least that residual; the factor is ``inf`` where the network's lobe, with
     only the body's tint and the added Lambertian fitted (brightness and colour), already does."""
-    eq = _normal_equations(design, photo, n_lobe, nl, level, basis, options)
+    eq = _normal_equations(design, photo, n_lobe, nl, level, basis, options, data)
     if floor_residual is None:
         return eq.solve(0.0), 0.0
     scale = discrepancy_scale(lambda s: eq.residual(eq.solve(s)), floor_residual, hi=_PULL_MAX)
