@@ -171,12 +171,6 @@ def run_train(args: argparse.Namespace) -> int:
 
         if not can_grow(load_weights(tcfg.init_weights).cfg, mcfg, fresh_encoder=tcfg.fresh_encoder):
             raise SpecGenError(f"{tcfg.init_weights}: weights were made with a different model config")
-    if tcfg.recycle_dormant:
-        from specgen_addon.model.recycle import unsupported
-
-        why = unsupported(mcfg)
-        if why:
-            raise SpecGenError(f"training config: recycle_dormant: {why}")
     out: Path = args.out
     if out.exists() and not out.is_dir():
         raise SpecGenError(f"{out}: exists and is not a directory")

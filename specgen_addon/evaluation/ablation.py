@@ -60,8 +60,8 @@ SEEDS = (0, 1)
 #: they leave a run unchanged, so :meth:`AblationSettings.key` leaves them out and the arms cached
 #: before they existed keep their keys (a documented table's command then trains nothing). A field
 #: added later belongs here too: tests/evaluation/test_ablation_study.py checks the recorded keys and fails until it is.
-KEY_NEUTRAL_AT_DEFAULT = {"m": ("encoder_negative_slope", "boost_channels", "boost_width"),
-                          "t": ("recycle_dormant", "recycle_mode", "fresh_encoder", "frozen", "family_draw",
+KEY_NEUTRAL_AT_DEFAULT = {"m": ("encoder_negative_slope",),
+                          "t": ("fresh_encoder", "frozen", "family_draw",
                                 "recolour_p", "material_balance", "balance_floor", "real_materials_per_step",
                                 "real_weight", "real_rgb_dir", "real_exclude", "real_exposure_jitter",
                                 "real_white_balance_jitter", "corpus_train_limit")}

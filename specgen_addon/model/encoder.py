@@ -88,7 +88,7 @@ class ImageEncoder(nn.Module):
 
     def pre_activation(self, image: torch.Tensor) -> torch.Tensor:
         """The latent before its final activation ``(B, latent_dim)`` (with a ReLU, a unit negative
-        here for every input is dead: :mod:`.activity`, :mod:`.recycle`)."""
+        here for every input is dead)."""
         x = self.compress(self.base_image(image))
         x = torch.cat([x, self.coords.expand(x.shape[0], -1, -1, -1)], dim=1)
         if self.detail is None:

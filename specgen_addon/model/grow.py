@@ -16,8 +16,6 @@ differ only in the fields of :data:`GROWABLE`:
   larger): the conv stack keeps its size, sees the larger image resampled by the same
   antialiased weights the input pipeline used, and the new detail branch starts at zero
   (:class:`.encoder.ImageEncoder`);
-* ``boost_channels`` and ``boost_width`` (from no boost encoder to one): the new branch's last
-  layer starts at zero, so the latent is unchanged (:mod:`.boost`).
 
 In each case the grown network computes the same function as the old one (to float rounding of
 the resampling). Two changes are allowed that do not keep the function:
@@ -42,7 +40,7 @@ from specgen_addon.model.config import Config
 
 #: Config fields a warm start may change.
 GROWABLE = ("spectral_code_knots", "latent_res_blocks", "trunk_res_blocks", "trunk_upsample_stages",
-            "image_size", "detail_factor", "boost_channels", "boost_width")
+            "image_size", "detail_factor")
 #: Config fields a warm start may change although the function then changes (see above).
 RELAXED = ("encoder_negative_slope",)
 #: Config fields that only the encoder reads (``latent_dim`` is the decoder's input too).
@@ -63,12 +61,7 @@ def can_grow(old: Config, new: Config, fresh_encoder: bool = False) -> bool:
         return all(b[k] >= a[k] for k in ADDED_BLOCKS if k not in ENCODER_FIELDS)
     same_stack = old.image_size // old.detail_factor == new.image_size // new.detail_factor
     branch_ok = old.detail_factor in (1, new.detail_factor)
-    return all(b[k] >= a[k] for k in ADDED_BLOCKS) and same_stack and branch_ok and _boost_ok(old, new)
-
-
-def _boost_ok(old: Config, new: Config) -> bool:
-    """A boost encoder may be added, never removed or reshaped."""
-    return not old.boost_channels or (old.boost_channels, old.boost_width) == (new.boost_channels, new.boost_width)
+    return all(b[k] >= a[k] for k in ADDED_BLOCKS) and same_stack and branch_ok
 
 
 def grow_state_dict(state: dict[str, torch.Tensor], old: Config, new: Config,
@@ -105,11 +98,8 @@ def grow_state_dict(state: dict[str, torch.Tensor], old: Config, new: Config,
             t = t.reshape(3 * c, old.spectral_code_knots, lam, -1).permute(0, 3, 1, 2)  # (3C, in, A, L)
             t = F.interpolate(t, size=(new.spectral_code_knots, lam), mode="bilinear", align_corners=True)
             out[name] = t.permute(0, 2, 3, 1).reshape(-1, *tail)
-    added_boost = new.boost_channels and not old.boost_channels
-    if (any(getattr(new, k) > getattr(old, k) for k in ADDED_BLOCKS) or new.detail_factor > old.detail_factor
-            or added_boost):
+    if any(getattr(new, k) > getattr(old, k) for k in ADDED_BLOCKS) or new.detail_factor > old.detail_factor:
         if fresh is None:
-            raise SpecGenError("growing blocks, a detail branch or a boost encoder needs the new model's "
-                               "initial weights (fresh)")
+            raise SpecGenError("growing blocks or a detail branch needs the new model's initial weights (fresh)")
         out.update({k: v.float().clone() for k, v in fresh.items() if k not in out})
     return out

@@ -16,7 +16,6 @@ from torch import nn
 from specgen_addon.common.errors import WeightsError
 from specgen_addon.common.atomic_io import atomic_write
 from specgen_addon.model import checksums
-from specgen_addon.model.boost import BoostEncoder
 from specgen_addon.model.config import Config
 from specgen_addon.model.decoder import BRDFMapping
 from specgen_addon.model.encoder import ImageEncoder
@@ -35,18 +34,13 @@ class SpecGen(nn.Module):
         super().__init__()
         self.cfg = cfg
         self.encoder = ImageEncoder(cfg)
-        self.boost = BoostEncoder(cfg) if cfg.boost_channels else None
         self.generator = PlaneGenerator(cfg)
         self.fusion = make_fusion(cfg)
         self.mapping = BRDFMapping(cfg)
 
     def latent(self, image: torch.Tensor) -> torch.Tensor:
-        """The latent ``(B, latent_dim)`` the decoder reads: the encoder's, plus the boost's if any."""
-        return self.boosted(self.encoder(image), image)
-
-    def boosted(self, z: torch.Tensor, image: torch.Tensor) -> torch.Tensor:
-        """The encoder's latent ``z`` of ``image`` plus the boost encoder's correction, if the model has one."""
-        return z if self.boost is None else z + self.boost(image, self.encoder)
+        """The latent ``(B, latent_dim)`` the decoder reads."""
+        return self.encoder(image)
 
     def planes(self, image: torch.Tensor) -> dict[str, torch.Tensor]:
         """The six planes ``{d1..e3: (B, C, rows, cols)}`` for images ``(B, 3, S, S)``."""

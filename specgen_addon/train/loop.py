@@ -43,13 +43,16 @@ from specgen_addon.train.real_rgb import real_loss, real_source
 from specgen_addon.common.cache import cache_root
 from specgen_addon.corpus.generate import check_mix, material_family
 from specgen_addon.model import load_weights
+from specgen_addon.model.config import retire_keys
 from specgen_addon.model.grow import can_grow, grow_state_dict
-from specgen_addon.model.recycle import STAGES, recycle_dormant, revive_at_boundary
 
 #: Band grid (nm) the spectral targets are evaluated on: 10 nm steps over the visible range.
 TARGET_WAVELENGTHS_NM = wavelength_grid(380.0, 780.0, 41)
 #: The network's top-level modules, as ``frozen`` names them.
-MODULES = ("encoder", "boost", "generator", "fusion", "mapping")
+MODULES = ("encoder", "generator", "fusion", "mapping")
+#: Training config keys of an experiment earlier versions carried (renewing dead units at a warm
+#: start), with the value that meant "off" (None: any value); the record is in lab/notebook.
+RETIRED_KEYS = {"recycle_dormant": [], "recycle_mode": None}
 
 
 @dataclass
@@ -132,15 +135,6 @@ class TrainConfig:
     lighting: str = "variants"
     #: Start from these weights (same model config) instead of a random initialisation.
     init_weights: str | None = None
-    #: Stages whose dormant ReLU units are renewed at the warm start, before the first step
-    #: (:func:`specgen_addon.model.recycle.recycle_dormant`: "encoder", "latent", "trunk",
-    #: "heads"; empty: off). The census is the training inputs (:func:`recycle_census`).
-    recycle_dormant: list[str] = field(default_factory=list)
-    #: How ``recycle_dormant`` renews a unit: "redo" (fresh incoming weights, outgoing zeroed:
-    #: :func:`~specgen_addon.model.recycle.recycle_dormant`) or "boundary" (incoming zeroed, bias
-    #: just above the kink, outgoing kept: :func:`~specgen_addon.model.recycle.revive_at_boundary`,
-    #: for a consumer that is ``frozen``).
-    recycle_mode: str = "redo"
     #: Start the encoder at a random initialisation and take only the decoder, fusion and mapping
     #: from ``init_weights`` (the encoder's config may then differ: :func:`.grow.can_grow`).
     fresh_encoder: bool = False
@@ -168,6 +162,7 @@ class TrainConfig:
     @classmethod
     def from_dict(cls, d: dict[str, Any]) -> "TrainConfig":
         names = {f.name for f in dataclasses.fields(cls)}
+        d = retire_keys(d, RETIRED_KEYS, "training config")
         unknown = set(d) - names
         if unknown:
             raise SpecGenError(f"unknown training config keys: {sorted(unknown)}")
@@ -237,17 +232,6 @@ class TrainConfig:
                                    f"({', '.join(sorted(self.families))})")
         if self.init_weights is not None and not Path(self.init_weights).is_file():
             raise SpecGenError(f"training config: init_weights {self.init_weights}: file not found")
-        if self.recycle_dormant:
-            bad = [s for s in self.recycle_dormant if s not in STAGES] if isinstance(
-                self.recycle_dormant, list) else [self.recycle_dormant]
-            if bad:
-                raise SpecGenError(f"training config: recycle_dormant must list stages out of "
-                                   f"{', '.join(STAGES)}, got {bad[0]!r}")
-            if self.init_weights is None:
-                raise SpecGenError("training config: recycle_dormant needs init_weights (it renews the "
-                                   "dead units of trained weights)")
-        if self.recycle_mode not in ("redo", "boundary"):
-            raise SpecGenError(f"training config: recycle_mode must be 'redo' or 'boundary', got {self.recycle_mode!r}")
         if not isinstance(self.fresh_encoder, bool):
             raise SpecGenError(f"training config: fresh_encoder must be true or false, got {self.fresh_encoder!r}")
         if not isinstance(self.frozen, list) or any(m not in MODULES for m in self.frozen):
@@ -277,10 +261,7 @@ def load_config(path: str | Path) -> tuple[Config, TrainConfig]:
 
 def check_frozen(mcfg: Config, tcfg: TrainConfig) -> None:
     """Refuse a ``frozen`` list that names a module the model lacks or leaves nothing to train."""
-    present = [m for m in MODULES if m != "boost" or mcfg.boost_channels]
-    if "boost" in tcfg.frozen and not mcfg.boost_channels:
-        raise SpecGenError("training config: frozen names boost, but the model has no boost_channels")
-    if set(present) <= set(tcfg.frozen):
+    if set(MODULES) <= set(tcfg.frozen):
         raise SpecGenError("training config: frozen lists every module of this model, so nothing would train")
 
 
@@ -364,21 +345,6 @@ def _draw(rng: np.random.Generator, mset: MaterialSet, k: int, canonical_fractio
         mats.append(mset.materials[i])
         imgs.append(stack[j])
     return mats, imgs
-
-
-def recycle_census(spectral: MaterialSet, rgb: MaterialSet, tcfg: TrainConfig,
-                   limit: int = 1024) -> torch.Tensor:
-    """The inputs the dead-unit census of a warm start sees: the canonical input of up to
-    ``limit`` training materials and, with ``lighting="mix"``, each again under a drawn
-    lighting (drawn from the run's seed, so a run stays reproducible)."""
-    seen: set[int] = set()      # an RGB version shares its spectral original's input stack
-    stacks = [s for mset in (spectral, rgb) for s in mset.images
-              if id(s) not in seen and not seen.add(id(s))][:limit]
-    rng = np.random.default_rng([tcfg.seed, 0x5EED])
-    images = [np.asarray(s[0], np.float32) for s in stacks]
-    if tcfg.lighting == "mix":
-        images += [mix_lighting(s, rng, canonical_p=0.0) for s in stacks]
-    return torch.from_numpy(np.stack(images))
 
 
 def _tensors(b: Batch, device: torch.device | None = None) -> dict[str, torch.Tensor]:
@@ -518,13 +484,6 @@ def train(mcfg: Config, tcfg: TrainConfig, spectral: MaterialSet, rgb: MaterialS
             raise SpecGenError(f"{tcfg.init_weights}: weights were made with a different model config")
         model.load_state_dict(grow_state_dict(init.state_dict(), init.cfg, mcfg, fresh=model.state_dict(),
                                               fresh_encoder=tcfg.fresh_encoder))
-        if tcfg.recycle_dormant:
-            census, stages = recycle_census(spectral, rgb, tcfg), tuple(tcfg.recycle_dormant)
-            renewed = (recycle_dormant(model, census, stages=stages, seed=tcfg.seed)
-                       if tcfg.recycle_mode == "redo" else revive_at_boundary(model, census, stages=stages))
-            if show_progress and dctx.is_main:
-                print("recycled dormant units: " + ", ".join(f"{k} {v}" for k, v in renewed.items()),
-                      flush=True)
     model.to(device)  # before the optimiser, so its state lives there too
     for name in tcfg.frozen:
         getattr(model, name).requires_grad_(False)
@@ -543,14 +502,14 @@ def train(mcfg: Config, tcfg: TrainConfig, spectral: MaterialSet, rgb: MaterialS
                        if resume and dctx.is_main and ckpt_path.is_file() else None, dctx)
     if ck is not None:
         # keys that older checkpoints lack take their defaults
-        saved = {"ema_decay": 0.0, "linear_loss_weight": 0.0, "input_jitter_px": 0.0, "recycle_dormant": [],
-                 "fresh_encoder": False, "frozen": [], "recycle_mode": "redo",
+        saved = {"ema_decay": 0.0, "linear_loss_weight": 0.0, "input_jitter_px": 0.0,
+                 "fresh_encoder": False, "frozen": [],
                  "input_scale_jitter": 0.0, "input_offgrid_fraction": 0.0, "input_finder_error_px": 0.07,
                  "recolour_p": 0.0, "material_balance": "mean", "balance_floor": 0.1,
                  "real_materials_per_step": 0, "real_weight": 1.0, "real_rgb_dir": None, "real_exclude": [],
                  "real_exposure_jitter": 0.0, "real_white_balance_jitter": 0.0, "corpus_train_limit": 0,
-                 **ck["train_config"]}
-        if ck["model_config"] != mcfg.to_dict() or saved != _tdict(tcfg, ignore_budget=True):
+                 **retire_keys(ck["train_config"], RETIRED_KEYS, "checkpoint")}
+        if Config.from_dict(ck["model_config"]) != mcfg or saved != _tdict(tcfg, ignore_budget=True):
             raise SpecGenError(f"{ckpt_path}: checkpoint was made with a different configuration")
         model.load_state_dict(ck["model"])
         opt.load_state_dict(ck["optimizer"])

@@ -204,41 +204,11 @@ def test_config_files_accept_no_added_blocks_and_refuse_too_many(tmp_path):
         validate_train_config(path)
 
 
-def test_adding_a_boost_encoder_keeps_the_network_function_and_then_trains_it():
-    torch.manual_seed(0)
-    old = lively(SpecGen(Config(**SMALL)))
-    new_cfg = Config(**SMALL, boost_channels=(8, 8, 8), boost_width=12)
-    new = SpecGen(new_cfg)
-    new.load_state_dict(grow_state_dict(old.state_dict(), old.cfg, new_cfg, fresh=new.state_dict()))
-    image = torch.rand(2, 3, 32, 32)
-    th, td, pd, lam = queries()
-    with torch.no_grad():
-        assert torch.equal(old(image, th, td, pd, lam), new.eval()(image, th, td, pd, lam))
-    new.train()
-    new(image, th, td, pd, lam).pow(2).mean().backward()
-    assert new.boost.head[-1].weight.grad.abs().sum() > 0       # the zero last layer is not dead
-    with torch.no_grad():                                        # once it moves, the latent moves
-        new.boost.head[-1].bias.fill_(0.5)
-        assert not torch.allclose(new.latent(image), new.encoder(image))
+def test_weights_that_name_the_retired_boost_encoder_switched_off_still_load():
+    d = Config(**SMALL).to_dict()
+    assert Config.from_dict({**d, "boost_channels": [], "boost_width": 96}) == Config(**SMALL)
 
 
-def test_a_boost_encoder_may_be_added_but_not_removed_or_reshaped():
-    plain = Config(**SMALL)
-    boosted = Config(**SMALL, boost_channels=(8, 8))
-    assert can_grow(plain, boosted)
-    assert not can_grow(boosted, plain)
-    assert not can_grow(boosted, dataclasses.replace(boosted, boost_width=8))
-    assert not can_grow(boosted, dataclasses.replace(boosted, boost_channels=(8, 16)))
-    with pytest.raises(SpecGenError, match="fresh"):
-        grow_state_dict(SpecGen(plain).state_dict(), plain, boosted)
-
-
-def test_bad_boost_sizes_are_refused():
-    for bad in ((0,), (8, -1), (8.5,), (True,)):
-        with pytest.raises(SpecGenError, match="boost_channels"):
-            Config(**SMALL, boost_channels=bad)
-    with pytest.raises(SpecGenError, match="2\\*\\*len\\(boost_channels\\)"):
-        Config(**SMALL, boost_channels=(4,) * 6)                  # 32 is not divisible by 64
-    for bad in (0, 1.5, True):
-        with pytest.raises(SpecGenError, match="boost_width"):
-            Config(**SMALL, boost_width=bad)
+def test_a_config_that_turns_the_retired_boost_encoder_on_is_refused_in_one_sentence():
+    with pytest.raises(SpecGenError, match="boost_channels = \\[8, 8\\] asks for an experiment"):
+        Config.from_dict({**Config(**SMALL).to_dict(), "boost_channels": [8, 8]})

@@ -263,13 +263,11 @@ def test_lighting_mix_honours_the_configured_canonical_fraction():
     ({"linear_loss_weight": -1.0}, "linear_loss_weight must be"),
     ({"data_workers": -1}, "data_workers must be an integer ≥ 0"),
     ({"init_weights": "/nonexistent/w.pt"}, "not found"),
-    ({"recycle_dormant": ["planes"]}, "recycle_dormant must list stages"),
-    ({"recycle_dormant": ["latent"]}, "recycle_dormant needs init_weights"),
     ({"frozen": ["planes"]}, "frozen must list modules"),
     ({"frozen": ["generator"]}, "need init_weights"),
     ({"fresh_encoder": True}, "need init_weights"),
     ({"fresh_encoder": "yes"}, "fresh_encoder must be true or false"),
-    ({"recycle_mode": "gentle"}, "recycle_mode must be"),
+    ({"recycle_dormant": ["latent"]}, "recycle_dormant = \\['latent'\\] asks for an experiment"),
     ({"family_draw": {"velvet": 1.0}}, "unknown material family 'velvet'"),
     ({"family_draw": {"sheen": -1.0}}, "family weights must be non-negative"),
     ({"families": {"classic": 1.0}, "family_draw": {"sheen": 1.0}}, "family_draw names no family"),
@@ -350,29 +348,6 @@ def test_a_run_warm_starts_from_one_knot_weights_into_a_knotted_model(tmp_path):
     assert grown.history[0]["loss"] == pytest.approx(again.history[0]["loss"], rel=1e-5)
 
 
-def test_a_warm_start_that_recycles_dead_units_starts_where_the_old_weights_ended(tmp_path):
-    from specgen_addon.model import save_weights
-
-    spec, rgb, val = sets()
-    first = train(Config(**SMALL), TrainConfig(**{**FAST, "steps": 3}), spec, rgb, val, tmp_path / "a",
-                  show_progress=False)
-    model = load_weights(first.weights)
-    killed = [0, 5, 9]
-    with torch.no_grad():
-        model.encoder.fc.bias[killed] = -1e3          # units no input switches on
-    damaged = save_weights(model, tmp_path / "damaged.pt")
-    tcfg = TrainConfig(**{**FAST, "steps": 1, "init_weights": str(damaged)})
-    plain = train(Config(**SMALL), tcfg, spec, rgb, val, tmp_path / "b", show_progress=False)
-    recycled = train(Config(**SMALL), dataclasses.replace(tcfg, recycle_dormant=["encoder", "latent"]),
-                     spec, rgb, val, tmp_path / "c", show_progress=False)
-    # the same function at the first step (its loss is computed before the update) ...
-    assert recycled.history[0]["loss"] == pytest.approx(plain.history[0]["loss"], rel=1e-6)
-    # ... but the dead units were renewed
-    bias = load_weights(recycled.weights).encoder.fc.bias.detach()
-    assert (bias[killed] > -10).all()
-    assert (load_weights(plain.weights).encoder.fc.bias.detach()[killed] < -900).all()
-
-
 def test_train_command_refuses_weights_of_another_model_before_any_work(tmp_path, repo_dir):
     from specgen_addon.cli.app import main as cli_main
 
@@ -384,21 +359,6 @@ def test_train_command_refuses_weights_of_another_model_before_any_work(tmp_path
     path.write_text(json.dumps({"model": {}, "train": {"init_weights": str(other), "steps": 1}}))
     assert cli_main(["train", "--config", str(path), "--out", str(tmp_path / "run"), "--quiet"]) == 2
     assert not (tmp_path / "run").exists()
-
-
-def test_train_command_refuses_to_recycle_a_network_it_cannot_before_any_work(tmp_path, capsys):
-    from specgen_addon.cli.app import main as cli_main
-    from specgen_addon.model import SpecGen, save_weights
-
-    torch.manual_seed(0)
-    blocks = {**SMALL, "trunk_res_blocks": 1}
-    init = save_weights(SpecGen(Config(**blocks)), tmp_path / "blocks.pt")
-    path = tmp_path / "cfg.json"
-    path.write_text(json.dumps({"model": blocks, "train": {"init_weights": str(init), "steps": 1,
-                                                           "recycle_dormant": ["trunk"]}}))
-    assert cli_main(["train", "--config", str(path), "--out", str(tmp_path / "run"), "--quiet"]) == 2
-    assert not (tmp_path / "run").exists()
-    assert "recycle_dormant" in capsys.readouterr().err
 
 
 def test_snapshots_hold_what_the_run_would_ship_at_their_step_and_average(tmp_path):
@@ -483,40 +443,13 @@ def test_a_warm_start_refuses_an_encoder_change_unless_the_encoder_is_fresh(tmp_
     assert not can_grow(Config(**SMALL), Config(**{**SMALL, "latent_dim": 16}), fresh_encoder=True)
 
 
-def test_the_recycling_census_holds_each_training_input_once():
-    from specgen_addon.train.loop import recycle_census
-
-    spec, rgb, _ = sets(3)                      # the RGB versions share their originals' images
-    images = recycle_census(spec, rgb, TrainConfig(**FAST))
-    assert images.shape[0] == 3
-    assert len({tuple(im.flatten()[:64].tolist()) for im in images}) == 3
-
-
-def test_a_boost_encoder_trains_alone_against_everything_else_frozen(tmp_path):
-    spec, rgb, val = sets()
-    first = train(Config(**SMALL), TrainConfig(**{**FAST, "steps": 3}), spec, rgb, val, tmp_path / "a",
-                  show_progress=False)
-    old = load_weights(first.weights)
-    boosted = Config(**SMALL, boost_channels=(8, 8), boost_width=8)
-    tcfg = TrainConfig(**{**FAST, "steps": 3, "lr": 1e-2, "init_weights": str(first.weights),
-                          "frozen": ["encoder", "generator", "fusion", "mapping"]})
-    new = load_weights(train(boosted, tcfg, spec, rgb, val, tmp_path / "b", show_progress=False).weights)
-    for name in ("encoder", "generator", "fusion", "mapping"):
-        for key, value in getattr(old, name).state_dict().items():
-            assert torch.equal(getattr(new, name).state_dict()[key], value), f"{name}.{key} changed"
-    assert new.boost.head[-1].weight.abs().sum() > 0                 # the boost moved off zero
-
-
-def test_a_frozen_list_that_leaves_nothing_to_train_or_names_a_missing_boost_is_refused(tmp_path):
+def test_a_frozen_list_that_leaves_nothing_to_train_is_refused(tmp_path):
     from specgen_addon.train.loop import check_frozen
 
-    plain, boosted = Config(**SMALL), Config(**SMALL, boost_channels=(8,))
     four = ["encoder", "generator", "fusion", "mapping"]
     with pytest.raises(SpecGenError, match="nothing would train"):
-        check_frozen(plain, TrainConfig(frozen=four, init_weights="w.pt"))
-    check_frozen(boosted, TrainConfig(frozen=four, init_weights="w.pt"))          # the boost trains
-    with pytest.raises(SpecGenError, match="no boost_channels"):
-        check_frozen(plain, TrainConfig(frozen=["boost"], init_weights="w.pt"))
+        check_frozen(Config(**SMALL), TrainConfig(frozen=four, init_weights="w.pt"))
+    check_frozen(Config(**SMALL), TrainConfig(frozen=four[1:], init_weights="w.pt"))   # the encoder trains
     (tmp_path / "w.pt").write_bytes(b"")
     cfg = tmp_path / "c.json"
     cfg.write_text(json.dumps({"model": {}, "train": {"frozen": four, "init_weights": "w.pt"}}))
