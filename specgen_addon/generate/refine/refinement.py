@@ -29,24 +29,38 @@ from __future__ import annotations
 
 import math
 import time
+from collections.abc import Callable
 from concurrent.futures import ThreadPoolExecutor
 from dataclasses import dataclass, field, replace
-from typing import Callable
 
 import numpy as np
 
-from specgen_addon.common.errors import Cancelled, SpecGenError
 from specgen_addon.brdf.table import BRDFTable
+from specgen_addon.common.errors import Cancelled, SpecGenError
 from specgen_addon.generate.refine.basis import CorrectionBasis
-from specgen_addon.generate.refine.blur import (BLUR_CANDIDATES_PX, blur_image, blur_rows, embed_rows, gather_rows,
-                   gaussian_blur_stack, rows_inside, search_blur)
+from specgen_addon.generate.refine.blur import (
+    BLUR_CANDIDATES_PX,
+    blur_image,
+    blur_rows,
+    embed_rows,
+    gather_rows,
+    gaussian_blur_stack,
+    rows_inside,
+    search_blur,
+)
+from specgen_addon.generate.refine.body import (
+    BODY_PRIORS,
+    blended_body,
+    blind_share,
+    has_separate_body,
+    natural_body,
+)
 from specgen_addon.generate.refine.discrepancy import difference_variance, discrepancy_scale, twin_scene
 from specgen_addon.generate.refine.holdout import block_folds, holdout_error, holdout_errors
-from specgen_addon.generate.refine.body import BODY_PRIORS, blended_body, blind_share, has_separate_body, natural_body
 from specgen_addon.generate.refine.operator import PhotoOperator, render_grid
-from specgen_addon.render.photo_reproduction import Reproduction, checked_photo, photo_scale, reproduction
 from specgen_addon.generate.refine.solve import difference_operator, nonneg_ridge
 from specgen_addon.photo.photo_lighting import InputLighting
+from specgen_addon.render.photo_reproduction import Reproduction, checked_photo, photo_scale, reproduction
 from specgen_addon.render.sampling import diffuse_floor
 
 ProgressFn = Callable[[float], None]
@@ -513,17 +527,20 @@ def _photo_blur(op: PhotoOperator, a_lobe: np.ndarray, a_lamb: np.ndarray, a_bod
     b_common = b[common]
     best: list = [math.inf, 0.0, None]                           # residual, σ, rows
 
+    sigma2 = (options.noise * level) ** 2
+
     def residual_at(k: int) -> float:
         sigma = BLUR_CANDIDATES_PX[k]
-        if sigma > 0:
+        if sigma > 0:       # kept in float32: the blurred stack's values, widened exactly where used
             blurred = gaussian_blur_stack(image, sigma, dtype=np.float32)
-            rows = gather_rows(blurred, op.pixel_ids[order]).reshape(order.size, 3, -1).astype(np.float64)
+            rows = gather_rows(blurred, op.pixel_ids[order]).reshape(order.size, 3, -1)
             del blurred
         else:                                                    # unblurred: the design as it is
             rows = np.concatenate(columns, axis=2)[order]
         design = rows[:n_common]
-        theta, _ = _solve_correction(design, b_common, n_lobe, nl, level, basis, options)
-        residual = float(np.mean((design @ theta - b_common) ** 2))
+        terms = _data_terms_by_chunks(design, b_common, sigma2)
+        eq = _normal_equations(design, b_common, n_lobe, nl, level, basis, options, terms)
+        residual = eq.residual(eq.solve(0.0))
         if twin_difference is not None:
             residual -= difference_variance(op.observe(blur_image(twin_difference, sigma))[common])
         if residual < best[0]:
@@ -558,6 +575,27 @@ def _data_terms(design: np.ndarray, photo: np.ndarray, sigma2: float) -> _DataTe
     a = design.reshape(-1, design.shape[-1])
     y = photo.reshape(-1)
     return _DataTerms(a.T @ a / sigma2, a.T @ y / sigma2, float(y @ y) / sigma2, y.size, sigma2)
+
+
+#: Rows per chunk of :func:`_data_terms_by_chunks` (a few MB of float64 at a time).
+_CHUNK_ROWS = 2048
+
+
+def _data_terms_by_chunks(design: np.ndarray, photo: np.ndarray, sigma2: float) -> _DataTerms:
+    """:func:`_data_terms` of float32 or float64 rows, widened to float64 a chunk of rows at a
+    time: the same sums (to float rounding) without a float64 copy of the whole design."""
+    a = design.reshape(-1, design.shape[-1])
+    y = photo.reshape(-1)
+    n = 3 * _CHUNK_ROWS
+    gram = np.zeros((a.shape[1], a.shape[1]))
+    rhs = np.zeros(a.shape[1])
+    chunk = np.empty((min(n, a.shape[0]), a.shape[1]))
+    for start in range(0, a.shape[0], n):
+        c = chunk[:min(n, a.shape[0] - start)]
+        c[...] = a[start:start + c.shape[0]]
+        gram += c.T @ c
+        rhs += c.T @ y[start:start + c.shape[0]]
+    return _DataTerms(gram / sigma2, rhs / sigma2, float(y @ y) / sigma2, y.size, sigma2)
 
 
 def _with_columns(terms: _DataTerms, design: np.ndarray, photo: np.ndarray, cols: slice) -> _DataTerms:
