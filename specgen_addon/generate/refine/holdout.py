@@ -11,7 +11,7 @@ resampling correlate neighbouring pixels' noise.
 
 from __future__ import annotations
 
-from typing import Callable
+from collections.abc import Callable
 
 import numpy as np
 
@@ -42,15 +42,16 @@ def holdout_error(design: np.ndarray, photo: np.ndarray, folds: np.ndarray, solv
 def holdout_errors(design: np.ndarray, photo: np.ndarray, folds: np.ndarray, solvers: list[Solver]) -> list[float]:
     """:func:`holdout_error` of each of ``solvers``, the folds cut once: every solver is given the
     same fold arrays, so solvers that share work on a fold (its normal equations) can reuse it."""
+    first = folds == 0
+    if not np.any(first) or np.all(first):
+        return [float("inf")] * len(solvers)
+    # each fold's rows are cut once (the design is large): one fold's held rows are the other's fitted ones
+    rows = [(design[first], photo[first]), (design[~first], photo[~first])]
     totals, count = [0.0] * len(solvers), 0
     for k in (0, 1):
-        held = folds == k
-        if not np.any(held) or np.all(held):
-            return [float("inf")] * len(solvers)
-        fit_design, fit_photo = design[~held], photo[~held]
-        held_design, held_photo = design[held], photo[held]
+        (held_design, held_photo), (fit_design, fit_photo) = rows[k], rows[1 - k]
         for i, solve in enumerate(solvers):
             theta = solve(fit_design, fit_photo)
             totals[i] += float(np.sum((held_design @ theta - held_photo) ** 2))
-        count += int(held.sum()) * photo.shape[1]
+        count += held_photo.size
     return [t / count for t in totals]

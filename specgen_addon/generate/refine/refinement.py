@@ -29,24 +29,38 @@ from __future__ import annotations
 
 import math
 import time
+from collections.abc import Callable
 from concurrent.futures import ThreadPoolExecutor
 from dataclasses import dataclass, field, replace
-from typing import Callable
 
 import numpy as np
 
-from specgen_addon.common.errors import Cancelled, SpecGenError
 from specgen_addon.brdf.table import BRDFTable
+from specgen_addon.common.errors import Cancelled, SpecGenError
 from specgen_addon.generate.refine.basis import CorrectionBasis
-from specgen_addon.generate.refine.blur import (BLUR_CANDIDATES_PX, blur_image, blur_rows, embed_rows, gather_rows,
-                   gaussian_blur_stack, rows_inside, search_blur)
+from specgen_addon.generate.refine.blur import (
+    BLUR_CANDIDATES_PX,
+    blur_image,
+    blur_rows,
+    embed_rows,
+    gather_rows,
+    gaussian_blur_stack,
+    rows_inside,
+    search_blur,
+)
+from specgen_addon.generate.refine.body import (
+    BODY_PRIORS,
+    blended_body,
+    blind_share,
+    has_separate_body,
+    natural_body,
+)
 from specgen_addon.generate.refine.discrepancy import difference_variance, discrepancy_scale, twin_scene
 from specgen_addon.generate.refine.holdout import block_folds, holdout_error, holdout_errors
-from specgen_addon.generate.refine.body import BODY_PRIORS, blended_body, blind_share, has_separate_body, natural_body
 from specgen_addon.generate.refine.operator import PhotoOperator, render_grid
-from specgen_addon.render.photo_reproduction import Reproduction, checked_photo, photo_scale, reproduction
 from specgen_addon.generate.refine.solve import difference_operator, nonneg_ridge
 from specgen_addon.photo.photo_lighting import InputLighting
+from specgen_addon.render.photo_reproduction import Reproduction, checked_photo, photo_scale, reproduction
 from specgen_addon.render.sampling import diffuse_floor
 
 ProgressFn = Callable[[float], None]
@@ -303,7 +317,7 @@ def refine_brdf(table: BRDFTable, photo: np.ndarray, lighting=None, options: Ref
             a_lobe = np.concatenate([a_lobe, a_add.reshape(b.shape[0], 3, -1)], axis=2)
         before_raw = before_job.result()
         twin_raw = None if twin_job is None else twin_job.result()
-        sigma, a_lobe_fit, a_lamb_fit = _photo_blur(op, a_lobe, a_lamb, op.lambert_design(floor, s_hats), b,
+        sigma, a_lobe_fit, a_lamb_fit, searched = _photo_blur(op, a_lobe, a_lamb, op.lambert_design(floor, s_hats), b,
                                                     clipped, n_lobe, nl, level, basis, options, check_cancel,
                                                     None if twin_raw is None else before_raw - twin_raw)
         blur = blur_rows(op.shape, op.pixel_ids, sigma)
@@ -332,8 +346,13 @@ def refine_brdf(table: BRDFTable, photo: np.ndarray, lighting=None, options: Ref
             replacing the network's)."""
             if last[0] is not design:
                 body_cols = slice(a_lobe.shape[2], a_lobe.shape[2] + nl)
-                terms = (_data_terms(design, photo_rows, sigma2) if last[0] is None
-                         else _with_columns(last[1], design, photo_rows, body_cols))
+                if last[0] is not None:
+                    terms = _with_columns(last[1], design, photo_rows, body_cols)
+                elif searched is not None:        # the blur search's, moved to these rows
+                    terms = _with_columns(_moved_rows(searched, keep, design, b, a_lobe_fit, a_lamb_fit, nl),
+                                          design, photo_rows, body_cols)
+                else:
+                    terms = _data_terms(design, photo_rows, sigma2)
                 last[:] = [design, terms]
             return last[1]
 
@@ -485,11 +504,14 @@ def refine_brdf(table: BRDFTable, photo: np.ndarray, lighting=None, options: Ref
 def _photo_blur(op: PhotoOperator, a_lobe: np.ndarray, a_lamb: np.ndarray, a_body: np.ndarray,
                 b: np.ndarray, clipped: np.ndarray, n_lobe: int, nl: int, level: float,
                 basis: CorrectionBasis, options: RefineOptions, check_cancel: Callable[[], None],
-                twin_difference: np.ndarray | None = None) -> tuple[float, np.ndarray, np.ndarray]:
+                twin_difference: np.ndarray | None = None
+                ) -> tuple[float, np.ndarray, np.ndarray, tuple[np.ndarray, _DataTerms] | None]:
     """The photo's blur σ (px) and the lobe and Lambertian designs blurred by it: σ is
     ``options.blur_px``, or the candidate of :data:`.blur.BLUR_CANDIDATES_PX` whose first solve
     leaves the smallest mean squared residual on the rows every candidate keeps (searched as
-    :data:`BLUR_SEARCH` says: :func:`.blur.search_blur`).
+    :data:`BLUR_SEARCH` says: :func:`.blur.search_blur`). With a search, also the rows it
+    compared on (a mask over the operator's rows) and the chosen candidate's data term there
+    (:func:`_moved_rows` reuses it); else None.
 
     With ``twin_difference`` (H, W, 3: the network's table rendered with the operator's samples
     minus with independent ones, :mod:`.discrepancy`) each candidate's residual is first reduced
@@ -498,10 +520,10 @@ def _photo_blur(op: PhotoOperator, a_lobe: np.ndarray, a_lamb: np.ndarray, a_bod
     samples with the operator would otherwise be fitted as a blurred one)."""
     if options.blur_px is not None:
         blur = blur_rows(op.shape, op.pixel_ids, float(options.blur_px))
-        return float(options.blur_px), blur(a_lobe), blur(a_lamb)
+        return float(options.blur_px), blur(a_lobe), blur(a_lamb), None
     common = rows_inside(op.shape, op.pixel_ids, max(BLUR_CANDIDATES_PX), clipped)
     if not np.any(common):              # nothing every candidate sees (a clipped photo): no blur
-        return 0.0, a_lobe, a_lamb
+        return 0.0, a_lobe, a_lamb, None
     n_lobe_cols, n_body = a_lobe.shape[2], a_body.shape[2]
     # every candidate blurs one stack of all the design's columns (in float32: half the memory
     # traffic); its rows are read with the fitted (common) rows first, in their own order, so that
@@ -511,23 +533,26 @@ def _photo_blur(op: PhotoOperator, a_lobe: np.ndarray, a_lamb: np.ndarray, a_bod
     order = np.concatenate([np.flatnonzero(common), np.flatnonzero(~common)])
     n_common = int(common.sum())
     b_common = b[common]
-    best: list = [math.inf, 0.0, None]                           # residual, σ, rows
+    best: list = [math.inf, 0.0, None, None]                     # residual, σ, rows, their data term
+
+    sigma2 = (options.noise * level) ** 2
 
     def residual_at(k: int) -> float:
         sigma = BLUR_CANDIDATES_PX[k]
-        if sigma > 0:
+        if sigma > 0:       # kept in float32: the blurred stack's values, widened exactly where used
             blurred = gaussian_blur_stack(image, sigma, dtype=np.float32)
-            rows = gather_rows(blurred, op.pixel_ids[order]).reshape(order.size, 3, -1).astype(np.float64)
+            rows = gather_rows(blurred, op.pixel_ids[order]).reshape(order.size, 3, -1)
             del blurred
         else:                                                    # unblurred: the design as it is
             rows = np.concatenate(columns, axis=2)[order]
         design = rows[:n_common]
-        theta, _ = _solve_correction(design, b_common, n_lobe, nl, level, basis, options)
-        residual = float(np.mean((design @ theta - b_common) ** 2))
+        terms = _data_terms_by_chunks(design, b_common, sigma2)
+        eq = _normal_equations(design, b_common, n_lobe, nl, level, basis, options, terms)
+        residual = eq.residual(eq.solve(0.0))
         if twin_difference is not None:
             residual -= difference_variance(op.observe(blur_image(twin_difference, sigma))[common])
         if residual < best[0]:
-            best[:] = [residual, sigma, rows]
+            best[:] = [residual, sigma, rows, terms]
         check_cancel()
         return residual
 
@@ -535,7 +560,7 @@ def _photo_blur(op: PhotoOperator, a_lobe: np.ndarray, a_lamb: np.ndarray, a_bod
     sigma, rows = best[1], best[2]
     in_order = np.empty_like(rows)
     in_order[order] = rows                                       # back to the operator's rows
-    return sigma, in_order[:, :, :n_lobe_cols], in_order[:, :, n_lobe_cols + n_body:]
+    return sigma, in_order[:, :, :n_lobe_cols], in_order[:, :, n_lobe_cols + n_body:], (common, best[3])
 
 
 #: The discrepancy pull's largest factor: the lobe's coefficients are then the network's to ~10⁻⁶.
@@ -558,6 +583,42 @@ def _data_terms(design: np.ndarray, photo: np.ndarray, sigma2: float) -> _DataTe
     a = design.reshape(-1, design.shape[-1])
     y = photo.reshape(-1)
     return _DataTerms(a.T @ a / sigma2, a.T @ y / sigma2, float(y @ y) / sigma2, y.size, sigma2)
+
+
+#: Rows per chunk of :func:`_data_terms_by_chunks` (a few MB of float64 at a time).
+_CHUNK_ROWS = 2048
+
+
+def _data_terms_by_chunks(design: np.ndarray, photo: np.ndarray, sigma2: float) -> _DataTerms:
+    """:func:`_data_terms` of float32 or float64 rows, widened to float64 a chunk of rows at a
+    time: the same sums (to float rounding) without a float64 copy of the whole design."""
+    a = design.reshape(-1, design.shape[-1])
+    y = photo.reshape(-1)
+    n = 3 * _CHUNK_ROWS
+    gram = np.zeros((a.shape[1], a.shape[1]))
+    rhs = np.zeros(a.shape[1])
+    chunk = np.empty((min(n, a.shape[0]), a.shape[1]))
+    for start in range(0, a.shape[0], n):
+        c = chunk[:min(n, a.shape[0] - start)]
+        c[...] = a[start:start + c.shape[0]]
+        gram += c.T @ c
+        rhs += c.T @ y[start:start + c.shape[0]]
+    return _DataTerms(gram / sigma2, rhs / sigma2, float(y @ y) / sigma2, y.size, sigma2)
+
+
+def _moved_rows(searched: tuple[np.ndarray, _DataTerms], keep: np.ndarray, design: np.ndarray, photo: np.ndarray,
+                a_lobe: np.ndarray, a_lamb: np.ndarray, nl: int) -> _DataTerms:
+    """The blur search's data term of its rows (mask ``common`` over the operator's rows) made that
+    of the rows ``keep``, whose design is ``design``: the rows only ``keep`` has added, those only
+    ``common`` has taken away. Its body columns are not those of ``design`` (the search blurred
+    another body): :func:`_with_columns` makes them again."""
+    common, terms = searched
+    added, taken = keep & ~common, common & ~keep
+    plus = _data_terms(design[added[keep]], photo[added], terms.sigma2)
+    body = np.zeros((int(taken.sum()), 3, nl))
+    minus = _data_terms(np.concatenate([a_lobe[taken], body, a_lamb[taken]], axis=2), photo[taken], terms.sigma2)
+    return _DataTerms(terms.gram + plus.gram - minus.gram, terms.rhs + plus.rhs - minus.rhs,
+                      terms.yy + plus.yy - minus.yy, terms.n_obs + plus.n_obs - minus.n_obs, terms.sigma2)
 
 
 def _with_columns(terms: _DataTerms, design: np.ndarray, photo: np.ndarray, cols: slice) -> _DataTerms:
