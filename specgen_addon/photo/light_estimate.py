@@ -38,6 +38,7 @@ import numpy as np
 from specgen_addon.photo.light_probe import _nnls, ball_normals
 from specgen_addon.photo.ndimage_np import binary_erosion
 from specgen_addon.photo.photo_lighting import Light, LightingError, parse_lighting
+from specgen_addon.photo.sphere_detect import luminance
 from specgen_addon.photo.sphere_image import EXPOSURE
 
 #: Spacing (degrees) of the direction grid.
@@ -124,7 +125,7 @@ def estimate_lights(photo: np.ndarray, exclude: np.ndarray | None = None,
                             f"not {ambient_from!r}")
     s = photo.shape[0]
     n, inside = ball_normals(s)
-    lum = photo[..., :3] @ np.array([0.2126, 0.7152, 0.0722])
+    lum = luminance(photo)
     seen = inside if exclude is None else inside & ~exclude     # black pixels too: a shadow may read 0
     use = seen & (lum > 0)
     nn, y = n[use], lum[use]

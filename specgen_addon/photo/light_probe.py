@@ -28,7 +28,9 @@ from specgen_addon.common.errors import ImageInputError, SpecGenError
 from specgen_addon.common.image_io import write_exr
 from specgen_addon.photo.ndimage_np import label, map_coordinates
 from specgen_addon.photo.photo_lighting import Light, parse_lighting
+from specgen_addon.photo.sphere_detect import luminance
 from specgen_addon.photo.sphere_image import EXPOSURE, PhotoSource
+from specgen_addon.photo.white_balance import LUMINANCE
 from specgen_addon.render.environment import Environment, _texel_directions
 
 #: Width of the unwrapped equirect map (height is half).
@@ -162,10 +164,10 @@ def fit_clipped_powers(probe: Probe, photo: np.ndarray, exposure: float = 1.0) -
         return []
     s = photo.shape[0]
     n, inside = ball_normals(s)
-    lum = photo[..., :3] @ np.array([0.2126, 0.7152, 0.0722])
+    lum = luminance(photo)
     nn = n[inside]
     env = Environment(probe.env_rgb)
-    e_env = env.irradiance_rgb(nn) @ np.array([0.2126, 0.7152, 0.0722]) / np.pi   # radiance of a white ball
+    e_env = env.irradiance_rgb(nn) @ LUMINANCE / np.pi   # radiance of a white ball
     cols = [e_env] + [np.maximum(nn @ d, 0.0) for d, _ in probe.clipped_lights]   # power 1 = radiance 1
     a = np.stack(cols, -1) * exposure
     y = lum[inside]

@@ -37,6 +37,7 @@ import numpy as np
 
 from specgen_addon.common.errors import ImageInputError
 from specgen_addon.photo.ndimage_np import fit_circle, gaussian_filter, map_coordinates
+from specgen_addon.photo.white_balance import LUMINANCE
 
 #: Longer side of the reduced copy the votes are counted on (pixels).
 WORK_SIDE = 256
@@ -70,7 +71,7 @@ class FoundCircle:
 
 def luminance(rgb: np.ndarray) -> np.ndarray:
     """Rec. 709 luminance of a linear RGB(A) image (H, W)."""
-    return np.asarray(rgb[..., :3], np.float64) @ np.array([0.2126, 0.7152, 0.0722])
+    return np.asarray(rgb[..., :3], np.float64) @ LUMINANCE
 
 
 def _reduce(lum: np.ndarray, factor: int) -> np.ndarray:

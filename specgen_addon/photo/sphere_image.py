@@ -49,7 +49,7 @@ from specgen_addon.photo import ndimage_np
 from specgen_addon.photo.colour_checker import checker_balance, find_checker
 from specgen_addon.photo.ndimage_np import ransac_circle
 from specgen_addon.photo.read import FLOAT_SUFFIXES, read_photo, warn_notes
-from specgen_addon.photo.sphere_detect import find_ball
+from specgen_addon.photo.sphere_detect import find_ball, luminance
 from specgen_addon.photo.sphere_edge import refine_circle
 from specgen_addon.photo.white_balance import patch_gains
 from specgen_addon.render import DistantLight, EnvSampling, Scene, sphere_geometry
@@ -385,9 +385,8 @@ def load_sphere_crop(path: str | Path, size: int = CANONICAL_SIZE, encoding: str
         if white_patch is not None:
             gains, source = patch_gains(arr, photo.saturated, white_patch, white_target, photo.scale), "from the patch"
         if colour_checker:
-            stat = path.stat()
             found = find_checker(arr, photo.saturated, photo.scale,
-                                 key=(str(path.resolve()), stat.st_mtime_ns, stat.st_size, encoding, white_level))
+                                 key=(str(path.resolve()), _file_stamp(path), encoding, white_level))
             balance = checker_balance(found, white_target)
             gains, source, note = balance.gains, "from the colour checker", balance.describe()
         if white_gains is not None:
@@ -510,7 +509,7 @@ def _clean_background(rgb: np.ndarray) -> bool:
     """Whether the background is a render's: a single colour (black, say) along half of the
     border or more (the rest: a sphere touching the frame), so the foreground's outline is the
     sphere's; a camera's background never is."""
-    lum = rgb @ np.array([0.2126, 0.7152, 0.0722])
+    lum = luminance(rgb)
     border = np.concatenate([lum[:2].ravel(), lum[-2:].ravel(), lum[:, :2].ravel(), lum[:, -2:].ravel()])
     top = float(np.percentile(lum, 99.5))
     return top > 0 and float(np.mean(np.abs(border - np.median(border)) <= 1e-3 * top)) >= 0.5
@@ -553,7 +552,7 @@ def _foreground(rgb: np.ndarray, noise_floor: float = 0.0) -> tuple[np.ndarray, 
     """
     ndimage = _ndimage()
 
-    lum = rgb @ np.array([0.2126, 0.7152, 0.0722])
+    lum = luminance(rgb)
     if not np.percentile(lum, 99.5) > 0:
         raise ImageInputError("image is blank: no sphere found")
     contrast = rgb.max(axis=-1)

@@ -369,7 +369,7 @@ def refine_brdf(table: BRDFTable, photo: np.ndarray, lighting=None, options: Ref
             hold-out compares are fitted to the same fold's rows (:func:`.holdout_errors`)."""
             kept = shared.get(id(d))
             if kept is None or kept[0] is not d or kept[1] is not y:
-                kept = shared[id(d)] = (d, y, _data_terms(d, y, (options.noise * level) ** 2))
+                kept = shared[id(d)] = (d, y, _data_terms(d, y, sigma2))
             return kept[2]
 
         def fit_rows(opts: RefineOptions, lobe_kept: bool = False):
