@@ -81,6 +81,9 @@ def build_parser() -> argparse.ArgumentParser:
     ap.add_argument("--weights", default=None, help="network weights (.pt); default: the shipped ones")
     ap.add_argument("--backend", choices=("onnx", "torch"), default=None,
                     help="inference backend (default: onnx if onnxruntime is installed)")
+    ap.add_argument("--every-band", action="store_true",
+                    help="the network evaluates every band (default: bands at most 40 nm apart, the "
+                         "others interpolated in λ: about 1 s faster, the same table to 0.2 %% rms)")
     ap.add_argument("--overwrite", action="store_true", help="replace existing output files")
     ap.add_argument("--keep-lookups", action="store_true",
                     help="keep the generated BRDF (compact material, a few MB) and its baked lookups "
@@ -182,7 +185,7 @@ def run(args) -> Path:
                                       weights=args.weights, backend=args.backend, name=source.stem,
                                       progress=progress, lighting=photo_lighting, refine=args.refine,
                                       save_table=args.keep_lookups, model=args.model,
-                                      latent_fit=args.latent_fit)
+                                      latent_fit=args.latent_fit, every_band=args.every_band)
         info = generated.lookup
         _report_generated(generated, args, photo, photo_lighting)
     else:
@@ -420,7 +423,7 @@ def _generate(spec, ns, stem: str, lookup: Path, wavelengths, args):
     generated = pipeline.generate(photo, out_dir=lookup, wavelengths_nm=wavelengths, weights=args.weights,
                                   backend=args.backend, name=stem, lighting=lighting,
                                   refine=ns.refine, model=ns.model, overwrite=args.overwrite,
-                                  latent_fit=ns.latent_fit)
+                                  latent_fit=ns.latent_fit, every_band=args.every_band)
     info = generated.lookup
     _report_generated(generated, ns, photo, lighting)
     print(f"{spec.image.name}: BRDF generated and baked in {time.perf_counter() - t0:.1f} s",

@@ -5,7 +5,8 @@
 On the shared grey-ball photos (../shared/data/photos/psm_gray_chrome, ``--linear``, the ball found
 in the photo): what the Generate button runs, :func:`specgen_addon.generate.pipeline.generate` with
 an ``out_dir`` (network, refinement, bake at 21 bands, the default 180-φd lookup, its preview
-image; the backend the panel picks: onnx where onnxruntime is installed), after the light is
+image; the backend the panel picks: onnx where onnxruntime is installed; the network at bands
+40 nm apart, or with ``--every-band`` at every band), after the light is
 resolved by the same code as ``infer`` (:func:`specgen_addon.cli.photo_args.photo_inputs`):
 
 * ``given``: the dataset's light direction (``--light-vector``);
@@ -87,6 +88,8 @@ def main() -> int:
     ap.add_argument("--inputs", type=int, nargs="+", default=[0])
     ap.add_argument("--modes", nargs="+", default=["given", "estimated", "chrome"], choices=list(TARGET_S))
     ap.add_argument("--repeat", type=int, default=2)
+    ap.add_argument("--every-band", action="store_true",
+                    help="the network evaluates every band (Generate's default: bands 40 nm apart)")
     args = ap.parse_args()
     if not DATA.is_dir():
         print(f"needs the shared photos at {DATA}", file=sys.stderr)
@@ -104,10 +107,11 @@ def main() -> int:
 
     def generate(src, light, name: str):
         return pipeline.generate(src, light, wavelengths_nm=wl, backend=None, out_dir=tmp / "lookup",
-                                 name=name, preview=True)
+                                 name=name, preview=True, every_band=args.every_band)
 
     print(describe_machine())
-    print(f"backend: {pipeline.choose_backend()}")
+    print(f"backend: {pipeline.choose_backend()}; the network at "
+          + ("every band" if args.every_band else f"bands {pipeline.NETWORK_BAND_GAP_NM:g} nm apart"))
     with contextlib.redirect_stdout(io.StringIO()):   # warm-up: the model and the scenes load
         ns = parser.parse_args(["infer", *photo_args("given", args.inputs[0], tmp)])
         generate(*photo_inputs(ns, ns.image, tmp / "probe.exr"), "warm")

@@ -112,15 +112,16 @@ def score(preds: list[np.ndarray], photos: list[np.ndarray], masks: list[np.ndar
 
 
 def run(inputs: list[int], modes: list[str], tmp: Path, network_input: str = "canonical",
-        estimate_ambient: str | None = None, refine: bool = True) -> dict:
+        estimate_ambient: str | None = None, refine: bool = True, every_band: bool = False) -> dict:
     from specgen_addon.generate.canonical_input import network_crop
-    from specgen_addon.generate.pipeline import network_reproduction
+    from specgen_addon.generate.pipeline import NETWORK_BAND_GAP_NM, network_reproduction
     from specgen_addon.generate.refine import CLIP_LEVEL, RefineOptions, refine_brdf, render_under
     from specgen_addon.model.runtime.inference import generate_brdf
     from specgen_addon.photo.photo_lighting import InputLighting
     from specgen_addon.photo.sphere_image import EXPOSURE, SphereCrop
     from specgen_addon.render import sphere_geometry
 
+    gap = None if every_band else NETWORK_BAND_GAP_NM      # as Generate: every band, or 40 nm apart
     lights = load_lights(DATA / "lights.txt")
     crops = [crop("gray", j) for j in range(12)]
     inside = sphere_geometry(SIZE).mask
@@ -149,12 +150,12 @@ def run(inputs: list[int], modes: list[str], tmp: Path, network_input: str = "ca
             # as the product: the refinement starts from the photo's own table; the network alone
             # (no refinement) is shown the photo re-rendered in the studio (generate.canonical_input)
             refit = network_input == "canonical" and not lighting.is_canonical
-            start = generate_brdf(SphereCrop(photo * lighting.network_gain(), crops[i].copied)) \
-                if refine or not refit else None
+            start = generate_brdf(SphereCrop(photo * lighting.network_gain(), crops[i].copied),
+                                  band_gap_nm=gap) if refine or not refit else None
             t1 = time.perf_counter()
             table, input_seconds = start, 0.0
             if refit:
-                table = generate_brdf(network_crop(crops[i], photo, lighting, CLIP_LEVEL)[0])
+                table = generate_brdf(network_crop(crops[i], photo, lighting, CLIP_LEVEL)[0], band_gap_nm=gap)
                 input_seconds = time.perf_counter() - t1
             res = refine_brdf(start, photo, lighting, RefineOptions(clip_level=CLIP_LEVEL,
                                                                      exclude=crops[i].saturated)) if refine else None
@@ -198,6 +199,9 @@ def main(argv=None) -> int:
                          "specgen_addon.photo.light_estimate.AMBIENT_FROM)")
     ap.add_argument("--network-only", action="store_true",
                     help="score the network alone and the Lambertian floor; skip the refinement (quick)")
+    ap.add_argument("--every-band", action="store_true",
+                    help="the network evaluates every band (default: as Generate, bands 40 nm apart "
+                         "and the others interpolated)")
     ap.add_argument("--json", type=Path, default=None)
     ap.add_argument("--tmp", type=Path, default=Path("/tmp/specgen_photos_loo"))
     args = ap.parse_args(argv)
@@ -206,7 +210,7 @@ def main(argv=None) -> int:
         return 2
     args.tmp.mkdir(parents=True, exist_ok=True)
     res = run(args.inputs, args.modes, args.tmp, args.network_input, args.estimate_ambient,
-              refine=not args.network_only)
+              refine=not args.network_only, every_band=args.every_band)
     print(json.dumps(res["mean_psnr_db"], indent=1))
     if args.json:
         args.json.write_text(json.dumps(res, indent=1))

@@ -68,6 +68,9 @@ def add_parser(sub: argparse._SubParsersAction) -> argparse.ArgumentParser:
                    help="write the full float32 table (122 MB at 21 bands) instead of the compact file")
     add_network_arguments(p)
     p.add_argument("--bands", type=int, default=21, help="wavelength bands (default 21)")
+    p.add_argument("--every-band", action="store_true",
+                   help="the network evaluates every band (default: bands at most 40 nm apart, the "
+                        "others interpolated in λ: about 1 s faster, the same table to 0.2 %% rms)")
     p.add_argument("--range", type=float, nargs=2, default=(380.0, 780.0), metavar=("START", "END"),
                    help="wavelength range in nm (default 380 780)")
     p.add_argument("--rgb", action="store_true", help="also write OUTPUT_rgb.npz (RGB projection, D65)")
@@ -225,7 +228,7 @@ def run_infer(args: argparse.Namespace) -> int:
     with progress_bar("infer", enabled=not args.quiet) as update:
         generated = generate(source, lighting, refine=args.refine, weights=args.weights,
                              wavelengths_nm=wl, backend=args.backend, progress=update, model=args.model,
-                             latent_fit=args.latent_fit)
+                             latent_fit=args.latent_fit, every_band=args.every_band)
     table = generated.table
     dt = time.perf_counter() - t0
     print(f"{out}: spectral BRDF {table.values.shape} ({wl[0]:g}–{wl[-1]:g} nm) in {dt:.1f} s")

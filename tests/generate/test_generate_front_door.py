@@ -47,3 +47,23 @@ def test_existing_outputs_and_bad_names_are_refused_before_any_work(weights, tmp
         generate(PHOTO, wavelengths_nm=WL, out_dir=tmp_path / "new", name="a/b", progress=seen.append)
     assert seen == [] and not (tmp_path / "new").exists()
     assert sorted(p.name for p in tmp_path.iterdir()) == ["ball_lookup.json"]
+
+
+@pytest.mark.parametrize("every_band,gap", [(False, "default"), (True, None)])
+def test_generate_asks_the_network_for_bands_40_nm_apart_unless_every_band(monkeypatch, every_band, gap):
+    from specgen_addon.generate import pipeline
+
+    asked = {}
+
+    class Stop(Exception):
+        pass
+
+    def network(*_args, **kwargs):
+        asked.update(kwargs)
+        raise Stop
+
+    monkeypatch.setattr(pipeline, "generate_brdf", network)
+    with pytest.raises(Stop):
+        generate(PHOTO, refine=False, every_band=every_band)
+    assert asked["band_gap_nm"] == (pipeline.NETWORK_BAND_GAP_NM if gap == "default" else None)
+    assert pipeline.NETWORK_BAND_GAP_NM == 40.0

@@ -304,7 +304,8 @@ def get_backend(weights=None, backend: str = "torch"):
 
 # ---------------------------------------------------------------------------------- generation
 def generate_brdf(image, weights=None, wavelengths_nm=None, backend: str = "torch",
-                  progress: ProgressFn | None = None, cancel: CancelFn | None = None) -> BRDFTable:
+                  progress: ProgressFn | None = None, cancel: CancelFn | None = None,
+                  band_gap_nm: float | None = None) -> BRDFTable:
     """Generate the spectral BRDF of the material in ``image`` on the MERL grid.
 
     Parameters
@@ -324,6 +325,11 @@ def generate_brdf(image, weights=None, wavelengths_nm=None, backend: str = "torc
     progress, cancel
         ``progress(fraction)`` after each block; ``cancel()`` returning True raises
         :class:`~specgen_addon.common.errors.Cancelled` (no table is returned).
+    band_gap_nm
+        ``None``: the network evaluates every band. A gap in nm: only the bands of
+        :func:`network_bands` (neighbours at most this far apart), the others interpolated
+        linearly in λ between them (:func:`fill_bands`); the table's metadata lists the
+        network's bands.
 
     Returns
     -------
@@ -342,9 +348,12 @@ def generate_brdf(image, weights=None, wavelengths_nm=None, backend: str = "torc
         raise SpecGenError(f"wavelengths {wl[0]:g}–{wl[-1]:g} nm fall outside the model's "
                            f"{cfg.lambda_min_nm:g}–{cfg.lambda_max_nm:g} nm")
     x = resample_square(crop.image, cfg.image_size)[None].astype(np.float32)
-    u_lambda = cfg.lambda_coordinates(wl)
+    kept = network_bands(wl, band_gap_nm)
+    u_lambda = cfg.lambda_coordinates(wl[kept])
     tables = be.make_tables(x, u_lambda)
-    values = evaluate_grid(be, tables, wl.size, progress=progress, cancel=cancel, decode_mu=cfg.mu)
+    values = evaluate_grid(be, tables, kept.size, progress=progress, cancel=cancel, decode_mu=cfg.mu)
+    if kept.size < wl.size:
+        values = fill_bands(values, wl, kept)
 
     reason = bad_values(values)
     if reason:
@@ -354,7 +363,35 @@ def generate_brdf(image, weights=None, wavelengths_nm=None, backend: str = "torc
     meta = {"source": "specgen", "input_image": src, "backend": backend,
             "weights": str(_weights_path(weights)), "input_sphere": "copied" if crop.copied else "resampled",
             "description": "SpecGen prediction"}
+    if kept.size < wl.size:
+        meta["network_bands_nm"] = [float(v) for v in wl[kept]]
     return BRDFTable(values, wl, metadata=meta)
+
+
+def network_bands(wavelengths_nm: np.ndarray, max_gap_nm: float | None) -> np.ndarray:
+    """Indices of the bands the network evaluates: all with ``max_gap_nm`` None; else the fewest
+    bands, first and last included, whose neighbours are at most ``max_gap_nm`` apart (every other
+    band of a 20 nm grid at 40 nm; every band of a grid already coarser than the gap)."""
+    wl = np.asarray(wavelengths_nm, dtype=np.float64)
+    if max_gap_nm is None or wl.size <= 2:
+        return np.arange(wl.size)
+    kept = [0]
+    for k in range(1, wl.size - 1):
+        if wl[k + 1] - wl[kept[-1]] > max_gap_nm + 1e-9:   # skipping k would leave too wide a gap
+            kept.append(k)
+    kept.append(wl.size - 1)
+    return np.asarray(kept)
+
+
+def fill_bands(values: np.ndarray, wavelengths_nm: np.ndarray, kept: np.ndarray) -> np.ndarray:
+    """``values`` (…, len(kept)) at the bands ``kept`` of ``wavelengths_nm`` -> (…, Λ): each other
+    band linearly interpolated in λ between its kept neighbours (``f_r`` itself, so an
+    interpolated band is the same mix of the two measured radiances); one matrix product."""
+    wl = np.asarray(wavelengths_nm, dtype=np.float64)
+    nodes = wl[kept]
+    mix = np.stack([np.interp(wl, nodes, e) for e in np.eye(kept.size)])   # (kept, Λ): hat functions
+    flat = values.reshape(-1, kept.size)
+    return (flat @ mix.astype(values.dtype)).reshape(values.shape[:-1] + (wl.size,))
 
 
 def evaluate_grid(be, tables, n_lambda: int, progress: ProgressFn | None = None,
