@@ -83,7 +83,7 @@ def build_parser() -> argparse.ArgumentParser:
                     help="inference backend (default: onnx if onnxruntime is installed)")
     ap.add_argument("--every-band", action="store_true",
                     help="the network evaluates every band (default: bands at most 40 nm apart, the "
-                         "others interpolated in λ: about 1 s faster, the same table to 0.2 %% rms)")
+                         "others interpolated in λ: about 1 s faster, the table within 1 %% rms)")
     ap.add_argument("--overwrite", action="store_true", help="replace existing output files")
     ap.add_argument("--keep-lookups", action="store_true",
                     help="keep the generated BRDF (compact material, a few MB) and its baked lookups "

@@ -70,7 +70,7 @@ def add_parser(sub: argparse._SubParsersAction) -> argparse.ArgumentParser:
     p.add_argument("--bands", type=int, default=21, help="wavelength bands (default 21)")
     p.add_argument("--every-band", action="store_true",
                    help="the network evaluates every band (default: bands at most 40 nm apart, the "
-                        "others interpolated in λ: about 1 s faster, the same table to 0.2 %% rms)")
+                        "others interpolated in λ: about 1 s faster, the table within 1 %% rms)")
     p.add_argument("--range", type=float, nargs=2, default=(380.0, 780.0), metavar=("START", "END"),
                    help="wavelength range in nm (default 380 780)")
     p.add_argument("--rgb", action="store_true", help="also write OUTPUT_rgb.npz (RGB projection, D65)")
