@@ -5,16 +5,18 @@
 On the shared grey-ball photos (../shared/data/photos/psm_gray_chrome, ``--linear``, the ball found
 in the photo): what the Generate button runs, :func:`specgen_addon.generate.pipeline.generate` with
 an ``out_dir`` (network, refinement, bake at 21 bands, the default 180-φd lookup, its preview
-image; the backend the panel picks: onnx where onnxruntime is installed; the network at bands
-40 nm apart, or with ``--every-band`` at every band), after the light is
-resolved by the same code as ``infer`` (:func:`specgen_addon.cli.photo_args.photo_inputs`):
+image and, as the panel's *Export Table* does by default, the compact material file ``<name>.npz``
+(``--no-material-file`` leaves it out); the backend the panel picks: onnx where onnxruntime is
+installed; the network at bands 40 nm apart, or with ``--every-band`` at every band), after the
+light is resolved by the same code as ``infer`` (:func:`specgen_addon.cli.photo_args.photo_inputs`):
 
 * ``given``: the dataset's light direction (``--light-vector``);
 * ``estimated``: ``--input-env estimate``, lights + ambient fitted to the ball's own shading;
 * ``chrome``: ``--light-probe`` the chrome ball under the same lamp (with its mask).
 
 Prints wall and CPU seconds (process time, all threads) per phase: resolving the light, the network
-(the photo's crop and the network over the table), the refinement, the bake. Targets (2 cores):
+(the photo's crop and the network over the table), the refinement, the bake (with the material
+file written beside it). Targets (2 cores):
 ≤ 6 s with the light given, ≤ 20 s estimated or from a chrome ball. The targets are wall times:
 compare them on a quiet machine (the load is printed). The CPU time counts every thread, numpy's
 and onnxruntime's waiting included, so it is higher on a quiet machine than on a loaded one.
@@ -88,6 +90,9 @@ def main() -> int:
     ap.add_argument("--inputs", type=int, nargs="+", default=[0])
     ap.add_argument("--modes", nargs="+", default=["given", "estimated", "chrome"], choices=list(TARGET_S))
     ap.add_argument("--repeat", type=int, default=2)
+    ap.add_argument("--no-material-file", action="store_true",
+                    help="leave out the compact material file the panel writes by default (Export "
+                         "Table on), as the figures before 2026-12-07 did")
     ap.add_argument("--every-band", action="store_true",
                     help="the network evaluates every band (Generate's default: bands 40 nm apart)")
     args = ap.parse_args()
@@ -107,7 +112,8 @@ def main() -> int:
 
     def generate(src, light, name: str):
         return pipeline.generate(src, light, wavelengths_nm=wl, backend=None, out_dir=tmp / "lookup",
-                                 name=name, preview=True, every_band=args.every_band)
+                                 name=name, preview=True, every_band=args.every_band,
+                                 save_table=not args.no_material_file)
 
     print(describe_machine())
     print(f"backend: {pipeline.choose_backend()}; the network at "

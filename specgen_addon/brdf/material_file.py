@@ -44,11 +44,22 @@ def encode(values: np.ndarray) -> tuple[bytes, str]:
     logs *= np.float32(1.0 / LOG_STEP)
     codes = np.rint(logs).astype(np.int32)
     codes[~(v > 0)] = _ZERO
-    d = np.diff(codes, axis=3, prepend=0)
-    d = np.diff(d, axis=2, prepend=0)
+    d = _difference(_difference(codes, axis=3), axis=2)
     small = int(np.abs(d).max(initial=0)) < 2 ** 15
     raw = np.ascontiguousarray(d.astype(np.int16 if small else np.int32))
     return zlib.compress(raw.tobytes(), ZLIB_LEVEL), str(raw.dtype)
+
+
+def _difference(a: np.ndarray, axis: int) -> np.ndarray:
+    """``np.diff(a, axis=axis, prepend=0)`` without its concatenated copy (ten times faster along
+    the short last axis): the first entry kept, every other one minus its predecessor."""
+    out = np.empty_like(a)
+    lead = [slice(None)] * a.ndim
+    first, rest, before = list(lead), list(lead), list(lead)
+    first[axis], rest[axis], before[axis] = slice(0, 1), slice(1, None), slice(None, -1)
+    out[tuple(first)] = a[tuple(first)]
+    np.subtract(a[tuple(rest)], a[tuple(before)], out=out[tuple(rest)])
+    return out
 
 
 def decode(payload: bytes, dtype: str, shape: tuple[int, ...]) -> np.ndarray:

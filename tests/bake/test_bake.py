@@ -167,3 +167,38 @@ def test_environment_directions_follow_the_density(tmp_path):
     row, col = ((1 - v) * 16).astype(int), (u * 32).astype(int) % 32
     p = bake.environment_density(rgb)
     assert np.mean((row == 3) & (col == 5)) == pytest.approx(p[3, 5], abs=0.01)
+
+
+def test_the_material_file_written_beside_the_bake_is_finished_before_a_cancel_is_raised(rich_table, tmp_path,
+                                                                                         monkeypatch):
+    import threading
+
+    from specgen_addon.brdf.table import BRDFTable as Table
+    from specgen_addon.common.errors import Cancelled
+
+    started, saved = threading.Event(), []
+    real_save = Table.save
+
+    def slow_save(self, path, **kwargs):
+        started.set()
+        threading.Event().wait(0.5)            # still writing when the bake is cancelled
+        saved.append(real_save(self, path, **kwargs))
+        return saved[-1]
+
+    monkeypatch.setattr(Table, "save", slow_save)
+    with pytest.raises(Cancelled):
+        bake.bake_lookup(rich_table, tmp_path, "ball", save_table=True,
+                         cancel=lambda: started.wait(5.0))
+    assert saved and saved[0].is_file()         # finished (so a clean-up after the raise sees it)
+    assert not (tmp_path / "ball_lookup.json").exists()
+
+
+def test_a_failing_material_file_fails_the_bake(rich_table, tmp_path, monkeypatch):
+    from specgen_addon.brdf.table import BRDFTable as Table
+
+    def broken(self, path, **kwargs):
+        raise OSError("disk full")
+
+    monkeypatch.setattr(Table, "save", broken)
+    with pytest.raises(OSError, match="disk full"):
+        bake.bake_lookup(rich_table, tmp_path, "ball", save_table=True)

@@ -99,3 +99,11 @@ def test_infer_writes_a_compact_material_that_renders_as_the_full_table(tmp_path
     ref, mask = _render(full)
     got, _ = _render(compact)
     assert metrics.spectral_metrics(ref, got, mask).psnr_mean >= MIN_RENDER_DB
+
+
+@pytest.mark.parametrize("axis", [0, 1, 2, 3])
+def test_the_encoders_difference_is_numpys_diff_with_a_leading_zero(axis):
+    from specgen_addon.brdf.material_file import _difference
+
+    codes = np.random.default_rng(axis).integers(-3000, 3000, (5, 6, 7, 8)).astype(np.int32)
+    np.testing.assert_array_equal(_difference(codes, axis), np.diff(codes, axis=axis, prepend=0))
