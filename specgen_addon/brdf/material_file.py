@@ -33,7 +33,9 @@ LOG_STEP = 1.0 / 256.0
 FLOOR = 1e-9
 #: The code of an exact zero (below every other code).
 _ZERO = int(np.floor(np.log(FLOOR) / LOG_STEP)) - 1
-ZLIB_LEVEL = 6
+#: Deflate level: 4 writes a 21-band material 2–3× faster than 6 for an 8–11 % larger file
+#: (docs/formats.md); any level reads back the same.
+ZLIB_LEVEL = 4
 
 
 def encode(values: np.ndarray) -> tuple[bytes, str]:
