@@ -47,16 +47,12 @@ def main() -> int:
     import bpy
     import numpy as np
 
-    batch = SimpleNamespace(**runpy.run_path(str(REPO / "batch.py"), run_name="batch"))  # the headless entry
-
-    pkg = batch.load_package()
+    pkg = registered_addon()
     pipeline = import_module("specgen_addon.generate.pipeline")
     from specgen_addon.spectral.spectra import wavelength_grid
 
     wl = wavelength_grid(380.0, 780.0, args.bands)
     out = Path(tempfile.mkdtemp(prefix="specgen_bench_"))
-    bpy.ops.wm.read_factory_settings(use_empty=True)
-    pkg.register()
     s = bpy.context.scene.specgen
     s.image_path, s.output_dir, s.bands, s.lookup_resolution = str(args.image), str(out), args.bands, args.lookup
     s.overwrite = True
@@ -86,6 +82,18 @@ def main() -> int:
     return 0
 
 
+def registered_addon():
+    """The add-on package, loaded by the headless entry (batch.py) and registered as Blender does
+    in a factory-fresh empty file."""
+    import bpy
+
+    batch = SimpleNamespace(**runpy.run_path(str(REPO / "batch.py"), run_name="batch"))
+    pkg = batch.load_package()
+    bpy.ops.wm.read_factory_settings(use_empty=True)
+    pkg.register()
+    return pkg
+
+
 def given_light(repeat: int) -> int:
     """The button, refinement and Export Table on, on ``gray.0`` under the dataset's light."""
     import math
@@ -98,10 +106,7 @@ def given_light(repeat: int) -> int:
         print(f"needs the shared photos at {data}", file=sys.stderr)
         return 2
     x, y, z = np.loadtxt(data / "lights.txt", skiprows=1)[0]
-    batch = SimpleNamespace(**runpy.run_path(str(REPO / "batch.py"), run_name="batch"))
-    pkg = batch.load_package()
-    bpy.ops.wm.read_factory_settings(use_empty=True)
-    pkg.register()
+    pkg = registered_addon()
     s = bpy.context.scene.specgen
     s.image_path, s.output_dir, s.overwrite = str(data / "gray" / "gray.0.tga"), tempfile.mkdtemp(), True
     photo = s.photo

@@ -530,20 +530,16 @@ def bake_lookup(table, out: Path, name: str, n_phi_d: int = N_PHI_D,
     (:mod:`specgen_addon.brdf.material_file`), with ``preview`` ``<name>_preview.png``
     (:mod:`specgen_addon.bake.preview`). Outputs are replaced; check them first with
     :func:`check_lookup_outputs`. The material file is written on a thread of its own beside the
-    bake (its encoding and deflate release the GIL); it is finished, or its error raised, before
-    this returns or fails."""
+    bake (its encoding and deflate release the GIL); leaving the executor waits for it, so it is
+    finished before this returns or fails (nothing still writes when a failure cleans up)."""
     with ThreadPoolExecutor(max_workers=1) as writer:
         saved = writer.submit(table.save, out / f"{name}.npz", overwrite=True, compact=True) \
             if save_table else None
-        try:
-            if preview:
-                write_preview(table, out / f"{name}_preview.png")
-            info = bake_atlas(table, out / f"{name}_lookup.exr", n_phi_d=n_phi_d, tolerance=tolerance,
-                              progress=progress, cancel=cancel)
-            save_atlas_info(info, out / f"{name}_lookup.json")
-        finally:
-            if saved is not None:
-                saved.exception()        # wait: nothing may still write when a failure cleans up
+        if preview:
+            write_preview(table, out / f"{name}_preview.png")
+        info = bake_atlas(table, out / f"{name}_lookup.exr", n_phi_d=n_phi_d, tolerance=tolerance,
+                          progress=progress, cancel=cancel)
+        save_atlas_info(info, out / f"{name}_lookup.json")
         if saved is not None:
-            saved.result()
+            saved.result()               # its error, if any
     return info
