@@ -92,3 +92,46 @@ def test_refine_options_refuse_an_unknown_relaxation():
         RefineOptions(relax_axes="phi_d")
     with pytest.raises(SpecGenError, match="smooth_theta_d"):
         RefineOptions(smooth_theta_d=-1.0)
+
+
+def _lights_scene(*angles_deg: float, ambient: float = 0.0):
+    """A sphere under distant lights at these angles from the camera (in the x–z plane), and an
+    ambient term if given."""
+    from specgen_addon.render import Environment, Scene, sphere_geometry
+    from specgen_addon.render.lights import DistantLight
+
+    lights = [DistantLight((np.sin(np.radians(a)), 0.0, np.cos(np.radians(a))), np.pi) for a in angles_deg]
+    env = Environment.uniform((ambient,) * 3) if ambient else None
+    return Scene(sphere_geometry(16), lights, env)
+
+
+@pytest.mark.parametrize("angles,ambient,seen", [
+    ((11.0,), 0.0, False),             # one light: every pixel at θd = 5.5°
+    ((-40.0, 40.0), 0.0, False),       # two lights mirrored about the view: both at θd = 20°
+    ((10.0, 60.0), 0.0, True),         # θd 5° and 30°: two knots told apart
+    ((11.0,), 0.05, True),             # an ambient term lights every direction
+])
+def test_theta_d_is_seen_only_where_the_lights_reach_more_than_one_theta_d(angles, ambient, seen):
+    from specgen_addon.generate.refine.refinement import theta_d_seen
+
+    assert theta_d_seen(_lights_scene(*angles, ambient=ambient)) is seen
+
+
+def test_under_one_distant_light_the_relaxed_fit_keeps_the_theta_d_smoothness(ramp_table):
+    """The relaxed fit, forced on, is the θh-only one under one distant light (the photo shows one
+    θd), and not once an ambient term lights the other θd."""
+    from specgen_addon.generate.refine import apply_correction, diffuse_floor_of, refine_brdf, render_under
+    from specgen_addon.photo.photo_lighting import Light, parse_lighting
+
+    basis = CorrectionBasis()
+    x = np.ones(basis.shape)
+    x[:, :, :] = np.linspace(0.4, 1.8, basis.shape[0])[:, None, None]      # a sharper lobe than the prior's
+    truth = apply_correction(ramp_table, diffuse_floor_of(ramp_table), x, np.full(3, 0.7), np.zeros(3), basis)
+    forced = dict(clip_level=None, relax_below_db=200.0, relax_holdout=False)
+    for ambient, same in ((0.0, True), (0.3, False)):
+        lighting = parse_lighting(None, lights=(Light.from_angles(25.0, 10.0),), ambient=ambient)
+        photo = render_under(truth, lighting.scene(32), lighting.image_exposure)
+        both = refine_brdf(ramp_table, photo, lighting, RefineOptions(**forced))
+        theta_h = refine_brdf(ramp_table, photo, lighting, RefineOptions(relax_axes="theta_h", **forced))
+        assert both.relaxed and theta_h.relaxed
+        assert np.array_equal(both.table.values, theta_h.table.values) is same, ambient

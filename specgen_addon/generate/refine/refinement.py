@@ -100,6 +100,12 @@ FIT_FLOOR: float | None = None
 BLUR_SEARCH = "walk"
 #: Photo values at or above this fraction of the maximum 8-bit level count as clipped.
 CLIP_LEVEL = 0.995
+#: Under distant lights alone (no map, no ambient) a pixel sees the material at θd = ½ · the angle
+#: between the light and the camera, whatever its normal. Lights whose θd lie closer together than
+#: this (degrees; under half the smallest interval between the correction's θd knots, 12°) show the
+#: photo one θd only: it constrains one mix of the two θd knots around it and none of their
+#: difference, so the relaxed fit keeps the θd smoothness there (:func:`theta_d_seen`).
+THETA_D_SEEN_SPAN_DEG = 5.0
 
 
 @dataclass(frozen=True)
@@ -124,7 +130,8 @@ class RefineOptions:
     versions). ``relax_below_db``: below this self-reproduction the smoothness is relaxed and the better
     fit kept, if it reproduces the photo at least ``relax_min_gain_db`` better; with ``relax_holdout`` it
     is tried only if it also predicts held-out pixels better (:mod:`.holdout`); ``relax_axes``: the
-    smoothness it loosens (``"both"``, or ``"theta_h"`` only). ``lobe_holdout``: the lobe's
+    smoothness it loosens (``"both"``, or ``"theta_h"`` only; ``"both"`` loosens θd only where the
+    lighting shows more than one θd, :func:`theta_d_seen`). ``lobe_holdout``: the lobe's
     correction is kept only where it predicts held-out pixels better than the network's lobe.
     ``smooth_weight``: ``"pair"`` weights each difference between neighbouring knots by
     the data weight of the two knots it ties (at least the block's median), so that knots the photo
@@ -244,6 +251,18 @@ def _smoothness(basis: CorrectionBasis) -> tuple[np.ndarray, np.ndarray]:
     shape = basis.shape
     rows = [difference_operator(shape, ax) for ax in (0, 1)]
     return np.concatenate(rows, axis=0), np.repeat([0, 1], [r.shape[0] for r in rows])
+
+
+def theta_d_seen(scene) -> bool:
+    """Whether a scene's lighting shows the material over a range of θd (radians inside, degrees
+    compared): always under an environment (a map or an ambient term lights every direction);
+    under distant lights alone only if their θd = ½ · angle(light, camera) span at least
+    :data:`THETA_D_SEEN_SPAN_DEG`. The hold-out check cannot tell: every pixel shares the θd."""
+    if scene.environment is not None:
+        return True
+    cos = [float(np.clip(np.dot(li.unit_direction(), scene.camera_dir), -1.0, 1.0)) for li in scene.lights]
+    theta_d = [0.5 * math.degrees(math.acos(c)) for c in cos]
+    return max(theta_d) - min(theta_d) >= THETA_D_SEEN_SPAN_DEG
 
 
 def refine_brdf(table: BRDFTable, photo: np.ndarray, lighting=None, options: RefineOptions = RefineOptions(),
@@ -449,8 +468,9 @@ def refine_brdf(table: BRDFTable, photo: np.ndarray, lighting=None, options: Ref
         m_before = reproduction(b, op.observe(before_img))
         m_after = reproduction(b, op.observe(after_img))
         relaxed_gain, relaxed_kept, relaxed_holdout = None, False, None
+        relax_theta_d = options.relax_axes == "both" and theta_d_seen(scene)   # else θd is not in the photo
         relaxed_opts = replace(options, smooth=RELAXED_SMOOTH,
-                               smooth_theta_d=RELAXED_SMOOTH if options.relax_axes == "both" else options.theta_d_smooth)
+                               smooth_theta_d=RELAXED_SMOOTH if relax_theta_d else options.theta_d_smooth)
         try_relax = m_after.psnr_db < options.relax_below_db and options.smooth > RELAXED_SMOOTH and not lobe_kept
         if try_relax and options.relax_holdout:
             relaxed_holdout = holdout_db(design, fit_rows(relaxed_opts), fit_rows(options))
