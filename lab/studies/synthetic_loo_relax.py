@@ -1,13 +1,16 @@
 """Leave-one-light-out on synthetic balls: does the θd-aware relaxed fit hold beyond the grey ball?
 
 The shared photos are of one matte ball. Here held-out corpus materials (glossy plastics, coats,
-metals: what the kept-aside glossy photos are like) are rendered by the reference renderer under
+metals: balls unlike the matte grey one) are rendered by the reference renderer under
 the 12 distant lights of ../shared/data/photos/psm_gray_chrome/lights.txt (128², 16-bit
 quantised, clipped at 1, as a linear camera file), one photo goes in, the other eleven are
 predicted, scored as bench/photos_leave_one_out.py scores (PSNR after one shared exposure). Arms:
-the refined table with the relaxed fit loosening both axes everywhere (``relax_axes="both"`` with
-θd always counted as seen: the behaviour before), the shipped θd-aware relaxation, and a
-Lambertian fitted to the same photo (the floor).
+``before``: the refinement started from the network's table of the photo × the gain, its relaxed
+fit loosening both axes everywhere (θd always counted as seen); ``relax``: the same start, the
+θd-aware relaxation (:func:`specgen_addon.generate.refine.theta_d_seen`, the product's); ``rerender``:
+the θd-aware relaxation started from the network's table of the canonical re-render (a candidate,
+not the product's start: lab/notebook/real-photos-network.md); and a Lambertian fitted to the same
+photo (the floor).
 
     .venv/bin/python lab/studies/synthetic_loo_relax.py --materials 6 --inputs 0 2 5 9
 """
@@ -31,6 +34,7 @@ def main(argv=None) -> int:
     from specgen_addon.brdf.table import BRDFTable
     from specgen_addon.evaluation.protocol import test_materials
     from specgen_addon.generate.refine import CLIP_LEVEL, RefineOptions, refine_brdf, render_under
+    from specgen_addon.generate.canonical_input import network_crop
     from specgen_addon.generate.refine import refinement
     from specgen_addon.model.runtime.inference import generate_brdf
     from specgen_addon.photo.sphere_image import EXPOSURE, SphereCrop
@@ -65,9 +69,10 @@ def main(argv=None) -> int:
         for i in args.inputs:
             photo, lt = photos[i], scenes[i]
             held = [j for j in range(12) if j != i]
-            start = generate_brdf(SphereCrop(photo * lt.network_gain(), True))
+            own = generate_brdf(SphereCrop(photo * lt.network_gain(), True))
+            rerender = generate_brdf(network_crop(SphereCrop(photo, True), photo, lt, CLIP_LEVEL)[0])
             out = {"material": mat.name, "kind": getattr(mat, "kind", ""), "input": i}
-            for arm, always in (("before", True), ("now", False)):
+            for arm, start, always in (("before", own, True), ("relax", own, False), ("rerender", rerender, False)):
                 refinement.theta_d_seen = (lambda scene: True) if always else seen
                 try:
                     res = refine_brdf(start, photo, lt, RefineOptions(clip_level=CLIP_LEVEL))
@@ -83,10 +88,10 @@ def main(argv=None) -> int:
                                           [photos[j] for j in held], [masks[j] for j in held])["psnr_db"]
             print(json.dumps(out), flush=True)
             rows.append(out)
-    for k in ("before", "now", "lambertian"):
+    for k in ("before", "relax", "rerender", "lambertian"):
         print(k, round(float(np.mean([r[k] for r in rows])), 2))
-    print("now below the floor:", sum(r["now"] < r["lambertian"] for r in rows), "of", len(rows),
-          "| before below the floor:", sum(r["before"] < r["lambertian"] for r in rows))
+    for k in ("before", "relax", "rerender"):
+        print(k, "below the floor:", sum(r[k] < r["lambertian"] for r in rows), "of", len(rows))
     if args.json:
         args.json.write_text(json.dumps(rows, indent=1))
     return 0

@@ -17,8 +17,9 @@ from specgen_addon.generate.refine.refinement import (
                                                       diffuse_floor_of,
                                                       refine_brdf,
                                                       render_under,
+                                                      theta_d_seen,
 )
 from specgen_addon.render.photo_reproduction import Reproduction
 
 __all__ = ["CLIP_LEVEL", "WARN_PSNR_DB", "CorrectionBasis", "PhotoOperator", "RefineOptions", "RefineResult",
-           "Reproduction", "apply_correction", "diffuse_floor_of", "refine_brdf", "render_under"]
+           "Reproduction", "apply_correction", "diffuse_floor_of", "refine_brdf", "render_under", "theta_d_seen"]
