@@ -61,6 +61,7 @@ from specgen_addon.generate.refine.operator import PhotoOperator, render_grid
 from specgen_addon.generate.refine.solve import difference_operator, nonneg_ridge
 from specgen_addon.photo.photo_lighting import InputLighting
 from specgen_addon.render.photo_reproduction import Reproduction, checked_photo, photo_scale, reproduction
+from specgen_addon.render.renderer import Scene
 from specgen_addon.render.sampling import diffuse_floor
 
 ProgressFn = Callable[[float], None]
@@ -253,11 +254,11 @@ def _smoothness(basis: CorrectionBasis) -> tuple[np.ndarray, np.ndarray]:
     return np.concatenate(rows, axis=0), np.repeat([0, 1], [r.shape[0] for r in rows])
 
 
-def theta_d_seen(scene) -> bool:
-    """Whether a scene's lighting shows the material over a range of θd (radians inside, degrees
-    compared): always under an environment (a map or an ambient term lights every direction);
-    under distant lights alone only if their θd = ½ · angle(light, camera) span at least
-    :data:`THETA_D_SEEN_SPAN_DEG`. The hold-out check cannot tell: every pixel shares the θd."""
+def theta_d_seen(scene: Scene) -> bool:
+    """Whether a scene's lighting shows the material over a range of θd (degrees): always under an
+    environment (a map or an ambient term lights every direction); under distant lights alone only
+    if their θd = ½ · angle(light, camera) span at least :data:`THETA_D_SEEN_SPAN_DEG`. The hold-out
+    check cannot tell: every pixel shares the θd."""
     if scene.environment is not None:
         return True
     cos = [float(np.clip(np.dot(li.unit_direction(), scene.camera_dir), -1.0, 1.0)) for li in scene.lights]
