@@ -115,17 +115,19 @@ def _sobol_table() -> dict[str, np.ndarray]:
 
 
 def _sobol(n: int, seed: int) -> np.ndarray:
-    """scipy's points, or the same points from :data:`SOBOL_TABLE` where scipy is absent."""
+    """The points from :data:`SOBOL_TABLE` (scipy's own, stored), or from scipy for a count or seed
+    the table lacks. The table comes first: it needs no scipy (a stock Blender), and scipy builds
+    its points in compiled code that swallows an exception raised inside it, so a Ctrl-C landing
+    there printed a traceback and was lost instead of stopping the run."""
+    key = f"n{n}_s{seed}"
+    table = _sobol_table()
+    if key in table:
+        return table[key].copy()
     try:
         return sobol_scipy(n, seed)
     except ImportError:
-        pass
-    table = _sobol_table()
-    key = f"n{n}_s{seed}"
-    if key not in table:
         raise SpecGenError(f"environment sampling with {n} directions (seed {seed}) needs scipy; "
-                           f"without it, counts {SOBOL_TABLE_COUNTS} and seeds {SOBOL_TABLE_SEEDS} work")
-    return table[key].copy()
+                           f"without it, counts {SOBOL_TABLE_COUNTS} and seeds {SOBOL_TABLE_SEEDS} work") from None
 
 
 def _local_to_world(local: np.ndarray, t: np.ndarray, b: np.ndarray, n: np.ndarray) -> np.ndarray:
