@@ -94,6 +94,13 @@ def white_render(lighting) -> np.ndarray:
     return out
 
 
+def lambertian_albedo(photo: np.ndarray, mask: np.ndarray, lighting) -> np.ndarray:
+    """(3,) per-channel albedo of the Lambertian fitted to ``photo``'s ``mask`` pixels under
+    ``lighting`` (least squares against :func:`white_render`): the floor's material."""
+    white = white_render(lighting)
+    return (photo[mask] * white[mask]).sum(0) / np.maximum((white[mask] ** 2).sum(0), 1e-30)
+
+
 def score(preds: list[np.ndarray], photos: list[np.ndarray], masks: list[np.ndarray]) -> dict:
     """PSNR (dB, mean over channels, peak = the held-out photos' 99.9th percentile) after one
     exposure factor shared by all, and the mean chromaticity angle (degrees)."""
@@ -160,9 +167,7 @@ def run(inputs: list[int], modes: list[str], tmp: Path, network_input: str = "ca
             res = refine_brdf(start, photo, lighting, RefineOptions(clip_level=CLIP_LEVEL,
                                                                      exclude=crops[i].saturated)) if refine else None
             alone = network_reproduction(table, photo, lighting, CLIP_LEVEL, crops[i].saturated)
-            white = white_render(lighting)
-            ok = masks[i]
-            albedo = (photo[ok] * white[ok]).sum(0) / np.maximum((white[ok] ** 2).sum(0), 1e-30)
+            albedo = lambertian_albedo(photo, masks[i], lighting)
             photos = [crops[j].image for j in held]
             hm = [masks[j] for j in held]
             out = {"input": i, "mode": mode, "lighting": lighting.label,

@@ -81,9 +81,7 @@ def main(argv=None) -> int:
                 preds = [render_under(res.table, scenes[j].scene(size), EXPOSURE) for j in held]
                 out[arm] = loo.score(preds, [photos[j] for j in held], [masks[j] for j in held])["psnr_db"]
                 out[f"{arm}_relaxed"] = res.relaxed
-            white = loo.white_render(lt)
-            ok = masks[i]
-            albedo = (photo[ok] * white[ok]).sum(0) / np.maximum((white[ok] ** 2).sum(0), 1e-30)
+            albedo = loo.lambertian_albedo(photo, masks[i], lt)
             out["lambertian"] = loo.score([loo.white_render(scenes[j]) * albedo for j in held],
                                           [photos[j] for j in held], [masks[j] for j in held])["psnr_db"]
             print(json.dumps(out), flush=True)
