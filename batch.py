@@ -466,9 +466,10 @@ PHASE = ["input checks"]
 def main(argv: list[str] | None = None) -> int:
     """Exit 0, 2 with one error line, or 130/143 on SIGINT/SIGTERM; new files removed on failure
     and temporary files (Cycles' OSL builds) kept in a folder removed on every exit path."""
-    args = build_parser().parse_args(_script_argv(argv))
     from importlib import import_module
 
+    signed = import_module("specgen_addon.photo.photo_lighting").attach_signed_values   # --light -30,20
+    args = build_parser().parse_args(signed(_script_argv(argv)))
     cli = import_module("specgen_addon.cli.app")
     interrupts = import_module("specgen_addon.common.interrupts")
     PHASE[0] = "input checks"

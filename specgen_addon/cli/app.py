@@ -18,6 +18,7 @@ from specgen_addon.common.atomic_io import (OutputLock, created_since, ledger_ma
                                             remove_created)
 from specgen_addon.common.interrupts import (EXIT_ERROR, OutputGuard, as_interrupted, on_hard_stop,
                                              print_traceback_if, raise_if_stopped, stop_on_signals)
+from specgen_addon.photo.photo_lighting import attach_signed_values
 from specgen_addon.scale.preflight import check_command, output_folders
 
 #: Modules (relative to this package) that contribute sub-commands, in help order.
@@ -50,7 +51,7 @@ def build_parser() -> argparse.ArgumentParser:
 
 def main(argv: Sequence[str] | None = None) -> int:
     parser = build_parser()
-    args = parser.parse_args(argv)
+    args = parser.parse_args(attach_signed_values(sys.argv[1:] if argv is None else argv))
     if not getattr(args, "func", None):
         parser.print_help()
         return EXIT_USER_ERROR

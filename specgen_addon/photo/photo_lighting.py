@@ -30,6 +30,8 @@ from __future__ import annotations
 import functools
 import math
 import os
+import re
+from collections.abc import Sequence
 from dataclasses import dataclass
 from pathlib import Path
 
@@ -410,3 +412,25 @@ def _white_rgb(light: InputLighting, size: int, stamp: tuple | None = None) -> n
     for key in keys:
         rgb = rgb + np.maximum(n @ key.unit_direction(), 0.0)[:, None] * key.rgb()[None] / np.pi
     return rgb.mean(axis=0) * light.image_exposure
+
+
+#: Options whose value may begin with a minus sign: a light from the left, from below or behind.
+SIGNED_LIST_OPTIONS = ("--light", "--light-vector")
+_SIGNED_VALUE = re.compile(r"^-[0-9.]")
+
+
+def attach_signed_values(argv: Sequence[str]) -> list[str]:
+    """``argv`` with ``--light -30,20`` written ``--light=-30,20`` (and so ``--light-vector``):
+    argparse reads a value that starts with a minus sign and is not one plain number as an option
+    of its own, and would refuse the light."""
+    argv = list(argv)
+    out: list[str] = []
+    i = 0
+    while i < len(argv):
+        if argv[i] in SIGNED_LIST_OPTIONS and i + 1 < len(argv) and _SIGNED_VALUE.match(argv[i + 1]):
+            out.append(f"{argv[i]}={argv[i + 1]}")
+            i += 2
+            continue
+        out.append(argv[i])
+        i += 1
+    return out

@@ -31,6 +31,7 @@ from specgen_addon.brdf.formats.export import size_text
 from specgen_addon.common.atomic_io import OutputLock, atomic_write
 from specgen_addon.common.errors import SpecGenError
 from specgen_addon.common.limits import check_number
+from specgen_addon.photo.photo_lighting import attach_signed_values
 from specgen_addon.scale import items as items_mod
 from specgen_addon.scale import worker as worker_mod
 from specgen_addon.scale.preflight import check_batch_settings
@@ -82,7 +83,7 @@ def check_batch_args(batch_script: Path, batch_args: list[str]) -> None:
     if {"-h", "--help"} & set(batch_args):
         refuse("--help is not an item setting")
     sentinel = "\0batch-many"
-    ns = parser.parse_args(["--image", sentinel, "--out", sentinel, *batch_args])
+    ns = parser.parse_args(attach_signed_values(["--image", sentinel, "--out", sentinel, *batch_args]))
     if ns.image != sentinel or ns.out != sentinel or getattr(ns, "overwrite", False):
         raise SpecGenError(f"batch.py arguments: {', '.join(OWN_OPTIONS)} are set by batch-many per item")
     if Path(batch_script).resolve() == Path(DEFAULT_BATCH_SCRIPT).resolve():   # values, as batch.py checks them

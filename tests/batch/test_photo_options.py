@@ -146,3 +146,14 @@ def test_batch_takes_an_estimated_light_and_a_chrome_ball(tmp_path, capsys):
     out = capsys.readouterr().out
     assert "input lighting estimated from the ball" in out and "unwrapped from the chrome ball" in out
     assert (tmp_path / "lookup" / "probe.exr").is_file()
+
+
+def test_batch_and_batch_many_take_a_light_from_the_left_written_with_a_space(tmp_path, capsys):
+    # the first light parses (azimuth −30°); the second is refused by the light's own check, in one line
+    from specgen_addon.scale.batch_many import DEFAULT_BATCH_SCRIPT, check_batch_args
+
+    code = batch.main(["--image", str(PHOTO), "--out", str(tmp_path / "o"), "--light", "-30,20",
+                       "--light-vector", "-0,0,0"])
+    err = capsys.readouterr().err.strip().splitlines()
+    assert code == 2 and len(err) == 1 and "a light needs a direction" in err[-1], err
+    check_batch_args(Path(DEFAULT_BATCH_SCRIPT), ["--light", "-30,20", "--light-vector", "-0.5,0.5,0.7"])

@@ -128,3 +128,25 @@ def test_the_command_line_refuses_a_panorama_of_the_wrong_aspect(tmp_path, capsy
                  "--input-env", str(tmp_path / "square.exr")])
     err = capsys.readouterr().err.strip().splitlines()
     assert code == 2 and len(err) == 1 and "twice as wide as it is high" in err[0], err
+
+
+def test_a_light_value_with_a_minus_sign_is_attached_to_its_option():
+    from specgen_addon.photo.photo_lighting import attach_signed_values
+
+    argv = ["img.png", "--light", "-30,20", "--light-vector", "-.1,0.2,0.97", "--input-rotation", "-30",
+            "--light=-5,5", "--light", "40,10", "--light"]
+    assert attach_signed_values(argv) == ["img.png", "--light=-30,20", "--light-vector=-.1,0.2,0.97",
+                                          "--input-rotation", "-30", "--light=-5,5", "--light", "40,10", "--light"]
+    assert attach_signed_values(["--light", "--quiet"]) == ["--light", "--quiet"]   # argparse says what is missing
+
+
+def test_the_command_line_takes_a_light_from_the_left_written_with_a_space(tmp_path, capsys):
+    # the first light parses (azimuth −30°); the second is refused by the light's own check, in one line
+    from conftest import REPO
+
+    from specgen_addon.cli.app import main
+
+    code = main(["infer", str(REPO / "examples" / "sphere.png"), "-o", str(tmp_path / "t.npz"), "--quiet",
+                 "--light", "-30,20", "--light-vector", "-0,0,0"])
+    err = capsys.readouterr().err.strip().splitlines()
+    assert code == 2 and len(err) == 1 and "a light needs a direction" in err[0], err
