@@ -58,7 +58,8 @@ def main(argv=None) -> int:
 
     ap = argparse.ArgumentParser(description=__doc__.split("\n")[0])
     ap.add_argument("--materials", type=int, default=6)
-    ap.add_argument("--skip", type=int, default=0, help="start at this test material (corpus order)")
+    ap.add_argument("--skip", type=int, default=0, help="start at this material of the split (corpus order)")
+    ap.add_argument("--split", choices=["test", "val"], default="test", help="the corpus split to draw from")
     ap.add_argument("--arms", nargs="+", default=["before", "relax", "rerender"],
                     choices=["before", "relax", "rerender"])
     ap.add_argument("--inputs", type=int, nargs="+", default=[0, 2, 5, 9])
@@ -72,7 +73,14 @@ def main(argv=None) -> int:
     wl = DEFAULT_WAVELENGTHS_NM
     rows = []
     seen = refinement.theta_d_seen
-    for mat in test_materials(args.skip + args.materials)[args.skip:]:
+    if args.split == "test":
+        materials = test_materials(args.skip + args.materials)
+    else:
+        from specgen_addon.corpus import generate_corpus
+        from specgen_addon.evaluation.protocol import CORPUS_SEED, CORPUS_SIZE
+
+        materials = [m for m in generate_corpus(CORPUS_SIZE, CORPUS_SEED) if m.split == "val"]
+    for mat in materials[args.skip:args.skip + args.materials]:
         def fn(th, td, pd, mat=mat):
             wi, wo = io_from_half_diff(th, td, pd)
             return mat.eval(wi, wo, wl)
