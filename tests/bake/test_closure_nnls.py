@@ -1,4 +1,4 @@
-"""The closure fit's small exact NNLS (all bands at once, faces solved in batches) against
+"""The closure fit's small exact NNLS (all bands at once, every face enumerated) against
 scipy.optimize.nnls, band by band."""
 
 from __future__ import annotations

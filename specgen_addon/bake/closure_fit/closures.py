@@ -333,26 +333,6 @@ def standin_closures(fit: ClosureFit, layout: list[StackClosure]) -> dict[str, t
 
 
 # ------------------------------------------------------------------------------ fitting
-def _faces(gram: np.ndarray, rhs: np.ndarray, tt: np.ndarray, subsets: list[list[int]],
-           bands: np.ndarray, per_band: bool) -> list[tuple[np.ndarray, np.ndarray]] | None:
-    """:func:`_nnls_small`'s face optima ``(x (n, bands), objective (bands,))`` for every subset of
-    one size ``n``, in one batched solve (the same LAPACK solve per system as a call each, so the
-    same numbers, in a tenth of the calls); None where any of them is singular."""
-    g = gram[bands] if per_band else gram
-    gs = np.stack([g[..., idx, :][..., idx] for idx in subsets])
-    n = len(subsets[0])
-    gs = gs + 1e-12 * np.trace(gs, axis1=-2, axis2=-1)[..., None, None] * np.eye(n)
-    bs = np.stack([rhs[idx][:, bands] for idx in subsets])          # (S, n, bands)
-    try:
-        if per_band:
-            xs = np.linalg.solve(gs, np.swapaxes(bs, 1, 2)[..., None])[..., 0].swapaxes(1, 2)
-        else:
-            xs = np.linalg.solve(gs, bs)
-    except np.linalg.LinAlgError:
-        return None
-    return [(x, tt[bands] - np.einsum("kl,kl->l", x, b)) for x, b in zip(xs, bs)]
-
-
 def _nnls_small(gram: np.ndarray, rhs: np.ndarray, tt: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
     """Exact NNLS on normal equations for a handful of unknowns, all bands at once.
 
@@ -366,8 +346,15 @@ def _nnls_small(gram: np.ndarray, rhs: np.ndarray, tt: np.ndarray) -> tuple[np.n
     per_band = gram.ndim == 3
 
     def face(idx: list[int], bands: np.ndarray) -> tuple[np.ndarray, np.ndarray] | None:
-        solved = _faces(gram, rhs, tt, [idx], bands, per_band)
-        return None if solved is None else solved[0]
+        g = gram[bands] if per_band else gram
+        g = g[..., idx, :][..., idx]
+        g = g + 1e-12 * np.trace(g, axis1=-2, axis2=-1)[..., None, None] * np.eye(len(idx))
+        b = rhs[idx][:, bands]
+        try:
+            xs = np.linalg.solve(g, b.T[..., None])[..., 0].T if per_band else np.linalg.solve(g, b)
+        except np.linalg.LinAlgError:
+            return None
+        return xs, tt[bands] - np.einsum("kl,kl->l", xs, b)  # at the face optimum: tt − xᵀb
 
     best_x = np.zeros((k, lam))
     best_obj = tt.astype(np.float64).copy()  # x = 0
@@ -381,11 +368,9 @@ def _nnls_small(gram: np.ndarray, rhs: np.ndarray, tt: np.ndarray) -> tuple[np.n
     if rest.size == 0:
         return best_x, np.maximum(best_obj, 0.0)
     for size in range(1, k + 1):
-        subsets = [list(c) for c in itertools.combinations(every, size)]
-        solved_faces = _faces(gram, rhs, tt, subsets, rest, per_band)
-        if solved_faces is None:   # one of them is singular: one by one, that one skipped
-            solved_faces = [face(idx, rest) for idx in subsets]
-        for idx, solved in zip(subsets, solved_faces):
+        for subset in itertools.combinations(every, size):
+            idx = list(subset)
+            solved = face(idx, rest)
             if solved is None:
                 continue
             xs, obj = solved
