@@ -26,6 +26,7 @@ from specgen_addon.common.errors import SpecGenError
 from specgen_addon.brdf.rusinkiewicz import io_from_half_diff
 from specgen_addon.brdf.table import mu_law_encode
 from specgen_addon.brdf.formats import detect_format, load_brdf
+from specgen_addon.brdf.formats.rgl import tabulate_rgl
 from specgen_addon.brdf.table import BRDFTable
 from specgen_addon.common.processes import context, pool_workers, quiet_worker
 
@@ -165,23 +166,13 @@ def load_file_materials(files: Sequence[Path], cache_dir: Path,
             else:
                 if progress:
                     progress(f"tabulating {path.name}")
-                spectral = bool(getattr(brdf, "is_spectral", False))
-                table = BRDFTable.tabulate(
-                    (lambda th, td, pd, b=brdf: _eval_hd_native(b, th, td, pd)),
-                    wavelengths=getattr(brdf, "wavelengths", None) if spectral else None,
-                    metadata={"source": str(path)})
+                # in the order io_from_half_diff gives (the model card's table ceilings)
+                table = tabulate_rgl(brdf, order="fixed")
                 cache_dir.mkdir(parents=True, exist_ok=True)
                 table.save(cached, overwrite=True)
                 brdf = table
         out.append(TrainingMaterial(name=path.stem, brdf=brdf, spectral=bool(brdf.is_spectral)))
     return out
-
-
-def _eval_hd_native(brdf: Any, theta_h: np.ndarray, theta_d: np.ndarray, phi_d: np.ndarray) -> np.ndarray:
-    wi, wo = io_from_half_diff(theta_h, theta_d, phi_d)
-    if getattr(brdf, "is_spectral", False):
-        return brdf.eval(wi, wo, brdf.wavelengths)
-    return brdf.eval_rgb(wi, wo)
 
 
 def material_key(mat: TrainingMaterial) -> str:

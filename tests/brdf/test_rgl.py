@@ -289,6 +289,21 @@ def test_tabulated_felt_matches_direct_evaluation_on_grid_nodes(felt):
     assert np.all(np.isfinite(table.values)) and np.all(table.values >= 0)
 
 
+def test_the_fixed_order_tabulates_the_grid_points_as_io_from_half_diff_gives_them(felt):
+    # what the real-file training and the model card's table ceilings use
+    table = tabulate_rgl(felt, order="fixed")
+    th, td, pd = grid_angles()
+    rng = np.random.default_rng(8)
+    i, j, k = rng.integers(0, 90, 300), rng.integers(0, 90, 300), rng.integers(0, 180, 300)
+    wi, wo = io_from_half_diff(th[i], td[j], pd[k])
+    np.testing.assert_allclose(table.values[i, j, k], felt.eval_rgb(wi, wo), rtol=1e-6, atol=1e-7)
+    nearer = tabulate_rgl(felt).values[i, j, k]
+    swapped = wi[:, 2] > wo[:, 2]
+    assert swapped.any() and not np.array_equal(table.values[i, j, k][swapped], nearer[swapped])
+    with pytest.raises(SpecGenError, match="unknown tabulation order"):
+        tabulate_rgl(felt, order="mean")
+
+
 def test_tabulating_a_spectral_file_resamples_wavelengths(tmp_path):
     fields, scale = synthetic_fields()
     bsdf = read_rgl(write_rgl(tmp_path / "ramp.bsdf", **fields))

@@ -570,8 +570,13 @@ def read_rgl(path: str | os.PathLike) -> RGLBSDF:
     return RGLBSDF.load(path)
 
 
+#: Which of a grid point's two direction orders :func:`tabulate_rgl` evaluates (see there).
+TABULATION_ORDERS = ("nearer", "fixed")
+
+
 def tabulate_rgl(bsdf: RGLBSDF, wavelengths_nm: np.ndarray | None = None,
-                 progress: ProgressFn | None = None, cancel: CancelFn | None = None) -> BRDFTable:
+                 progress: ProgressFn | None = None, cancel: CancelFn | None = None,
+                 order: str = "nearer") -> BRDFTable:
     """Resample a measurement onto the MERL grid (90 θh × 90 θd × 180 φd) as a :class:`BRDFTable`.
 
     Spectral files are interpolated onto ``wavelengths_nm`` (nm; default: the file's own);
@@ -579,8 +584,14 @@ def tabulate_rgl(bsdf: RGLBSDF, wavelengths_nm: np.ndarray | None = None,
     ``φh = 0`` (the file is isotropic). Each grid point is evaluated with the direction nearer the
     normal as ``wo``: :meth:`RGLBSDF.eval` divides the measured ``fr·cos θo`` by ``cos θo``, and
     the measurement does not vanish at grazing ``θo``; by reciprocity either order is the same
-    point, and this one keeps grazing-``θo`` artefacts out of the table.
+    point, and this one keeps grazing-``θo`` artefacts out of the table. ``order="fixed"``
+    evaluates the order :func:`io_from_half_diff` gives instead: the real-file training targets
+    and the model card's table ceilings. A measurement is not quite reciprocal (8 θi slices,
+    linear across them), so the two orders score differently, by up to ±10 dB in one scene
+    (docs/model-card.md, "Real materials").
     """
+    if order not in TABULATION_ORDERS:
+        raise SpecGenError(f"unknown tabulation order {order!r}; choose one of {', '.join(TABULATION_ORDERS)}")
     if bsdf.is_spectral:
         wavelengths = bsdf.wavelengths if wavelengths_nm is None else np.asarray(wavelengths_nm, float)
         table = bsdf.resampled_reflectance(wavelengths)
@@ -592,6 +603,8 @@ def tabulate_rgl(bsdf: RGLBSDF, wavelengths_nm: np.ndarray | None = None,
 
     def fr_half_diff(theta_h: np.ndarray, theta_d: np.ndarray, phi_d: np.ndarray) -> np.ndarray:
         wi, wo = io_from_half_diff(theta_h, theta_d, phi_d)
+        if order == "fixed":
+            return bsdf.eval_native(wi, wo, table)
         # (wi, wo) and (wo, wi) are the same grid point (reciprocity); evaluate the order whose
         # second direction is nearer the normal, so the division by cos θo stays well conditioned
         # (the measured fr·cos θo does not vanish at grazing θo, fr/cos would diverge there).
