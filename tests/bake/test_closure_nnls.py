@@ -38,3 +38,18 @@ def test_small_nnls_matches_scipy_band_by_band(per_band, columns):
         assert np.sum((a[b] @ x[:, b] - y[:, b]) ** 2) == pytest.approx(res ** 2, rel=1e-9, abs=1e-9)
         if columns != "two equal":
             np.testing.assert_allclose(x[:, b], ref, rtol=1e-7, atol=1e-9)
+
+
+def test_small_nnls_with_the_fits_six_columns_matches_scipy_in_every_band():
+    # two diffuse and two lobes × (plain, Fresnel): the size the closure fit solves, with many
+    # bands whose unconstrained optimum is negative somewhere (the KKT early stop decides them)
+    rng = np.random.default_rng(11)
+    gram, rhs, tt, a, y = _problem(rng, 60, 6, 40, True, "independent")
+    x, obj = _nnls_small(gram, rhs, tt)
+    some_zero = 0
+    for b in range(y.shape[1]):
+        ref, res = nnls(a[b], y[:, b])
+        some_zero += bool(np.any(ref == 0))
+        assert obj[b] == pytest.approx(res ** 2, rel=1e-9, abs=1e-9)
+        np.testing.assert_allclose(x[:, b], ref, rtol=1e-7, atol=1e-9)
+    assert some_zero >= 10        # the constrained case is what is tested

@@ -339,7 +339,8 @@ def _nnls_small(gram: np.ndarray, rhs: np.ndarray, tt: np.ndarray) -> tuple[np.n
     Minimises ``xᵀGx − 2xᵀb + tt`` over ``x ≥ 0`` for every column of ``rhs`` (K, Λ). ``gram``
     is (K, K), or (Λ, K, K) for a different design per band. Where the unconstrained optimum is
     non-negative it is the answer (the problem is convex); the other bands enumerate the active
-    sets (2^K faces; the constrained optimum is the best feasible face optimum). Returns
+    sets, larger faces first (the constrained optimum is the best feasible face optimum), and a
+    band is done at the first feasible face optimum that meets the KKT conditions. Returns
     ``(x (K, Λ), objective (Λ,))``.
     """
     k, lam = rhs.shape
@@ -365,21 +366,35 @@ def _nnls_small(gram: np.ndarray, rhs: np.ndarray, tt: np.ndarray) -> tuple[np.n
         done = np.all(full[0] >= 0, axis=0)
         best_x[:, done], best_obj[done] = full[0][:, done], full[1][done]
     rest = np.flatnonzero(~done)
-    if rest.size == 0:
-        return best_x, np.maximum(best_obj, 0.0)
-    for size in range(1, k + 1):
+    diag = np.diagonal(gram, axis1=-2, axis2=-1)            # (K,) or (Λ, K)
+    for size in range(k - 1, 0, -1):   # large faces first: most bands hold one or two columns at 0
         for subset in itertools.combinations(every, size):
+            if rest.size == 0:
+                return best_x, np.maximum(best_obj, 0.0)
             idx = list(subset)
             solved = face(idx, rest)
             if solved is None:
                 continue
             xs, obj = solved
-            ok = np.all(xs >= 0, axis=0) & (obj < best_obj[rest])
+            feasible = np.all(xs >= 0, axis=0)
+            ok = feasible & (obj < best_obj[rest])
             if np.any(ok):
                 cols = rest[ok]
                 best_obj[cols] = obj[ok]
                 best_x[:, cols] = 0.0
                 best_x[np.ix_(idx, cols)] = xs[:, ok]
+            # a feasible face optimum where the objective rises along every column held at zero
+            # (KKT: (G x − b)_j ≥ 0) is the optimum of its convex problem: that band is done
+            held = [j for j in every if j not in subset]
+            if per_band:
+                g = gram[rest]
+                slope = np.einsum("bom,mb->ob", g[:, held][:, :, idx], xs) - rhs[held][:, rest]
+                scale = np.sqrt(diag[rest][:, held].T * tt[rest])
+            else:
+                slope = gram[np.ix_(held, idx)] @ xs - rhs[held][:, rest]
+                scale = np.sqrt(diag[held][:, None] * tt[rest][None])
+            optimal = feasible & np.all(slope >= -1e-9 * scale, axis=0)
+            rest = rest[~optimal]
     return best_x, np.maximum(best_obj, 0.0)
 
 
@@ -402,7 +417,8 @@ class _Samples:
     """The table entries the fit weighs, as the rows of a least-squares problem scaled by
     ``√w = cos θi cos θo``: directions, the target (N, Λ), the view direction's Fresnel weight,
     and ``tt`` (Λ,), the target's weighted energy. Lobes' columns and their products with the
-    diffuse columns and the target are kept per roughness (the last 64)."""
+    diffuse columns and the target are kept per roughness (the last 64; :meth:`lobe`), and
+    without the target for the values only per-band searches try (:meth:`band_lobe`)."""
 
     wi: np.ndarray
     wo: np.ndarray
@@ -411,15 +427,34 @@ class _Samples:
     fres: np.ndarray
     tt: np.ndarray
     _lobes: dict[float, tuple[np.ndarray, ...]] = field(default_factory=dict, repr=False)
+    _band_lobes: dict[float, tuple[np.ndarray, ...]] = field(default_factory=dict, repr=False)
 
     def __post_init__(self) -> None:
         self._cosines = _lobe_cosines(self.wi, self.wo)
         self._sqrt_w = np.sqrt(self.weight)
+        _, ci, co = self._cosines
+        self._cos2 = ci * ci, co * co
         #: (2, N) diffuse columns, Lambert and Lambert (1 − F), and the target (Λ, N), scaled by √w
         self.base = np.stack([np.full(len(self.weight), 1.0 / np.pi), (1.0 - self.fres) / np.pi]) * self._sqrt_w
         self.target_w = np.ascontiguousarray((self.target * self._sqrt_w[:, None]).T)
         self._known = np.concatenate([self.base, self.target_w])   # what a lobe is multiplied with
         self.base_gram, self.base_rhs = self.base @ self.base.T, self.base @ self.target_w.T
+
+    def _columns(self, roughness: float) -> np.ndarray:
+        """A lobe's columns (2, N), plain and F-weighted, scaled by √w: :func:`_ggx_cosines`
+        without its horizon test (every sample here is above it), in place, cos² kept."""
+        a2 = float(roughness) ** 4
+        ch2, ci, co = self._cosines
+        ci2, co2 = self._cos2
+        g = ch2 * (a2 - 1.0)
+        g += 1.0
+        g *= g                                          # π D = α² / g
+        vis = np.sqrt(a2 + (1.0 - a2) * ci2)
+        vis *= co
+        vis += ci * np.sqrt(a2 + (1.0 - a2) * co2)     # ½ / (G₂ / (4 cos θi cos θo))
+        g *= vis
+        np.divide(self._sqrt_w * (0.5 * a2 / np.pi), g, out=g)
+        return np.stack([g, g * self.fres])
 
     def lobe(self, roughness: float) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
         """One GGX lobe (plain and F-weighted): its columns (2, N) scaled by √w, their products
@@ -428,17 +463,48 @@ class _Samples:
         if r not in self._lobes:
             if len(self._lobes) >= 64:
                 self._lobes.pop(next(iter(self._lobes)))
-            g = _ggx_cosines(*self._cosines, r) * self._sqrt_w
-            cols = np.stack([g, g * self.fres])
+            cols = self._columns(r)
             # einsum, not BLAS: (2, N)·(N, 2 + Λ) is too thin to gain from (busy) BLAS threads
             known = np.einsum("in,jn->ij", cols, self._known)
             self._lobes[r] = (cols, known[:, :2], np.einsum("in,jn->ij", cols, cols), known[:, 2:])
         return self._lobes[r]
 
+    def band_lobe(self, roughness: float, band: int) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
+        """:meth:`lobe` at one band: the product with the target (2,) of band ``band`` only.
+
+        Per-band searches try a new value in every band, and the product of its columns with the
+        other bands' targets would be waste: such a lobe is kept (the last 96) without it."""
+        r = float(roughness)
+        if r in self._lobes:
+            cols, with_base, with_self, with_target = self._lobes[r]
+            return cols, with_base, with_self, with_target[:, band]
+        if r not in self._band_lobes:
+            if len(self._band_lobes) >= 96:
+                self._band_lobes.pop(next(iter(self._band_lobes)))
+            cols = self._columns(r)
+            self._band_lobes[r] = (cols, np.einsum("in,jn->ij", cols, self.base),
+                                   np.einsum("in,jn->ij", cols, cols))
+        cols, with_base, with_self = self._band_lobes[r]
+        return cols, with_base, with_self, cols @ self.target_w[band]
+
     def normal_equations(self, roughness: list[float]) -> tuple[np.ndarray, np.ndarray]:
         """Gram (K, K) and right-hand sides (K, Λ) of the diffuse terms and these lobes."""
-        phi = np.concatenate([self.base] + [self.lobe(r)[0] for r in roughness])
-        return phi @ phi.T, phi @ self.target_w.T
+        if len(roughness) > 2:  # a grid of candidates: every pair's product, in one product
+            phi = np.concatenate([self.base] + [self.lobe(r)[0] for r in roughness])
+            return phi @ phi.T, phi @ self.target_w.T
+        # one or two lobes: from the products :meth:`lobe` keeps, plus the lobes' cross product
+        k = 2 + 2 * len(roughness)
+        gram, rhs = np.empty((k, k)), np.empty((k, self.tt.size))
+        gram[:2, :2], rhs[:2] = self.base_gram, self.base_rhs
+        lobes = [self.lobe(r) for r in roughness]
+        for a, (cols, with_base, with_self, with_target) in enumerate(lobes):
+            ia = slice(2 + 2 * a, 4 + 2 * a)
+            gram[ia, :2], gram[:2, ia], gram[ia, ia], rhs[ia] = with_base, with_base.T, with_self, with_target
+            for b in range(a):
+                ib = slice(2 + 2 * b, 4 + 2 * b)
+                gram[ia, ib] = np.einsum("in,jn->ij", cols, lobes[b][0])
+                gram[ib, ia] = gram[ia, ib].T
+        return gram, rhs
 
     def score(self, obj: np.ndarray, bands: np.ndarray | None = None) -> np.ndarray:
         """Relative squared error per band of NNLS objectives ``obj`` (at ``bands``, default all)."""
@@ -555,11 +621,11 @@ def _band_equations(s: _Samples, roughness: np.ndarray,
     gram, rhs = np.empty((len(bands), k, k)), np.empty((k, len(bands)))
     gram[:, :2, :2], rhs[:2] = s.base_gram, s.base_rhs[:, bands]
     for i, band in enumerate(bands):
-        lobes = [s.lobe(r) for r in roughness[:, band]]
+        lobes = [s.band_lobe(r, band) for r in roughness[:, band]]
         for a, (cols, with_base, with_self, with_target) in enumerate(lobes):
             ia = slice(2 + 2 * a, 4 + 2 * a)
             gram[i, ia, :2], gram[i, :2, ia], gram[i, ia, ia] = with_base, with_base.T, with_self
-            rhs[ia, i] = with_target[:, band]
+            rhs[ia, i] = with_target
             for b in range(a):
                 ib = slice(2 + 2 * b, 4 + 2 * b)
                 gram[i, ia, ib] = np.einsum("in,jn->ij", cols, lobes[b][0])
