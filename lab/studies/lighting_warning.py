@@ -42,8 +42,19 @@ def sh9(normals: np.ndarray) -> np.ndarray:
     return np.stack([np.ones_like(x), x, y, z, x * y, y * z, x * z, x * x - y * y, 3 * z * z - 1], 1)
 
 
-def synthetic_cases(n: int, lights: np.ndarray):
-    """(name, light index, SphereCrop) of ``n`` training-split corpus materials under lights 0, 5."""
+def residual_figures(photo: np.ndarray, rendered: np.ndarray, mask: np.ndarray, scale: float) -> dict:
+    """Where the refined render misses the photo: PSNR (dB, the photo's level) over its brightest
+    5 % of pixels and over the rest, and the brightest pixels' share of the squared residual."""
+    lum = photo[mask].mean(1)
+    top = lum >= np.percentile(lum, 95)
+    err = ((rendered[mask] - photo[mask]) / scale) ** 2
+    db = lambda e: round(float(-10 * np.log10(max(e.mean(), 1e-30))), 2)  # noqa: E731
+    return {"bright_db": db(err[top]), "rest_db": db(err[~top]),
+            "bright_share": round(float(err[top].sum() / max(err.sum(), 1e-30)), 4)}
+
+
+def synthetic_cases(n: int, lights: np.ndarray, split: str = "train"):
+    """(name, light index, SphereCrop) of ``n`` corpus materials of ``split`` under lights 0, 5."""
     from specgen_addon.brdf.rusinkiewicz import io_from_half_diff
     from specgen_addon.brdf.table import BRDFTable
     from specgen_addon.corpus import generate_corpus
@@ -54,7 +65,7 @@ def synthetic_cases(n: int, lights: np.ndarray):
     from specgen_addon.spectral.spectra import DEFAULT_WAVELENGTHS_NM as wl
 
     inside = sphere_geometry(SIZE).mask
-    train = [m for m in generate_corpus(CORPUS_SIZE, CORPUS_SEED) if m.split == "train"][:n]
+    train = [m for m in generate_corpus(CORPUS_SIZE, CORPUS_SEED) if m.split == split][:n]
     for mat in train:
         def fn(th, td, pd, mat=mat):
             wi, wo = io_from_half_diff(th, td, pd)
@@ -81,13 +92,18 @@ def main() -> int:
     ap = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
     ap.add_argument("--inputs", type=int, nargs="+", default=list(range(12)))
     ap.add_argument("--synthetic", type=int, default=0, help="N training-split corpus materials instead")
+    ap.add_argument("--split", choices=["train", "val"], default="train", help="the corpus split of --synthetic")
+    ap.add_argument("--save", type=Path, default=None,
+                    help="a folder for each row's photo, refined render and observed pixels (.npz)")
     ap.add_argument("--json", type=Path, default=None)
     args = ap.parse_args()
+    if args.save:
+        args.save.mkdir(parents=True, exist_ok=True)
     lights = load_lights(DATA / "lights.txt")
     geo = sphere_geometry(SIZE)
     out = open(args.json, "w") if args.json else None
     cases = ([(f"gray.{i}", i, crop("gray", i)) for i in args.inputs] if not args.synthetic
-             else synthetic_cases(args.synthetic, lights))
+             else synthetic_cases(args.synthetic, lights, args.split))
     for name, i, c in cases:
         photo = c.image.astype(np.float64)
         mask = geo.mask & (photo.max(-1) < CLIP_LEVEL) & (photo.max(-1) > 0)
@@ -104,9 +120,14 @@ def main() -> int:
             res = refine_brdf(start, photo, lighting, RefineOptions(clip_level=CLIP_LEVEL, exclude=c.saturated))
             lam = white_render(lighting) * lambertian_albedo(photo, mask, lighting)
             row = {"photo": name, "input": i, "light": kind, "any_light_db": getattr(res, "any_light_db", None),
+                   "product_bright_share": getattr(res, "bright_share", None),
                    "warned": any("does not explain" in w for w in res.warnings), "refined_db": round(res.after.psnr_db, 2),
                    "network_db": round(res.before.psnr_db, 2),
                    "lambert_given_db": round(rgb_psnr(rows_b, lam[mask], s), 2), "sh9_lambert_db": round(sh_db, 2)}
+            row.update(residual_figures(photo, res.rendered, mask, s))
+            if args.save:
+                np.savez_compressed(args.save / f"{name.split()[0]}_{i}_{kind}.npz", photo=photo.astype(np.float32),
+                                    rendered=res.rendered.astype(np.float32), mask=mask)
             print(json.dumps(row), flush=True)
             if out:
                 out.write(json.dumps(row) + "\n")

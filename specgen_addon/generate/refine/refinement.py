@@ -57,6 +57,7 @@ from specgen_addon.generate.refine.body import (
 )
 from specgen_addon.generate.refine.discrepancy import difference_variance, discrepancy_scale, twin_scene
 from specgen_addon.generate.refine.holdout import block_folds, holdout_error, holdout_errors
+from specgen_addon.generate.refine.lighting_check import any_light_lambertian_db, bright_residual_share, lighting_warning
 from specgen_addon.generate.refine.operator import PhotoOperator, render_grid
 from specgen_addon.generate.refine.solve import difference_operator, nonneg_ridge
 from specgen_addon.photo.photo_lighting import InputLighting
@@ -67,7 +68,9 @@ from specgen_addon.render.sampling import diffuse_floor
 ProgressFn = Callable[[float], None]
 CancelFn = Callable[[], bool]
 
-#: Self-reproduction below this (dB) means the lighting does not explain the photo: warn.
+#: Self-reproduction below this (dB), and well below a Lambertian under any lighting
+#: (:func:`~specgen_addon.generate.refine.lighting_check.lighting_suspect`), means the lighting
+#: does not explain the photo: warn.
 WARN_PSNR_DB = 30.0
 #: Self-reproduction (dB) below which the smoothness is relaxed to :data:`RELAXED_SMOOTH` and the
 #: better-reproducing of the two corrections is kept (the photo target is 40 dB).
@@ -219,6 +222,9 @@ class RefineResult:
     lobe_kept: bool = False                  # the network's lobe was kept (brightness and colour fitted)
     holdout_db: float | None = None          # score_holdout: held-out pixels predicted by the kept setting
                                              # fitted to the others, as a PSNR (dB, the photo's level)
+    any_light_db: float | None = None        # a Lambertian under the best distant lighting of any kind
+                                             # (lighting_check): what the lighting is judged against
+    bright_share: float | None = None        # the squared residual's share on the brightest pixels (lighting_check)
 
     def summary(self) -> str:
         blur = f" (photo blur σ {self.blur_px:g} px modelled)" if self.blur_px > 0 else ""
@@ -501,9 +507,13 @@ def refine_brdf(table: BRDFTable, photo: np.ndarray, lighting=None, options: Ref
             warnings.append(f"refinement did not improve on the network ({m_after.psnr_db:.1f} dB vs "
                             f"{m_before.psnr_db:.1f} dB); the network's table is kept")
             refined, after_img, m_after = table, before_img, m_before
-        if m_after.psnr_db < WARN_PSNR_DB:
-            warnings.append(f"the chosen lighting does not explain this photo: self-reproduction reaches only "
-                            f"{m_after.psnr_db:.1f} dB (check the input lighting, exposure and image)")
+        normals = scene.geometry.normals.reshape(-1, 3)[op.pixel_ids]
+        any_light = any_light_lambertian_db(b, normals, ~clipped, options.clip_level, level)
+        bright_share = bright_residual_share(b, op.observe(after_img))
+        lighting_note = lighting_warning(m_after.psnr_db, any_light, bright_share, WARN_PSNR_DB,
+                                        studio=lighting.is_canonical)
+        if lighting_note is not None:
+            warnings.append(lighting_note)
         coeffs = {"lobe": x.reshape(basis.shape).tolist(), "body_tint": yb.tolist(),
                   "added": None if u is None else u.reshape(basis.shape).tolist(),
                   "lambert": zl.tolist(), "floor": floor.tolist(), "body": body.tolist(),
@@ -519,7 +529,8 @@ def refine_brdf(table: BRDFTable, photo: np.ndarray, lighting=None, options: Ref
         return RefineResult(refined, m_before, m_after, coeffs, time.perf_counter() - t0, clipped_fraction,
                             warnings, after_img, improved, sigma, sampling_floor,
                             float(max(scales)), within_noise, relaxed_gain, relaxed_kept and improved,
-                            relaxed_holdout, lobe_holdout, lobe_kept and improved, heldout)
+                            relaxed_holdout, lobe_holdout, lobe_kept and improved, heldout, any_light,
+                            bright_share)
 
 
 def _photo_blur(op: PhotoOperator, a_lobe: np.ndarray, a_lamb: np.ndarray, a_body: np.ndarray,
