@@ -92,12 +92,23 @@ def _lobe_cosines(wi: np.ndarray, wo: np.ndarray) -> tuple[np.ndarray, np.ndarra
 def _ggx_cosines(ch2: np.ndarray, ci: np.ndarray, co: np.ndarray, roughness: float) -> np.ndarray:
     """:func:`ggx_lobe` from :func:`_lobe_cosines` (zero where either cosine is 0)."""
     a2 = float(roughness) ** 4  # α = r², α²
-    d = a2 / (np.pi * (ch2 * (a2 - 1.0) + 1.0) ** 2)
-    # G₂ / (4 cos θi cos θo) in the stable "visibility" form of the height-correlated Smith term
-    # (Heitz 2014, eq. 99): ½ / (cos θo √(α² + (1−α²) cos² θi) + cos θi √(α² + (1−α²) cos² θo)).
-    denom = co * np.sqrt(a2 + (1.0 - a2) * ci * ci) + ci * np.sqrt(a2 + (1.0 - a2) * co * co)
-    above = (ci > 0) & (co > 0)
-    return np.where(above, d * 0.5 / np.where(above, denom, 1.0), 0.0)
+    # D = α² / (π t²), t = cos² θh (α² − 1) + 1; G₂ / (4 cos θi cos θo) in the stable "visibility"
+    # form of the height-correlated Smith term (Heitz 2014, eq. 99):
+    # ½ / (cos θo √(α² + (1−α²) cos² θi) + cos θi √(α² + (1−α²) cos² θo)). In place: the fit
+    # evaluates hundreds of roughnesses over tens of thousands of samples.
+    t = ch2 * (a2 - 1.0)
+    t += 1.0
+    t *= t
+    denom = co * np.sqrt(a2 + (1.0 - a2) * ci * ci)
+    denom += ci * np.sqrt(a2 + (1.0 - a2) * co * co)
+    denom *= t
+    below = (ci <= 0) | (co <= 0)
+    if below.any():
+        denom[below] = 1.0
+    out = np.divide(0.5 * a2 / np.pi, denom, out=denom)
+    if below.any():
+        out[below] = 0.0
+    return out
 
 
 def fresnel_dielectric(cos_theta: np.ndarray, ior: float) -> np.ndarray:
@@ -432,8 +443,6 @@ class _Samples:
     def __post_init__(self) -> None:
         self._cosines = _lobe_cosines(self.wi, self.wo)
         self._sqrt_w = np.sqrt(self.weight)
-        _, ci, co = self._cosines
-        self._cos2 = ci * ci, co * co
         #: (2, N) diffuse columns, Lambert and Lambert (1 − F), and the target (Λ, N), scaled by √w
         self.base = np.stack([np.full(len(self.weight), 1.0 / np.pi), (1.0 - self.fres) / np.pi]) * self._sqrt_w
         self.target_w = np.ascontiguousarray((self.target * self._sqrt_w[:, None]).T)
@@ -441,19 +450,9 @@ class _Samples:
         self.base_gram, self.base_rhs = self.base @ self.base.T, self.base @ self.target_w.T
 
     def _columns(self, roughness: float) -> np.ndarray:
-        """A lobe's columns (2, N), plain and F-weighted, scaled by √w: :func:`_ggx_cosines`
-        without its horizon test (every sample here is above it), in place, cos² kept."""
-        a2 = float(roughness) ** 4
-        ch2, ci, co = self._cosines
-        ci2, co2 = self._cos2
-        g = ch2 * (a2 - 1.0)
-        g += 1.0
-        g *= g                                          # π D = α² / g
-        vis = np.sqrt(a2 + (1.0 - a2) * ci2)
-        vis *= co
-        vis += ci * np.sqrt(a2 + (1.0 - a2) * co2)     # ½ / (G₂ / (4 cos θi cos θo))
-        g *= vis
-        np.divide(self._sqrt_w * (0.5 * a2 / np.pi), g, out=g)
+        """A lobe's columns (2, N), plain and F-weighted, scaled by √w."""
+        g = _ggx_cosines(*self._cosines, roughness)
+        g *= self._sqrt_w
         return np.stack([g, g * self.fres])
 
     def lobe(self, roughness: float) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
@@ -496,14 +495,7 @@ class _Samples:
         k = 2 + 2 * len(roughness)
         gram, rhs = np.empty((k, k)), np.empty((k, self.tt.size))
         gram[:2, :2], rhs[:2] = self.base_gram, self.base_rhs
-        lobes = [self.lobe(r) for r in roughness]
-        for a, (cols, with_base, with_self, with_target) in enumerate(lobes):
-            ia = slice(2 + 2 * a, 4 + 2 * a)
-            gram[ia, :2], gram[:2, ia], gram[ia, ia], rhs[ia] = with_base, with_base.T, with_self, with_target
-            for b in range(a):
-                ib = slice(2 + 2 * b, 4 + 2 * b)
-                gram[ia, ib] = np.einsum("in,jn->ij", cols, lobes[b][0])
-                gram[ib, ia] = gram[ia, ib].T
+        _fill_lobe_blocks(gram, rhs, [self.lobe(r) for r in roughness])
         return gram, rhs
 
     def score(self, obj: np.ndarray, bands: np.ndarray | None = None) -> np.ndarray:
@@ -621,16 +613,21 @@ def _band_equations(s: _Samples, roughness: np.ndarray,
     gram, rhs = np.empty((len(bands), k, k)), np.empty((k, len(bands)))
     gram[:, :2, :2], rhs[:2] = s.base_gram, s.base_rhs[:, bands]
     for i, band in enumerate(bands):
-        lobes = [s.band_lobe(r, band) for r in roughness[:, band]]
-        for a, (cols, with_base, with_self, with_target) in enumerate(lobes):
-            ia = slice(2 + 2 * a, 4 + 2 * a)
-            gram[i, ia, :2], gram[i, :2, ia], gram[i, ia, ia] = with_base, with_base.T, with_self
-            rhs[ia, i] = with_target
-            for b in range(a):
-                ib = slice(2 + 2 * b, 4 + 2 * b)
-                gram[i, ia, ib] = np.einsum("in,jn->ij", cols, lobes[b][0])
-                gram[i, ib, ia] = gram[i, ia, ib].T
+        _fill_lobe_blocks(gram[i], rhs[:, i], [s.band_lobe(r, band) for r in roughness[:, band]])
     return gram, rhs
+
+
+def _fill_lobe_blocks(gram: np.ndarray, rhs: np.ndarray, lobes: list[tuple[np.ndarray, ...]]) -> None:
+    """Write the lobes' rows of a gram (K, K) and right-hand side (K, …) whose first two rows (the
+    diffuse terms) are set: each lobe's products as :meth:`_Samples.lobe` gives them, and the
+    lobes' cross products."""
+    for a, (cols, with_base, with_self, with_target) in enumerate(lobes):
+        ia = slice(2 + 2 * a, 4 + 2 * a)
+        gram[ia, :2], gram[:2, ia], gram[ia, ia], rhs[ia] = with_base, with_base.T, with_self, with_target
+        for b in range(a):
+            ib = slice(2 + 2 * b, 4 + 2 * b)
+            gram[ia, ib] = np.einsum("in,jn->ij", cols, lobes[b][0])
+            gram[ib, ia] = gram[ia, ib].T
 
 
 def _solve_bands(s: _Samples, roughness: np.ndarray, bands: np.ndarray | None = None,

@@ -86,12 +86,23 @@ def lighting_suspect(refined_db: float, reference_db: float | None, bright_share
     Lambertian's ``reference_db`` or with more than :data:`BRIGHT_SHARE` of its residual on the
     brightest pixels (``bright_share``), or :data:`FAR_BELOW_DB` under ``below_db``. Without
     either figure, under ``below_db`` alone."""
+    return _suspect_because(refined_db, reference_db, bright_share, below_db) is not None
+
+
+def _suspect_because(refined_db: float, reference_db: float | None, bright_share: float | None,
+                     below_db: float) -> str | None:
+    """:func:`lighting_suspect` as the clause the warning quotes ("" when no figure names the
+    lighting but the self-reproduction is too low anyway), or None when it is not suspect."""
     if refined_db >= below_db:
-        return False
+        return None
+    if reference_db is not None and refined_db < reference_db - LIGHTING_MARGIN_DB:
+        return f", where a matte ball under a light of its own choosing reaches {reference_db:.1f} dB"
+    if bright_share is not None and bright_share > BRIGHT_SHARE:
+        return (f", with {100 * bright_share:.0f}% of its error on the photo's brightest pixels "
+                f"(a highlight this lighting does not put there)")
     if (reference_db is None and bright_share is None) or refined_db < below_db - FAR_BELOW_DB:
-        return True
-    return ((reference_db is not None and refined_db < reference_db - LIGHTING_MARGIN_DB)
-            or (bright_share is not None and bright_share > BRIGHT_SHARE))
+        return ""
+    return None
 
 
 def lighting_warning(refined_db: float, reference_db: float | None, bright_share: float | None,
@@ -106,14 +117,8 @@ def lighting_warning(refined_db: float, reference_db: float | None, bright_share
         return (f"the canonical studio (assumed when no light is given) does not explain this photo: "
                 f"self-reproduction reaches only {refined_db:.1f} dB (give the room's light: a light's "
                 f"direction, a chrome ball, a panorama, or have it estimated)")
-    if not lighting_suspect(refined_db, reference_db, bright_share, below_db):
+    why = _suspect_because(refined_db, reference_db, bright_share, below_db)
+    if why is None:
         return None
-    if reference_db is not None and refined_db < reference_db - LIGHTING_MARGIN_DB:
-        why = f", where a matte ball under a light of its own choosing reaches {reference_db:.1f} dB"
-    elif bright_share is not None and bright_share > BRIGHT_SHARE:
-        why = (f", with {100 * bright_share:.0f}% of its error on the photo's brightest pixels "
-               f"(a highlight this lighting does not put there)")
-    else:
-        why = ""
     return (f"the chosen lighting does not explain this photo: self-reproduction reaches only "
             f"{refined_db:.1f} dB{why} (check the input lighting, exposure and image)")
