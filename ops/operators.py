@@ -34,7 +34,7 @@ from .photo_inputs import balanced_to_the_light, balances_to_the_light, lighting
 from .properties import output_dir
 from .render_settings import PREVIEW_PERCENT, PREVIEW_SAMPLES, band_render
 from .scene_lighting import ball_position
-from .travel import load_image
+from .travel import load_image, scene_atlas_json
 from .reporting import check_generate_settings, check_render_settings, report_exception
 
 TIMER_STEP_S = 0.1
@@ -294,7 +294,7 @@ class SPECGEN_OT_apply(bpy.types.Operator):
                 raise SpecGenError("select at least one mesh object")
             mat = s.material
             if mat is None:  # a lookup baked elsewhere (e.g. by batch.py): build its material
-                info = bake.load_atlas_info(s.atlas_json)
+                info = bake.load_atlas_info(scene_atlas_json(s))
                 mat = make_material(f"SpecGen {Path(info.path).stem}", info)
         except Exception as exc:
             return report_exception(self, exc, "Apply")

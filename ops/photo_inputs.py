@@ -107,10 +107,13 @@ def lighting_job(photo, scene, out_dir: str, stem: str, overwrite: bool, target=
         lighting = parse_lighting(NO_MAP, lights=panel_lights(photo), ambient=photo.ambient)
         return lambda source: (lighting, [])
     if kind == "PANORAMA":
-        env = str(_file(photo.input_env_file, "a panorama file")) if photo.input_env == "FILE" else photo.input_env
+        from_file = photo.input_env == "FILE"
+        env = str(_file(photo.input_env_file, "a panorama file")) if from_file else photo.input_env
+        # Calibrated is drawn (and means something) for a file only: a tick left from a file is
+        # not held against a bundled map the user picked afterwards
         lighting = parse_lighting(env, photo.input_rotation, photo.input_exposure, photo.input_key_light,
                                   lights=panel_lights(photo), ambient=photo.ambient,
-                                  calibrated=photo.calibrated)
+                                  calibrated=photo.calibrated and from_file)
         return lambda source: (lighting, [])
     if kind == "ESTIMATE":
         def estimate(source):

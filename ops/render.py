@@ -198,6 +198,7 @@ def make_material(name: str, atlas: bake.AtlasInfo) -> bpy.types.Material:
         build_closure_stack(mat, atlas.closures, out)
     mat.cycles.emission_sampling = "NONE"  # the emission is reflected light, not a light source
     mat[MATERIAL_TAG] = True
+    mat.use_fake_user = True   # a generated result is kept on save before it is applied to anything
     mat["specgen_wavelengths_nm"] = [float(w) for w in atlas.wavelengths_nm]
     mat["specgen_atlas"] = str(atlas.path)
     mat["specgen_atlas_groups"] = [str(p) for p in atlas.group_paths]

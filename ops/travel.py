@@ -120,6 +120,7 @@ def relocate(blend_path: str) -> list[str]:
 
     blend_dir = os.path.dirname(os.path.abspath(blend_path))
     warnings = []
+    moved: dict[str, str] = {}        # old → new absolute folder of the sets moved out of the temporary one
     for mat in _specgen_materials():
         groups = [_absolute(p) for p in mat["specgen_atlas_groups"]]
         atlas = _absolute(str(mat["specgen_atlas"]))
@@ -132,12 +133,16 @@ def relocate(blend_path: str) -> list[str]:
             else:
                 groups = [str(new_dir / Path(p).name) for p in groups]
                 atlas = str(new_dir / Path(atlas).name)
+                moved[os.path.normpath(str(old_dir))] = str(new_dir)
                 for img in bpy.data.images:   # the preview went with them
                     if img.filepath and _in_unsaved_folder(bpy.path.abspath(img.filepath)) \
                             and (new_dir / Path(img.filepath).name).is_file():
                         img.filepath = _relative(str(new_dir / Path(img.filepath).name), blend_dir)
         mat["specgen_atlas_groups"] = [_relative(p, blend_dir) for p in groups]
         mat["specgen_atlas"] = _relative(atlas, blend_dir)
+        preview = bpy.data.images.get(str(mat.get("specgen_preview", "")))
+        if preview is not None and preview.filepath and not preview.filepath.startswith("//"):
+            preview.filepath = _relative(preview.filepath, blend_dir)   # as the lookups: moves with the .blend
         img = packed_image(mat)
         if img is not None:   # Unpack Resources writes it where it is looked for
             stem = Path(atlas).name.removesuffix("_lookup.exr")
@@ -145,7 +150,19 @@ def relocate(blend_path: str) -> list[str]:
         node = script_node(mat)
         if node is not None and node.inputs["Atlas"].default_value:
             node.inputs["Atlas"].default_value = groups[0]
+    for scene in bpy.data.scenes:     # the last lookup baked, which Apply builds a material from
+        s = getattr(scene, "specgen", None)
+        if s is not None and s.atlas_json:
+            path = scene_atlas_json(s)
+            path = os.path.join(moved.get(os.path.dirname(path), os.path.dirname(path)), os.path.basename(path))
+            s.atlas_json = _relative(path, blend_dir)
     return warnings
+
+
+def scene_atlas_json(settings) -> str:
+    """The absolute path of a scene's last baked lookup (``settings.atlas_json``, stored relative
+    to the .blend once saved)."""
+    return os.path.normpath(_absolute(settings.atlas_json))
 
 
 def missing_lookups(materials=None) -> list[str]:

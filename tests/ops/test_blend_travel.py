@@ -23,6 +23,7 @@ bake = addon_module("specgen_addon.bake.lookup")
 render = addon_module("ops.render")
 scene_mod = addon_module("ops.scene")
 properties = addon_module("ops.properties")
+travel = addon_module("ops.travel")
 
 from blend_reopen import reopen_and_render as _reopen
 from blend_reopen import small_table as _table
@@ -76,3 +77,41 @@ def test_lookups_move_beside_the_saved_blend_and_a_moved_blend_renders_the_same(
     assert f"material 'SpecGen ball': baked lookup {gone} is missing" in out, out
     assert "REFUSED" in out and not (tmp_path / "never.npy").exists()
     assert json.loads((elsewhere / "specgen" / "ball_lookup.json").read_text())
+
+
+@pytest.mark.blender
+@pytest.mark.parametrize("first_save", [True, False], ids=["unsaved file", "saved file"])
+def test_the_preview_and_the_last_lookup_are_stored_relative_and_an_unapplied_material_is_kept(
+        tmp_path, monkeypatch, registered_addon, first_save):
+    """Saved, a material's preview image and the scene's last baked lookup (what Apply builds a
+    material from) are stored relative to the .blend like its lookups, so they move with it; a
+    material applied to nothing survives the save and reopening."""
+    monkeypatch.setattr(tempfile, "tempdir", str(tmp_path / "temp"))
+    (tmp_path / "temp").mkdir()
+    sc = bpy.context.scene
+    blend = tmp_path / "project" / "scene.blend"
+    blend.parent.mkdir()
+    if not first_save:
+        bpy.ops.wm.save_as_mainfile(filepath=str(blend))
+    folder = Path(properties.output_dir(sc.specgen))
+    folder.mkdir(parents=True, exist_ok=True)
+    info = bake.bake_atlas(_table(), folder / "ball_lookup.exr")
+    bake.save_atlas_info(info, folder / "ball_lookup.json")
+    mat = render.make_material("SpecGen ball", info)                 # applied to nothing
+    preview = bpy.data.images.new("SpecGen ball preview", 4, 4)
+    preview.filepath_raw = str(folder / "ball_preview.png")
+    preview.file_format = "PNG"
+    preview.save()
+    preview.use_fake_user = True
+    mat["specgen_preview"] = preview.name
+    sc.specgen.atlas_json = str(folder / "ball_lookup.json")
+
+    bpy.ops.wm.save_as_mainfile(filepath=str(blend))
+    assert sc.specgen.atlas_json == "//specgen/ball_lookup.json"
+    assert bpy.data.images["SpecGen ball preview"].filepath == "//specgen/ball_preview.png"
+    moved = tmp_path / "moved"
+    shutil.move(str(blend.parent), str(moved))
+    bpy.ops.wm.open_mainfile(filepath=str(moved / "scene.blend"))
+    assert "SpecGen ball" in bpy.data.materials                      # kept by its fake user
+    assert Path(travel.scene_atlas_json(bpy.context.scene.specgen)) == moved / "specgen" / "ball_lookup.json"
+    assert Path(bpy.path.abspath(bpy.data.images["SpecGen ball preview"].filepath)).is_file()

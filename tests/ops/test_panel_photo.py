@@ -228,6 +228,16 @@ def test_a_panorama_of_the_wrong_aspect_is_refused_in_one_sentence(panel, tmp_pa
         bpy.ops.specgen.generate_brdf()
 
 
+def test_a_calibrated_tick_left_from_a_file_does_not_block_a_bundled_panorama(panel, tmp_path):
+    """Calibrated is drawn for a panorama file only; ticked there, then a bundled map chosen (the
+    tick now hidden), the map is used as a bundled map is, not refused for the hidden tick."""
+    scene, _s, photo = panel
+    photo.lighting, photo.input_env, photo.calibrated = "PANORAMA", "FILE", True
+    photo.input_env = "forest"
+    lighting, _notes = _lighting(scene, photo, tmp_path)
+    assert lighting.env == "forest" and not lighting.calibrated
+
+
 @pytest.mark.slow
 def test_generate_under_a_given_light_reports_the_lighting_and_the_circle(panel, tmp_path):
     from specgen_addon.model import DEFAULT_WEIGHTS
