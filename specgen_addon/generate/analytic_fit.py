@@ -271,7 +271,7 @@ def _golden(f: Callable[[float], float], lo: float, hi: float, steps: int) -> fl
 
 def fit_photo(photo: np.ndarray, scene, exposure: float, *, alphas: tuple[float, ...] = ALPHA_GRID,
               coat_alphas: tuple[float, ...] = COAT_ALPHA_GRID, refine_steps: int = 6, rounds: int = 2,
-              clip_level: float | None = None, exclude: np.ndarray | None = None,
+              clip_level: float | np.ndarray | None = None, exclude: np.ndarray | None = None,
               max_edge: float | None = None, progress: ProgressFn | None = None,
               cancel: CancelFn | None = None) -> PhotoFit:
     """Fit :class:`AnalyticRGB` to a sphere ``photo`` rendered under a prepared renderer ``scene``.

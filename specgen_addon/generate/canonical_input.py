@@ -52,7 +52,7 @@ class CanonicalInput:
                 f"studio ({self.fit.summary()}; {self.seconds:.1f} s)")
 
 
-def canonical_input(photo: np.ndarray, lighting, clip_level: float | None = None,
+def canonical_input(photo: np.ndarray, lighting, clip_level: float | np.ndarray | None = None,
                     exclude: np.ndarray | None = None, cancel=None) -> CanonicalInput:
     """Fit an analytic BRDF to ``photo`` (linear sRGB (S, S, 3) on the canonical sphere crop) under
     ``lighting`` (:class:`~specgen_addon.photo.photo_lighting.InputLighting`, not canonical) and
@@ -78,7 +78,7 @@ def canonical_input(photo: np.ndarray, lighting, clip_level: float | None = None
     return CanonicalInput(SphereCrop(image, copied=True), fit, time.perf_counter() - t0)
 
 
-def network_crop(crop: SphereCrop, photo: np.ndarray, lighting, clip_level: float | None = None,
+def network_crop(crop: SphereCrop, photo: np.ndarray, lighting, clip_level: float | np.ndarray | None = None,
                  cancel=None, refit: bool = True) -> tuple[SphereCrop, CanonicalInput | None]:
     """What the network is given for ``photo`` under ``lighting``: under the canonical studio, or
     without ``refit``, the photo itself × :meth:`InputLighting.network_gain` (the crop's own kind);

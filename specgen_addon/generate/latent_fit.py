@@ -263,7 +263,7 @@ def decode_table(backend, z, colour, wavelengths_nm: np.ndarray, cancel: CancelF
 
 
 def fit_latent(image, photo: np.ndarray, lighting=None, weights=None, wavelengths_nm=None,
-               options: LatentFitOptions = LatentFitOptions(), clip_level: float | None = None,
+               options: LatentFitOptions = LatentFitOptions(), clip_level: float | np.ndarray | None = None,
                network_table: BRDFTable | None = None, progress: ProgressFn | None = None,
                cancel: CancelFn | None = None) -> LatentFitResult:
     """Fit the network's latent and colour to ``photo`` and return the table they decode to.

@@ -184,6 +184,9 @@ def _generate(image, lighting=None, refine: bool = True, weights=None, wavelengt
     lighting = lighting or InputLighting()
     crop, linear = load_photo_crop(image)
     photo = crop.image.astype(np.float64)
+    # an 8/16-bit camera clips before any white balance: full scale per channel is the balance's gain
+    full_scale = np.ones(3) if crop.white_gains is None else np.asarray(crop.white_gains, np.float64)
+    clip_level = None if linear else CLIP_LEVEL * full_scale   # per channel
     src = str(image.path) if hasattr(image, "path") else str(image) if isinstance(image, (str, Path)) else "image"
 
     def sub(lo: float, hi: float) -> ProgressFn | None:
@@ -192,14 +195,13 @@ def _generate(image, lighting=None, refine: bool = True, weights=None, wavelengt
     if model == "thin-film":
         wl = DEFAULT_WAVELENGTHS_NM if wavelengths_nm is None else np.asarray(wavelengths_nm, np.float64)
         # a resampled crop spreads the highlight: the fit models that blur (docs/thin_film_fit.md)
-        fit = fit_thin_film(photo, lighting, clip_level=None if linear else CLIP_LEVEL,
+        fit = fit_thin_film(photo, lighting, clip_level=clip_level,
                             progress=sub(0.0, 0.8), cancel=cancel,
                             blur_px=(0.0,) if crop.copied else BLUR_CANDIDATES_PX)
         table = fit.table(wl, progress=sub(0.8, 1.0), cancel=cancel)
         table.metadata = {**table.metadata, "input_image": src, "input_lighting": lighting.label}
         return Generated(table, film_fit=fit)
 
-    clip_level = None if linear else CLIP_LEVEL
     # progress: the network, then the latent fit (about 4× the network's time), then refinement
     ends = np.cumsum([NETWORK_SHARE, 4.0 * NETWORK_SHARE if latent_fit else 0.0,
                       1.0 - NETWORK_SHARE if refine else 0.0])
@@ -220,19 +222,22 @@ def _generate(image, lighting=None, refine: bool = True, weights=None, wavelengt
         return Generated(table, latent_fit=fitted, crop=crop, canonical_input=canonical,
                          network_reproduction=network_reproduction(table, photo, lighting, clip_level, crop.saturated))
 
-    options = RefineOptions(clip_level=clip_level, exclude=crop.saturated)
+    options = RefineOptions(clip_level=None if linear else CLIP_LEVEL, full_scale=tuple(full_scale.tolist()),
+                            exclude=crop.saturated)
     result = refine_brdf(table, photo, lighting, options, progress=sub(ends[1], 1.0), cancel=cancel)
     return Generated(result.table, result, latent_fit=fitted, crop=crop, canonical_input=canonical)
 
 
-def network_reproduction(table: BRDFTable, photo: np.ndarray, lighting, clip_level: float | None,
+def network_reproduction(table: BRDFTable, photo: np.ndarray, lighting, clip_level: float | np.ndarray | None,
                          exclude: np.ndarray | None = None):
     """How well a table alone reproduces the photo under its lighting (RGB PSNR, ΔE2000 over the
-    sphere's unsaturated pixels): the figure a run without refinement reports."""
+    sphere's unsaturated pixels): the figure a run without refinement reports. ``clip_level``
+    (per channel, or None for a linear photo): photo values at or above it are clipped, and the
+    render is clipped at the full scale it is :data:`CLIP_LEVEL` of."""
     scene = lighting.scene(photo.shape[0])
     img = render_under(table, scene, lighting.image_exposure)
     if clip_level is not None:
-        img = np.minimum(img, 1.0)
+        img = np.minimum(img, np.asarray(clip_level) / CLIP_LEVEL)
     inside = np.any(photo > 0, axis=-1) | np.any(img > 0, axis=-1)
 
     inside &= sphere_geometry(photo.shape[0]).mask

@@ -313,7 +313,7 @@ class _ReducedDesign:
         return np.einsum("nm,nm->n", r, r)
 
 
-def fit_thin_film(photo: np.ndarray, lighting=None, clip_level: float | None = 0.995,
+def fit_thin_film(photo: np.ndarray, lighting=None, clip_level: float | np.ndarray | None = 0.995,
                   progress: ProgressFn | None = None, cancel: CancelFn | None = None,
                   blur_px: Sequence[float] = (0.0,)) -> ThinFilmFit:
     """Fit the thin-film family (module docstring) to a sphere ``photo`` taken under ``lighting``.

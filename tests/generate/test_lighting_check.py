@@ -45,7 +45,7 @@ def test_a_clipped_highlight_is_left_out_of_the_fit_and_clipped_in_the_reference
     photo = np.minimum(shade, 1.0)                                         # the camera clips at 1
     unclipped = photo.max(1) < 1.0
     assert not unclipped.all()
-    as_camera = any_light_lambertian_db(photo, normals, unclipped, clip_level=1.0)
+    as_camera = any_light_lambertian_db(photo, normals, unclipped, full_scale=1.0)
     assert as_camera > 100.0
     assert any_light_lambertian_db(photo, normals) < as_camera - 20.0     # fitted to the clip as if real
     assert any_light_lambertian_db(photo, normals, fitted=np.zeros(len(photo), bool)) is None

@@ -85,3 +85,22 @@ def test_a_chrome_ball_photographed_alike_gets_the_same_gains(photos):
     lit = plain.env_rgb.max(-1) > 1e-3
     np.testing.assert_allclose(balanced.env_rgb[lit] / plain.env_rgb[lit],
                                np.broadcast_to(gains, balanced.env_rgb[lit].shape), rtol=1e-4)
+
+
+@pytest.mark.slow
+def test_generate_judges_clipping_before_the_white_balance(repo_dir):
+    """An 8-bit photo balanced by a patch whose gains exceed 1: Generate leaves out the pixels the
+    camera saturated, not those the gains lifted past 1 (they are data)."""
+    from specgen_addon.generate.pipeline import generate
+
+    photo = repo_dir / "examples" / "sphere.png"
+    source = PhotoSource(photo, white_patch=parse_patch("100,60,8,8"))
+    crop = source.crop()
+    assert crop.white_gains.max() > 1.5 and crop.saturated.any()
+    lifted = np.any(crop.image >= 0.995, axis=-1) & ~crop.saturated
+    assert lifted.sum() > 0.5 * crop.saturated.sum()           # a clip at 1 would take these too
+    fit = generate(source).refinement
+    disc = np.pi / 4 * crop.image.shape[0] ** 2
+    saturated_share, lifted_share = crop.saturated.sum() / disc, lifted.sum() / disc
+    assert fit.clipped_fraction < saturated_share + 0.5 * lifted_share, (fit.clipped_fraction, saturated_share)
+    assert not any("clipped at full scale" in w for w in fit.warnings)

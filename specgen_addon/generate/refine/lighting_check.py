@@ -48,11 +48,12 @@ def sh9_basis(normals: np.ndarray) -> np.ndarray:
 
 
 def any_light_lambertian_db(rows: np.ndarray, normals: np.ndarray, fitted: np.ndarray | None = None,
-                            clip_level: float | None = None, scale: float | None = None) -> float | None:
+                            full_scale: float | np.ndarray | None = None, scale: float | None = None) -> float | None:
     """RGB PSNR (dB, :func:`~specgen_addon.render.photo_reproduction.rgb_psnr`) of the best
     Lambertian ball under any distant lighting against the photo's rows (P, 3), pixel normals
     (P, 3) in any fixed frame; fitted to the rows where ``fitted`` (P,) is True (default: all),
-    scored on all, clipped at ``clip_level`` as the camera clips. None with fewer than 9 rows."""
+    scored on all, clipped at ``full_scale`` (per channel) as the camera clips (None: not clipped).
+    None with fewer than 9 rows."""
     rows = np.asarray(rows, np.float64)
     keep = np.ones(rows.shape[0], bool) if fitted is None else np.asarray(fitted, bool)
     if keep.sum() < 9:
@@ -60,8 +61,8 @@ def any_light_lambertian_db(rows: np.ndarray, normals: np.ndarray, fitted: np.nd
     basis = sh9_basis(normals)
     coef, *_ = np.linalg.lstsq(basis[keep], rows[keep], rcond=None)
     pred = basis @ coef
-    if clip_level is not None:
-        pred = np.minimum(pred, 1.0)
+    if full_scale is not None:
+        pred = np.minimum(pred, full_scale)
     return rgb_psnr(rows, pred, scale)
 
 

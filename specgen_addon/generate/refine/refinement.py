@@ -126,9 +126,9 @@ class RefineOptions:
     the network's where its :func:`.body.visibility` is below ``body_visibility``); ``additive`` adds
     the angular term ``u`` (:func:`apply_correction`), which gives a shape to near-Lambertian
     tables that the multiplicative lobe correction cannot scale; ``clip_level`` marks saturated
-    pixels of an 8/16-bit photo (values in [0, 1]): they are left out of the fit, and renders are
-    clipped at 1 like the photo before they are scored (``None``: a linear EXR photo, nothing is
-    clipped). ``fit_floor`` τ: the fit leaves at least τ × the renderer's own sampling-error variance
+    pixels of an 8/16-bit photo (values at or above ``clip_level`` × ``full_scale``): they are left
+    out of the fit, and renders are clipped at ``full_scale`` like the photo before they are scored
+    (``None``: a linear EXR photo, nothing is clipped). ``fit_floor`` τ: the fit leaves at least τ × the renderer's own sampling-error variance
     as its residual (measured per photo, :mod:`.discrepancy`), and keeps the network's table where that
     already does; ``None`` fits as closely as the prior allows (the behaviour of earlier
     versions). ``relax_below_db``: below this self-reproduction the smoothness is relaxed and the better
@@ -165,6 +165,9 @@ class RefineOptions:
     body_visibility: float = 0.3
     additive: bool = True
     clip_level: float | None = CLIP_LEVEL
+    #: the photo's full scale per channel (R, G, B): 1, or the white balance's gains where they were
+    #: applied to an 8/16-bit photo (its camera clipped before the balance)
+    full_scale: tuple[float, float, float] = (1.0, 1.0, 1.0)
     energy_check: bool = True
     blur_px: float | None = None
     score_holdout: bool = False
@@ -313,8 +316,9 @@ def refine_brdf(table: BRDFTable, photo: np.ndarray, lighting=None, options: Ref
     warnings: list[str] = []
     level = photo_scale(b)
     clipped = np.zeros(b.shape[0], dtype=bool)
+    full_scale = np.asarray(options.full_scale, np.float64)
     if options.clip_level is not None:
-        clipped = np.any(b >= options.clip_level, axis=1)
+        clipped = np.any(b >= options.clip_level * full_scale, axis=1)
     if options.exclude is not None:
         clipped |= op.observe(np.repeat(np.asarray(options.exclude, np.float64)[..., None], 3, -1))[:, 0] > 0.5
     clipped_fraction = float(clipped.mean()) if clipped.size else 0.0
@@ -465,7 +469,7 @@ def refine_brdf(table: BRDFTable, photo: np.ndarray, lighting=None, options: Ref
             progress(0.9)
 
         def clip(img: np.ndarray) -> np.ndarray:   # an 8/16-bit photo: the camera clipped at full scale
-            return img if options.clip_level is None else np.minimum(img, 1.0)
+            return img if options.clip_level is None else np.minimum(img, full_scale)
 
         def as_photographed(img: np.ndarray) -> np.ndarray:   # blurred by the lens and the crop, then clipped
             return clip(blur_image(img, sigma))
@@ -508,7 +512,8 @@ def refine_brdf(table: BRDFTable, photo: np.ndarray, lighting=None, options: Ref
                             f"{m_before.psnr_db:.1f} dB); the network's table is kept")
             refined, after_img, m_after = table, before_img, m_before
         normals = scene.geometry.normals.reshape(-1, 3)[op.pixel_ids]
-        any_light = any_light_lambertian_db(b, normals, ~clipped, options.clip_level, level)
+        any_light = any_light_lambertian_db(b, normals, ~clipped, None if options.clip_level is None else full_scale,
+                                            level)
         bright_share = bright_residual_share(b, op.observe(after_img))
         lighting_note = lighting_warning(m_after.psnr_db, any_light, bright_share, WARN_PSNR_DB,
                                         studio=lighting.is_canonical)
