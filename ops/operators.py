@@ -128,6 +128,9 @@ def generate_with_photo_lighting(args: dict, lighting, circle_png: Path | None =
     from specgen_addon.common.interrupts import OutputGuard
     from specgen_addon.photo.sphere_image import write_circle_preview
 
+    # replacing a set: its files this run does not write again (the table with Export Table off,
+    # a circle preview, a lookup group fewer) are the old run's, removed once the new set is made
+    earlier = _file_stamps(args["out_dir"], args["name"]) if args["overwrite"] else {}
     with OutputGuard([args["out_dir"]]):
         make_dirs(Path(args["out_dir"]))
         photo_lighting, notes = lighting(args["image"])
@@ -138,7 +141,24 @@ def generate_with_photo_lighting(args: dict, lighting, circle_png: Path | None =
             write_circle_preview(circle_png, args["image"], info.crop.circle, overwrite=args["overwrite"])
         else:
             circle_png = None
+    for path, stamp in earlier.items():
+        if _file_stamp(path) == stamp:      # not written again: the replaced run's
+            path.unlink(missing_ok=True)
     return GenerateRun(info, photo_lighting, notes, circle_png)
+
+
+def _file_stamp(path: Path) -> tuple[int, int, int] | None:
+    """(inode, size, modification time in ns) of a file, or None: every output is written to a
+    new file and moved into place, so a file written again has another stamp."""
+    try:
+        st = path.stat()
+    except OSError:
+        return None
+    return st.st_ino, st.st_size, st.st_mtime_ns
+
+
+def _file_stamps(out_dir, stem: str) -> dict[Path, tuple[int, int, int] | None]:
+    return {p: _file_stamp(p) for p in naming.files_of(out_dir, stem)}
 
 
 class SPECGEN_OT_generate_brdf(_Modal, bpy.types.Operator):

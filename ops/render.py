@@ -674,11 +674,11 @@ class SpectralRenderJob(RenderJobOutputs):
         self.groups = [(np.asarray(b, np.float64).reshape(-1, self.wavelengths_nm.size),
                         np.asarray(o, np.float64), ms) for (b, o), ms in groups.items()]
         self.basis, self.offsets = self.groups[0][0], self.groups[0][1]
-        from .travel import missing_lookups
+        from .travel import missing_lookups, replaced_lookups
 
-        missing = missing_lookups(mats)
-        if missing:
-            raise SpecGenError(missing[0])
+        wrong = missing_lookups(mats) or replaced_lookups(mats)
+        if wrong:
+            raise SpecGenError(wrong[0])
         refresh_shader(mats)
         return mats
 

@@ -37,11 +37,32 @@ def read_scene_lighting(scene, target=None) -> SceneLighting:
     cam = rotation_part(scene.camera.matrix_world)
     target = np.zeros(3) if target is None else np.asarray(target, np.float64)
     taken = SceneLighting()
-    for obj in scene.objects:
-        if obj.type == "LIGHT" and not obj.hide_render:
+    for obj in _rendered_objects(scene):
+        if obj.type == "LIGHT":
             _add_light(taken, obj, cam, target)
     _add_world(taken, scene.world, cam)
     return taken
+
+
+def _rendered_objects(scene) -> list:
+    """The scene's objects a render of its view layer shows: in a collection the view layer does
+    not exclude and that (with its parents) is not disabled in renders, and not disabled in
+    renders themselves. Read from the layer's collection tree, which is always current (the view
+    layer's object list is updated lazily)."""
+    layer = bpy.context.view_layer if bpy.context.scene == scene else scene.view_layers[0]
+    found: dict[str, object] = {}
+
+    def walk(layer_collection) -> None:
+        if layer_collection.exclude or layer_collection.collection.hide_render:
+            return
+        for obj in layer_collection.collection.objects:
+            if not obj.hide_render:
+                found.setdefault(obj.name, obj)
+        for child in layer_collection.children:
+            walk(child)
+
+    walk(layer.layer_collection)
+    return list(found.values())
 
 
 def _add_light(taken: SceneLighting, obj, cam: np.ndarray, target: np.ndarray) -> None:
@@ -106,7 +127,13 @@ def _add_world(taken: SceneLighting, world, cam: np.ndarray) -> None:
         taken.not_taken.append(f"the world's '{tex.name}' ({tex.projection.lower().replace('_', ' ')} "
                                "projection; only equirectangular is read)")
         return
-    taken.panorama = world_in_camera_frame(_image_rgb(tex.image), cam, _mapping(taken, tex))
+    rgb = _image_rgb(tex.image)
+    h, w = rgb.shape[:2]
+    if w != 2 * h:
+        taken.not_taken.append(f"the world's image '{tex.image.name}' ({w}×{h}; an equirectangular "
+                               "panorama is twice as wide as it is high)")
+        return
+    taken.panorama = world_in_camera_frame(rgb, cam, _mapping(taken, tex))
     taken.strength = strength
     taken.notes.append(f"world: {tex.image.name} × {strength:g}, seen from the camera")
 

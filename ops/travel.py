@@ -176,6 +176,29 @@ def missing_lookups(materials=None) -> list[str]:
     return out
 
 
+def replaced_lookups(materials=None) -> list[str]:
+    """One sentence per material (default: every SpecGen material) whose lookups on disk are
+    another Generate's: a later run with *Replace Materials* rewrote them, then Undo brought the
+    material back (undo restores datablocks, not files). Told apart by the spectral basis the
+    material holds against the one its lookups' JSON holds."""
+    import json
+
+    import numpy as np
+
+    out = []
+    for mat in _specgen_materials() if materials is None else materials:
+        described = Path(_absolute(str(mat["specgen_atlas"]))).with_suffix(".json")
+        try:
+            on_disk = np.asarray(json.loads(described.read_text()).get("basis", []), np.float64).ravel()
+        except (OSError, ValueError, AttributeError):
+            continue              # missing or unreadable: missing_lookups says so
+        held = np.asarray(mat.get("specgen_basis", []), np.float64)
+        if on_disk.shape != held.shape or not np.allclose(on_disk, held, rtol=1e-6, atol=1e-9):
+            out.append(f"material {mat.name!r}: its lookups in {described.parent} were replaced by a later "
+                       "Generate (undo brings back the material, not its files); Generate it again")
+    return out
+
+
 def compact_path(mat) -> Path:
     """Where a material's compact file (``<stem>.npz``) lies: beside its lookups."""
     atlas = Path(_absolute(str(mat["specgen_atlas"])))

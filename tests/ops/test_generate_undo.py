@@ -48,3 +48,33 @@ def test_one_undo_after_generate_removes_only_what_generate_made(tmp_path, regis
     bpy.ops.wm.save_as_mainfile(filepath=str(tmp_path / "saved.blend"))
     bpy.ops.wm.open_mainfile(filepath=str(tmp_path / "saved.blend"))
     assert all(name in bpy.data.images for name in previews)   # the thumbnail survives the save
+
+
+@pytest.mark.slow
+@pytest.mark.blender
+def test_replace_materials_removes_the_old_runs_files_and_an_undone_material_says_its_files_changed(
+        tmp_path, registered_addon, sphere_photo, default_weights):
+    """Generate again with Replace Materials and Export Table off: the first run's table goes
+    with the rest of its set (it would be exported, packed and baked from as this material's).
+    Undo then brings the first run's material back, but not its files: the spectral render
+    refuses with one sentence naming the material instead of rendering the other run's lookups."""
+    render = addon_module("ops.render")
+    s = bpy.context.scene.specgen
+    s.image_path, s.output_dir = str(sphere_photo), str(tmp_path / "out")
+    s.bands, s.refine, s.overwrite, s.export_table = 4, False, True, True
+    scene_mod.add_camera(bpy.context.scene)
+    ball = scene_mod.add_mesh(bpy.context.scene, "sphere")
+    assert bpy.ops.specgen.generate_brdf("EXEC_DEFAULT", True) == {"FINISHED"}
+    stem = s.material["specgen_stem"]
+    table = tmp_path / "out" / f"{stem}.npz"
+    assert table.is_file()
+    ball.data.materials.append(s.material)
+    bpy.ops.ed.undo_push(message="apply")
+    s.export_table, s.refine = False, True                  # another material: the refined one
+    assert bpy.ops.specgen.generate_brdf("EXEC_DEFAULT", True) == {"FINISHED"}
+    assert not table.exists()                              # not this material's table any more
+    render.SpectralRenderJob(bpy.context.scene, None, samples=1, resolution=(8, 8))._preflight()
+    assert bpy.ops.ed.undo() == {"FINISHED"}
+    with pytest.raises(Exception, match="replaced by a later Generate") as info:
+        render.SpectralRenderJob(bpy.context.scene, None, samples=1, resolution=(8, 8))._preflight()
+    assert len(str(info.value).splitlines()) == 1

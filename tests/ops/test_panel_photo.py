@@ -186,6 +186,49 @@ def test_what_the_scene_cannot_give_is_named_in_the_warning(panel, tmp_path):
     assert len(lighting.lights) == 2 and not lighting.has_map   # the sun and the spot taken as a point
 
 
+def test_lit_like_this_scene_takes_only_lights_that_render(panel, tmp_path):
+    """A light disabled in renders, in a collection disabled in renders or excluded from the view
+    layer, lights nothing in the render, so it lights nothing in the photo's lighting either."""
+    scene, _s, photo = panel
+    _camera(scene)
+    _light(scene, "SUN", "Key", 3.0, direction=(0.3, -1.0, 1.0))
+    _light(scene, "SUN", "Off", 3.0, direction=(-1.0, -1.0, 0.2)).hide_render = True
+    for name, how in (("Render off", "hide_render"), ("Excluded", "exclude")):
+        coll = bpy.data.collections.new(name)
+        scene.collection.children.link(coll)
+        sun = _light(scene, "SUN", f"Sun in {name}", 3.0, direction=(-1.0, 0.5, 0.5))
+        scene.collection.objects.unlink(sun)
+        coll.objects.link(sun)
+        if how == "hide_render":
+            coll.hide_render = True
+        else:
+            bpy.context.view_layer.layer_collection.children[name].exclude = True
+    photo.lighting = "SCENE"
+    lighting, _notes = _lighting(scene, photo, tmp_path)
+    assert len(lighting.lights) == 1                              # the key light alone
+
+
+def test_lit_like_this_scene_names_a_world_image_that_is_not_a_panorama(panel, tmp_path):
+    from specgen_addon.common.image_io import write_exr
+
+    scene, _s, photo = panel
+    _camera(scene)
+    _light(scene, "SUN", "Sun", 3.0, direction=(0.3, -1.0, 1.0))
+    square = write_exr(tmp_path / "square.exr", {c: np.ones((16, 16), np.float32) for c in "RGB"})
+    world = bpy.data.worlds.new("World")
+    scene.world = world
+    if bpy.app.version < (5, 0, 0):
+        world.use_nodes = True
+    tex = world.node_tree.nodes.new("ShaderNodeTexEnvironment")
+    tex.image = bpy.data.images.load(str(square))
+    world.node_tree.links.new(tex.outputs["Color"], world.node_tree.nodes["Background"].inputs["Color"])
+    photo.lighting = "SCENE"
+    lighting, notes = _lighting(scene, photo, tmp_path)
+    warning = " ".join(n for n in notes if n.startswith("warning"))
+    assert "square.exr' (16×16" in warning and "twice as wide" in warning, warning
+    assert not lighting.has_map and len(lighting.lights) == 1
+
+
 BAD = {
     "a light list left empty": (lambda p: setattr(p, "lighting", "LIGHTS"), "at least one light"),
     "a light of power 0": (lambda p: (setattr(p, "lighting", "LIGHTS"), setattr(p.lights.add(), "power", 0.0)),
