@@ -44,7 +44,9 @@ _FOUND: OrderedDict = OrderedDict()   # a photo's key → its chart found (one d
 def reference_swatches() -> np.ndarray:
     """The chart's 24 swatches (24, 3) in linear sRGB (D65), row by row from dark skin to black."""
     try:
-        import colour
+        with warnings.catch_warnings():
+            warnings.simplefilter("ignore")
+            import colour
     except ImportError:
         raise ImageInputError(_NEED) from None
     chart = colour.CCS_COLOURCHECKERS[CHART]
@@ -132,12 +134,14 @@ def find_checker(rgb: np.ndarray, saturated: np.ndarray | None, scale: float = 1
     if key is not None and key in _FOUND:
         return _FOUND[key]
     try:
-        import cv2
-        from colour_checker_detection import (
-            SETTINGS_SEGMENTATION_COLORCHECKER_CLASSIC,
-            detect_colour_checkers_segmentation,
-        )
-        from colour_checker_detection.detection.common import reformat_image, sample_colour_checker
+        with warnings.catch_warnings():   # its plotting stack's deprecation notes are not the run's
+            warnings.simplefilter("ignore")
+            import cv2
+            from colour_checker_detection import (
+                SETTINGS_SEGMENTATION_COLORCHECKER_CLASSIC,
+                detect_colour_checkers_segmentation,
+            )
+            from colour_checker_detection.detection.common import reformat_image, sample_colour_checker
     except ImportError:
         raise ImageInputError(_NEED) from None
     reference = reference_swatches()

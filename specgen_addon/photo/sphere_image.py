@@ -239,12 +239,21 @@ class SphereCrop:
     white_gains: np.ndarray | None = None  # (3,) per-channel white-balance gains applied (None: as shot)
     white_source: str = ""   # where the gains came from: "from the patch", "from the colour checker", "as the photo's"
     white_note: str = ""     # the colour checker found and its fit, for the run's report ("" without one)
+    read_scale: float = 1.0  # width read / the file's width (< 1: downsampled on reading; ``circle`` is in the read pixels)
+
+    @property
+    def file_circle(self) -> tuple[float, float, float] | None:
+        """:attr:`circle` in the file's pixels (as ``--circle`` takes it), or None."""
+        if self.circle is None:
+            return None
+        return tuple(float(v) / self.read_scale for v in self.circle)
 
     def describe(self) -> str:
-        """One line for a run's report: the circle, how it was found, and the saturated share."""
+        """One line for a run's report: the circle (in the file's pixels), how it was found, and
+        the saturated share."""
         if self.circle is None:
             return "sphere: as given"
-        cx, cy, r = self.circle
+        cx, cy, r = self.file_circle
         sat = ""
         if self.saturated is not None and self.saturated.any():
             sat = f"; {100 * self.saturated.mean() / (np.pi / 4):.1f} % of the sphere saturated (left out of the fit)"
@@ -253,7 +262,8 @@ class SphereCrop:
         if self.white_gains is not None:
             wb = f"; white balance {self.white_source or 'from the patch'}: gains " + \
                 "R {:.3f} G {:.3f} B {:.3f}".format(*self.white_gains)
-        return f"sphere: centre ({cx:.2f}, {cy:.2f}) px, radius {r:.2f} px ({self.circle_source}){enc}{wb}{sat}"
+        read = "" if self.read_scale == 1.0 else f"; read at {self.read_scale:.3g}× the file's size"
+        return f"sphere: centre ({cx:.2f}, {cy:.2f}) px, radius {r:.2f} px ({self.circle_source}){enc}{wb}{read}{sat}"
 
 
 #: How many of :meth:`PhotoSource.crop`'s crops are kept (a photo and its chrome ball's).
@@ -396,7 +406,7 @@ def load_sphere_crop(path: str | Path, size: int = CANONICAL_SIZE, encoding: str
             arr = arr.copy()
             arr[..., :3] *= gains.astype(arr.dtype)
         return replace(_crop_photo(arr, photo, size, circle, mask), white_gains=gains, white_source=source,
-                       white_note=note)
+                       white_note=note, read_scale=photo.scale)
     except ImageInputError as exc:
         raise ImageInputError(f"{path}: {exc}") from None
 

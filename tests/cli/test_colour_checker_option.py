@@ -43,6 +43,8 @@ def test_infer_without_a_chart_in_the_photo_is_one_sentence_and_exit_2(tmp_path,
     err = res.stderr.strip().splitlines()[-1]
     assert res.returncode == 2 and "no colour checker found in the photo" in err, res.stderr
     assert "Traceback" not in res.stderr and not (tmp_path / "o.npz").exists()
+    said = [line for line in res.stderr.splitlines() if line.strip() and not line.startswith("infer:")]
+    assert said == [err], res.stderr          # the detector's own import notes are not repeated
 
 
 def test_infer_refuses_a_chart_and_a_white_patch_together(tmp_path, photos):

@@ -147,3 +147,5 @@ def test_a_circle_given_in_the_files_pixels_follows_a_downsampled_read(tmp_path)
     Image.fromarray(img).save(tmp_path / "wide.png")
     crop = input_image.PhotoSource(tmp_path / "wide.png", circle=(2050.0, 150.0, 50.0)).crop()
     np.testing.assert_allclose(crop.circle, (2050.0 / 3, 50.0, 50.0 / 3))
+    np.testing.assert_allclose(crop.file_circle, (2050.0, 150.0, 50.0))   # reported as given
+    assert "centre (2050.00, 150.00) px, radius 50.00 px" in crop.describe()
