@@ -8,7 +8,7 @@ so that every fit can leave them out.
   (``encoding="linear"``); a 16-bit file is read through OpenImageIO a band of rows at a time, so
   it keeps all 16 bits at any size (Pillow reads 16-bit RGB as 8-bit). Saturated: a code at the
   maximum (255, 65535).
-* OpenEXR and Radiance HDR: linear as stored; nothing counts as saturated unless ``white_level``
+* OpenEXR, Radiance HDR and floating-point TIFF: linear as stored; nothing counts as saturated unless ``white_level``
   is given (a clipped highlight core in an EXR looks like a real one).
 * Camera RAW (DNG, CR2, CR3, NEF, ARW, RAF, ORF, RW2 ...): developed by LibRaw (``rawpy``, command
   line only) linearly, as shot white balance, sRGB primaries, no tone curve and no automatic
@@ -77,13 +77,34 @@ def read_photo(path: str | Path, encoding: str = "auto", white_level: float | No
         photo = _read_raw(path)
     else:
         image_checks.check_image_header(path)   # pixel limit, before any decoding
-        if suffix in FLOAT_SUFFIXES:
+        if suffix in FLOAT_SUFFIXES or stores_floats(path):
             photo = _read_float(path)
         else:
             photo = _read_integer(path, encoding == "linear")
     if white_level is not None:
         photo.saturated |= np.any(photo.rgb[..., :3] >= white_level * (1.0 - 1e-6), axis=-1)
     return photo   # the saturated share is reported with the circle (SphereCrop.describe)
+
+
+def stores_floats(path: str | Path) -> bool:
+    """Whether a file holds floating-point pixels (an EXR or HDR, or a 16/32-bit float TIFF):
+    linear light as stored, not clipped at a full scale. Read from the header (OpenImageIO)."""
+    path = Path(path)
+    if path.suffix.lower() in FLOAT_SUFFIXES:
+        return True
+    if path.suffix.lower() not in (".tif", ".tiff"):
+        return False
+    try:
+        import OpenImageIO as oiio
+    except ImportError:
+        return False
+    inp = oiio.ImageInput.open(str(path))
+    if inp is None:
+        return False
+    try:
+        return inp.spec().format.basetype in (oiio.HALF, oiio.FLOAT, oiio.DOUBLE)
+    finally:
+        inp.close()
 
 
 def _read_float(path: Path) -> Photo:

@@ -48,7 +48,7 @@ from specgen_addon.common.image_io import write_png8
 from specgen_addon.photo import ndimage_np
 from specgen_addon.photo.colour_checker import checker_balance, find_checker
 from specgen_addon.photo.ndimage_np import ransac_circle
-from specgen_addon.photo.read import FLOAT_SUFFIXES, read_photo, warn_notes
+from specgen_addon.photo.read import read_photo, stores_floats, warn_notes
 from specgen_addon.photo.sphere_detect import find_ball, luminance
 from specgen_addon.photo.sphere_edge import refine_circle
 from specgen_addon.photo.white_balance import patch_gains
@@ -330,7 +330,7 @@ class PhotoSource:
     @property
     def linear(self) -> bool:
         """Whether the photo's values are unclipped linear light (a float file)."""
-        return Path(self.path).suffix.lower() in FLOAT_SUFFIXES
+        return stores_floats(self.path)
 
 
 def parse_circle(text: str) -> tuple[float, float, float]:

@@ -69,6 +69,24 @@ def test_an_exr_is_unclipped_unless_a_white_level_is_given(tmp_path):
         photo_read.read_photo(tmp_path / "p.exr", white_level=-1.0)
 
 
+@pytest.mark.parametrize("kind", ["float", "half"])
+def test_a_floating_point_tiff_is_read_as_linear_light_like_an_exr(tmp_path, kind):
+    oiio = pytest.importorskip("OpenImageIO")
+    from specgen_addon.photo.sphere_image import PhotoSource
+
+    rgb = np.full((20, 24, 3), 0.25, np.float32)
+    rgb[2:4, 2:4] = (8.0, 2.0, 0.5)                           # above 1: not clipped
+    path = tmp_path / "p.tif"
+    out = oiio.ImageOutput.create(str(path))
+    assert out.open(str(path), oiio.ImageSpec(24, 20, 3, oiio.FLOAT if kind == "float" else oiio.HALF))
+    assert out.write_image(rgb)
+    out.close()
+    photo = photo_read.read_photo(path)
+    assert photo.encoding == "linear (float)" and photo.saturated_count == 0
+    np.testing.assert_allclose(photo.rgb[..., :3], rgb, rtol=1e-3)
+    assert photo_read.stores_floats(path) and PhotoSource(path).linear   # no clip level in the fits
+
+
 def test_saturated_pixels_reach_the_crop_that_refinement_excludes(tmp_path):
     from PIL import Image
 
