@@ -41,7 +41,11 @@ TIMER_STEP_S = 0.1
 
 
 def _image_input(settings):
-    """The input image as a path (preferred: the core decodes files itself) or a linear array."""
+    """The input image as a path (preferred: the core decodes files itself) or a linear array.
+
+    An image whose pixels were edited (or that has no file) is read from Blender's pixels, decoded
+    by the panel's *Encoding* as its file would be: 8-bit pixels as sRGB or linear, float pixels
+    (linear in Blender) as they are. The image's Color Space setting plays no part either way."""
     img = settings.image
     if img is not None:
         path = bpy.path.abspath(img.filepath) if img.filepath else ""
@@ -52,7 +56,7 @@ def _image_input(settings):
         px = np.empty(w * h * 4, np.float32)
         img.pixels.foreach_get(px)
         rgb = px.reshape(h, w, 4)[::-1, :, :3].astype(np.float64)
-        if not img.is_float and img.colorspace_settings.name.lower().startswith("srgb"):
+        if not img.is_float and settings.photo.encoding != "linear":
             from specgen_addon.spectral.spectra import srgb_decode
 
             rgb = srgb_decode(rgb)

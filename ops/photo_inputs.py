@@ -60,8 +60,7 @@ def photo_source(photo, image):
     panel's encoding, white level and circle, or the pixels of an image not saved to a file."""
     circle, mask = _circle(photo.sphere, "sphere")
     if not isinstance(image, (str, os.PathLike)):
-        custom = [name for name, used in (("the encoding", photo.encoding != "auto"),
-                                          ("a white level", photo.white_level > 0),
+        custom = [name for name, used in (("a white level", photo.white_level > 0),
                                           ("the white patch", photo.use_white_patch),
                                           ("the sphere's circle or mask", photo.sphere.mode != "AUTO"),
                                           ("the circle preview", photo.circle_preview),

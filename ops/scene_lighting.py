@@ -9,6 +9,7 @@ cone, a procedural world, a world texture that is not equirectangular.
 from __future__ import annotations
 
 import os
+import warnings
 
 import bpy
 import numpy as np
@@ -40,7 +41,10 @@ def read_scene_lighting(scene, target=None) -> SceneLighting:
     for obj in _rendered_objects(scene):
         if obj.type == "LIGHT":
             _add_light(taken, obj, cam, target)
-    _add_world(taken, scene.world, cam)
+    with warnings.catch_warnings(record=True) as said:   # a note on the world's pixels: the run's report says it
+        warnings.simplefilter("always")
+        _add_world(taken, scene.world, cam)
+    taken.notes += [f"world: {w.message}" for w in said]
     return taken
 
 

@@ -229,6 +229,27 @@ def test_lit_like_this_scene_names_a_world_image_that_is_not_a_panorama(panel, t
     assert not lighting.has_map and len(lighting.lights) == 1
 
 
+def test_a_note_on_the_worlds_pixels_is_in_the_runs_report_not_a_python_warning(panel, tmp_path, recwarn):
+    from specgen_addon.common.image_io import write_exr
+
+    scene, _s, photo = panel
+    _camera(scene)
+    pano = np.full((16, 32), 0.5, np.float32)
+    pano[3, 4] = -1.0                                             # a negative texel: clamped, with a note
+    path = write_exr(tmp_path / "pano.exr", {c: pano for c in "RGB"})
+    world = bpy.data.worlds.new("World")
+    scene.world = world
+    if bpy.app.version < (5, 0, 0):
+        world.use_nodes = True
+    tex = world.node_tree.nodes.new("ShaderNodeTexEnvironment")
+    tex.image = bpy.data.images.load(str(path))
+    world.node_tree.links.new(tex.outputs["Color"], world.node_tree.nodes["Background"].inputs["Color"])
+    photo.lighting = "SCENE"
+    _taken, notes = _lighting(scene, photo, tmp_path)
+    assert any(n.startswith("world: ") and "negative" in n for n in notes), notes
+    assert not [w for w in recwarn if "negative" in str(w.message)]
+
+
 BAD = {
     "a light list left empty": (lambda p: setattr(p, "lighting", "LIGHTS"), "at least one light"),
     "a light of power 0": (lambda p: (setattr(p, "lighting", "LIGHTS"), setattr(p.lights.add(), "power", 0.0)),
@@ -381,6 +402,24 @@ def test_estimate_and_chrome_ball_give_the_clis_lighting(panel, tmp_path):
     assert Path(ours.env).name == "ball_probe.exr" and ours.calibrated
     np.testing.assert_allclose(ours.white_sphere_rgb(), cli.white_sphere_rgb(), rtol=1e-6)
     assert any(n.startswith("chrome ball: chrome ball sphere: centre") for n in notes)
+
+
+@pytest.mark.parametrize("encoding", ["auto", "linear"])
+def test_an_edited_image_is_decoded_by_the_encoding_as_its_file_is(panel, encoding):
+    """One rule for an image datablock: its pixels, edited or not, decode as the panel's Encoding
+    says, whatever Color Space the image is set to in Blender."""
+    from specgen_addon.photo.read import read_photo
+
+    _scene, s, photo = panel
+    operators = addon_module("ops.operators")
+    img = bpy.data.images.load(str(EXAMPLE))
+    img.colorspace_settings.name = "Non-Color"
+    s.image, photo.encoding = img, encoding
+    assert operators._image_input(s) == str(EXAMPLE)           # untouched: the file, decoded by the core
+    img.pixels[0] = img.pixels[0]                                # edited: read from Blender's pixels
+    assert img.is_dirty
+    edited = operators._image_input(s)
+    np.testing.assert_allclose(edited, read_photo(EXAMPLE, encoding=encoding).rgb[..., :3], atol=1e-5)
 
 
 def test_an_image_not_saved_to_a_file_asks_to_be_saved_for_the_file_options(panel, tmp_path):
