@@ -612,7 +612,7 @@ def _circle_of_mask(mask: np.ndarray, fit_outline: bool) -> tuple[float, float, 
                 model, inliers = _ransac_circle(pts, residual_threshold=max(1.5, 0.02 * r), max_trials=200)
         if model is None or inliers is None or inliers.mean() <= 0.5:
             raise ImageInputError("no sphere found (the foreground's outline is not a circle; "
-                                  "give the image an alpha channel masking the sphere)")
+                                  "give the sphere's circle or a mask, or an alpha channel masking it)")
         fx, fy, fr = (float(v) for v in model.params)
         # the outline passes through edge-pixel centres, half a pixel inside the silhouette
         cx, cy, r = fx, fy, fr + 0.5
