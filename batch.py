@@ -36,6 +36,16 @@ PACKAGE = "specgen"
 EXIT_BAD_INPUT = 2
 
 
+def check_settings(args: argparse.Namespace) -> None:
+    """batch.py's settings that need neither its input nor the network (sizes, wavelengths,
+    weights, mesh, environment name, the photo options): what ``batch-many`` checks once for all
+    its items before any runs; each run checks its photo with them (:func:`run`)."""
+    from importlib import import_module
+
+    import_module("specgen_addon.scale.preflight").check_batch_settings(args)
+    import_module("specgen_addon.cli.photo_args").check_photo_options(args)
+
+
 def load_package(name: str = PACKAGE):
     """Import this repository as the package ``name`` (as Blender imports the installed extension,
     ``bl_ext.<repo>.specgen``) for the Blender tier ``ops``; the core is ``specgen_addon`` itself."""
@@ -145,21 +155,25 @@ def run(args) -> Path:
     if args.mesh not in ("sphere", "suzanne") and not Path(args.mesh).is_file():
         raise errors.SpecGenError(f"{args.mesh}: mesh file not found (use sphere, suzanne or an .obj path)")
     photo_args = import_module("specgen_addon.cli.photo_args")
+    out = Path(args.out)
+    mesh_tag = args.mesh if args.mesh in ("sphere", "suzanne") else Path(args.mesh).stem
+    target = out / f"{source.stem}_{mesh_tag}_{args.env}.exr"
     if args.image:
+        outputs = {"the render": target,
+                   "the render's preview": target.with_name(target.stem + "_preview.png")}
+        if args.light_probe is not None:
+            outputs["the unwrapped chrome ball"] = out / "lookup" / f"{source.stem}_probe.exr"
         with warnings.catch_warnings():  # keep a bad image to the one error line
             warnings.simplefilter("ignore")
-            # no sphere / unreadable / bad light, patch or probe -> one sentence, early
-            photo_args.check_photo_args(args, source)
+            # no sphere / unreadable / bad light, patch, probe or preview -> one sentence, early
+            photo_args.check_photo_args(args, source, outputs, out_dir=out)
     env = lighting.load_environment(args.env)  # unknown name -> LightingAssetError with the list
-    out = Path(args.out)
     try:
         import_module("specgen_addon.common.atomic_io").make_dirs(out)  # removed if the run fails
     except OSError as exc:
         raise errors.SpecGenError(f"{out}: cannot create the output folder ({exc.strerror})") from None
     if not os.access(out, os.W_OK):
         raise errors.SpecGenError(f"{out}: output folder is not writable")
-    mesh_tag = args.mesh if args.mesh in ("sphere", "suzanne") else Path(args.mesh).stem
-    target = out / f"{source.stem}_{mesh_tag}_{args.env}.exr"
     for p in (target, target.with_name(target.stem + "_preview.png")):
         if p.exists() and not args.overwrite:
             raise errors.OutputExistsError(f"{p}: already exists (pass --overwrite to replace it)")
@@ -279,6 +293,10 @@ def run_scene(args) -> Path:
     scene = bpy.context.scene
     scene_args.check_objects(applies, {o.name: o.type for o in scene.objects}, scene.name)
     targets = _scene_targets(scene, frames or [scene.frame_current], out, args.overwrite)
+    renders = {f"frame {f}'s {what}": p for f, t in targets
+               for what, p in (("render", t), ("preview", t.with_name(t.stem + "_preview.png")))}
+    for spec, ns in zip(applies, photos):   # a circle preview named like a frame's render
+        core("cli.photo_args").check_circle_preview(ns, spec.image, renders)
     stems = _lookup_stems(applies, out / "lookup", args.overwrite)
     before = _files_in(out / "lookup")
 
@@ -300,12 +318,14 @@ def run_scene(args) -> Path:
     for frame, target in targets:
         scene.frame_set(frame)
         t0 = time.perf_counter()
-        job = fullscene.FullSceneRenderJob(scene, target, wavelengths, overwrite=args.overwrite,
-                                           attributes={"specgenScene": str(blend),
-                                                       "specgenFrame": str(frame)},
-                                           warn=lambda m: print(m, file=sys.stderr),
-                                           log=lambda m: print(m, flush=True), show_result=False)
-        with settings.QuickPreview(scene, args.preview):
+        # Cycles' "Saved: ..." lines kept off stdout unless --verbose; the job's own lines are said
+        with settings.QuickPreview(scene, args.preview), \
+                core("common.quiet").native_stdout_silenced(not args.verbose) as say:
+            job = fullscene.FullSceneRenderJob(scene, target, wavelengths, overwrite=args.overwrite,
+                                               attributes={"specgenScene": str(blend),
+                                                           "specgenFrame": str(frame)},
+                                               warn=lambda m: print(m, file=sys.stderr),
+                                               log=say, show_result=False)
             job.run(lambda f: interrupts.raise_if_stopped())  # between band renders
             h, w = job.spectral.shape[:2]
             spp = scene.cycles.samples
@@ -353,12 +373,16 @@ def _check_photos(applies, args) -> list:
     photo_args = import_module("specgen_addon.cli.photo_args")
     preflight.check_weights_file(args.weights)
     photos = []
+    previews: dict[str, Path] = {}   # no two photos write one circle preview
     for spec in applies:
         preflight.check_image_file(spec.image)
         ns = spec.namespace(args)
         with warnings.catch_warnings():  # keep a bad image to the one error line
             warnings.simplefilter("ignore")
-            photo_args.check_photo_args(ns, spec.image)  # no sphere / bad light ... -> one sentence
+            # no sphere / bad light / preview in the way ... -> one sentence
+            photo_args.check_photo_args(ns, spec.image, previews, out_dir=Path(args.out))
+        if ns.circle_preview is not None:
+            previews[f"{spec.image.name}'s circle preview"] = Path(ns.circle_preview)
         photos.append(ns)
     return photos
 

@@ -9,6 +9,7 @@ from pathlib import Path
 
 from specgen_addon.cli.photo_args import (
     add_photo_arguments,
+    check_circle_preview,
     photo_inputs,
     print_photo_report,
     print_refinement,
@@ -218,12 +219,16 @@ def run_infer(args: argparse.Namespace) -> int:
     out: Path = args.output
     check_output(out)
     rgb_out = out.with_name(out.stem + "_rgb.npz")
-    extra = [p for p in (args.circle_preview,) if p is not None]
-    for p in [out] + ([rgb_out] if args.rgb else []) + extra:
+    probe_env = out.with_name(out.stem + "_probe.exr")
+    outputs = {"-o": out, **({"the --rgb output": rgb_out} if args.rgb else {})}
+    for p in outputs.values():
         if p.exists() and not args.overwrite:
             raise OutputExistsError(f"{p}: already exists (pass --overwrite to replace it)")
+    if args.light_probe is not None:
+        outputs["the unwrapped chrome ball"] = probe_env
+    check_circle_preview(args, args.image, outputs)   # before the photo is read
     wl = wavelength_grid(args.range[0], args.range[1], args.bands)
-    source, lighting = photo_inputs(args, args.image, out.with_name(out.stem + "_probe.exr"))
+    source, lighting = photo_inputs(args, args.image, probe_env)
     t0 = time.perf_counter()
     with progress_bar("infer", enabled=not args.quiet) as update:
         generated = generate(source, lighting, refine=args.refine, weights=args.weights,

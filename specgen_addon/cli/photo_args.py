@@ -13,18 +13,40 @@ from __future__ import annotations
 import argparse
 import copy
 import functools
+import os
 import re
 import sys
 from pathlib import Path
 
 from specgen_addon.brdf.formats.export import size_text
 from specgen_addon.common.errors import OutputExistsError, SpecGenError
+from specgen_addon.common.limits import check_input_file, check_output_file
+from specgen_addon.photo.image_checks import check_image_header
 from specgen_addon.photo.light_estimate import estimated_lighting as estimate
-from specgen_addon.photo.light_probe import CHROME_REFLECTANCE, lighting_from_probe, read_probe
-from specgen_addon.photo.photo_lighting import parse_light, parse_lighting
-from specgen_addon.photo.sphere_image import PhotoSource, parse_circle, write_circle_preview
+from specgen_addon.photo.light_probe import (
+    CHROME_REFLECTANCE,
+    check_reflectance,
+    lighting_from_probe,
+    read_probe,
+)
+from specgen_addon.photo.photo_lighting import (
+    AZIMUTH_RANGE,
+    CANONICAL,
+    ELEVATION_RANGE,
+    MAX_AMBIENT,
+    MAX_LIGHT_POWER,
+    NO_MAP,
+    parse_light,
+    parse_lighting,
+)
+from specgen_addon.photo.read import check_white_level
+from specgen_addon.photo.sphere_image import (
+    PhotoSource,
+    check_white_balance_choice,
+    parse_circle,
+    write_circle_preview,
+)
 from specgen_addon.photo.white_balance import parse_patch
-from specgen_addon.scale.preflight import check_image_file
 
 #: ``--apply`` keys kept from before every photo option was a key: short names of the map options.
 APPLY_ALIASES = {"env": "--input-env", "rotation": "--input-rotation", "exposure": "--input-exposure",
@@ -63,8 +85,10 @@ def add_photo_arguments(p: argparse.ArgumentParser) -> None:
                         "they are (no normalisation to unit mean; --input-exposure still multiplies)")
     g.add_argument("--light", action="append", default=[], metavar="AZ,EL[,POWER[,COLOUR]]",
                    help="a distant light (or the sun) of the room, by azimuth and elevation in degrees "
-                        "in the camera's frame (azimuth 0 faces the camera, +90 is to the right; "
-                        "elevation +90 is up), power (1: the canonical key light) and colour (a CIE "
+                        f"in the camera's frame (azimuth {AZIMUTH_RANGE[0]:g} to {AZIMUTH_RANGE[1]:g}, 0 "
+                        "faces the camera, +90 is to the right; elevation "
+                        f"{ELEVATION_RANGE[0]:g} to {ELEVATION_RANGE[1]:g}, +90 is up), power (1: the "
+                        f"canonical key light; at most {MAX_LIGHT_POWER:,.0f}) and colour (a CIE "
                         "illuminant such as D65 or A, a temperature such as 3200K, or linear RGB "
                         "such as 1/0.8/0.6); repeatable. "
                         "Without --input-env the lights (and --ambient) alone light the photo")
@@ -73,7 +97,7 @@ def add_photo_arguments(p: argparse.ArgumentParser) -> None:
                         "towards the camera), as --light; repeatable")
     g.add_argument("--ambient", type=float, default=0.0, metavar="L",
                    help="uniform ambient radiance of the room (1: the radiance of a white surface "
-                        "facing the canonical key light; default 0)")
+                        f"facing the canonical key light; at most {MAX_AMBIENT:,.0f}; default 0)")
     g.add_argument("--light-probe", type=Path, default=None, metavar="CHROME",
                    help="a photo of a chrome (mirror) ball from the same place under the same light, "
                         "taken like the photo: unwrapped into the room's environment in the camera's frame "
@@ -84,7 +108,7 @@ def add_photo_arguments(p: argparse.ArgumentParser) -> None:
     g.add_argument("--probe-circle", default=None, metavar="X,Y,R",
                    help="the chrome ball's centre and radius in --light-probe's pixels")
     g.add_argument("--probe-reflectance", type=float, default=None, metavar="R",
-                   help="the chrome ball's reflectance (default 0.75)")
+                   help=f"the chrome ball's reflectance, in (0, 1] (default {CHROME_REFLECTANCE:g})")
     g.add_argument("--linear", action="store_true",
                    help="the photo's 8/16-bit values are linear light (a linear export of a RAW, a "
                         "scientific camera); default: sRGB-encoded. EXR/HDR are always linear and "
@@ -108,7 +132,8 @@ def add_photo_arguments(p: argparse.ArgumentParser) -> None:
     g.add_argument("--mask", type=Path, default=None, metavar="FILE",
                    help="a mask image of the photo's size, the sphere white (or opaque): its circle is used")
     g.add_argument("--circle-preview", type=Path, default=None, metavar="PNG",
-                   help="write the photo with the circle used drawn on it (8-bit sRGB PNG)")
+                   help="write the photo with the circle used drawn on it (8-bit sRGB PNG, a name "
+                        "ending in .png)")
 
 
 @functools.lru_cache(maxsize=1)
@@ -238,41 +263,140 @@ def photo_source_from_args(args: argparse.Namespace, image: Path, white_target=N
                        colour_checker=bool(getattr(args, "colour_checker", False)))
 
 
+#: The lighting and chrome-ball options whose use depends on the others, each with its value when
+#: not given.
+_DEFAULTS = {"--light": [], "--light-vector": [], "--ambient": 0.0, "--input-key-light": None,
+             "--input-rotation": 0.0, "--input-exposure": 1.0, "--input-env-calibrated": False,
+             "--light-probe": None, "--probe-mask": None, "--probe-circle": None, "--probe-reflectance": None}
+#: Options that describe the light in the photo, and options of an --input-env map.
+_LIGHT_FLAGS = ("--light", "--light-vector", "--ambient", "--input-key-light")
+_MAP_FLAGS = ("--input-rotation", "--input-exposure", "--input-env-calibrated")
+
+
+def _given(args: argparse.Namespace, *flags: str) -> list[str]:
+    """Those of ``flags`` (keys of :data:`_DEFAULTS`) that ``args`` sets to anything but their default."""
+    return [f for f in flags
+            if getattr(args, f[2:].replace("-", "_"), _DEFAULTS[f]) not in (_DEFAULTS[f], None)]
+
+
+def _and(flags: list[str]) -> str:
+    """``a``, ``a and b``, ``a, b and c``."""
+    return " and ".join([", ".join(flags[:-1]), flags[-1]] if len(flags) > 1 else flags)
+
+
+def _unused(flags: list[str], applies: str, remedy: str) -> SpecGenError:
+    """One sentence refusing options that do not apply: ``--a applies to …: remedy, or leave it out``
+    (``apply``, ``them`` for several)."""
+    one = len(flags) == 1
+    return SpecGenError(f"{_and(flags)} {'applies' if one else 'apply'} to {applies}: {remedy}, or leave "
+                        f"{'it' if one else 'them'} out")
+
+
 def _lighting_mode(args: argparse.Namespace) -> str:
-    """``"estimate"``, ``"probe"`` or ``"given"``; conflicting choices refused in one sentence."""
-    lights = bool(getattr(args, "light", None) or getattr(args, "light_vector", None))
+    """``"estimate"``, ``"probe"`` or ``"given"``; an option that conflicts with the choice or does
+    not apply to it, and a chrome ball's reflectance or circle out of range, refused in one sentence."""
+    probe_options = _given(args, "--probe-mask", "--probe-circle", "--probe-reflectance")
+    probe = getattr(args, "light_probe", None) is not None
+    if probe_options and not probe:
+        raise _unused(probe_options, "the chrome ball of --light-probe", "give --light-probe")
     if args.input_env == "estimate":
-        if lights or getattr(args, "light_probe", None) is not None:
-            raise SpecGenError("--input-env estimate finds the light itself: leave out --light, "
-                               "--light-vector and --light-probe")
+        needless = _given(args, *_LIGHT_FLAGS, *_MAP_FLAGS, "--light-probe")
+        if needless:
+            raise SpecGenError(f"--input-env estimate finds the light itself: leave out {_and(needless)}")
         return "estimate"
-    if getattr(args, "light_probe", None) is not None:
-        if lights or args.input_env not in (None, "", "canonical"):
-            raise SpecGenError("--light-probe gives the room's light: leave out --light, --light-vector "
-                               "and --input-env")
+    if probe:
+        needless = _given(args, *_LIGHT_FLAGS, *_MAP_FLAGS) + \
+            ([] if args.input_env in (None, "", CANONICAL) else ["--input-env"])
+        if needless:
+            raise SpecGenError(f"--light-probe gives the room's light: leave out {_and(needless)}")
+        if getattr(args, "probe_reflectance", None) is not None:
+            check_reflectance(args.probe_reflectance)
+        if getattr(args, "probe_circle", None):
+            parse_circle(args.probe_circle)
         return "probe"
+    map_options = _given(args, "--input-rotation", "--input-exposure")
+    if map_options and args.input_env in (None, "", CANONICAL, NO_MAP):
+        raise _unused(map_options, "an --input-env map", "name a bundled map or a panorama file")
     return "given"
 
 
-def check_photo_args(args: argparse.Namespace, image: Path) -> None:
+def check_photo_options(args: argparse.Namespace) -> str:
+    """Everything about the photo options that needs neither the photo nor the network (what
+    batch-many checks for every item before any runs): the lighting options and how they combine,
+    the lights' and the chrome ball's values, ``--circle`` and ``--white-patch`` as numbers, one
+    white balance, the white level, the mask and chrome-ball files readable. Gives the lighting
+    mode (:func:`_lighting_mode`)."""
+    mode = _lighting_mode(args)
+    if mode == "given":
+        input_lighting_from_args(args)
+    source = photo_source_from_args(args, Path(os.devnull))    # parses --circle and --white-patch
+    check_white_balance_choice(source.white_patch, source.colour_checker)
+    check_white_level(getattr(args, "white_level", None))
+    for option, what in (("mask", "--mask file"), ("light_probe", "--light-probe photo"),
+                         ("probe_mask", "--probe-mask file")):
+        if getattr(args, option, None) is not None:
+            check_input_file(getattr(args, option), what)
+            check_image_header(getattr(args, option))
+    return mode
+
+
+def check_photo_args(args: argparse.Namespace, image: Path, outputs: dict[str, Path] | None = None,
+                     out_dir: Path | None = None) -> None:
     """Everything about one photo's options that needs no network: the photo read and its ball
     found (with ``--circle``/``--mask``/``--linear``), the white patch in the photo, the light's
-    values, the probe file there, the preview not in the way."""
-    mode = _lighting_mode(args)
+    values, the probe file there, the preview not in the way of the photo or of the run's other
+    ``outputs`` (:func:`check_circle_preview`; ``out_dir``: the output folder the run makes first)."""
+    mode = check_photo_options(args)
     lighting = input_lighting_from_args(args) if mode == "given" else None
-    preview = getattr(args, "circle_preview", None)
-    if preview is not None and Path(preview).exists() and not getattr(args, "overwrite", False):
-        raise OutputExistsError(f"{preview}: already exists (pass --overwrite to replace it)")
+    check_circle_preview(args, image, outputs or {}, out_dir)
+    if mode == "probe":
+        check_probe_file(args.light_probe)
     crop = photo_source_from_args(args, image, _white_target(lighting)).crop()
     if mode == "probe":   # found and unwrapped now (a fraction of a second), not after the scene opens
-        check_image_file(args.light_probe)
         _read_probe(args, "auto" if not getattr(args, "linear", False) else "linear", crop.white_gains)
 
 
+def check_probe_file(path: Path) -> None:
+    """The ``--light-probe`` photo: a readable file within the pixel limit, else one sentence."""
+    check_input_file(path, "--light-probe photo")
+    check_image_header(path)
+
+
+def check_circle_preview(args: argparse.Namespace, image: Path, outputs: dict[str, Path],
+                         out_dir: Path | None = None) -> None:
+    """``--circle-preview``: a ``.png`` name (not a folder) in an existing, writable folder (or in
+    ``out_dir``, the output folder the run makes before it writes the preview), new or replaced
+    with ``--overwrite``, and neither the photo, nor a file the options read, nor one of the run's
+    other ``outputs`` (what each is, as the message names it → its path)."""
+    preview = getattr(args, "circle_preview", None)
+    if preview is None:
+        return
+    preview = Path(preview)
+    read = {"the photo": image, "--mask": getattr(args, "mask", None),
+            "--light-probe": getattr(args, "light_probe", None),
+            "--probe-mask": getattr(args, "probe_mask", None)}
+    for what, other in {**read, **outputs}.items():
+        if other is not None and _same_file(preview, Path(other)):
+            raise SpecGenError(f"--circle-preview {preview} is the same file as {what} {other}")
+    made_first = (out_dir is not None and not Path(out_dir).exists()
+                  and _same_file(preview.parent, Path(out_dir)))
+    if not made_first:
+        check_output_file(preview, getattr(args, "overwrite", False))
+    if preview.suffix.lower() != ".png":
+        raise SpecGenError(f"--circle-preview writes a PNG, so its name must end in .png, got {preview}")
+
+
+def _same_file(a: Path, b: Path) -> bool:
+    """Whether two paths name one file (through links, and before either exists)."""
+    if a.exists() and b.exists():
+        return os.path.samefile(a, b)
+    return a.resolve() == b.resolve()
+
+
 def _read_probe(args: argparse.Namespace, encoding: str, gains):
+    reflectance = CHROME_REFLECTANCE if args.probe_reflectance is None else args.probe_reflectance
     return read_probe(args.light_probe, circle=parse_circle(args.probe_circle) if args.probe_circle else None,
-                      mask=args.probe_mask, encoding=encoding,
-                      reflectance=args.probe_reflectance or CHROME_REFLECTANCE, gains=gains)
+                      mask=args.probe_mask, encoding=encoding, reflectance=reflectance, gains=gains)
 
 
 def _white_target(lighting):
@@ -309,6 +433,7 @@ def probe_lighting_from_args(args: argparse.Namespace, source, env_path: Path):
     its environment written to ``env_path``; the photo's white-balance gains applied to the probe
     too (same camera); the run's notes about it printed."""
     overwrite = getattr(args, "overwrite", False)
+    check_probe_file(args.light_probe)
     if env_path.exists() and not overwrite:
         raise OutputExistsError(f"{env_path}: already exists (pass --overwrite to replace it)")
     env_path.parent.mkdir(parents=True, exist_ok=True)

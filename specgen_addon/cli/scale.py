@@ -12,7 +12,8 @@ from specgen_addon.scale.batch_many import BatchManyOptions, DEFAULT_BATCH_SCRIP
 def add_parser(sub: argparse._SubParsersAction) -> argparse.ArgumentParser:
     p = sub.add_parser(
         "batch-many", help="run batch.py's pipeline on many photos / BRDF files on a Dask cluster",
-        description="For every input (photo of a sphere, or BRDF file .npz/.binary/.bsdf): generate "
+        description="For every input (photo of a sphere: PNG, JPEG, TIFF, TGA, EXR, HDR or camera "
+                    "RAW; or BRDF file .npz/.binary/.bsdf): generate "
                     "the spectral BRDF (refined as batch.py does), bake, render the scene, write the "
                     "spectral EXR and preview into OUT/<name>/. Runs on a local Dask cluster, or on an "
                     "existing one with --scheduler. A rerun skips finished items; a failed item is "
@@ -26,7 +27,9 @@ def add_parser(sub: argparse._SubParsersAction) -> argparse.ArgumentParser:
                    help="file listing inputs: one path per line (# comments), or a JSON list")
     p.add_argument("--out", type=Path, required=True, help="output folder (one sub-folder per input)")
     p.add_argument("--batch-args", default="", metavar="'ARGS'",
-                   help="batch.py options applied to every item (checked by batch.py's parser first)")
+                   help="batch.py options applied to every item, checked as batch.py checks them "
+                        "before any item runs; an option naming a file of its own to write "
+                        "(--circle-preview) is refused, as an item writes only into OUT/<name>/")
     p.add_argument("--scheduler", default=None, metavar="tcp://HOST:PORT",
                    help="use this running Dask scheduler (default: start a LocalCluster here)")
     p.add_argument("--workers", type=int, default=2,

@@ -42,6 +42,7 @@ from specgen_addon.generate.latent_fit import fit_latent
 from specgen_addon.generate.refine import CLIP_LEVEL, RefineOptions, refine_brdf, render_under
 from specgen_addon.generate.refine.blur import BLUR_CANDIDATES_PX
 from specgen_addon.generate.thin_film import fit_thin_film
+from specgen_addon.photo.read import stores_floats
 from specgen_addon.model.checksums import DamagedWeightsError
 from specgen_addon.model.runtime.inference import generate_brdf, sphere_crop
 from specgen_addon.photo.photo_lighting import InputLighting
@@ -96,7 +97,7 @@ def load_photo_crop(image) -> tuple[SphereCrop, bool]:
     whether the sphere was copied or resampled, and so which shipped network it gets)."""
     if isinstance(image, PhotoSource):
         return sphere_crop(image), image.linear
-    linear = not isinstance(image, (str, Path)) or Path(image).suffix.lower() == ".exr"
+    linear = not isinstance(image, (str, Path)) or stores_floats(image)
     return sphere_crop(image), linear
 
 
@@ -111,7 +112,7 @@ def generate(image, lighting=None, refine: bool = True, weights=None, wavelength
     ``lighting`` is an :class:`~specgen_addon.photo.photo_lighting.InputLighting` (default: canonical).
     ``model`` is one of :data:`MODELS` (``"thin-film"`` ignores ``refine``, ``weights``, ``backend``).
     ``backend`` ``None`` picks onnx when onnxruntime is importable (a stock Blender ships no torch)
-    and says so when it has to fall back to torch.
+    and says so when it has to fall back to torch; torch for the latent fit (it needs gradients).
     ``latent_fit`` fits the network's latent to the photo before any refinement (torch backend only).
     The network evaluates every band with ``every_band``, else those :data:`NETWORK_BAND_GAP_NM`
     apart, the others interpolated in λ.
@@ -154,7 +155,7 @@ def choose_backend() -> str:
 def _generate_any_backend(image, backend: str | None, **kwargs) -> Generated:
     """:func:`_generate` with ``backend``, or with ``None`` the one :func:`choose_backend` picks:
     onnx, or torch with a warning where the onnx graphs are missing or unusable."""
-    chosen = backend or choose_backend()
+    chosen = backend or ("torch" if kwargs.get("latent_fit") else choose_backend())   # its gradients: torch
     try:
         return _generate(image, backend=chosen, **kwargs)
     except WeightsError as exc:
@@ -200,7 +201,7 @@ def _generate(image, lighting=None, refine: bool = True, weights=None, wavelengt
                             blur_px=(0.0,) if crop.copied else BLUR_CANDIDATES_PX)
         table = fit.table(wl, progress=sub(0.8, 1.0), cancel=cancel)
         table.metadata = {**table.metadata, "input_image": src, "input_lighting": lighting.label}
-        return Generated(table, film_fit=fit)
+        return Generated(table, film_fit=fit, crop=crop)
 
     # progress: the network, then the latent fit (about 4× the network's time), then refinement
     ends = np.cumsum([NETWORK_SHARE, 4.0 * NETWORK_SHARE if latent_fit else 0.0,

@@ -26,6 +26,7 @@ import numpy as np
 
 from specgen_addon.common.errors import ImageInputError, SpecGenError
 from specgen_addon.common.image_io import write_exr
+from specgen_addon.common.limits import check_input_file
 from specgen_addon.photo.ndimage_np import label, map_coordinates
 from specgen_addon.photo.photo_lighting import Light, parse_lighting
 from specgen_addon.photo.sphere_detect import luminance
@@ -43,6 +44,12 @@ BLIND_CONE_DEG = 20.0
 
 class ProbeError(SpecGenError):
     """A chrome-ball light probe cannot be used (no ball, a bad circle, nothing lit)."""
+
+
+def check_reflectance(reflectance: float) -> None:
+    """Refuse a chrome ball's reflectance outside (0, 1] (NaN included) in one sentence."""
+    if not 0.0 < reflectance <= 1.0:
+        raise ProbeError(f"the chrome ball's reflectance must lie in (0, 1], got {reflectance:g}")
 
 
 @dataclass
@@ -76,8 +83,7 @@ def unwrap(crop: np.ndarray, reflectance: float = CHROME_REFLECTANCE, width: int
     """The equirect environment (width/2, width, 3) seen in a chrome-ball crop (S, S, 3, the ball
     filling it, linear), divided by ``reflectance``; and the map's texels that saw a saturated pixel.
     Directions in the blind cone behind the ball take the mean of the cone's rim."""
-    if not 0.0 < reflectance <= 1.0:
-        raise ProbeError(f"the chrome ball's reflectance must lie in (0, 1], got {reflectance}")
+    check_reflectance(reflectance)
     s = crop.shape[0]
     d = _texel_directions(width // 2, width, 0.0)                 # (h, w, 3)
     h_vec = d + np.array([0.0, 0.0, 1.0])                         # the normal that reflects d to the camera
@@ -136,12 +142,19 @@ def read_probe(path: str | Path, circle: tuple[float, float, float] | None = Non
                gains=None) -> Probe:
     """Unwrap a chrome-ball photo (its circle given, from a mask, or found) into a :class:`Probe`;
     ``gains`` (3,) are the white-balance gains of the photo it lights (the same camera)."""
+    check_reflectance(reflectance)
+    try:
+        check_input_file(path, "chrome ball photo")
+    except SpecGenError as exc:
+        raise ProbeError(str(exc)) from None
     wb = None if gains is None else tuple(float(g) for g in gains)
     try:
         crop = PhotoSource(Path(path), encoding=encoding, circle=circle, mask=mask,
                            white_gains=wb).crop(size=256)
     except ImageInputError as exc:
-        raise ProbeError(f"chrome ball not found: {exc} (give its mask or circle)") from None
+        if circle is None and mask is None:   # it was looked for, and not found
+            raise ProbeError(f"chrome ball not found: {exc} (give its mask or circle)") from None
+        raise ProbeError(f"chrome ball: {exc}") from None
     env, sat = unwrap(crop.image.astype(np.float64), reflectance, width, crop.saturated)
     if not np.any(env > 0):
         raise ProbeError(f"{path}: the chrome ball reflects nothing (a black probe)")
@@ -200,8 +213,9 @@ def probe_lighting(probe: Probe, env_path: str | Path, photo: np.ndarray | None 
     write_exr(env_path, {"R": env[..., 0], "G": env[..., 1], "B": env[..., 2]}, overwrite=overwrite)
     if probe.clipped_lights and photo is not None:
         powers = fit_clipped_powers(probe, photo)
-        probe.notes.append("clipped source power(s) fitted to the diffuse ball: "
-                           + ", ".join(f"{p:.3g}" for p in powers))
+        probe.notes.append("clipped source power(s) fitted to the diffuse ball: "   # as the lights' labels
+                           + ", ".join(f"×{p / EXPOSURE:g}" for p in powers)
+                           + " (1: the canonical key light)")
     else:
         peak = float(env.max())
         powers = [peak * sr for _, sr in probe.clipped_lights]
@@ -221,12 +235,13 @@ def lighting_from_probe(probe_path: str | Path, source, env_path: str | Path,
     """The lighting of a chrome-ball photo for a :class:`~specgen_addon.photo.sphere_image.PhotoSource`
     taken alike (same encoding): the probe unwrapped (:func:`read_probe`), its environment written to
     ``env_path`` and its clipped sources' powers fitted to the source's ball
-    (:func:`probe_lighting`). Returns ``(lighting, notes)`` (the CLI's ``--light-probe`` and the
-    panel's Chrome Ball)."""
+    (:func:`probe_lighting`); ``reflectance`` None is :data:`CHROME_REFLECTANCE`. Returns
+    ``(lighting, notes)`` (the CLI's ``--light-probe`` and the panel's Chrome Ball)."""
     crop = source.crop()
     # the same camera: the photo's white-balance gains apply to the chrome ball too
     probe = read_probe(probe_path, circle=circle, mask=mask, encoding=source.encoding,
-                       reflectance=reflectance or CHROME_REFLECTANCE, gains=crop.white_gains)
+                       reflectance=CHROME_REFLECTANCE if reflectance is None else reflectance,
+                       gains=crop.white_gains)
     photo = crop.image.astype(np.float64)
     lighting = probe_lighting(probe, env_path, photo, overwrite=overwrite)
     return lighting, list(probe.notes)

@@ -51,6 +51,15 @@ NO_MAP = "none"
 HDRI_SUFFIXES = (".exr", ".hdr")
 #: Exposure multipliers accepted (a factor of 2^±10 around the canonical level).
 EXPOSURE_RANGE = (2.0 ** -10, 2.0 ** 10)
+#: Largest light power accepted (1: the canonical key light): a million times the key light is far
+#: beyond any room, and keeps the renders and fits clear of floating-point overflow.
+MAX_LIGHT_POWER = 1e6
+#: Largest ambient radiance accepted (1: a white surface facing the canonical key light), likewise.
+MAX_AMBIENT = 1e6
+#: Azimuth (degrees) a light given by angles may have: a turn either way.
+AZIMUTH_RANGE = (-360.0, 360.0)
+#: Elevation (degrees) a light given by angles may have: straight down to straight up.
+ELEVATION_RANGE = (-90.0, 90.0)
 
 
 class LightingError(SpecGenError):
@@ -71,8 +80,9 @@ class Light:
         d = np.asarray(self.direction, np.float64)
         if d.shape != (3,) or not np.all(np.isfinite(d)) or not np.linalg.norm(d) > 0:
             raise LightingError(f"a light needs a direction (a non-zero vector), got {self.direction}")
-        if not (math.isfinite(self.power) and self.power > 0):
-            raise LightingError(f"a light's power must be a positive number, got {self.power}")
+        if not (math.isfinite(self.power) and 0 < self.power <= MAX_LIGHT_POWER):
+            raise LightingError(f"a light's power must be a positive number up to {MAX_LIGHT_POWER:,.0f} "
+                                f"(1: the canonical key light), got {self.power:g}")
 
         try:
             colour_tables.illuminant(self.colour)
@@ -93,14 +103,16 @@ class Light:
     @property
     def label(self) -> str:
         x, y, z = self.direction
-        az = math.degrees(math.atan2(x, z))
-        el = math.degrees(math.asin(max(-1.0, min(1.0, y))))
-        return f"light az {az:.0f}° el {el:.0f}° ×{self.power:g} {self.colour}"
+        az = round(math.degrees(math.atan2(x, z)))
+        el = round(math.degrees(math.asin(max(-1.0, min(1.0, y)))))
+        az = 180 if az == -180 else az   # straight behind is 180°, whichever way it rounds
+        return f"light az {az}° el {el}° ×{self.power:g} {self.colour}"
 
 
 def parse_light(text: str, vector: bool = False) -> Light:
-    """``"AZ,EL[,POWER[,COLOUR]]"`` (degrees), or with ``vector`` ``"X,Y,Z[,POWER[,COLOUR]]"``, as a
-    :class:`Light`; one clear sentence for a light without a direction."""
+    """``"AZ,EL[,POWER[,COLOUR]]"`` (degrees, azimuth in :data:`AZIMUTH_RANGE`, elevation in
+    :data:`ELEVATION_RANGE`), or with ``vector`` ``"X,Y,Z[,POWER[,COLOUR]]"``, as a :class:`Light`;
+    one clear sentence, quoting ``text``, for a light without a direction or one out of range."""
     parts = [p.strip() for p in str(text).split(",")]
     n = 3 if vector else 2
     what = "X,Y,Z" if vector else "AZIMUTH,ELEVATION (degrees)"
@@ -108,8 +120,14 @@ def parse_light(text: str, vector: bool = False) -> Light:
         values = [float(p) for p in parts[:n]]
     except ValueError:
         values = []
-    if len(values) != n or len(parts) > n + 2:
+    if len(values) != n or len(parts) > n + 2 or (vector and not all(map(math.isfinite, values))):
         raise LightingError(f"a light needs a direction: {what}[,POWER[,COLOUR]], got {text!r}")
+    if not vector:
+        for name, value, (lo, hi) in (("azimuth", values[0], AZIMUTH_RANGE),
+                                      ("elevation", values[1], ELEVATION_RANGE)):
+            if not lo <= value <= hi:   # NaN too
+                raise LightingError(f"a light's {name} must be a number of degrees in [{lo:g}, {hi:g}], "
+                                    f"got {text!r}")
     try:
         power = float(parts[n]) if len(parts) > n and parts[n] else 1.0
     except ValueError:
@@ -158,10 +176,11 @@ class InputLighting:
         lo, hi = EXPOSURE_RANGE
         if not (math.isfinite(self.exposure) and lo <= self.exposure <= hi):
             raise LightingError(f"input lighting exposure must lie in [{lo:g}, {hi:g}], got {self.exposure}")
-        if not (math.isfinite(self.ambient) and self.ambient >= 0):
-            raise LightingError(f"the ambient term must be a non-negative number, got {self.ambient}")
+        if not (math.isfinite(self.ambient) and 0 <= self.ambient <= MAX_AMBIENT):
+            raise LightingError(f"the ambient term must be a non-negative number up to {MAX_AMBIENT:,.0f} "
+                                f"(1: a white surface facing the canonical key light), got {self.ambient:g}")
         if self.env == NO_MAP and not self.lights and self.ambient == 0 and not self.key_light:
-            raise LightingError("input lighting 'none' needs at least one light or an ambient term")
+            raise LightingError("with no map, give at least one light or an ambient term to light the photo")
         if (self.lights or self.ambient) and self.env == CANONICAL:
             raise LightingError("lights or an ambient term describe the room instead of the canonical "
                                 "studio: give them with no map (none), or with a map")
@@ -414,20 +433,21 @@ def _white_rgb(light: InputLighting, size: int, stamp: tuple | None = None) -> n
     return rgb.mean(axis=0) * light.image_exposure
 
 
-#: Options whose value may begin with a minus sign: a light from the left, from below or behind.
-SIGNED_LIST_OPTIONS = ("--light", "--light-vector")
+#: Options whose comma-separated value may begin with a minus sign: a light from the left, from
+#: below or behind; a circle or white patch reaching past the photo's left edge.
+SIGNED_OPTIONS = ("--light", "--light-vector", "--white-patch", "--circle", "--probe-circle")
 _SIGNED_VALUE = re.compile(r"^-[0-9.]")
 
 
 def attach_signed_values(argv: Sequence[str]) -> list[str]:
-    """``argv`` with ``--light -30,20`` written ``--light=-30,20`` (and so ``--light-vector``):
-    argparse reads a value that starts with a minus sign and is not one plain number as an option
-    of its own, and would refuse the light."""
+    """``argv`` with ``--light -30,20`` written ``--light=-30,20`` (and so every option of
+    :data:`SIGNED_OPTIONS`): argparse reads a value that starts with a minus sign and is not one
+    plain number as an option of its own, and would refuse it with its usage."""
     argv = list(argv)
     out: list[str] = []
     i = 0
     while i < len(argv):
-        if argv[i] in SIGNED_LIST_OPTIONS and i + 1 < len(argv) and _SIGNED_VALUE.match(argv[i + 1]):
+        if argv[i] in SIGNED_OPTIONS and i + 1 < len(argv) and _SIGNED_VALUE.match(argv[i + 1]):
             out.append(f"{argv[i]}={argv[i + 1]}")
             i += 2
             continue

@@ -63,13 +63,18 @@ def check_encoding(encoding: str) -> str:
     return encoding
 
 
+def check_white_level(white_level: float | None) -> None:
+    """A white level (linear units of the decoded values) is None or a positive number."""
+    if white_level is not None and not (math.isfinite(white_level) and white_level > 0):
+        raise ImageInputError(f"the white level must be a positive number, got {white_level}")
+
+
 def read_photo(path: str | Path, encoding: str = "auto", white_level: float | None = None) -> Photo:
     """Read a photo file (module docstring); ``white_level`` (linear units of the decoded values)
     marks every pixel with a colour value at or above it as saturated too."""
     path = Path(path)
     check_encoding(encoding)
-    if white_level is not None and not (math.isfinite(white_level) and white_level > 0):
-        raise ImageInputError(f"the white level must be a positive number, got {white_level}")
+    check_white_level(white_level)
     if not path.is_file():
         raise ImageInputError(f"{path}: {'is a folder, not an image file' if path.is_dir() else 'no such image file'}")
     suffix = path.suffix.lower()

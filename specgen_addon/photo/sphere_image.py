@@ -375,6 +375,12 @@ def load_sphere_image(path: str | Path, size: int = CANONICAL_SIZE) -> np.ndarra
     return load_sphere_crop(path, size).image
 
 
+def check_white_balance_choice(white_patch, colour_checker: bool) -> None:
+    """One source of white balance at most: a patch or a colour checker, not both."""
+    if white_patch is not None and colour_checker:
+        raise ImageInputError("--white-patch and --colour-checker both set the white balance: give one")
+
+
 def load_sphere_crop(path: str | Path, size: int = CANONICAL_SIZE, encoding: str = "auto",
                      white_level: float | None = None, circle: tuple[float, float, float] | None = None,
                      mask: str | Path | None = None,
@@ -385,8 +391,7 @@ def load_sphere_crop(path: str | Path, size: int = CANONICAL_SIZE, encoding: str
     """:func:`load_sphere_image`, with whether the sphere was copied or resampled, the circle used,
     the saturated pixels and the white balance (:class:`PhotoSource` names the choices)."""
     path = Path(path)
-    if white_patch is not None and colour_checker:
-        raise ImageInputError("--white-patch and --colour-checker both set the white balance: give one")
+    check_white_balance_choice(white_patch, colour_checker)
     photo = read_photo(path, encoding=encoding, white_level=white_level)
     warn_notes(photo, path)
     arr = photo.rgb

@@ -34,13 +34,17 @@ from specgen_addon.common.limits import check_number
 from specgen_addon.photo.photo_lighting import attach_signed_values
 from specgen_addon.scale import items as items_mod
 from specgen_addon.scale import worker as worker_mod
-from specgen_addon.scale.preflight import check_batch_settings
 
 REPO = Path(__file__).resolve().parents[2]
 DEFAULT_BATCH_SCRIPT = REPO / "batch.py"
 REPORT_NAME = "report.json"
 #: batch.py options batch-many sets itself for every item.
 OWN_OPTIONS = ("--image", "--brdf", "--out", "--overwrite")
+#: batch.py options (flag, namespace name) that name a file of their own to write: refused in
+#: ``--batch-args``, since an item writes only into its folder (every item would write the one file,
+#: outside OUT, replaced without --overwrite as batch-many passes it, a relative name in the worker's
+#: folder).
+OUTPUT_PATH_OPTIONS = (("--circle-preview", "circle_preview"),)
 
 
 @dataclass
@@ -86,10 +90,13 @@ def check_batch_args(batch_script: Path, batch_args: list[str]) -> None:
     ns = parser.parse_args(attach_signed_values(["--image", sentinel, "--out", sentinel, *batch_args]))
     if ns.image != sentinel or ns.out != sentinel or getattr(ns, "overwrite", False):
         raise SpecGenError(f"batch.py arguments: {', '.join(OWN_OPTIONS)} are set by batch-many per item")
+    for flag, dest in OUTPUT_PATH_OPTIONS:
+        if getattr(ns, dest, None) is not None:
+            refuse(f"{flag} names one file outside the item folders, so batch-many refuses it "
+                   "(an item writes only into OUT/<name>/, and its batch.log gives the circle used)")
     if Path(batch_script).resolve() == Path(DEFAULT_BATCH_SCRIPT).resolve():   # values, as batch.py checks them
-
         try:
-            check_batch_settings(ns)
+            module.check_settings(ns)   # sizes, names, files and the photo options, without a photo
         except SpecGenError as exc:
             refuse(str(exc))
 
@@ -226,7 +233,7 @@ def _run_on_cluster(opts: BatchManyOptions, todo: list[items_mod.Item], run: str
         run_item = _shipped_run_item(client)
         for it in todo:
             fut = client.submit(operator.call, run_item, it.to_dict(), out, run, cmd, list(opts.batch_args),
-                                str(REPO), it.fingerprint(opts.batch_args), opts.timeout,
+                                str(REPO), it.fingerprint(opts.batch_args), opts.timeout, os.getcwd(),
                                 key=f"specgen-{it.id}-{run}", retries=opts.retries, pure=False)
             futures[fut] = it
         if opts.progress:

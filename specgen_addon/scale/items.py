@@ -14,9 +14,13 @@ from pathlib import Path
 from typing import Iterable, Sequence
 
 from specgen_addon.common.errors import SpecGenError
+from specgen_addon.photo.read import FLOAT_SUFFIXES, RAW_SUFFIXES
 
-#: Photos of a sphere: ``batch.py --image``.
-IMAGE_SUFFIXES = (".png", ".jpg", ".jpeg", ".exr", ".tif", ".tiff")
+#: 8/16-bit photo files (the photo reader decodes them through Pillow or OpenImageIO).
+INTEGER_IMAGE_SUFFIXES = (".png", ".jpg", ".jpeg", ".tif", ".tiff", ".tga")
+#: Photos of a sphere: ``batch.py --image``; the float and camera RAW suffixes are the photo
+#: reader's own (:mod:`specgen_addon.photo.read`), so batch-many takes what ``infer`` reads.
+IMAGE_SUFFIXES = INTEGER_IMAGE_SUFFIXES + FLOAT_SUFFIXES + RAW_SUFFIXES
 #: BRDF files: spectral tables render directly, the rest go through :mod:`.prepare` first.
 BRDF_SUFFIXES = (".npz", ".binary", ".bsdf")
 #: The record a finished item leaves in its folder (written last, inside the atomic rename).
@@ -88,8 +92,9 @@ def collect_inputs(paths: Iterable[Path], manifest: Path | None = None) -> list[
         elif not p.is_file():
             raise SpecGenError(f"{p}: input not found")
         elif input_kind(p) is None:
-            raise SpecGenError(f"{p}: not a known input (photos: {', '.join(IMAGE_SUFFIXES)}; "
-                               f"BRDF files: {', '.join(BRDF_SUFFIXES)})")
+            raise SpecGenError(f"{p}: not a known input (photos: "
+                               f"{', '.join(INTEGER_IMAGE_SUFFIXES + FLOAT_SUFFIXES)} and camera RAW "
+                               f"{', '.join(RAW_SUFFIXES)}; BRDF files: {', '.join(BRDF_SUFFIXES)})")
         else:
             files.append(p)
     seen: set[Path] = set()

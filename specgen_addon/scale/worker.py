@@ -80,12 +80,13 @@ def _run_logged(cmd: list[str], log: Path, cwd: str, env: dict, timeout: float |
 
 
 def run_item(item: dict, out: str, run: str, batch_cmd: list[str], batch_args: list[str], repo: str,
-             fingerprint: dict, timeout: float | None = None) -> dict:
+             fingerprint: dict, timeout: float | None = None, cwd: str | None = None) -> dict:
     """Make one item's results in ``out/<id>/``; returns its record (status "done" or "failed").
 
     ``batch_cmd`` starts ``batch.py`` (``{python}`` stands for this worker's interpreter); the
-    input option, ``--out`` and ``--overwrite`` are added, then ``batch_args``. Raises
-    RuntimeError on a failure worth retrying.
+    input option, ``--out`` and ``--overwrite`` are added, then ``batch_args``. It runs in
+    ``cwd`` (the folder batch-many was started in, so that relative paths in ``batch_args`` mean
+    what they meant there; default: ``repo``). Raises RuntimeError on a failure worth retrying.
     """
     t0 = time.perf_counter()
     out_dir = Path(out)
@@ -137,7 +138,7 @@ def run_item(item: dict, out: str, run: str, batch_cmd: list[str], batch_args: l
         cmd = [sys.executable if c == PYTHON else c for c in batch_cmd]
         t = time.perf_counter()
         code, last = _run(cmd + [option, source, "--out", str(work), "--overwrite", *batch_args],
-                          log, repo, env, timeout, cpu)
+                          log, cwd or repo, env, timeout, cpu)
         record["stages_s"]["batch"] = round(time.perf_counter() - t, 2)
         if code != 0:
             return fail(last or f"batch.py exited with status {code}", retry=code != EXIT_BAD_INPUT)

@@ -89,6 +89,7 @@ def test_batch_applies_a_photo_to_an_object_and_renders_each_frame(blend, tmp_pa
     done = subprocess.run(cmd, capture_output=True, text=True, timeout=600)
     assert done.returncode == 0, done.stderr[-2000:]
     assert "material 'SpecGen sphere' applied to 'Red'" in done.stdout
+    assert "Saved:" not in done.stdout and "full-scene spectral render of" in done.stdout   # Cycles' lines need --verbose
     for frame in (1, 3):
         exr = out / f"Scene_Camera_f{frame:04d}.exr"
         image = read_spectral_exr(exr)

@@ -157,3 +157,14 @@ def test_batch_and_batch_many_take_a_light_from_the_left_written_with_a_space(tm
     err = capsys.readouterr().err.strip().splitlines()
     assert code == 2 and len(err) == 1 and "a light needs a direction" in err[-1], err
     check_batch_args(Path(DEFAULT_BATCH_SCRIPT), ["--light", "-30,20", "--light-vector", "-0.5,0.5,0.7"])
+
+
+def test_batch_and_batch_many_take_a_circle_past_the_left_edge_written_with_a_space(tmp_path, capsys):
+    # parsed, not taken for an option: the circle's own check refuses it, in one line
+    from specgen_addon.scale.batch_many import DEFAULT_BATCH_SCRIPT, check_batch_args
+
+    code = batch.main(["--image", str(PHOTO), "--out", str(tmp_path / "o"), "--circle", "-10,20,30"])
+    err = capsys.readouterr().err.strip().splitlines()
+    assert code == 2 and len(err) == 1 and "the circle (-10, 20, r 30) does not lie in" in err[-1], err
+    check_batch_args(Path(DEFAULT_BATCH_SCRIPT), ["--white-patch", "-5,10,20,20", "--circle", "-10,20,30",
+                                                  "--light-probe", str(PHOTO), "--probe-circle", "-1,2,3"])

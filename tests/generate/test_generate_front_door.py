@@ -49,21 +49,42 @@ def test_existing_outputs_and_bad_names_are_refused_before_any_work(weights, tmp
     assert sorted(p.name for p in tmp_path.iterdir()) == ["ball_lookup.json"]
 
 
-@pytest.mark.parametrize("every_band,gap", [(False, "default"), (True, None)])
-def test_generate_asks_the_network_for_bands_40_nm_apart_unless_every_band(monkeypatch, every_band, gap):
+class _Stop(Exception):
+    """Raised by the stand-in network: the test has what it asked for."""
+
+
+@pytest.fixture
+def asked_of_network(monkeypatch) -> dict:
+    """What the pipeline asks the network for (its keywords), the network itself never run."""
     from specgen_addon.generate import pipeline
 
-    asked = {}
-
-    class Stop(Exception):
-        pass
+    asked: dict = {}
 
     def network(*_args, **kwargs):
         asked.update(kwargs)
-        raise Stop
+        raise _Stop
 
     monkeypatch.setattr(pipeline, "generate_brdf", network)
-    with pytest.raises(Stop):
+    return asked
+
+
+@pytest.mark.parametrize("every_band,gap", [(False, "default"), (True, None)])
+def test_generate_asks_the_network_for_bands_40_nm_apart_unless_every_band(asked_of_network, every_band, gap):
+    from specgen_addon.generate import pipeline
+
+    with pytest.raises(_Stop):
         generate(PHOTO, refine=False, every_band=every_band)
-    assert asked["band_gap_nm"] == (pipeline.NETWORK_BAND_GAP_NM if gap == "default" else None)
+    assert asked_of_network["band_gap_nm"] == (pipeline.NETWORK_BAND_GAP_NM if gap == "default" else None)
     assert pipeline.NETWORK_BAND_GAP_NM == 40.0
+
+
+@pytest.mark.parametrize("latent_fit", [False, True])
+def test_no_backend_chosen_takes_torch_for_the_latent_fit(monkeypatch, asked_of_network, latent_fit):
+    """batch.py and the panel leave the backend to the pipeline: onnx where installed, but the
+    latent fit needs gradients, so a run with it takes torch instead of refusing itself."""
+    from specgen_addon.generate import pipeline
+
+    monkeypatch.setattr(pipeline, "choose_backend", lambda: "onnx")
+    with pytest.raises(_Stop):
+        generate(PHOTO, refine=False, backend=None, latent_fit=latent_fit)
+    assert asked_of_network["backend"] == ("torch" if latent_fit else "onnx")

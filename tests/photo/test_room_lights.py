@@ -37,6 +37,52 @@ def test_power_and_colour_are_checked():
         parse_light("0,0,1,50K")
 
 
+@pytest.mark.parametrize("text", ["27,29,1e300", "27,29,1.5e6", "27,29,inf"])
+def test_an_absurd_power_is_refused_with_the_range_accepted(text):
+    with pytest.raises(LightingError, match=r"power must be a positive number up to 1,000,000 "
+                                            r"\(1: the canonical key light\)"):
+        parse_light(text)
+    assert parse_light("27,29,1e6").power == 1e6   # the bound itself is a light
+
+
+@pytest.mark.parametrize("ambient", [1e30, 2e6, float("inf")])
+def test_an_absurd_ambient_term_is_refused_with_the_range_accepted(ambient):
+    with pytest.raises(LightingError, match="ambient term must be a non-negative number up to 1,000,000"):
+        parse_lighting(None, lights=(parse_light("0,0"),), ambient=ambient)
+
+
+@pytest.mark.parametrize("text,message", [
+    ("30,95", "elevation must be a number of degrees in [-90, 90], got '30,95'"),
+    ("30,-90.5", "elevation must be a number of degrees in [-90, 90], got '30,-90.5'"),
+    ("400,20", "azimuth must be a number of degrees in [-360, 360], got '400,20'"),
+    ("30,nan", "elevation must be a number of degrees in [-90, 90], got '30,nan'"),
+    ("nan,30", "azimuth must be a number of degrees in [-360, 360], got 'nan,30'"),
+])
+def test_a_light_direction_out_of_range_is_refused_quoting_the_text(text, message):
+    with pytest.raises(LightingError) as err:
+        parse_light(text)
+    assert message in str(err.value)
+
+
+def test_a_light_vector_that_is_not_a_number_is_refused_quoting_the_text():
+    with pytest.raises(LightingError, match="needs a direction: X,Y,Z.*got '1,nan,0'"):
+        parse_light("1,nan,0", vector=True)
+
+
+def test_the_range_ends_are_lights():
+    assert parse_light("-360,-90").direction == pytest.approx((0.0, -1.0, 0.0), abs=1e-12)
+    assert parse_light("360,90").direction == pytest.approx((0.0, 1.0, 0.0), abs=1e-12)
+
+
+@pytest.mark.parametrize("azimuth", [180, -180, 179.8, -179.8])
+def test_a_light_straight_behind_is_labelled_180_degrees(azimuth):
+    assert Light.from_angles(azimuth, 10).label.startswith("light az 180° el 10°")
+
+
+def test_a_light_just_left_of_the_camera_is_labelled_0_not_minus_0_degrees():
+    assert Light.from_angles(-0.3, -0.2).label.startswith("light az 0° el 0°")
+
+
 def test_a_colour_temperature_is_plancks_law():
     colour = pytest.importorskip("colour")
     from specgen_addon.spectral.colour_tables import blackbody
@@ -97,8 +143,9 @@ def test_a_calibrated_panorama_keeps_its_power(tmp_path):
 def test_lights_do_not_mix_with_the_canonical_studio():
     with pytest.raises(LightingError, match="canonical studio"):
         InputLighting("canonical", lights=(Light((0.0, 0.0, 1.0)),))
-    with pytest.raises(LightingError, match="at least one light"):
+    with pytest.raises(LightingError, match="at least one light") as err:
         InputLighting("none")
+    assert str(err.value) == "with no map, give at least one light or an ambient term to light the photo"
     assert math.isclose(Light.from_angles(0, 0).direction[2], 1.0)
 
 
@@ -138,6 +185,27 @@ def test_a_light_value_with_a_minus_sign_is_attached_to_its_option():
     assert attach_signed_values(argv) == ["img.png", "--light=-30,20", "--light-vector=-.1,0.2,0.97",
                                           "--input-rotation", "-30", "--light=-5,5", "--light", "40,10", "--light"]
     assert attach_signed_values(["--light", "--quiet"]) == ["--light", "--quiet"]   # argparse says what is missing
+    argv = ["--white-patch", "-5,10,20,20", "--circle", "-10,20,30", "--probe-circle", "-.5,2,3"]
+    assert attach_signed_values(argv) == ["--white-patch=-5,10,20,20", "--circle=-10,20,30",
+                                          "--probe-circle=-.5,2,3"]
+
+
+@pytest.mark.parametrize("args,message", [
+    (["--white-patch", "-5,10,20,20"], "the white patch (-5.0, 10.0, 20.0, 20.0) does not lie in"),
+    (["--circle", "-10,20,30"], "the circle (-10, 20, r 30) does not lie in"),
+    (["--light-probe", "{photo}", "--probe-circle", "-10,20,30"],
+     "chrome ball: {photo}: the circle (-10, 20, r 30) does not lie in"),
+])
+def test_a_negative_first_value_reaches_its_own_check_not_the_usage(tmp_path, capsys, args, message):
+    from conftest import REPO
+
+    from specgen_addon.cli.app import main
+
+    photo = str(REPO / "examples" / "sphere.png")
+    argv = [a.format(photo=photo) for a in args]
+    code = main(["infer", photo, "-o", str(tmp_path / "t.npz"), "--quiet", *argv])
+    err = capsys.readouterr().err.strip().splitlines()
+    assert code == 2 and len(err) == 1 and message.format(photo=photo) in err[0], err
 
 
 def test_the_command_line_takes_a_light_from_the_left_written_with_a_space(tmp_path, capsys):

@@ -22,7 +22,7 @@ from specgen_addon.common.errors import SpecGenError
 from specgen_addon.scale import items as items_mod
 from specgen_addon.scale.batch_many import DEFAULT_BATCH_SCRIPT, check_batch_args
 from specgen_addon.scale.worker import PYTHON, run_item
-from batch_stand_in import stand_in_source, touch_inputs
+from batch_stand_in import stand_in, stand_in_source, touch_inputs
 
 REPO = Path(__file__).resolve().parents[2]
 
@@ -78,6 +78,22 @@ def test_batch_arguments_are_checked_by_batch_py_before_any_work():
         check_batch_args(DEFAULT_BATCH_SCRIPT, ["--samples", "many"])
     with pytest.raises(SpecGenError, match="set by batch-many per item"):
         check_batch_args(DEFAULT_BATCH_SCRIPT, ["--out", "elsewhere"])
+
+
+def test_an_item_runs_in_the_folder_batch_many_was_started_in(tmp_path):
+    """Relative paths in --batch-args (a mask, a mesh, a map) were checked against the user's folder
+    before the run, so each item's batch.py runs there too, not in the repository."""
+    script = stand_in(tmp_path / "fake_batch.py",
+                      '(pathlib.Path(a.out) / (src.stem + "_render.exr")).write_text(os.getcwd())')
+    inputs = touch_inputs(tmp_path / "in", "ball.png")
+    out, here = tmp_path / "out", tmp_path / "where the user was"
+    out.mkdir()
+    here.mkdir()
+    item = items_mod.make_items(inputs)[0]
+    rec = run_item(item.to_dict(), str(out), "r1", [PYTHON, str(script)], [], str(REPO), item.fingerprint([]),
+                   None, str(here))
+    assert rec["status"] == "done", rec
+    assert (out / "ball" / "ball_render.exr").read_text() == str(here)
 
 
 def test_worker_publishes_an_item_whole_or_not_at_all(tmp_path):
