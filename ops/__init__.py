@@ -8,7 +8,7 @@ and the core package.
 
 from __future__ import annotations
 
-_MODULES = ("properties", "operators", "export_brdf", "photo_panel", "panel", "travel")
+_MODULES = ("properties", "operators", "export_brdf", "circle_pick", "photo_panel", "panel", "travel")
 
 
 def _modules():

@@ -51,13 +51,14 @@ class SPECGEN_OT_light_remove(bpy.types.Operator):
         return {"FINISHED"}
 
 
-def _draw_circle(col, circle, text: str) -> None:
+def _draw_circle(col, circle, text: str, target: str) -> None:
     col.prop(circle, "mode", text=text)
     if circle.mode == "CIRCLE":
         sub = col.column(align=True)
         sub.prop(circle, "x")
         sub.prop(circle, "y")
         sub.prop(circle, "radius")
+        sub.operator("specgen.pick_circle", icon="EYEDROPPER").target = target
     elif circle.mode == "MASK":
         col.prop(circle, "mask")
 
@@ -77,7 +78,7 @@ def draw_photo(layout, photo) -> None:
     col.prop(photo, "use_white_patch")
     if photo.use_white_patch:
         col.prop(photo, "white_patch")
-    _draw_circle(col, photo.sphere, "Sphere")
+    _draw_circle(col, photo.sphere, "Sphere", "SPHERE")
     col.prop(photo, "circle_preview")
 
     col = body.column()
@@ -93,7 +94,7 @@ def draw_photo(layout, photo) -> None:
         col.prop(photo, "input_key_light")
     elif kind == "PROBE":
         col.prop(photo, "probe_path")
-        _draw_circle(col, photo.probe_ball, "Ball")
+        _draw_circle(col, photo.probe_ball, "Ball", "PROBE")
         col.prop(photo, "probe_reflectance")
     elif kind == "ESTIMATE":
         col.label(text="Lights and ambient found from the ball's shading", icon="INFO")
