@@ -312,11 +312,14 @@ def _lighting_mode(args: argparse.Namespace) -> str:
         if getattr(args, "probe_reflectance", None) is not None:
             check_reflectance(args.probe_reflectance)
         if getattr(args, "probe_circle", None):
-            parse_circle(args.probe_circle)
+            parse_circle(args.probe_circle, "--probe-circle")
         return "probe"
     map_options = _given(args, "--input-rotation", "--input-exposure")
     if map_options and args.input_env in (None, "", CANONICAL, NO_MAP):
         raise _unused(map_options, "an --input-env map", "name a bundled map or a panorama file")
+    if getattr(args, "input_key_light", None) is False and args.input_env in (None, "", CANONICAL):
+        raise SpecGenError("--no-input-key-light applies to an --input-env map (the canonical studio "
+                           "always has its key light): leave it out")
     return "given"
 
 
@@ -395,7 +398,7 @@ def _same_file(a: Path, b: Path) -> bool:
 
 def _read_probe(args: argparse.Namespace, encoding: str, gains):
     reflectance = CHROME_REFLECTANCE if args.probe_reflectance is None else args.probe_reflectance
-    return read_probe(args.light_probe, circle=parse_circle(args.probe_circle) if args.probe_circle else None,
+    return read_probe(args.light_probe, circle=parse_circle(args.probe_circle, "--probe-circle") if args.probe_circle else None,
                       mask=args.probe_mask, encoding=encoding, reflectance=reflectance, gains=gains)
 
 
@@ -438,7 +441,7 @@ def probe_lighting_from_args(args: argparse.Namespace, source, env_path: Path):
         raise OutputExistsError(f"{env_path}: already exists (pass --overwrite to replace it)")
     env_path.parent.mkdir(parents=True, exist_ok=True)
     lighting, notes = lighting_from_probe(args.light_probe, source, env_path,
-                                          circle=parse_circle(args.probe_circle) if args.probe_circle else None,
+                                          circle=parse_circle(args.probe_circle, "--probe-circle") if args.probe_circle else None,
                                           mask=args.probe_mask, reflectance=args.probe_reflectance,
                                           overwrite=overwrite)
     for note in notes:

@@ -333,14 +333,15 @@ class PhotoSource:
         return stores_floats(self.path)
 
 
-def parse_circle(text: str) -> tuple[float, float, float]:
-    """``"X,Y,R"`` (pixels) → (cx, cy, r); one clear sentence when it is not three numbers with R > 0."""
+def parse_circle(text: str, option: str = "--circle") -> tuple[float, float, float]:
+    """``"X,Y,R"`` (pixels) → (cx, cy, r); one clear sentence naming ``option`` when it is not
+    three numbers with R > 0."""
     try:
         values = tuple(float(v) for v in str(text).replace(" ", "").split(","))
     except ValueError:
         values = ()
     if len(values) != 3 or not all(np.isfinite(values)) or values[2] <= 0:
-        raise ImageInputError(f"--circle takes X,Y,R in pixels (centre from the top-left corner, radius > 0), "
+        raise ImageInputError(f"{option} takes X,Y,R in pixels (centre from the top-left corner, radius > 0), "
                               f"got {text!r}")
     return values  # type: ignore[return-value]
 

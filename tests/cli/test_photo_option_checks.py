@@ -44,6 +44,8 @@ BAD_OPTIONS = {
                                            "--probe-circle applies to the chrome ball of --light-probe"),
     "a reflectance with no chrome ball": (["--probe-reflectance", "0.7"],
                                           "--probe-reflectance applies to the chrome ball of --light-probe"),
+    "a malformed chrome ball circle": (["--light-probe", "{photo}", "--probe-circle", "64,64"],
+                                       "--probe-circle takes X,Y,R in pixels"),
 }
 
 #: Circle previews refused by infer: (argv, what the one line says).
@@ -159,3 +161,11 @@ def test_the_thin_film_model_reports_its_circle_and_writes_its_preview(tmp_path,
     out = capsys.readouterr().out
     assert "sphere: centre (64.00, 64.00) px, radius 64.00 px" in out
     assert preview.is_file() and f"wrote {preview}" in out
+
+
+def test_no_key_light_is_refused_for_the_canonical_studio_which_always_has_it(tmp_path, capsys):
+    code = main(["infer", str(PHOTO), "-o", str(tmp_path / "o.npz"), "--quiet", "--no-input-key-light"])
+    assert "--no-input-key-light applies to an --input-env map" in _one_error_line(code, capsys)
+    code = main(["infer", str(PHOTO), "-o", str(tmp_path / "o.npz"), "--quiet", "--no-input-key-light",
+                 "--input-env", "forest", "--probe-reflectance", "0.5"])
+    assert "--probe-reflectance applies" in _one_error_line(code, capsys)   # with a map: taken
