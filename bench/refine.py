@@ -18,7 +18,7 @@ from pathlib import Path
 
 REPO = Path(__file__).resolve().parents[1]
 
-from bench.machine import describe_machine  # noqa: E402
+from machine import describe_machine  # noqa: E402  (bench/machine.py, beside this script)
 
 
 def main() -> int:

@@ -114,8 +114,9 @@ def add_photo_arguments(p: argparse.ArgumentParser) -> None:
                         "scientific camera); default: sRGB-encoded. EXR/HDR are always linear and "
                         "camera RAW files are developed linearly")
     g.add_argument("--white-level", type=float, default=None, metavar="V",
-                   help="values at or above V count as saturated and are left out of every fit (for "
-                        "EXR/HDR; 8/16-bit files and RAW are checked at their own full scale)")
+                   help="values at or above V (linear, as decoded) count as saturated and are left out "
+                        "of every fit: for EXR/HDR, which have no full scale; 8/16-bit files and RAW "
+                        "are also checked at their own full scale")
     g.add_argument("--white-patch", default=None, metavar="X,Y,W,H",
                    help="white balance: a neutral patch of the photo (a grey card, a white wall), its "
                         "top-left corner and size in pixels (x right, y down); the photo is scaled so "
