@@ -797,5 +797,7 @@ def _energy_warnings(network: BRDFTable, refined: BRDFTable) -> list[str]:
     a_net = directional_albedo(network).max()
     if a_ref > 1.0 + 1e-3 and a_net <= 1.0 + 1e-3:
         return [f"the refined material reflects up to {a_ref:.2f}× the light it receives (not energy "
-                f"conserving): the photo is brighter than this lighting allows — check the exposure"]
+                f"conserving): the photo is brighter than this lighting allows, its power too low for "
+                f"this material (raise it, or the map's exposure; a light estimated or found in a chrome "
+                f"ball had its power fitted, so the material's brightness is uncertain by that factor)"]
     return []
