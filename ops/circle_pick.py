@@ -1,8 +1,9 @@
-"""*Pick in Image Editor*: a ball's circle clicked on its outline in the photo an Image Editor shows.
+"""*Pick in Image Editor*: a ball's circle clicked on its outline, or a white patch clicked at two
+opposite corners, in the photo an Image Editor shows.
 
-Glue only: the clicks become the photo's pixels and the circle through them in
-:mod:`specgen_addon.photo.circle_pick`; the result is the panel's Centre and Radius (the command
-line's ``--circle``), for the photo's ball or the chrome ball's.
+Glue only: the clicks become the photo's pixels, and the circle through them or the patch they span,
+in :mod:`specgen_addon.photo.circle_pick`; the result is the panel's Centre and Radius (the command
+line's ``--circle``) for the photo's ball or the chrome ball's, or its White Patch (``--white-patch``).
 """
 
 from __future__ import annotations
@@ -14,10 +15,18 @@ import bpy
 from bpy.props import EnumProperty
 
 from specgen_addon.common.errors import SpecGenError
-from specgen_addon.photo.circle_pick import MIN_POINTS, circle_through, pixel_from_view, view_from_pixel
+from specgen_addon.photo.circle_pick import (
+    MIN_PATCH_POINTS,
+    MIN_POINTS,
+    circle_through,
+    patch_through,
+    pixel_from_view,
+    view_from_pixel,
+)
 
 TARGETS = (("SPHERE", "Sphere", "The ball in the photo"),
-           ("PROBE", "Chrome Ball", "The chrome ball in its photo"))
+           ("PROBE", "Chrome Ball", "The chrome ball in its photo"),
+           ("PATCH", "White Patch", "A neutral patch of the photo (a grey card, a white wall)"))
 #: Mouse and key events the Image Editor keeps while points are picked (pan and zoom the photo).
 _NAVIGATION = {"MIDDLEMOUSE", "WHEELUPMOUSE", "WHEELDOWNMOUSE", "TRACKPADPAN", "TRACKPADZOOM",
                "NDOF_MOTION", "NUMPAD_PLUS", "NUMPAD_MINUS", "MOUSEMOVE", "INBETWEEN_MOUSEMOVE"}
@@ -36,6 +45,14 @@ def set_picked_circle(circle, points) -> tuple[float, float, float]:
     return cx, cy, r
 
 
+def set_picked_patch(photo, points) -> tuple[int, int, int, int]:
+    """The white patch spanning ``points`` (the photo's pixels) made the panel's White Patch, and
+    turned on; gives (x, y, w, h). Too small: one sentence, the setting unchanged."""
+    patch = patch_through(points)
+    photo.white_patch, photo.use_white_patch = patch, True
+    return patch
+
+
 def _photo_path(settings, target: str) -> str:
     """The file the circle belongs to ('' when none is chosen)."""
     if target == "PROBE":
@@ -51,7 +68,7 @@ def _shows(space, settings, target: str, path: str) -> bool:
     img = space.image
     if img is None:
         return False
-    if target == "SPHERE" and settings.image is not None:
+    if target != "PROBE" and settings.image is not None:
         return img == settings.image
     return bool(img.filepath) and os.path.normpath(bpy.path.abspath(img.filepath)) == path
 
@@ -60,7 +77,7 @@ def _image_editor(context, settings, target: str):
     """(area, its main region) of an Image Editor showing the photo; an Image Editor showing
     something else is given the photo; None without an Image Editor."""
     path = _photo_path(settings, target)
-    if not path and not (target == "SPHERE" and settings.image is not None):
+    if not path and not (target != "PROBE" and settings.image is not None):
         raise SpecGenError("choose the chrome ball photo first" if target == "PROBE"
                            else "choose the input image first")
     screens = [w.screen for w in context.window_manager.windows] if context.window_manager else []
@@ -68,7 +85,7 @@ def _image_editor(context, settings, target: str):
     area = next((a for a in areas if _shows(a.spaces.active, settings, target, path)), None)
     if area is None and areas:
         area = areas[0]
-        if target == "SPHERE" and settings.image is not None:
+        if target != "PROBE" and settings.image is not None:
             area.spaces.active.image = settings.image
         else:
             if not os.path.isfile(path):
@@ -81,7 +98,7 @@ def _image_editor(context, settings, target: str):
 
 
 class SPECGEN_OT_pick_circle(bpy.types.Operator):
-    """Click points on the ball's outline in the Image Editor (three or more), then Enter: they set the circle's centre and radius"""
+    """Click points on the ball's outline in the Image Editor (three or more; for a white patch, two opposite corners), then Enter"""
 
     bl_idname = "specgen.pick_circle"
     bl_label = "Pick in Image Editor"
@@ -133,32 +150,51 @@ class SPECGEN_OT_pick_circle(bpy.types.Operator):
             w, h = self._image.size
             u, v = r.view2d.region_to_view(x, y)
             self._points.append(pixel_from_view(u, v, w, h))
-        elif event.type in {"RET", "NUMPAD_ENTER", "SPACE"} and len(self._points) >= MIN_POINTS:
+        elif event.type in {"RET", "NUMPAD_ENTER", "SPACE"} and len(self._points) >= self._needed:
             photo = context.scene.specgen.photo
             try:
-                cx, cy, rad = set_picked_circle(circle_settings(photo, self.target), self._points)
+                if self.target == "PATCH":
+                    x, y, w, h = set_picked_patch(photo, self._points)
+                    said = f"white patch set: {w}×{h} px at ({x}, {y})"
+                else:
+                    cx, cy, rad = set_picked_circle(circle_settings(photo, self.target), self._points)
+                    what = "chrome ball" if self.target == "PROBE" else "sphere"
+                    said = (f"{what} circle set from {len(self._points)} points: centre ({cx:.1f}, "
+                            f"{cy:.1f}) px, radius {rad:.1f} px")
             except SpecGenError as exc:
                 self.report({"WARNING"}, f"SpecGen: {exc}")
                 return {"RUNNING_MODAL"}
             self._end()
-            what = "chrome ball" if self.target == "PROBE" else "sphere"
-            self.report({"INFO"}, f"SpecGen: {what} circle set from {len(self._points)} points: "
-                                  f"centre ({cx:.1f}, {cy:.1f}) px, radius {rad:.1f} px")
+            self.report({"INFO"}, f"SpecGen: {said}")
             return {"FINISHED"}
         self._say()
         return {"RUNNING_MODAL"}
 
+    @property
+    def _needed(self) -> int:
+        return MIN_PATCH_POINTS if self.target == "PATCH" else MIN_POINTS
+
+    def _shape(self):
+        """("circle", (cx, cy, r)) or ("patch", (x, y, w, h)) of the points so far, or None."""
+        if len(self._points) < self._needed:
+            return None
+        try:
+            if self.target == "PATCH":
+                return "patch", patch_through(self._points)
+            return "circle", circle_through(self._points)
+        except SpecGenError:
+            return None
+
     def _say(self) -> None:
-        n = len(self._points)
+        n, shape = len(self._points), self._shape()
+        where = "two opposite corners of a neutral patch" if self.target == "PATCH" else "the ball's outline"
         fit = ""
-        if n >= MIN_POINTS:
-            try:
-                cx, cy, r = circle_through(self._points)
-                fit = f"; circle ({cx:.1f}, {cy:.1f}) r {r:.1f} px, Enter to set it"
-            except SpecGenError:
-                fit = "; these points fix no circle"
-        self._area.header_text_set(f"SpecGen: click points on the ball's outline ({n} of at least "
-                                   f"{MIN_POINTS}{fit}); Backspace removes the last, Esc cancels")
+        if n >= self._needed:
+            fit = "; these points fix no shape" if shape is None else (
+                "; patch {2}×{3} px at ({0}, {1}), Enter to set it".format(*shape[1]) if shape[0] == "patch"
+                else "; circle ({:.1f}, {:.1f}) r {:.1f} px, Enter to set it".format(*shape[1]))
+        self._area.header_text_set(f"SpecGen: click points on {where} ({n} of at least {self._needed}"
+                                   f"{fit}); Backspace removes the last, Esc cancels")
         self._area.tag_redraw()
 
     def _end(self) -> None:
@@ -167,7 +203,7 @@ class SPECGEN_OT_pick_circle(bpy.types.Operator):
         self._area.tag_redraw()
 
     def _draw_points(self) -> None:
-        """The points picked and, from three on, the circle through them, over the photo."""
+        """The points picked and the circle through them (or the patch they span), over the photo."""
         if bpy.context.area != self._area or not self._points:
             return
         import gpu
@@ -183,14 +219,17 @@ class SPECGEN_OT_pick_circle(bpy.types.Operator):
         for x, y in self._points:
             px, py = at(x, y)
             lines += [(px - 6, py), (px + 6, py), (px, py - 6), (px, py + 6)]
-        try:
-            cx, cy, r = circle_through(self._points) if len(self._points) >= MIN_POINTS else (0, 0, 0)
-        except SpecGenError:
-            r = 0
-        if r > 0:
-            ring = [at(cx + r * math.cos(2 * math.pi * k / 96), cy + r * math.sin(2 * math.pi * k / 96))
-                    for k in range(97)]
-            lines += [p for a, b in zip(ring, ring[1:]) for p in (a, b)]
+        shape = self._shape()
+        if shape is not None and shape[0] == "circle":
+            cx, cy, r = shape[1]
+            outline = [at(cx + r * math.cos(2 * math.pi * k / 96), cy + r * math.sin(2 * math.pi * k / 96))
+                       for k in range(97)]
+        elif shape is not None:
+            x, y, w, h = shape[1]
+            outline = [at(x, y), at(x + w, y), at(x + w, y + h), at(x, y + h), at(x, y)]
+        else:
+            outline = []
+        lines += [p for a, b in zip(outline, outline[1:]) for p in (a, b)]
         shader = gpu.shader.from_builtin("UNIFORM_COLOR")
         shader.uniform_float("color", (1.0, 0.16, 0.16, 1.0))   # the circle preview's red
         batch_for_shader(shader, "LINES", {"pos": lines}).draw(shader)

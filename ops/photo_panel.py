@@ -78,6 +78,7 @@ def draw_photo(layout, photo) -> None:
     col.prop(photo, "use_white_patch")
     if photo.use_white_patch:
         col.prop(photo, "white_patch")
+        col.operator("specgen.pick_circle", icon="EYEDROPPER").target = "PATCH"
     _draw_circle(col, photo.sphere, "Sphere", "SPHERE")
     col.prop(photo, "circle_preview")
 

@@ -73,3 +73,12 @@ def test_picking_without_the_mouse_is_refused_in_one_sentence(photo):
     with pytest.raises(RuntimeError, match="picked with the mouse in an Image Editor") as info:
         bpy.ops.specgen.pick_circle(target="SPHERE")
     assert len([line for line in str(info.value).splitlines() if line.strip()]) == 1
+
+
+def test_two_corners_picked_set_and_turn_on_the_white_patch(photo):
+    got = circle_pick.set_picked_patch(photo, [(140.6, 72.2), (120.3, 90.9)])
+    assert got == (120, 72, 21, 19) and photo.use_white_patch
+    assert tuple(photo.white_patch) == (120.0, 72.0, 21.0, 19.0)
+    with pytest.raises(SpecGenError, match="under two pixels"):
+        circle_pick.set_picked_patch(photo, [(5.0, 5.0), (5.5, 30.0)])
+    assert tuple(photo.white_patch) == (120.0, 72.0, 21.0, 19.0)            # unchanged

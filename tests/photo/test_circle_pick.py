@@ -48,3 +48,14 @@ def test_the_view_position_is_the_photos_pixels_counted_from_the_top_left():
     assert pixel_from_view(1.0, 0.0, 640, 480) == (640.0, 480.0)        # bottom-right corner
     assert pixel_from_view(0.25, 0.75, 640, 480) == (160.0, 120.0)
     np.testing.assert_allclose(view_from_pixel(*pixel_from_view(0.3, 0.6, 640, 480), 640, 480), (0.3, 0.6))
+
+
+def test_two_corners_give_the_white_patch_in_whole_pixels():
+    from specgen_addon.photo.circle_pick import patch_through
+
+    assert patch_through([(120.4, 30.6), (100.2, 50.1)]) == (100, 30, 21, 21)   # any two opposite corners
+    assert patch_through([(10, 10), (20, 15), (12, 30)]) == (10, 10, 10, 20)      # or more: their span
+    with pytest.raises(ImageInputError, match="two opposite corners"):
+        patch_through([(10, 10)])
+    with pytest.raises(ImageInputError, match="under two pixels"):
+        patch_through([(10.2, 10.2), (10.7, 40.0)])
