@@ -22,7 +22,7 @@ from pathlib import Path
 import bpy
 import numpy as np
 
-from specgen_addon.common.atomic_io import make_output_dir
+from specgen_addon.common.atomic_io import file_identity, make_output_dir
 from specgen_addon.common.errors import OutputExistsError, SpecGenError
 from specgen_addon.spectral.spectra import wavelength_grid
 from specgen_addon.bake import lookup as bake
@@ -145,24 +145,17 @@ def generate_with_photo_lighting(args: dict, lighting, circle_png: Path | None =
             write_circle_preview(circle_png, args["image"], info.crop.circle, overwrite=args["overwrite"])
         else:
             circle_png = None
+    now = _file_stamps(args["out_dir"], args["name"]) if earlier else {}
     for path, stamp in earlier.items():
-        if _file_stamp(path) == stamp:      # not written again: the replaced run's
+        if now.get(path) == stamp:          # not written again: the replaced run's
             path.unlink(missing_ok=True)
     return GenerateRun(info, photo_lighting, notes, circle_png)
 
 
-def _file_stamp(path: Path) -> tuple[int, int, int] | None:
-    """(inode, size, modification time in ns) of a file, or None: every output is written to a
-    new file and moved into place, so a file written again has another stamp."""
-    try:
-        st = path.stat()
-    except OSError:
-        return None
-    return st.st_ino, st.st_size, st.st_mtime_ns
-
-
-def _file_stamps(out_dir, stem: str) -> dict[Path, tuple[int, int, int] | None]:
-    return {p: _file_stamp(p) for p in naming.files_of(out_dir, stem)}
+def _file_stamps(out_dir, stem: str) -> dict[Path, tuple | None]:
+    """The identity of each file of the set ``stem`` (:func:`~specgen_addon.common.atomic_io.file_identity`):
+    every output is written to a new file and moved into place, so a file written again has another."""
+    return {p: file_identity(p) for p in naming.files_of(out_dir, stem)}
 
 
 class SPECGEN_OT_generate_brdf(_Modal, bpy.types.Operator):

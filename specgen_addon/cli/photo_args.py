@@ -324,24 +324,22 @@ def _lighting_mode(args: argparse.Namespace) -> str:
     return "given"
 
 
-def check_photo_options(args: argparse.Namespace) -> str:
+def check_photo_options(args: argparse.Namespace):
     """Everything about the photo options that needs neither the photo nor the network (what
     batch-many checks for every item before any runs): the lighting options and how they combine,
     the lights' and the chrome ball's values, ``--circle`` and ``--white-patch`` as numbers, one
     white balance, the white level, the mask and chrome-ball files readable. Gives the lighting
-    mode (:func:`_lighting_mode`)."""
+    mode (:func:`_lighting_mode`) and, for ``"given"``, the lighting (else None)."""
     mode = _lighting_mode(args)
-    if mode == "given":
-        input_lighting_from_args(args)
+    lighting = input_lighting_from_args(args) if mode == "given" else None
     source = photo_source_from_args(args, Path(os.devnull))    # parses --circle and --white-patch
     check_white_balance_choice(source.white_patch, source.colour_checker)
     check_white_level(getattr(args, "white_level", None))
     for option, what in (("mask", "--mask file"), ("light_probe", "--light-probe photo"),
                          ("probe_mask", "--probe-mask file")):
         if getattr(args, option, None) is not None:
-            check_input_file(getattr(args, option), what)
-            check_image_header(getattr(args, option))
-    return mode
+            _check_image_file(getattr(args, option), what)
+    return mode, lighting
 
 
 def check_photo_args(args: argparse.Namespace, image: Path, outputs: dict[str, Path] | None = None,
@@ -350,11 +348,8 @@ def check_photo_args(args: argparse.Namespace, image: Path, outputs: dict[str, P
     found (with ``--circle``/``--mask``/``--linear``), the white patch in the photo, the light's
     values, the probe file there, the preview not in the way of the photo or of the run's other
     ``outputs`` (:func:`check_circle_preview`; ``out_dir``: the output folder the run makes first)."""
-    mode = check_photo_options(args)
-    lighting = input_lighting_from_args(args) if mode == "given" else None
+    mode, lighting = check_photo_options(args)            # the chrome ball's file included
     check_circle_preview(args, image, outputs or {}, out_dir)
-    if mode == "probe":
-        check_probe_file(args.light_probe)
     crop = photo_source_from_args(args, image, _white_target(lighting)).crop()
     if mode == "probe":   # found and unwrapped now (a fraction of a second), not after the scene opens
         _read_probe(args, "auto" if not getattr(args, "linear", False) else "linear", crop.white_gains)
@@ -362,7 +357,12 @@ def check_photo_args(args: argparse.Namespace, image: Path, outputs: dict[str, P
 
 def check_probe_file(path: Path) -> None:
     """The ``--light-probe`` photo: a readable file within the pixel limit, else one sentence."""
-    check_input_file(path, "--light-probe photo")
+    _check_image_file(path, "--light-probe photo")
+
+
+def _check_image_file(path: Path, what: str) -> None:
+    """An image file an option names (``what``): readable, within the pixel limit; else one sentence."""
+    check_input_file(path, what)
     check_image_header(path)
 
 

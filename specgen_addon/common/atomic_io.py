@@ -49,7 +49,7 @@ def _current_umask() -> int:
     return mask
 
 
-def _identity(path: Path) -> tuple | None:
+def file_identity(path: str | os.PathLike) -> tuple | None:
     """(device, inode, and for a file its modification time and size): an inode number freed
     and reused by another process's new file at the same path is not taken for ours."""
     try:
@@ -63,7 +63,7 @@ def _identity(path: Path) -> tuple | None:
 
 def record_created(path: str | os.PathLike) -> None:
     """Enter ``path`` (just created by this process) in the ledger with its identity."""
-    ident = _identity(Path(path))
+    ident = file_identity(Path(path))
     if ident is not None:
         _LEDGER[os.path.abspath(path)] = (ident, next(_SEQ))
 
@@ -80,7 +80,7 @@ def is_ours(path: str | os.PathLike) -> bool:
     entry = _LEDGER.get(key)
     if entry is None:
         return key in _PENDING and os.path.lexists(key)
-    ident = _identity(Path(path))
+    ident = file_identity(Path(path))
     if key in _STAGING:
         return ident is not None and ident[:2] == entry[0][:2]
     return ident == entry[0]
@@ -370,7 +370,7 @@ class OutputLock:
                 return  # an unwritable folder: the command's own checks name it
             with os.fdopen(fd, "w") as fh:
                 json.dump(me, fh)
-            self.held.append((lock, _identity(lock)))
+            self.held.append((lock, file_identity(lock)))
             return
         raise OutputBusyError(f"{target}: another SpecGen command holds its lock {lock} "
                               "(wait for it to finish, or delete the lock if that command is gone)")
@@ -400,6 +400,6 @@ class OutputLock:
         """Remove the lock files still ours (idempotent; safe in a hard stop's clean-up)."""
         while self.held:
             lock, ident = self.held.pop()
-            if _identity(lock) == ident:
+            if file_identity(lock) == ident:
                 with contextlib.suppress(OSError):
                     lock.unlink()

@@ -20,10 +20,12 @@ is refused there with one sentence.
 
 from __future__ import annotations
 
+import contextlib
 import math
 import warnings
 from dataclasses import dataclass, field
 from pathlib import Path
+from typing import Iterator
 
 import numpy as np
 
@@ -99,15 +101,28 @@ def stores_floats(path: str | Path) -> bool:
         return True
     if path.suffix.lower() not in (".tif", ".tiff"):
         return False
+    with _oiio_opened(path) as opened:
+        if opened is None:
+            return False
+        oiio, inp = opened
+        return inp.spec().format.basetype in (oiio.HALF, oiio.FLOAT, oiio.DOUBLE)
+
+
+@contextlib.contextmanager
+def _oiio_opened(path: Path) -> Iterator[tuple | None]:
+    """(OpenImageIO, the file opened with it), closed after the block; None without OpenImageIO
+    or where it cannot open the file."""
     try:
         import OpenImageIO as oiio
     except ImportError:
-        return False
+        yield None
+        return
     inp = oiio.ImageInput.open(str(path))
     if inp is None:
-        return False
+        yield None
+        return
     try:
-        return inp.spec().format.basetype in (oiio.HALF, oiio.FLOAT, oiio.DOUBLE)
+        yield oiio, inp
     finally:
         inp.close()
 
@@ -187,14 +202,10 @@ def _read_oiio_uint16(path: Path, linear: bool) -> Photo | None:
     """A 16-bit integer file through OpenImageIO, a band of rows at a time, all 16 bits kept and
     box-downsampled in linear light to :data:`MAX_WORK_SIDE`; None for any other file (or without
     OpenImageIO)."""
-    try:
-        import OpenImageIO as oiio
-    except ImportError:
-        return None
-    inp = oiio.ImageInput.open(str(path))
-    if inp is None:
-        return None
-    try:
+    with _oiio_opened(path) as opened:
+        if opened is None:
+            return None
+        oiio, inp = opened
         spec = inp.spec()
         if spec.format != oiio.UINT16 or spec.nchannels not in (1, 2, 3, 4):
             return None
@@ -213,8 +224,6 @@ def _read_oiio_uint16(path: Path, linear: bool) -> Photo | None:
             lin = image_checks._decode_downsampled(codes, 65536, out_c == 4, factor, linear, parts)
             out[y0 // factor:y1 // factor] = lin[:, :ow]
             sat[y0 // factor:y1 // factor] = parts[0][:, :ow]
-    finally:
-        inp.close()
     photo = Photo(out, sat, "linear" if linear else "sRGB-decoded", 16, scale=ow / w)
     if c in (1, 2):
         photo.notes.append("16-bit grayscale" + ("+alpha image converted to RGBA" if c == 2 else " image converted to RGB"))

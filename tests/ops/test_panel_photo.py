@@ -208,20 +208,24 @@ def test_lit_like_this_scene_takes_only_lights_that_render(panel, tmp_path):
     assert len(lighting.lights) == 1                              # the key light alone
 
 
+def _world_image(scene, path: Path) -> None:
+    """A world whose Background colour is the image file ``path`` (an Environment Texture)."""
+    world = bpy.data.worlds.new("World")
+    scene.world = world
+    if bpy.app.version < (5, 0, 0):
+        world.use_nodes = True
+    tex = world.node_tree.nodes.new("ShaderNodeTexEnvironment")
+    tex.image = bpy.data.images.load(str(path))
+    world.node_tree.links.new(tex.outputs["Color"], world.node_tree.nodes["Background"].inputs["Color"])
+
+
 def test_lit_like_this_scene_names_a_world_image_that_is_not_a_panorama(panel, tmp_path):
     from specgen_addon.common.image_io import write_exr
 
     scene, _s, photo = panel
     _camera(scene)
     _light(scene, "SUN", "Sun", 3.0, direction=(0.3, -1.0, 1.0))
-    square = write_exr(tmp_path / "square.exr", {c: np.ones((16, 16), np.float32) for c in "RGB"})
-    world = bpy.data.worlds.new("World")
-    scene.world = world
-    if bpy.app.version < (5, 0, 0):
-        world.use_nodes = True
-    tex = world.node_tree.nodes.new("ShaderNodeTexEnvironment")
-    tex.image = bpy.data.images.load(str(square))
-    world.node_tree.links.new(tex.outputs["Color"], world.node_tree.nodes["Background"].inputs["Color"])
+    _world_image(scene, write_exr(tmp_path / "square.exr", {c: np.ones((16, 16), np.float32) for c in "RGB"}))
     photo.lighting = "SCENE"
     lighting, notes = _lighting(scene, photo, tmp_path)
     warning = " ".join(n for n in notes if n.startswith("warning"))
@@ -236,14 +240,7 @@ def test_a_note_on_the_worlds_pixels_is_in_the_runs_report_not_a_python_warning(
     _camera(scene)
     pano = np.full((16, 32), 0.5, np.float32)
     pano[3, 4] = -1.0                                             # a negative texel: clamped, with a note
-    path = write_exr(tmp_path / "pano.exr", {c: pano for c in "RGB"})
-    world = bpy.data.worlds.new("World")
-    scene.world = world
-    if bpy.app.version < (5, 0, 0):
-        world.use_nodes = True
-    tex = world.node_tree.nodes.new("ShaderNodeTexEnvironment")
-    tex.image = bpy.data.images.load(str(path))
-    world.node_tree.links.new(tex.outputs["Color"], world.node_tree.nodes["Background"].inputs["Color"])
+    _world_image(scene, write_exr(tmp_path / "pano.exr", {c: pano for c in "RGB"}))
     photo.lighting = "SCENE"
     _taken, notes = _lighting(scene, photo, tmp_path)
     assert any(n.startswith("world: ") and "negative" in n for n in notes), notes
