@@ -202,19 +202,10 @@ class SPECGEN_OT_pick_circle(bpy.types.Operator):
         self._area.header_text_set(None)
         self._area.tag_redraw()
 
-    def _draw_points(self) -> None:
-        """The points picked and the circle through them (or the patch they span), over the photo."""
-        if bpy.context.area != self._area or not self._points:
-            return
-        import gpu
-        from gpu_extras.batch import batch_for_shader
-
-        w, h = self._image.size
-        view2d = self._region.view2d
-
-        def at(x: float, y: float) -> tuple[float, float]:
-            return view2d.view_to_region(*view_from_pixel(x, y, w, h), clip=False)
-
+    def _overlay_lines(self, at) -> list[tuple[float, float]]:
+        """Line segments (pairs of region positions, ``at`` mapping the photo's pixels there) of
+        the overlay: a cross at each point picked, and the circle through them or the patch they
+        span once there are enough."""
         lines = []
         for x, y in self._points:
             px, py = at(x, y)
@@ -229,7 +220,22 @@ class SPECGEN_OT_pick_circle(bpy.types.Operator):
             outline = [at(x, y), at(x + w, y), at(x + w, y + h), at(x, y + h), at(x, y)]
         else:
             outline = []
-        lines += [p for a, b in zip(outline, outline[1:]) for p in (a, b)]
+        return lines + [p for a, b in zip(outline, outline[1:]) for p in (a, b)]
+
+    def _draw_points(self) -> None:
+        """The points picked and the circle through them (or the patch they span), over the photo."""
+        if bpy.context.area != self._area or not self._points:
+            return
+        import gpu
+        from gpu_extras.batch import batch_for_shader
+
+        w, h = self._image.size
+        view2d = self._region.view2d
+
+        def at(x: float, y: float) -> tuple[float, float]:
+            return view2d.view_to_region(*view_from_pixel(x, y, w, h), clip=False)
+
+        lines = self._overlay_lines(at)
         shader = gpu.shader.from_builtin("UNIFORM_COLOR")
         shader.uniform_float("color", (1.0, 0.16, 0.16, 1.0))   # the circle preview's red
         batch_for_shader(shader, "LINES", {"pos": lines}).draw(shader)
