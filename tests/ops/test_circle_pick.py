@@ -11,7 +11,7 @@ import pytest
 
 bpy = pytest.importorskip("bpy")
 
-from addon_modules import PKG, addon_module
+from addon_modules import addon_module
 
 from specgen_addon.common.errors import SpecGenError
 
@@ -20,12 +20,8 @@ pytestmark = pytest.mark.blender
 
 
 @pytest.fixture
-def photo(blank_scene):
-    PKG.register()
-    try:
-        yield blank_scene.specgen.photo
-    finally:
-        PKG.unregister()
+def photo(registered_addon):
+    return registered_addon.specgen.photo
 
 
 @pytest.mark.parametrize("target", ["SPHERE", "PROBE"])

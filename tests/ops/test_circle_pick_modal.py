@@ -17,7 +17,7 @@ import pytest
 
 bpy = pytest.importorskip("bpy")
 
-from addon_modules import PKG, addon_module
+from addon_modules import addon_module
 
 circle_pick = addon_module("ops.circle_pick")
 Operator = circle_pick.SPECGEN_OT_pick_circle
@@ -79,12 +79,8 @@ class Picking:
 
 
 @pytest.fixture
-def photo(blank_scene):
-    PKG.register()
-    try:
-        yield blank_scene.specgen.photo
-    finally:
-        PKG.unregister()
+def photo(registered_addon):
+    return registered_addon.specgen.photo
 
 
 def on_circle(cx, cy, r, degrees):
