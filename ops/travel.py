@@ -181,16 +181,16 @@ def replaced_lookups(materials=None) -> list[str]:
     another Generate's: a later run with *Replace Materials* rewrote them, then Undo brought the
     material back (undo restores datablocks, not files). Told apart by the spectral basis the
     material holds against the one its lookups' JSON holds."""
-    import json
-
     import numpy as np
+
+    from specgen_addon.bake import lookup as bake
 
     out = []
     for mat in _specgen_materials() if materials is None else materials:
         described = Path(_absolute(str(mat["specgen_atlas"]))).with_suffix(".json")
         try:
-            on_disk = np.asarray(json.loads(described.read_text()).get("basis", []), np.float64).ravel()
-        except (OSError, ValueError, AttributeError):
+            on_disk = bake.load_atlas_info(described).basis.ravel()
+        except SpecGenError:
             continue              # missing or unreadable: missing_lookups says so
         held = np.asarray(mat.get("specgen_basis", []), np.float64)
         if on_disk.shape != held.shape or not np.allclose(on_disk, held, rtol=1e-6, atol=1e-9):

@@ -81,6 +81,11 @@ def group_path(base: Path, group: int) -> Path:
     return base.with_name(f"{base.stem}.g{group:02d}{base.suffix or '.exr'}")
 
 
+def group_paths_of(base: Path, n_renders: int) -> list[Path]:
+    """The ``n_renders`` group files of the atlas ``base`` (:func:`group_path`)."""
+    return [group_path(base, g) for g in range(n_renders)]
+
+
 def _fit_standins(table, wavelengths_nm: np.ndarray | None):
     """The native closure fit of ``table`` (its rendered error checked) with the Principled
     stand-in's sheen where the material needs one."""
@@ -130,7 +135,7 @@ class AtlasInfo:
 
     @property
     def group_paths(self) -> list[Path]:
-        return [group_path(self.path, g) for g in range(self.n_renders)]
+        return group_paths_of(self.path, self.n_renders)
 
 
 def atlas_layout(n_phi_d: int) -> tuple[int, int]:
@@ -483,7 +488,10 @@ def save_atlas_info(info: AtlasInfo, path: str | os.PathLike) -> Path:
 
 
 def load_atlas_info(path: str | os.PathLike) -> AtlasInfo:
-    """Read :func:`save_atlas_info`'s JSON; SpecGenError if missing, corrupt or incomplete."""
+    """Read :func:`save_atlas_info`'s JSON; SpecGenError if missing, corrupt or incomplete.
+
+    The JSON holds the textures' absolute path as baked; when the folder has moved since (with its
+    .blend, to another machine), the textures are those beside the JSON, under the same names."""
     import json
 
     path = Path(path)
@@ -501,6 +509,10 @@ def load_atlas_info(path: str | os.PathLike) -> AtlasInfo:
             info.closures = ClosureFit.from_json(data["closures"])
     except (OSError, ValueError, KeyError, TypeError, SpecGenError) as exc:
         raise SpecGenError(f"{path}: cannot read the baked lookup description ({exc})") from None
+    if not all(p.is_file() for p in info.group_paths):
+        beside = path.parent / info.path.name       # the folder moved: the textures came with it
+        if all(p.is_file() for p in group_paths_of(beside, info.n_renders)):
+            info.path = beside
     missing = [str(p) for p in info.group_paths if not p.is_file()]
     if missing:
         raise SpecGenError(f"{path}: baked lookup textures are missing ({missing[0]})")

@@ -88,6 +88,21 @@ def test_atlas_description_keeps_the_closure_fit(rich_table, tmp_path):
     np.testing.assert_array_equal(back.basis, info.basis)
 
 
+def test_an_atlas_moved_with_its_folder_is_read_from_beside_its_description(rich_table, tmp_path):
+    """The description holds the absolute path it was baked at; moved (a .blend's folder taken to
+    another machine), the textures beside it are the atlas; gone from both, a clear sentence."""
+    info = bake.bake_atlas(rich_table, tmp_path / "baked" / "a_lookup.exr")
+    bake.save_atlas_info(info, tmp_path / "baked" / "a_lookup.json")
+    slots = bake.read_atlas(info)
+    (tmp_path / "baked").rename(tmp_path / "moved")
+    back = bake.load_atlas_info(tmp_path / "moved" / "a_lookup.json")
+    assert back.path == tmp_path / "moved" / "a_lookup.exr"
+    np.testing.assert_array_equal(bake.read_atlas(back), slots)
+    back.group_paths[-1].unlink()
+    with pytest.raises(bake.SpecGenError, match="baked lookup textures are missing"):
+        bake.load_atlas_info(tmp_path / "moved" / "a_lookup.json")
+
+
 def test_spectral_basis_is_exact_for_low_rank_spectra_and_reports_truncation():
     rng = np.random.default_rng(0)
     coeffs = rng.random((5000, 3))
