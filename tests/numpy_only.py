@@ -1,6 +1,6 @@
 """A Python child process that can import numpy and the standard library but not the CLI's extra
 packages (torch, scipy, scikit-image, Pillow, colour-science, OpenEXR, numba): the panel's path in a
-stock Blender (guide principle 3)."""
+stock Blender, which has numpy and its own bundled modules and nothing else."""
 
 from __future__ import annotations
 

@@ -16,20 +16,25 @@ from specgen_addon.brdf.formats.export import check_output, write_output
 
 def add_parser(sub: argparse._SubParsersAction) -> None:
     p = sub.add_parser("info", help="print a BRDF file's metadata (RGL .bsdf, MERL .binary, .npz table)")
-    p.add_argument("file", type=Path)
+    p.add_argument("file", type=Path, metavar="FILE",
+                   help="BRDF file: RGL .bsdf, MERL .binary or SpecGen .npz (format read from its header)")
     p.add_argument("--json", action="store_true", help="print machine-readable JSON")
     p.set_defaults(func=run_info)
 
     p = sub.add_parser("tabulate", help="tabulate an RGL or MERL file onto the MERL grid (.npz table)")
-    p.add_argument("file", type=Path)
+    p.add_argument("file", type=Path, metavar="FILE",
+                   help="BRDF file to tabulate: RGL .bsdf (spectral or RGB), MERL .binary or SpecGen .npz "
+                        "(the last two are on the MERL grid already and are only rewritten)")
     p.add_argument("-o", "--out", type=Path, required=True,
                    help="output: .npz (compact material; full table with --full-table), .bsdf or .binary")
     p.add_argument("--full-table", action="store_true",
                    help="write the full float32 table instead of the compact material file")
-    p.add_argument("--wl-min", type=float, default=DEFAULT_RANGE_NM[0], help="first wavelength, nm")
-    p.add_argument("--wl-max", type=float, default=DEFAULT_RANGE_NM[1], help="last wavelength, nm")
+    p.add_argument("--wl-min", type=float, default=DEFAULT_RANGE_NM[0],
+                   help="first wavelength, nm (default %(default)g)")
+    p.add_argument("--wl-max", type=float, default=DEFAULT_RANGE_NM[1],
+                   help="last wavelength, nm (default %(default)g)")
     p.add_argument("--bands", type=int, default=DEFAULT_BAND_COUNT,
-                   help="wavelength count for spectral files (RGB files keep R, G, B)")
+                   help="wavelength count for spectral files (default %(default)s; RGB files keep R, G, B)")
     p.add_argument("--overwrite", action="store_true", help="replace an existing output")
     p.add_argument("--quiet", action="store_true", help="no progress bar")
     p.set_defaults(func=run_tabulate)

@@ -30,7 +30,8 @@ def add_parser(sub: argparse._SubParsersAction) -> argparse.ArgumentParser:
                    help=f"wavelength bands of tables over {DEFAULT_RANGE_NM[0]:g}–"
                         f"{DEFAULT_RANGE_NM[1]:g} nm (default {DEFAULT_BAND_COUNT})")
     p.add_argument("--families", default="classic", metavar="MIX",
-                   help="family mix: 'classic' (the issue-3 recipe, default), 'default' (the training "
+                   help="family mix: 'classic' (default: classic materials only, i.e. plastics and metals, "
+                        "some clear-coated; docs/dev/corpus.md), 'default' (the training "
                         "mix of configs/default.json), or NAME=WEIGHT,... over "
                         "classic, tinted_coat, car_paint, thin_film, sheen, lobes")
     p.add_argument("--inputs", action="store_true",

@@ -27,7 +27,8 @@ def add_parser(subparsers: argparse._SubParsersAction) -> argparse.ArgumentParse
     p.add_argument("--smoke", action="store_true",
                    help="tiny configuration for CI: 2 materials, 64² renders, ablation arms of a few steps")
     p.add_argument("--materials", default=None,
-                   help="number of held-out test materials (first in corpus order), or comma-separated names")
+                   help="number of held-out test materials (first in corpus order), or comma-separated names "
+                        "(default: the first 10; 2 with --smoke)")
     p.add_argument("--budget-minutes", type=float, default=None,
                    help="approximate wall-clock budget of each ablation arm; converted once to a fixed "
                         "step count (runs stay deterministic) from a short timing of the training step "

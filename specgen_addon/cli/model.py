@@ -30,7 +30,11 @@ def add_network_arguments(p: argparse.ArgumentParser) -> None:
     p.add_argument("--weights", type=Path, default=None,
                    help="weights (.pt); default: the shipped network for how the sphere was cut "
                         "(copied from a canonical frame, or resampled from a photo)")
-    p.add_argument("--backend", choices=("torch", "onnx"), default="torch")
+    p.add_argument("--backend", choices=("torch", "onnx"), default="torch",
+                   help="what runs the network: torch (default) or onnx (onnxruntime, with the graphs "
+                        "<stem>.tables.onnx and <stem>.head.onnx beside the weights; export-onnx "
+                        "writes them). batch.py and the Blender panel default to onnx where "
+                        "onnxruntime is installed")
 
 
 def add_parser(sub: argparse._SubParsersAction) -> argparse.ArgumentParser:
@@ -39,7 +43,7 @@ def add_parser(sub: argparse._SubParsersAction) -> argparse.ArgumentParser:
                                    "specgen.pt, checkpoint.pt, history.csv and loss_curve.png. Under "
                                    "torchrun (torchrun --nproc_per_node N -m specgen_addon train ...) "
                                    "each rank trains on a shard of every step's materials with DDP "
-                                   "(docs/scale.md).")
+                                   "(docs/headless-and-scale.md).")
     p.add_argument("--config", type=Path, default=None,
                    help="JSON/TOML with 'model' and 'train' sections (default: configs/default.json)")
     p.add_argument("--out", type=Path, default=None, help="output directory (required unless --show-config)")
@@ -49,7 +53,10 @@ def add_parser(sub: argparse._SubParsersAction) -> argparse.ArgumentParser:
     p.add_argument("--brdf-dir", type=Path, action="append", default=[],
                    help="extra directory of MERL .binary / RGL .bsdf files (repeatable)")
     p.add_argument("--steps", type=int, default=None, help="override the number of steps")
-    p.add_argument("--max-minutes", type=float, default=None, help="stop (and save) after this long")
+    p.add_argument("--max-minutes", type=float, default=None,
+                   help="stop (and save) after this many minutes, at a step boundary (default: the "
+                        "config's max_minutes; where that is unset too, no time limit: the run ends "
+                        "after its last step)")
     p.add_argument("--seed", type=int, default=None, help="override the seed")
     p.add_argument("--device", choices=("cpu", "cuda", "auto"), default=None,
                    help="where the network trains (default: the config's, cpu); cuda: one GPU per "

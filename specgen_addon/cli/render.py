@@ -22,7 +22,7 @@ def add_parser(sub: argparse._SubParsersAction) -> argparse.ArgumentParser:
         "render-input", help="render a material's canonical sphere input image (EXR + PNG)",
         description="Render the image SpecGen consumes: a 128×128 sphere of MATERIAL under the "
                     "canonical lighting (studio map + D65 key light, exposure 0.5), written as a "
-                    "linear EXR and an 8-bit sRGB PNG beside it (see docs/renderer.md).")
+                    "linear EXR and an 8-bit sRGB PNG beside it (see docs/dev/renderer.md).")
     p.add_argument("material", metavar="MATERIAL",
                    help="BRDF file (MERL .binary, RGL .bsdf, SpecGen .npz), or a corpus material "
                         "name (e.g. mat0007) or index")

@@ -37,7 +37,10 @@ def add_parser(sub: argparse._SubParsersAction) -> argparse.ArgumentParser:
     p.add_argument("--retries", type=int, default=1,
                    help="extra attempts for an item that crashed or timed out (default 1); "
                         "a bad input is reported at once")
-    p.add_argument("--timeout", type=float, default=None, help="seconds allowed per item step")
+    p.add_argument("--timeout", type=float, default=None,
+                   help="seconds allowed for each step of an item (preparing a BRDF file, running "
+                        "batch.py); a step that runs longer is stopped and retried like a crash "
+                        "(--retries). Default: no time limit")
     p.add_argument("--dashboard-address", default="127.0.0.1:8787",
                    help="LocalCluster dashboard address (default 127.0.0.1:8787, this machine only; "
                         "give HOST:PORT or :PORT to open it to the network; :0 picks a free port)")

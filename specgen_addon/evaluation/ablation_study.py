@@ -1,14 +1,15 @@
 """Seeded ablation study (paper §4.4): AFF vs Hadamard fusion, joint vs spectral-only training.
 
-Each arm of :mod:`.ablation` is trained from scratch with several seeds at one equal step budget
-and scored, network alone, on the held-out mixed test split under the protocol's distant lights
-(the issue-11 measure: spectral PSNR in dB, first ``per_family`` test materials of each corpus
-family). An effect is the per-seed *paired* difference of two arms (the same seed gives both arms
-the same spectral batches), reported as mean ± sample standard deviation over seeds with its
-standard error; its sign is called only when the mean is at least ``sign_bar`` standard errors from
-zero (two by default; more for a study that has been looked at, and extended, before: Pocock's
-constant for the number of looks). A Wilcoxon signed-rank test and each arm's count of failed runs
-(scores under ``failure_below`` dB) are reported beside it and decide nothing.
+Each arm of :mod:`.ablation` is trained from scratch with several seeds at one equal step budget and
+scored, network alone, on the held-out mixed test split under the protocol's distant lights (the
+per-family measure of :func:`.trained_network.evaluate_families`: spectral PSNR in dB, first
+``per_family`` test materials of each corpus family). An effect is the per-seed *paired* difference
+of two arms (the same seed gives both arms the same spectral batches), reported as mean ± sample
+standard deviation over seeds with its standard error; its sign is called only when the mean is at
+least ``sign_bar`` standard errors from zero (two by default; more for a study that has been looked
+at, and extended, before: Pocock's constant for the number of looks). A Wilcoxon signed-rank test
+and each arm's count of failed runs (scores under ``failure_below`` dB) are reported beside it and
+decide nothing.
 
 Arms train in separate processes (one torch thread each), so ``workers`` arms run at once on as
 many cores. Trained arms and their scores are cached under ``cache_root()/ablation``: a rerun

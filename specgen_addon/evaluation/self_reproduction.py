@@ -1,4 +1,5 @@
-"""Self-reproduction and novel-lighting study of the refinement (issue: "the photo is the measurement").
+"""Self-reproduction and novel-lighting study of the refinement (principle: the photo is the
+measurement).
 
 For a material (a held-out corpus material, or a real RGL file) and an input lighting:
 

@@ -163,7 +163,7 @@ def evaluate_families(weights: str | Path | None = None, per_family: int = 4, en
     """PSNR/SSIM per family of the mixed test split, network alone (no refinement), each family
     with its self-reproduction (the photo is the measurement).
 
-    ``split``: ``"test"`` (held out: the figures the issue's targets are on), or ``"train"`` /
+    ``split``: ``"test"`` (held out: the figures docs/model-card.md's targets are on), or ``"train"`` /
     ``"val"`` for the same protocol on other materials, e.g. to tell how well the network fits the
     materials it was trained on from how well it generalises.
 

@@ -92,7 +92,7 @@ class PlaneGenerator(nn.Module):
         c_last = cfg.decoder_channels[-1]
         self.trunk = nn.Sequential(*ups, *conv_blocks(cfg.trunk_res_blocks, c_last))
         #: Finer trunk stages (``trunk_upsample_stages``): a sharp lobe or sheen rim a few plane
-        #: texels wide needs more than the 16-row trunk the heads resample (docs/model.md).
+        #: texels wide needs more than the 16-row trunk the heads resample (lab/notebook/capacity.md).
         self.refine = upsample_stages(cfg.trunk_upsample_stages, c_last)
         self.heads = nn.ModuleDict({
             name: nn.Sequential(nn.Conv2d(c_last, cfg.head_channels, 3, padding=1), nn.ReLU(inplace=True),

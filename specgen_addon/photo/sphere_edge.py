@@ -3,7 +3,8 @@
 A photographed or antialiased sphere's outline pixels are partly covered: each holds the sphere's
 colour weighted by the fraction of its area inside the disc. Counting them as whole pixels makes
 the sphere about half a pixel too large, and the network (trained on exactly framed spheres)
-loses several dB for a 1 % error in scale (docs/model.md, "Where the sphere sits").
+loses several dB for a 1 % error in scale (lab/notebook/resampled-network.md, "Where the sphere
+sits").
 
 :func:`refine_circle` measures that coverage. Per angular sector, the area the disc covers in a
 thin band across the outline is the sum of the band pixels' coverages, each the pixel's contrast

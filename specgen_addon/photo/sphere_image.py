@@ -679,7 +679,8 @@ def _resample_circle(rgb: np.ndarray, cx: float, cy: float, r: float, size: int)
 
     Only the square and a margin the filters reach are read, so a large photo costs little.
     (Replacing the outline pixels by the sphere's inside colour before resampling was measured and
-    cost the shipped network 0.4 dB more than leaving them mixed with the background; docs/model.md.)
+    cost the shipped network 0.4 dB more than leaving them mixed with the background;
+    lab/notebook/resampled-network.md.)
     """
     ndimage = _ndimage()
 

@@ -41,7 +41,7 @@ class EnvSampling:
     """Directions per pixel for each environment strategy (powers of two keep Sobol balanced).
 
     Defaults (112 directions per pixel) were chosen with ``bench/render_reference.py``; its
-    doubling-the-work figures are in docs/renderer.md.
+    doubling-the-work figures are in docs/dev/renderer.md.
     """
 
     n_env: int = 32

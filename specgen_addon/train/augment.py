@@ -3,8 +3,8 @@
 The corpus renders are framed exactly: the sphere's outline on the pixel grid, its outline pixels
 point-sampled. A user's sphere lies off the grid, and :mod:`specgen_addon.photo.sphere_image` finds it to
 a fraction of a pixel and resamples it; the resampling blurs the image a little and the outline
-pixels mix with the background. Measurements (lab/notebook) show what that costs a
-network trained on exact framing (docs/model.md, ``evaluate --input-shift``).
+pixels mix with the background. Measurements show what that costs a network trained on exact
+framing (docs/model-card.md, lab/notebook/resampled-network.md, ``evaluate --input-shift``).
 
 * :func:`jitter_framing` moves and scales the sphere by up to the old whole-pixel crop's error.
 * :func:`displaced_input` moves an image by a fraction of a pixel inside a black border (an

@@ -3,8 +3,9 @@
 A step's batch is a pure function of ``(seed, step)`` (:func:`.loop.make_step_batches`), so
 workers can make future steps while the network trains on the current one, and the run is the
 same, bit for bit, as one that makes each batch when it needs it. On a GPU the data is the bound
-(docs/scale.md: 10–160 ms of numpy against 22–46 ms of network per step on an H200), on two CPU
-cores the network is, and the default is no workers.
+(lab/notebook/gpu-training.md: 10–160 ms of numpy against 22–46 ms of network per step on an
+H200; docs/headless-and-scale.md, "Data workers"), on two CPU cores the network is, and the
+default is no workers.
 """
 
 from __future__ import annotations

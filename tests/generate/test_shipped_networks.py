@@ -52,7 +52,7 @@ def test_both_shipped_networks_have_their_graphs_and_fit_the_budget():
         assert w.is_file()
         assert all(p.is_file() for p in infer.onnx_paths(w))
     total = sum(p.stat().st_size for p in folder.iterdir() if p.is_file())
-    assert total <= 40e6, f"weights/ holds {total / 1e6:.1f} MB, over the issue's 40 MB"
+    assert total <= 40e6, f"weights/ holds {total / 1e6:.1f} MB, over the 40 MB budget"
 
 
 def test_generate_brdf_without_weights_uses_the_network_for_how_the_sphere_was_cut(canonical):

@@ -157,13 +157,13 @@ def test_every_shipped_config_file_passes_the_schema_and_builds_its_model(repo_d
         data = read_config_dict(path)   # bases merged, init_weights absolute
         init = data["train"].get("init_weights")
         if init and (repo_dir / "out").resolve() in Path(init).parents:
-            # a chained run (docs/model.md): it starts from an earlier run's output, absent from a
+            # a chained run (lab/README.md): it starts from an earlier run's output, absent from a
             # clean clone, so the shipped weights stand in for the rest of the checks
             data["train"]["init_weights"] = str(repo_dir / "weights" / "specgen_default.pt")
             path = tmp_path / path.name
             path.write_text(json.dumps(data))
         mcfg, _ = load_config(path)
-        assert count_parameters(SpecGen(mcfg)) <= 10_000_000, path.name   # the model budget
+        assert count_parameters(SpecGen(mcfg)) <= 10_000_000, path.name   # the 10 M-parameter model budget
 
 
 def _component_sets(n: int = 3):

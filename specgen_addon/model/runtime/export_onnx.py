@@ -18,7 +18,7 @@ not need the ``.pt`` file's pickle.
 Large weights that float16 holds exactly are stored as float16 and widened by a ``Cast`` at load
 time (:func:`store_weights_half`): the shipped ``.pt`` holds float16 weights already, so the graph
 computes with the same numbers in float32 at half the file size (two networks fit the repository's
-40 MB and the extension's 60 MiB; docs/model.md).
+40 MB and the extension's 60 MiB; docs/model-card.md, docs/blender.md).
 """
 
 from __future__ import annotations

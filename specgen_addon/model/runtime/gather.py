@@ -32,7 +32,8 @@ exact rewrites remove the remaining passes or shrink them:
 
 With numba installed (the command line's requirements), the logits, the gather with its ReLU and
 the output layer run as three compiled loops (:mod:`specgen_addon.model.runtime.gather_kernels`), about
-1.2–1.6× faster over the grid (docs/model.md); ``SPECGEN_KERNELS=torch`` keeps the torch ops.
+1.2–1.6× faster over the grid (lab/notebook/model-reference.md); ``SPECGEN_KERNELS=torch`` keeps the
+torch ops.
 
 Same output as :class:`~specgen_addon.model.runtime.fast.GridHead` to float rounding (tests/model/test_infer.py).
 """
