@@ -10,6 +10,7 @@ import bpy
 from bpy.props import StringProperty
 from bpy_extras.io_utils import ExportHelper
 
+from specgen_addon.brdf.formats.export import OUTPUT_SUFFIXES
 from specgen_addon.common.errors import SpecGenError
 
 from .reporting import report_exception
@@ -36,7 +37,7 @@ class SPECGEN_OT_export_brdf(bpy.types.Operator, ExportHelper):
     bl_label = "Export BRDF"
     bl_options = {"REGISTER"}
     filename_ext = ".bsdf"
-    filter_glob: StringProperty(default="*.bsdf;*.binary;*.npz", options={"HIDDEN"})
+    filter_glob: StringProperty(default=";".join(f"*{s}" for s in OUTPUT_SUFFIXES), options={"HIDDEN"})
 
     @classmethod
     def poll(cls, context):

@@ -4,6 +4,8 @@ from __future__ import annotations
 
 import bpy
 
+from specgen_addon.generate.models import MODELS
+
 from .photo_panel import draw_photo
 
 
@@ -33,7 +35,7 @@ class SPECGEN_PT_main(bpy.types.Panel):
         draw_photo(layout, s.photo)
         col = layout.column(heading="BRDF")
         col.prop(s, "model")
-        if s.model == "network":
+        if MODELS[s.model].refines:
             col.prop(s, "refine")
 
         col = layout.column(heading="Spectrum", align=True)

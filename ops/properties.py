@@ -10,6 +10,7 @@ from bpy.props import (BoolProperty, EnumProperty, FloatProperty, IntProperty, P
                        StringProperty)
 
 from specgen_addon.bake.lookup import DEFAULT_TOLERANCE
+from specgen_addon.generate.models import DEFAULT_MODEL, MODELS
 from specgen_addon.spectral.spectra import DEFAULT_BAND_COUNT, DEFAULT_RANGE_NM
 from .photo_properties import CLASSES as PHOTO_CLASSES
 from .photo_properties import SpecGenPhotoSettings
@@ -87,10 +88,9 @@ class SpecGenSettings(bpy.types.PropertyGroup):
                                 "denoising (this render only; the scene keeps its settings)")
     estimate: StringProperty(name="Estimate", default="", options={"HIDDEN"},
                              description="The last time estimate of a Full Scene render")
-    model: EnumProperty(name="Model", default="network",
-                        items=[("network", "SpecGen Network", "The network's BRDF (then refined to the photo)"),
-                               ("thin-film", "Thin-Film Fit", "Fit an interference film (soap, oil, "
-                                "anodised metal) to the photo: its colour changes with angle")],
+    model: EnumProperty(name="Model", default=DEFAULT_MODEL,
+                        items=[(name, c.label, c.description[0].upper() + c.description[1:])
+                               for name, c in MODELS.items()],
                         description="What makes the BRDF from the photo")
     refine: BoolProperty(name="Refine to Photo", default=True,
                          description="Refine the network's BRDF so that, rendered under the input "

@@ -11,6 +11,7 @@ from specgen_addon.common.limits import check_number
 from specgen_addon.common.progress import progress_bar
 from specgen_addon.spectral.spectra import DEFAULT_BAND_COUNT, DEFAULT_RANGE_NM, wavelength_grid
 from specgen_addon.common.cache import cache_root
+from specgen_addon.corpus.families import FAMILY_NAMES
 from specgen_addon.corpus.generate import FAMILY_MIX, check_mix, generate_mixed_corpus, material_family
 
 MANIFEST_NAME = "manifest.json"
@@ -33,7 +34,7 @@ def add_parser(sub: argparse._SubParsersAction) -> argparse.ArgumentParser:
                    help="family mix: 'classic' (default: classic materials only, i.e. plastics and metals, "
                         "some clear-coated; docs/dev/corpus.md), 'default' (the training "
                         "mix of configs/default.json), or NAME=WEIGHT,... over "
-                        "classic, tinted_coat, car_paint, thin_film, sheen, lobes")
+                        f"{', '.join(FAMILY_NAMES)}")
     p.add_argument("--inputs", action="store_true",
                    help="also render the train/val materials' training-input lighting components into "
                         "the cache (resumable: only missing renders are made)")

@@ -16,6 +16,7 @@ from specgen_addon.cli.photo_args import (
 )
 from specgen_addon.common.errors import OutputExistsError, SpecGenError
 from specgen_addon.common.progress import progress_bar
+from specgen_addon.corpus.generate import FAMILY_MIX
 from specgen_addon.brdf.formats.export import check_output, write_output
 from specgen_addon.common.atomic_io import atomic_write
 from specgen_addon.common.cache import cache_root
@@ -120,8 +121,8 @@ def add_parser(sub: argparse._SubParsersAction) -> argparse.ArgumentParser:
                         "does, each pixel the mean over its area (rendered at 4× and box-filtered; "
                         "--input-shift then moves it by quarter pixels)")
     p.add_argument("--family", action="append", default=None, metavar="NAME",
-                   help="with --families: score only this corpus family (classic, tinted_coat, car_paint, "
-                        "thin_film, sheen, lobes; repeat for several); the real RGL files are then skipped")
+                   help="with --families: score only this family of the default training mix "
+                        f"({', '.join(FAMILY_MIX)}; repeat for several); the real RGL files are then skipped")
     p.add_argument("--family-split", choices=("test", "train", "val"), default="test",
                    help="with --families: the corpus split to score (default test, the held-out one; "
                         "train scores the same protocol on materials the network was trained on, and "

@@ -20,6 +20,7 @@ from pathlib import Path
 
 from specgen_addon.brdf.formats.export import size_text
 from specgen_addon.common.errors import OutputExistsError, SpecGenError
+from specgen_addon.generate.models import DEFAULT_MODEL, MODELS
 from specgen_addon.common.limits import check_input_file, check_output_file
 from specgen_addon.photo.image_checks import check_image_header
 from specgen_addon.photo.light_estimate import estimated_lighting as estimate
@@ -60,10 +61,9 @@ def add_photo_arguments(p: argparse.ArgumentParser) -> None:
     g = p.add_argument_group("photo consistency",
                              "the lighting the photo was taken under, and the refinement that makes "
                              "the BRDF reproduce the photo under it")
-    g.add_argument("--model", choices=("network", "thin-film"), default="network",
-                   help="what makes the BRDF: 'network' (SpecGen, then refinement; default) or "
-                        "'thin-film': fit the thin-film interference family (soap, oil, anodised "
-                        "metal) to the photo, for a colour that changes with angle")
+    g.add_argument("--model", choices=tuple(MODELS), default=DEFAULT_MODEL,
+                   help="what makes the BRDF (default %(default)s): " + "; ".join(
+                       f"'{name}': {choice.description}" for name, choice in MODELS.items()))
     g.add_argument("--refine", action=argparse.BooleanOptionalAction, default=True,
                    help="refine the network's BRDF so it reproduces the photo (default: on)")
     g.add_argument("--latent-fit", action="store_true",

@@ -24,7 +24,7 @@ from specgen_addon.brdf.formats import load_brdf
 from specgen_addon.common.errors import SpecGenError
 from specgen_addon.corpus import generate_corpus
 from specgen_addon.corpus.families import FAMILY_NAMES
-from specgen_addon.corpus.generate import generate_mixed_corpus, material_family
+from specgen_addon.corpus.generate import FAMILY_MIX, generate_mixed_corpus, material_family
 from specgen_addon.corpus.spectra_sources import SPLITS
 from specgen_addon.evaluation.protocol import (CORPUS_SEED, CORPUS_SIZE, DISTANT_LIGHTS, WAVELENGTHS_NM,
                                                input_lighting_under, input_under_environment)
@@ -128,7 +128,13 @@ def mixed_split_materials(per_family: int, families: list[str] | None = None, sp
     ``val``, figures reported on ``test``)."""
     if split not in SPLITS:
         raise SpecGenError(f"unknown split {split!r} (choose from {', '.join(SPLITS)})")
-    wanted = list(FAMILY_NAMES if families is None else families)
+    wanted = list(FAMILY_MIX if families is None else families)
+    for family in wanted:   # the mixed corpus draws only the default mix's families
+        if family not in FAMILY_MIX:
+            raise SpecGenError(
+                f"family {family!r} is not in the default training mix ({', '.join(FAMILY_MIX)}), so the "
+                "mixed corpus holds none of it to score" if family in FAMILY_NAMES else
+                f"unknown family {family!r} (choose from {', '.join(FAMILY_MIX)})")
     out, count = [], {f: 0 for f in wanted}
     for m in generate_mixed_corpus(MIXED_CORPUS_SIZE, MIXED_CORPUS_SEED):
         f = material_family(m)

@@ -47,6 +47,7 @@ from specgen_addon.model.checksums import DamagedWeightsError
 from specgen_addon.model.runtime.inference import generate_brdf, sphere_crop
 from specgen_addon.photo.photo_lighting import InputLighting
 from specgen_addon.photo.sphere_image import PhotoSource, SphereCrop
+from specgen_addon.generate.models import MODELS
 from specgen_addon.render import sphere_geometry
 from specgen_addon.render.photo_reproduction import reproduction
 from specgen_addon.spectral.spectra import DEFAULT_WAVELENGTHS_NM
@@ -56,8 +57,6 @@ CancelFn = Callable[[], bool]
 
 #: Share of the progress bar taken by the network when refinement (and no latent fit) follows.
 NETWORK_SHARE = 0.45
-#: What generates the table: the network (then refinement), or the thin-film family's fit.
-MODELS = ("network", "thin-film")
 #: Generate's network evaluates bands at most this far apart (nm) and interpolates the others
 #: linearly in λ (:func:`specgen_addon.model.runtime.inference.network_bands`): every other band
 #: of the default 20 nm grid, about 40 % of the network's time saved, the table within 1 % rms of

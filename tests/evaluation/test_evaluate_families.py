@@ -39,6 +39,18 @@ def test_unknown_split_is_refused_before_the_corpus_is_drawn():
 
 
 @pytest.mark.slow
+def test_a_family_outside_the_training_mix_is_refused_not_scored_as_empty(monkeypatch):
+    """A family registered but not in the default mix has no material in the mixed corpus: asking
+    to score it says so in one sentence (it used to print an empty table and exit 0)."""
+    from specgen_addon.evaluation import trained_network
+
+    monkeypatch.setattr(trained_network, "FAMILY_NAMES", trained_network.FAMILY_NAMES + ("lambert_const",))
+    with pytest.raises(SpecGenError, match="'lambert_const' is not in the default training mix"):
+        mixed_split_materials(1, ["lambert_const"], "test")
+    with pytest.raises(SpecGenError, match="unknown family 'bogus'"):
+        mixed_split_materials(1, ["bogus"], "test")
+
+
 def test_family_rows_average_to_the_family_means(shared_dir):
     rgl = shared_dir / "data" / "rgl" if shared_dir is not None else None
     res = evaluate_families(per_family=1, envs=False, resolution=24, families=["sheen"], rgl_dir=rgl)

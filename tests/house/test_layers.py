@@ -53,7 +53,19 @@ def _imports(path: Path) -> list[tuple[int, str]]:
                 base = ".".join(package[:len(package) - node.level + 1] + ([base] if base else []))
             out.append((node.lineno, base))
             out += [(node.lineno, f"{base}.{a.name}") for a in node.names if a.name != "*"]
+        elif _imports_by_name(node):    # importlib.import_module("a.b"), __import__("a.b"): imports too
+            out.append((node.lineno, node.args[0].value))
     return out
+
+
+def _imports_by_name(node: ast.AST) -> bool:
+    """Whether ``node`` is a call importing a module named by a string literal."""
+    if not (isinstance(node, ast.Call) and node.args and isinstance(node.args[0], ast.Constant)
+            and isinstance(node.args[0].value, str)):
+        return False
+    f = node.func
+    name = f.attr if isinstance(f, ast.Attribute) else f.id if isinstance(f, ast.Name) else ""
+    return name in ("import_module", "__import__")
 
 
 def _layer(module: str) -> str | None:
@@ -99,6 +111,17 @@ def test_known_upward_imports_still_exist():
 def test_the_core_never_imports_the_blender_tier_or_the_lab():
     bad = [f"{p.relative_to(REPO)}:{line} {m}" for p in _modules() for line, m in _imports(p)
            if m.split(".")[0] in ("ops", "batch", "lab", "bench", "tests")]
+    assert not bad, bad
+
+
+def test_the_blender_tier_stands_beside_the_commands_and_never_imports_the_lab():
+    """``ops/`` sits beside ``cli/`` (both above ``scale``), so it takes nothing from the commands;
+    no product entry (``ops/``, ``batch.py``, the extension's ``__init__.py``) imports ``lab/``,
+    ``bench/`` or the tests, by statement or by name (``import_module("…")``)."""
+    entries = [REPO / "batch.py", REPO / "__init__.py", *sorted((REPO / "ops").rglob("*.py"))]
+    bad = [f"{p.relative_to(REPO)}:{line} {m}" for p in entries for line, m in _imports(p)
+           if m.split(".")[0] in ("lab", "bench", "tests")
+           or (p.relative_to(REPO).parts[0] == "ops" and m.startswith("specgen_addon.cli"))]
     assert not bad, bad
 
 
