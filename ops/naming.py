@@ -11,7 +11,13 @@ Each Generate makes one *set*, found from its stem ``<stem>`` (e.g. ``sphere``, 
   (the scene's world, lit like this scene) and ``<stem>_circle.png`` (the circle preview).
 
 With *Replace Materials* off a new Generate never reuses a stem that has a material, a node group
-or files; with it on, the stem of the input is reused and its set replaced.
+or files; with it on, the stem of the input is reused and its set replaced when the set is this
+.blend's own (its material here names those files) or there is none, and never when the files in
+the folder are another .blend's (two .blend files beside each other share ``//specgen/``).
+
+Stems are safe on every system Blender runs on: ASCII (accents dropped, ``Kugel Öl`` →
+``Kugel_Ol``), never a Windows device name (``con`` → ``con_``), and told apart from existing files
+without regard to case (``Sphere`` and ``sphere`` are one file on Windows and macOS).
 
 A spectral render is named after the scene, the camera and the frame
 (:func:`render_output_name`, ``Scene_Camera_f0001.exr``); *Replace Outputs* decides whether an
@@ -21,11 +27,15 @@ existing one may be replaced.
 from __future__ import annotations
 
 import re
+import unicodedata
 from pathlib import Path
 from typing import Callable, Iterable
 
 PREFIX = "SpecGen"
 MAX_STEM = 48
+#: Names Windows keeps for devices, whatever the extension (``con.npz`` cannot be a file there).
+WINDOWS_DEVICES = frozenset({"CON", "PRN", "AUX", "NUL", *(f"COM{i}" for i in range(1, 10)),
+                             *(f"LPT{i}" for i in range(1, 10))})
 
 
 def clean_stem(raw: str) -> str:
@@ -34,8 +44,12 @@ def clean_stem(raw: str) -> str:
 
 
 def clean_name(raw: str, fallback: str) -> str:
-    """A file-safe version of a datablock name (``"cam.001"`` → ``cam_001``), ``fallback`` if empty."""
-    return re.sub(r"[^A-Za-z0-9_\-]+", "_", raw).strip("_")[:MAX_STEM] or fallback
+    """A file-safe version of a datablock name (``"cam.001"`` → ``cam_001``), ``fallback`` if empty:
+    accents dropped (``Ö`` → ``O``), other characters but letters, digits, ``_`` and ``-`` made ``_``,
+    and a Windows device name given a trailing ``_``."""
+    ascii_ = unicodedata.normalize("NFKD", raw).encode("ascii", "ignore").decode("ascii")
+    name = re.sub(r"[^A-Za-z0-9_\-]+", "_", ascii_).strip("_")[:MAX_STEM] or fallback
+    return f"{name}_" if name.upper() in WINDOWS_DEVICES else name
 
 
 def material_name(stem: str) -> str:
@@ -76,13 +90,15 @@ def circle_png(out_dir: str | Path, stem: str) -> Path:
 
 
 def files_of(out_dir: str | Path, stem: str) -> list[Path]:
-    """Existing files of the set ``stem`` in ``out_dir``."""
+    """Existing files of the set ``stem`` in ``out_dir``, named in any case (one file on Windows
+    and macOS)."""
     out = Path(out_dir)
     if not out.is_dir():
         return []
-    return sorted(p for p in out.iterdir() if p.name.startswith(f"{stem}_lookup")
-                  or p.name in (f"{stem}_preview.png", f"{stem}.npz", f"{stem}_probe.exr",
-                                f"{stem}_scene_env.exr", f"{stem}_circle.png"))
+    key = stem.casefold()
+    names = {f"{key}{end}" for end in ("_preview.png", ".npz", "_probe.exr", "_scene_env.exr", "_circle.png")}
+    return sorted(p for p in out.iterdir()
+                  if p.name.casefold().startswith(f"{key}_lookup") or p.name.casefold() in names)
 
 
 def unique_stem(base: str, taken: Callable[[str], bool]) -> str:
@@ -97,15 +113,18 @@ def unique_stem(base: str, taken: Callable[[str], bool]) -> str:
 
 
 def stem_for_generate(source: str, out_dir: str | Path, overwrite: bool,
-                      material_names: Iterable[str], group_names: Iterable[str] = ()) -> str:
-    """The stem a Generate of ``source`` uses: the input's own with Replace Materials on, else the
-    first whose material, node group and files do not exist yet."""
+                      material_names: Iterable[str], group_names: Iterable[str] = (),
+                      owned: Callable[[str], bool] = lambda stem: False) -> str:
+    """The stem a Generate of ``source`` uses: with Replace Materials on, the input's own when its
+    files in ``out_dir`` are this .blend's (``owned(stem)``: a material here names them) or there
+    are none; else the first whose material, node group and files do not exist yet."""
     base = clean_stem(source)
-    if overwrite:
+    if overwrite and (owned(base) or not files_of(out_dir, base)):
         return base
-    materials, groups = set(material_names), set(group_names)
-    return unique_stem(base, lambda s: material_name(s) in materials or group_name(s) in groups
-                       or bool(files_of(out_dir, s)))
+    materials = {m.casefold() for m in material_names}
+    groups = {g.casefold() for g in group_names}
+    return unique_stem(base, lambda s: material_name(s).casefold() in materials
+                       or group_name(s).casefold() in groups or bool(files_of(out_dir, s)))
 
 
 def render_output_name(scene: str, camera: str | None, frame: int) -> str:

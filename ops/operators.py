@@ -34,7 +34,7 @@ from .photo_inputs import balanced_to_the_light, balances_to_the_light, lighting
 from .properties import output_dir
 from .render_settings import PREVIEW_PERCENT, PREVIEW_SAMPLES, band_render
 from .scene_lighting import ball_position
-from .travel import load_image, scene_atlas_json
+from .travel import load_image, owns_set, scene_atlas_json
 from .reporting import check_generate_settings, check_render_settings, report_exception
 
 TIMER_STEP_S = 0.1
@@ -177,7 +177,8 @@ class SPECGEN_OT_generate_brdf(_Modal, bpy.types.Operator):
         source = s.image.name if s.image is not None else bpy.path.basename(s.image_path)
         self._stem = naming.stem_for_generate(source, out, s.overwrite,
                                               [m.name for m in bpy.data.materials],
-                                              [g.name for g in bpy.data.node_groups])
+                                              [g.name for g in bpy.data.node_groups],
+                                              owned=lambda stem: owns_set(out, stem))
         self._out = out
         self._lighting = lighting_job(s.photo, context.scene, out, self._stem, s.overwrite,
                                       ball_position(context))

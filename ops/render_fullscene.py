@@ -32,7 +32,7 @@ from specgen_addon.bake import scene_uplift as uplift
 from specgen_addon.common.errors import SpecGenError
 from .exact_direct import (DirectOnlySettings, compose, exact_direct_steps, has_specgen, report_fit,
                            world_light)
-from .render import RenderJobOutputs, SavedAttributes
+from .render import RenderJobOutputs, SavedAttributes, specgen_materials
 from .render_settings import band_render
 from .result_view import preview_transform, show_result
 from .scene_convert import SceneConversion
@@ -128,6 +128,21 @@ class FullSceneRenderJob(RenderJobOutputs):
         if self.scene.camera is None:
             raise SpecGenError(f"scene {self.scene.name!r} has no camera")
         _render_layer(self.scene)
+        if self.exact_direct:
+            self._check_lookups()
+
+    def _check_lookups(self) -> None:
+        """The scene's SpecGen materials' lookups, as the exact render checks them: missing ones
+        baked again from the compact material (beside them or packed); still missing, or another
+        Generate's, the render refuses in the same sentence rather than show the stand-in alone."""
+        from .travel import missing_lookups, replaced_lookups, restore_missing
+
+        mats = [m for m in specgen_materials(self.scene) if "specgen_atlas_groups" in m]
+        for note in restore_missing(mats):
+            self.warn(f"SpecGen: {note}")
+        wrong = missing_lookups(mats) or replaced_lookups(mats)
+        if wrong:
+            raise SpecGenError(wrong[0])
 
     def steps(self) -> Iterator[float]:
         """Generator: convert the scene, one Cycles render per band group, restore, write."""
@@ -180,6 +195,7 @@ class FullSceneRenderJob(RenderJobOutputs):
             if exact_light is not None:
                 closure_light = uplift.unpack_groups(np.stack(direct)[..., :3], wl.size)
                 self.spectral = compose(self.spectral, closure_light, exact_light)
+            exact = exact_light is not None
             yield 0.95
         from specgen_addon.render.spectral_exr import (linear_srgb_preview, write_preview_png,
                                                 write_spectral_exr)
@@ -193,6 +209,8 @@ class FullSceneRenderJob(RenderJobOutputs):
                      "specgenPreviewTransform": "RGB = CIE 1931 2deg projection, D65 white, linear "
                                                 f"sRGB (Blender's scene linear); PNG: {shown}",
                      "specgenSamples": str(self.scene.cycles.samples),
+                     # whether SpecGen surfaces' direct light is the exact lookups' or the closures'
+                     "specgenExactDirect": "yes" if exact else "no",
                      **{k: str(v) for k, v in self.attributes.items()}}
             write_spectral_exr(outs[0], self.spectral, wl, overwrite=self.overwrite, rgb=rgb,
                                attributes=attrs, alpha=self.alpha)

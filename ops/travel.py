@@ -103,15 +103,32 @@ def _in_unsaved_folder(path: str) -> bool:
         return False
 
 
-def _move_set(mat, old_dir: Path, new_dir: Path) -> None:
-    """Move the material's set of files (:func:`ops.naming.files_of`) from ``old_dir`` to ``new_dir``."""
+def _move_set(mat, old_dir: Path, new_dir: Path) -> dict[str, str]:
+    """Move the material's set of files (:func:`ops.naming.files_of`) from ``old_dir`` to
+    ``new_dir``, all or none; where ``new_dir`` holds a set of the same stem (another .blend's),
+    under the first free stem (``sphere.001``). Gives old → new absolute path of each file."""
+    from specgen_addon.bake import lookup as bake
+
     stem = Path(str(mat["specgen_atlas"])).name.removesuffix("_lookup.exr")
+    new_stem = naming.unique_stem(stem, lambda s: bool(naming.files_of(new_dir, s)))
+    moves = [(f, new_dir / f"{new_stem}{f.name[len(stem):]}") for f in naming.files_of(old_dir, stem)]
+    taken = next((t for _, t in moves if t.exists()), None)
+    if taken is not None:
+        raise OSError(f"{taken} already exists")
     new_dir.mkdir(parents=True, exist_ok=True)
-    for f in naming.files_of(old_dir, stem):
-        target = new_dir / f.name
-        if target.exists():
-            raise OSError(f"{target} already exists")
-        shutil.move(str(f), str(target))
+    done: list[tuple[Path, Path]] = []
+    try:
+        for f, target in moves:
+            shutil.move(str(f), str(target))
+            done.append((f, target))
+        described = naming.lookup_json(new_dir, new_stem)
+        if described.is_file():        # the description names its textures where they now are
+            bake.set_atlas_path(described, new_dir / f"{new_stem}_lookup.exr")
+    except (OSError, SpecGenError):
+        for f, target in reversed(done):   # all or none: a half-moved set is a broken material
+            shutil.move(str(target), str(f))
+        raise
+    return {os.path.normpath(str(f)): str(t) for f, t in moves}
 
 
 def relocate(blend_path: str) -> list[str]:
@@ -119,34 +136,43 @@ def relocate(blend_path: str) -> list[str]:
     from .render import script_node
 
     blend_dir = os.path.dirname(os.path.abspath(blend_path))
+    # Blender rebases a datablock's relative path from the folder the file was in to the new one
+    # as it writes (Save As elsewhere): such paths are set relative to the old folder here;
+    # custom properties are not rebased, so they are set relative to the new one
+    datablock_dir = os.path.dirname(bpy.data.filepath) if bpy.data.filepath else blend_dir
     warnings = []
-    moved: dict[str, str] = {}        # old → new absolute folder of the sets moved out of the temporary one
+    moved: dict[str, str] = {}        # old → new absolute path of each file moved out of the temporary folder
     for mat in _specgen_materials():
         groups = [_absolute(p) for p in mat["specgen_atlas_groups"]]
         atlas = _absolute(str(mat["specgen_atlas"]))
         if groups and _in_unsaved_folder(groups[0]):
             old_dir, new_dir = Path(groups[0]).parent, Path(blend_dir) / FOLDER
+            stem = Path(atlas).name.removesuffix("_lookup.exr")
             try:
-                _move_set(mat, old_dir, new_dir)
-            except OSError as exc:
+                renamed = _move_set(mat, old_dir, new_dir)
+            except (OSError, SpecGenError) as exc:
                 warnings.append(f"SpecGen: the lookups of {mat.name!r} stay in {old_dir} ({exc})")
             else:
-                groups = [str(new_dir / Path(p).name) for p in groups]
-                atlas = str(new_dir / Path(atlas).name)
-                moved[os.path.normpath(str(old_dir))] = str(new_dir)
+                moved.update(renamed)
+                groups = [renamed.get(os.path.normpath(p), p) for p in groups]
+                atlas = str(Path(groups[0]).parent / f"{Path(groups[0]).name.split('_lookup.g')[0]}_lookup.exr")
+                new_stem = Path(atlas).name.removesuffix("_lookup.exr")
+                if new_stem != stem:
+                    warnings.append(f"SpecGen: the lookups of {mat.name!r} are saved as {new_stem}_… in "
+                                    f"{new_dir}: the set named {stem} there is another .blend's")
                 for img in bpy.data.images:   # the preview went with them
-                    if img.filepath and _in_unsaved_folder(bpy.path.abspath(img.filepath)) \
-                            and (new_dir / Path(img.filepath).name).is_file():
-                        img.filepath = _relative(str(new_dir / Path(img.filepath).name), blend_dir)
+                    where = os.path.normpath(bpy.path.abspath(img.filepath)) if img.filepath else ""
+                    if where in renamed:
+                        img.filepath = _relative(renamed[where], datablock_dir)
         mat["specgen_atlas_groups"] = [_relative(p, blend_dir) for p in groups]
         mat["specgen_atlas"] = _relative(atlas, blend_dir)
         preview = bpy.data.images.get(str(mat.get("specgen_preview", "")))
         if preview is not None and preview.filepath and not preview.filepath.startswith("//"):
-            preview.filepath = _relative(preview.filepath, blend_dir)   # as the lookups: moves with the .blend
+            preview.filepath = _relative(preview.filepath, datablock_dir)   # as the lookups: moves with the .blend
         img = packed_image(mat)
         if img is not None:   # Unpack Resources writes it where it is looked for
             stem = Path(atlas).name.removesuffix("_lookup.exr")
-            img.filepath_raw = _relative(str(Path(atlas).parent / f"{stem}.npz"), blend_dir)
+            img.filepath_raw = _relative(str(Path(atlas).parent / f"{stem}.npz"), datablock_dir)
         node = script_node(mat)
         if node is not None and node.inputs["Atlas"].default_value:
             node.inputs["Atlas"].default_value = groups[0]
@@ -154,8 +180,7 @@ def relocate(blend_path: str) -> list[str]:
         s = getattr(scene, "specgen", None)
         if s is not None and s.atlas_json:
             path = scene_atlas_json(s)
-            path = os.path.join(moved.get(os.path.dirname(path), os.path.dirname(path)), os.path.basename(path))
-            s.atlas_json = _relative(path, blend_dir)
+            s.atlas_json = _relative(moved.get(os.path.normpath(path), path), blend_dir)
     return warnings
 
 
@@ -174,6 +199,16 @@ def missing_lookups(materials=None) -> list[str]:
             out.append(f"material {mat.name!r}: baked lookup {gone[0]} is missing "
                        f"(move the {FOLDER}/ folder with the .blend, or Generate again)")
     return out
+
+
+def owns_set(out_dir: str, stem: str) -> bool:
+    """Whether the set ``stem`` in ``out_dir`` is this .blend's: its material here names those
+    lookups (another .blend beside this one may hold a set of the same stem in ``//specgen/``)."""
+    mat = bpy.data.materials.get(naming.material_name(stem))
+    if mat is None or "specgen_atlas" not in mat:
+        return False
+    here = os.path.normcase(os.path.normpath(_absolute(str(mat["specgen_atlas"]))))
+    return here == os.path.normcase(os.path.normpath(os.path.join(out_dir, f"{stem}_lookup.exr")))
 
 
 def replaced_lookups(materials=None) -> list[str]:
@@ -254,7 +289,12 @@ def _restore_packed(mat, source: Path) -> Path | None:
     if img is None:
         return None
     data = bytes(img.packed_file.data)
-    for folder in (source.parent, Path(tempfile.gettempdir()) / FOLDER):
+    # where the material says, if that folder is there; else beside this .blend (a file copied
+    # alone); else the temporary folder (an unsaved file, or a folder that cannot be written)
+    folders = [source.parent] if source.parent.is_dir() else []
+    if bpy.data.filepath:
+        folders.append(Path(os.path.dirname(bpy.data.filepath)) / FOLDER)
+    for folder in folders + [Path(tempfile.gettempdir()) / FOLDER]:
         try:
             folder.mkdir(parents=True, exist_ok=True)
             with atomic_write(folder / source.name, overwrite=True) as tmp:

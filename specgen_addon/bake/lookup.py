@@ -40,7 +40,7 @@ import functools
 import os
 from concurrent.futures import ThreadPoolExecutor
 from dataclasses import dataclass, field
-from pathlib import Path
+from pathlib import Path, PureWindowsPath
 from typing import Callable
 
 import numpy as np
@@ -487,6 +487,21 @@ def save_atlas_info(info: AtlasInfo, path: str | os.PathLike) -> Path:
     return Path(path)
 
 
+def set_atlas_path(path: str | os.PathLike, atlas: str | os.PathLike) -> None:
+    """Point :func:`save_atlas_info`'s JSON at ``path`` to the textures of ``atlas`` (its files
+    moved, or renamed with their set)."""
+    import json
+
+    path = Path(path)
+    try:
+        data = json.loads(path.read_text())
+        data["path"] = str(atlas)
+    except (OSError, ValueError, TypeError) as exc:
+        raise SpecGenError(f"{path}: cannot read the baked lookup description ({exc})") from None
+    with atomic_write(path, overwrite=True) as tmp:
+        tmp.write_text(json.dumps(data))
+
+
 def load_atlas_info(path: str | os.PathLike) -> AtlasInfo:
     """Read :func:`save_atlas_info`'s JSON; SpecGenError if missing, corrupt or incomplete.
 
@@ -510,7 +525,9 @@ def load_atlas_info(path: str | os.PathLike) -> AtlasInfo:
     except (OSError, ValueError, KeyError, TypeError, SpecGenError) as exc:
         raise SpecGenError(f"{path}: cannot read the baked lookup description ({exc})") from None
     if not all(p.is_file() for p in info.group_paths):
-        beside = path.parent / info.path.name       # the folder moved: the textures came with it
+        # the folder moved (the textures came with it), perhaps from another system: a Windows
+        # path's name is found whichever separator the stored path uses
+        beside = path.parent / PureWindowsPath(data["path"]).name
         if all(p.is_file() for p in group_paths_of(beside, info.n_renders)):
             info.path = beside
     missing = [str(p) for p in info.group_paths if not p.is_file()]

@@ -90,7 +90,10 @@ def test_atlas_description_keeps_the_closure_fit(rich_table, tmp_path):
 
 def test_an_atlas_moved_with_its_folder_is_read_from_beside_its_description(rich_table, tmp_path):
     """The description holds the absolute path it was baked at; moved (a .blend's folder taken to
-    another machine), the textures beside it are the atlas; gone from both, a clear sentence."""
+    another machine, a Windows one included), the textures beside it are the atlas; gone from
+    both, a clear sentence."""
+    import json
+
     info = bake.bake_atlas(rich_table, tmp_path / "baked" / "a_lookup.exr")
     bake.save_atlas_info(info, tmp_path / "baked" / "a_lookup.json")
     slots = bake.read_atlas(info)
@@ -98,6 +101,10 @@ def test_an_atlas_moved_with_its_folder_is_read_from_beside_its_description(rich
     back = bake.load_atlas_info(tmp_path / "moved" / "a_lookup.json")
     assert back.path == tmp_path / "moved" / "a_lookup.exr"
     np.testing.assert_array_equal(bake.read_atlas(back), slots)
+    described = json.loads((tmp_path / "moved" / "a_lookup.json").read_text())
+    described["path"] = r"C:\Users\me\Projekt\specgen\a_lookup.exr"     # baked on Windows
+    (tmp_path / "moved" / "a_lookup.json").write_text(json.dumps(described))
+    assert bake.load_atlas_info(tmp_path / "moved" / "a_lookup.json").path == tmp_path / "moved" / "a_lookup.exr"
     back.group_paths[-1].unlink()
     with pytest.raises(bake.SpecGenError, match="baked lookup textures are missing"):
         bake.load_atlas_info(tmp_path / "moved" / "a_lookup.json")

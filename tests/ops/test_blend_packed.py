@@ -5,6 +5,7 @@ renders the same spectral stack (headless, bpy module)."""
 from __future__ import annotations
 
 import shutil
+from pathlib import Path
 
 import numpy as np
 import pytest
@@ -25,13 +26,18 @@ def _table():
     return small_table(albedo=(0.6, 0.3, 0.1), alpha=0.25, gloss=0.2)
 
 
+def _project(tmp_path):
+    """An empty file, and the folder ``project/specgen/`` its material's lookups will be in."""
+    project = tmp_path / "project"
+    (project / "specgen").mkdir(parents=True)
+    bpy.ops.wm.read_factory_settings(use_empty=True)
+    return project, project / "specgen"
+
+
 @pytest.mark.slow
 @pytest.mark.blender
 def test_a_packed_blend_copied_alone_rebuilds_its_lookups_and_renders_the_same(tmp_path):
-    project = tmp_path / "project"
-    lookups = project / "specgen"
-    lookups.mkdir(parents=True)
-    bpy.ops.wm.read_factory_settings(use_empty=True)
+    project, lookups = _project(tmp_path)
     PKG.register()
     try:
         sc = bpy.context.scene
@@ -101,3 +107,36 @@ def test_a_render_bakes_lookups_deleted_after_opening_again_from_the_packed_copy
         assert 10 * np.log10(before.max() ** 2 / np.mean((after - before) ** 2)) >= 60.0
     finally:
         PKG.unregister()
+
+
+@pytest.mark.slow
+@pytest.mark.blender
+def test_save_as_elsewhere_keeps_the_packed_path_and_a_copy_rebuilds_beside_itself(tmp_path):
+    """Blender rebases a datablock's relative path on Save As into another folder: the packed
+    copy's path still names the set's compact file, and the new .blend copied alone bakes its
+    lookups again into ``specgen/`` beside itself, not into a folder outside it."""
+    project, lookups = _project(tmp_path)
+    PKG.register()
+    try:
+        mat, before = sphere_scene_with_material(lookups, "ball", _table())
+        assert bpy.ops.specgen.pack_materials() == {"FINISHED"}
+        bpy.ops.wm.save_as_mainfile(filepath=str(project / "scene.blend"))
+        saved_as = tmp_path / "other" / "new.blend"
+        saved_as.parent.mkdir()
+        bpy.ops.wm.save_as_mainfile(filepath=str(saved_as))
+        img = travel.packed_image(mat)
+        assert Path(bpy.path.abspath(img.filepath)).resolve() == lookups / "ball.npz", img.filepath
+        assert Path(travel.atlas_groups(mat)[0]).resolve().parent == lookups
+    finally:
+        PKG.unregister()
+
+    alone = tmp_path / "far" / "a" / "b"
+    alone.mkdir(parents=True)
+    shutil.copy2(saved_as, alone / "new.blend")
+    out = _reopen(alone / "new.blend", tmp_path / "after.npy")
+    assert "RENDERED" in out, out
+    assert sorted(p.name for p in (alone / "specgen").iterdir()) == sorted(p.name for p in lookups.iterdir())
+    assert sorted(p.relative_to(tmp_path / "far").as_posix() for p in (tmp_path / "far").rglob("*.npz")) == [
+        "a/b/specgen/ball.npz"]
+    psnr = 10 * np.log10(before.max() ** 2 / np.mean((np.load(tmp_path / "after.npy") - before) ** 2))
+    assert psnr >= 60.0, psnr

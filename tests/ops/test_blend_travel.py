@@ -115,3 +115,37 @@ def test_the_preview_and_the_last_lookup_are_stored_relative_and_an_unapplied_ma
     assert "SpecGen ball" in bpy.data.materials                      # kept by its fake user
     assert Path(travel.scene_atlas_json(bpy.context.scene.specgen)) == moved / "specgen" / "ball_lookup.json"
     assert Path(bpy.path.abspath(bpy.data.images["SpecGen ball preview"].filepath)).is_file()
+
+
+@pytest.mark.blender
+@pytest.mark.parametrize("theirs", [["ball_lookup.json", "ball.npz", "ball_lookup.g00.exr"], ["ball_preview.png"]],
+                         ids=["whole set", "one file"])
+def test_first_save_beside_another_blends_set_renames_this_set_and_touches_none_of_theirs(
+        tmp_path, monkeypatch, registered_addon, theirs):
+    """Two .blend files beside each other share ``specgen/``: an unsaved file's set of the same
+    stem moves in under the next free stem, whole, and the other file's set is left as it was."""
+    monkeypatch.setattr(tempfile, "tempdir", str(tmp_path / "temp"))
+    sc = bpy.context.scene
+    unsaved = Path(properties.output_dir(sc.specgen))
+    unsaved.mkdir(parents=True)
+    from blend_reopen import sphere_scene_with_material
+
+    mat, before = sphere_scene_with_material(unsaved, "ball", _table())
+    sc.specgen.atlas_json = str(unsaved / "ball_lookup.json")
+    shared = tmp_path / "project" / "specgen"
+    shared.mkdir(parents=True)
+    for name in theirs:
+        (shared / name).write_bytes(b"the other .blend's " + name.encode())
+
+    bpy.ops.wm.save_as_mainfile(filepath=str(tmp_path / "project" / "second.blend"))
+    for name in theirs:                                                  # theirs untouched
+        assert (shared / name).read_bytes() == b"the other .blend's " + name.encode()
+    assert not any(unsaved.iterdir())                                    # ours moved, whole
+    assert mat["specgen_atlas"] == "//specgen/ball.001_lookup.exr"
+    assert all(p.startswith("//specgen/ball.001_lookup.g") for p in mat["specgen_atlas_groups"])
+    assert sc.specgen.atlas_json == "//specgen/ball.001_lookup.json"
+    info = bake.load_atlas_info(shared / "ball.001_lookup.json")
+    assert info.path == shared / "ball.001_lookup.exr"                   # the description follows
+    assert (shared / "ball.001.npz").is_file()
+    after = render.SpectralRenderJob(sc, None, samples=1, resolution=(16, 16)).run()
+    np.testing.assert_allclose(after, before, rtol=1e-5, atol=1e-7)

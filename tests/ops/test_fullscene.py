@@ -251,7 +251,9 @@ def test_batch_renders_a_blend_file_in_full_scene_mode(white_atlas, tmp_path):
                           timeout=600)
     assert done.returncode == 0, done.stderr[-2000:]
     exr = "Scene_Camera_f0001.exr"                      # <scene>_<camera>_f<frame>.exr
-    assert read_spectral_exr(tmp_path / "a" / exr).values.shape == (14, 20, 6)
+    written = read_spectral_exr(tmp_path / "a" / exr)
+    assert written.values.shape == (14, 20, 6)
+    assert str(written.header["specgenExactDirect"]).endswith("yes")   # the lookups lit the sphere
     # as `blender --background ordinary.blend --python batch.py -- --scene --out b`
     script = ("import sys, runpy, bpy\n"
               f"bpy.ops.wm.open_mainfile(filepath={str(blend)!r})\n"
@@ -288,3 +290,32 @@ def test_f12_after_apply_shows_the_rgb_standin_and_exact_mode_leaves_no_temp_pat
     assert node.inputs["EnvMap"].default_value == "" and node.inputs["EnvList"].default_value == ""
     out = render.material_output(mat)
     assert out.inputs["Surface"].links[0].from_node.name != render.BRDF_NODE_NAME  # stack again
+
+
+def test_full_scene_refuses_a_material_whose_lookups_are_gone_before_rendering(blank_scene, tmp_path):
+    """The lookups deleted and no compact file to bake them again from: the default render names
+    the material and the file, as the exact render does, instead of writing the stand-in alone."""
+    from blend_reopen import small_table, sphere_scene_with_material
+
+    mat, _ = sphere_scene_with_material(tmp_path, "ball", small_table())
+    gone = sorted(tmp_path.glob("ball_lookup.g*.exr"))
+    for f in gone + [tmp_path / "ball.npz"]:
+        f.unlink()
+    out = tmp_path / "out" / "s.exr"
+    out.parent.mkdir()
+    renders = []
+
+    def counted(*_):
+        renders.append(1)
+
+    bpy.app.handlers.render_pre.append(counted)
+    try:
+        with pytest.raises(core_errors.SpecGenError,
+                           match=rf"material 'SpecGen ball': baked lookup {gone[0]} is missing"):
+            fullscene.FullSceneRenderJob(bpy.context.scene, out, WL, warn=lambda _: None).run()
+    finally:
+        bpy.app.handlers.render_pre.remove(counted)
+    assert renders == [] and not any(out.parent.iterdir())
+    # without the exact lookups asked for, the closures alone render (what the user chose)
+    stack = fullscene.FullSceneRenderJob(bpy.context.scene, None, WL, exact_direct=False).run()
+    assert stack.shape[-1] == WL.size and stack.max() > 0

@@ -15,6 +15,7 @@ bake = addon_module("specgen_addon.bake.lookup")
 naming = addon_module("ops.naming")
 render = addon_module("ops.render")
 scene_mod = addon_module("ops.scene")
+travel = addon_module("ops.travel")
 
 from specgen_addon.brdf.rusinkiewicz import io_from_half_diff  # noqa: E402
 from specgen_addon.brdf.table import BRDFTable  # noqa: E402
@@ -51,10 +52,40 @@ def test_generate_names_never_collide_unless_overwrite(tmp_path):
     (tmp_path / "sphere_lookup.json").write_text("{}")
     assert naming.stem_for_generate("sphere.png", tmp_path, False, []) == "sphere.001"
     assert naming.stem_for_generate("sphere.png", tmp_path, False, ["SpecGen sphere.001"]) == "sphere.002"
-    assert naming.stem_for_generate("sphere.png", tmp_path, True, ["SpecGen sphere"]) == "sphere"
+    assert naming.stem_for_generate("sphere.png", tmp_path, True, ["SpecGen sphere"], owned=lambda s: True) == "sphere"
     # a node group of the set's name (e.g. the user's copy of it) also makes a new stem
     assert naming.stem_for_generate("sphere.png", tmp_path, False, [], ["SpecGen sphere.001"]) == "sphere.002"
     assert naming.group_name("sphere.001") == naming.material_name("sphere.001")
+
+
+def test_replace_materials_reuses_a_stem_only_for_this_blends_own_set(tmp_path):
+    """Two .blend files beside each other share //specgen/: Replace Materials replaces the set its
+    own material names, and never another file's set of the same stem."""
+    (tmp_path / "sphere_lookup.json").write_text("{}")            # a set in the folder
+    assert naming.stem_for_generate("sphere.png", tmp_path, True, [], owned=lambda s: s == "sphere") == "sphere"
+    assert naming.stem_for_generate("sphere.png", tmp_path, True, ["SpecGen sphere"]) == "sphere.001"
+    assert naming.stem_for_generate("ball.png", tmp_path, True, []) == "ball"   # nothing there yet
+
+
+def test_a_set_is_this_blends_own_when_its_material_here_names_its_lookups(blank_scene, tmp_path):
+    mine, theirs = tmp_path / "specgen", tmp_path / "elsewhere"
+    mat = bpy.data.materials.new(naming.material_name("sphere"))
+    mat["specgen_atlas"] = str(mine / "sphere_lookup.exr")
+    assert travel.owns_set(str(mine), "sphere")
+    assert not travel.owns_set(str(theirs), "sphere")              # the same stem in another folder
+    assert not travel.owns_set(str(mine), "sphere.001")            # no material of that stem here
+
+
+def test_stems_are_safe_on_windows_and_macos(tmp_path):
+    assert naming.clean_stem("Kugel Öl.png") == "Kugel_Ol"
+    assert naming.clean_stem("ça_va.jpg") == "ca_va"
+    assert naming.clean_stem("con.png") == "con_" and naming.clean_stem("COM1.exr") == "COM1_"
+    assert naming.clean_stem("console.png") == "console"
+    (tmp_path / "sphere.npz").write_bytes(b"")
+    # one file on a case-insensitive system: Sphere.png does not take sphere's files
+    assert naming.files_of(tmp_path, "Sphere") == [tmp_path / "sphere.npz"]
+    assert naming.stem_for_generate("Sphere.PNG", tmp_path, False, []) == "Sphere.001"
+    assert naming.stem_for_generate("Sphere.PNG", tmp_path, False, ["SpecGen sphere.001"]) == "Sphere.002"
 
 
 def _group_of(mat):
