@@ -175,8 +175,7 @@ def run(args) -> Path:
     if not os.access(out, os.W_OK):
         raise errors.SpecGenError(f"{out}: output folder is not writable")
     for p in (target, target.with_name(target.stem + "_preview.png")):
-        if p.exists() and not args.overwrite:
-            raise errors.OutputExistsError(f"{p}: already exists (pass --overwrite to replace it)")
+        import_module("specgen_addon.common.limits").refuse_existing(p, args.overwrite)
     wavelengths = spectra.wavelength_grid(args.wl_min, args.wl_max, args.bands)
 
     bake = import_module("specgen_addon.bake.lookup")
@@ -337,15 +336,23 @@ def run_scene(args) -> Path:
     return targets[-1][1]
 
 
-def _files_in(folder: Path) -> set[Path]:
-    """The files in ``folder`` now (none when it does not exist)."""
-    return {p for p in folder.iterdir() if p.is_file()} if folder.is_dir() else set()
+def _files_in(folder: Path) -> dict[Path, tuple | None]:
+    """The files in ``folder`` now, each with its identity (none when the folder does not exist),
+    so a file this run rewrote in place is told from one it left alone; hidden files are the
+    run's own bookkeeping and are left out."""
+    from importlib import import_module
+
+    identity = import_module("specgen_addon.common.atomic_io").file_identity
+    return {p: identity(p) for p in folder.iterdir()     # hidden: staging files, locks, kept copies
+            if p.is_file() and not p.name.startswith(".")} if folder.is_dir() else {}
 
 
-def _report_outputs(files: list[Path], lookup: Path | None = None, before: set[Path] = frozenset(),
+def _report_outputs(files: list[Path], lookup: Path | None = None, before: dict | None = None,
                     keep: bool = True) -> None:
-    """Print each output written with its size; then either report the lookups this run made in
-    ``lookup`` (``keep``) or remove them (and the folder, left empty), so only the renders stay."""
+    """Print each output written with its size; then either report the lookups this run wrote in
+    ``lookup`` (``keep``: new or rewritten files; a replaced set's group files that this run did
+    not write again are removed, so a kept set is one run's) or remove them (and the folder, left
+    empty), so only the renders stay."""
     from importlib import import_module
 
     size_text = import_module("specgen_addon.brdf.formats.export").size_text
@@ -353,7 +360,16 @@ def _report_outputs(files: list[Path], lookup: Path | None = None, before: set[P
         print(f"wrote {f} ({size_text(f.stat().st_size)})")
     if lookup is None:
         return
-    made = sorted(_files_in(lookup) - set(before))
+    before = before or {}
+    now = _files_in(lookup)
+    made = sorted(p for p, ident in now.items() if before.get(p) != ident)
+    def set_of(path: Path) -> str | None:   # ``<stem>_lookup.gNN.exr`` → ``<stem>``
+        return path.name.rsplit("_lookup.g", 1)[0] if "_lookup.g" in path.name and path.suffix == ".exr" else None
+
+    sets = {set_of(p) for p in made} - {None}
+    stale = [p for p in now if p not in made and set_of(p) in sets]
+    for p in stale:            # group files of the set this run replaced, left from a larger basis
+        p.unlink(missing_ok=True)
     if keep:
         total = sum(p.stat().st_size for p in made)
         print(f"kept {len(made)} lookup files in {lookup} ({size_text(total)})")
@@ -406,9 +422,7 @@ def _scene_targets(scene, frames: list[int], out: Path, overwrite: bool) -> list
             target = out / naming.render_output_name(scene.name, scene.camera.name, frame)
             for p in (target, target.with_name(target.stem + "_preview.png")):
                 limits.check_name_length(p)
-                if p.exists() and not overwrite:
-                    raise errors.OutputExistsError(f"{p}: already exists (pass --overwrite to "
-                                                   "replace it)")
+                limits.refuse_existing(p, overwrite)
             targets.append((frame, target))
     finally:
         scene.frame_set(current)

@@ -15,7 +15,7 @@ from typing import Callable, Sequence
 from specgen_addon import __version__
 from specgen_addon.common.errors import SpecGenError, one_line_warnings
 from specgen_addon.common.atomic_io import (OutputLock, created_since, ledger_mark, make_lock_folders,
-                                            remove_created)
+                                            remove_created, replacements_kept)
 from specgen_addon.common.interrupts import (EXIT_ERROR, OutputGuard, as_interrupted, on_hard_stop,
                                              print_traceback_if, raise_if_stopped, stop_on_signals)
 from specgen_addon.photo.photo_lighting import attach_signed_values
@@ -91,7 +91,8 @@ def run_guarded(what: str | Callable[[], str], work, outputs=([], []), verbose: 
 
     try:
         with stop_on_signals(stopped), on_hard_stop(lambda: remove_created(made)), lock, \
-                on_hard_stop(lock.release), on_hard_stop(remove_new_files), one_line_warnings(verbose):
+                on_hard_stop(lock.release), replacements_kept(), on_hard_stop(remove_new_files), \
+                one_line_warnings(verbose):
             try:
                 with guard:
                     code = int(work() or 0)

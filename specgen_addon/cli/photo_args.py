@@ -19,9 +19,9 @@ import sys
 from pathlib import Path
 
 from specgen_addon.brdf.formats.export import size_text
-from specgen_addon.common.errors import OutputExistsError, SpecGenError
+from specgen_addon.common.errors import SpecGenError
 from specgen_addon.generate.models import DEFAULT_MODEL, MODELS
-from specgen_addon.common.limits import check_input_file, check_output_file
+from specgen_addon.common.limits import check_input_file, check_output_file, refuse_existing
 from specgen_addon.photo.image_checks import check_image_header
 from specgen_addon.photo.light_estimate import estimated_lighting as estimate
 from specgen_addon.photo.light_probe import (
@@ -254,6 +254,10 @@ def photo_source_from_args(args: argparse.Namespace, image: Path, white_target=N
     """The :class:`~specgen_addon.photo.sphere_image.PhotoSource` of a photo and the photo options;
     ``white_target`` (linear RGB) is the colour ``--white-patch`` or ``--colour-checker`` balances to
     (default neutral)."""
+    for circle, mask in (("circle", "mask"), ("probe_circle", "probe_mask")):   # one way to place a ball
+        if getattr(args, circle, None) and getattr(args, mask, None) is not None:
+            raise SpecGenError(f"--{circle.replace('_', '-')} and --{mask.replace('_', '-')} both place "
+                               "the ball: give one")
     circle = getattr(args, "circle", None)
     patch = getattr(args, "white_patch", None)
     return PhotoSource(Path(image), encoding="linear" if getattr(args, "linear", False) else "auto",
@@ -438,8 +442,7 @@ def probe_lighting_from_args(args: argparse.Namespace, source, env_path: Path):
     too (same camera); the run's notes about it printed."""
     overwrite = getattr(args, "overwrite", False)
     check_probe_file(args.light_probe)
-    if env_path.exists() and not overwrite:
-        raise OutputExistsError(f"{env_path}: already exists (pass --overwrite to replace it)")
+    refuse_existing(env_path, overwrite)
     env_path.parent.mkdir(parents=True, exist_ok=True)
     lighting, notes = lighting_from_probe(args.light_probe, source, env_path,
                                           circle=parse_circle(args.probe_circle, "--probe-circle") if args.probe_circle else None,

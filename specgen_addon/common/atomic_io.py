@@ -10,6 +10,11 @@ and lock files that keep two processes off one output.
   process's ledger with its identity (device, inode): clean-up after a failed or stopped command
   (:func:`remove_created`) removes only those, and only while they still are the very files this
   process made, never a file another process wrote into the same folder.
+* Inside :func:`replacements_kept` (a command's whole run), a file another process or an earlier
+  run made that ``overwrite`` replaces is kept aside (a hidden hard link beside it) until the
+  command ends: a failed or stopped command puts it back when its clean-up removes the new file,
+  so an interrupted ``--overwrite`` leaves the old outputs whole, not half replaced; a command
+  that succeeds drops the copies.
 * :class:`OutputLock` holds ``.<name>.lock`` beside an output (pid and host inside) for the
   length of a command; a second command on the same output is refused before any work. A lock
   whose process is gone (same host, pid not running) is stale and taken over.
@@ -38,6 +43,9 @@ _LEDGER: dict[str, tuple[tuple, int]] = {}
 _SEQ = itertools.count(1)
 #: Staging files being written: absolute staging path -> absolute target path.
 _STAGING: dict[str, str] = {}
+#: Files replaced with ``overwrite`` inside :func:`replacements_kept`: absolute target -> the
+#: hidden copy of the file it replaced (None while no command keeps them).
+_REPLACED: dict[str, str] | None = None
 #: Staging files about to be created (path -> ledger number): a stop that lands between their
 #: creation and their ledger entry still finds and removes them (the names are private and unique).
 _PENDING: dict[str, int] = {}
@@ -119,7 +127,38 @@ def remove_created(paths: Iterable[Path], keep: Iterable[Path] = ()) -> list[Pat
             removed.append(Path(p))
             _LEDGER.pop(a, None)
             _PENDING.pop(a, None)
+        kept_aside = (_REPLACED or {}).pop(a, None)
+        if kept_aside is not None and not os.path.lexists(a):   # the file it replaced, put back
+            with contextlib.suppress(OSError):
+                os.replace(kept_aside, a)
     return removed
+
+
+@contextlib.contextmanager
+def replacements_kept() -> Iterator[None]:
+    """A command's run: files that ``overwrite`` replaces are kept aside until it ends (module
+    docstring); :func:`remove_created` puts one back when it removes the new file, and the copies
+    of the rest are dropped on the way out, whether the command succeeded or not."""
+    global _REPLACED
+    outer, _REPLACED = _REPLACED, {}
+    try:
+        yield
+    finally:
+        for kept_aside in _REPLACED.values():
+            with contextlib.suppress(OSError):
+                os.unlink(kept_aside)
+        _REPLACED = outer
+
+
+def _keep_aside(target: Path) -> str | None:
+    """A hidden hard link to ``target`` beside it (the file an overwrite is about to replace);
+    None where the file system has no hard links (the replacement is then final at once)."""
+    aside = target.parent / f".{target.name}.{secrets.token_hex(4)}.replaced"
+    try:
+        os.link(target, aside)
+    except OSError:
+        return None
+    return str(aside)
 
 
 def make_dirs(path: str | os.PathLike) -> Path:
@@ -265,6 +304,11 @@ def _publish(tmp: Path, target: Path, overwrite: bool) -> None:
     path that was another process's before stays theirs (it is never removed by a clean-up)."""
     key = os.path.abspath(target)
     ours = not os.path.lexists(target) or is_ours(target)
+    if not ours and overwrite and _REPLACED is not None and key not in _REPLACED:
+        kept_aside = _keep_aside(target)       # put back if this command fails or is stopped
+        if kept_aside is not None:
+            _REPLACED[key] = kept_aside
+            ours = True                        # the new file is this command's to remove
     if ours:
         record_created(tmp)  # its full identity now that it is complete
         _LEDGER[key] = _LEDGER.pop(os.path.abspath(tmp))

@@ -158,9 +158,17 @@ def check_output_file(path: str | os.PathLike, overwrite: bool = False,
         raise SpecGenError(f"{path}: output folder {parent} does not exist")
     if not os.access(parent, os.W_OK):
         raise SpecGenError(f"{path}: output folder {parent} is not writable")
-    if path.exists() and not overwrite:
-        raise OutputExistsError(f"{path}: already exists (pass --overwrite to replace it)")
+    refuse_existing(path, overwrite)
     return path
+
+
+def refuse_existing(path: str | os.PathLike, overwrite: bool) -> None:
+    """Refuse, without ``overwrite``, an output that is there already: a file, or a link, even one
+    to a missing file (found before the work, not when the finished file cannot be published)."""
+    if not overwrite and os.path.lexists(path):
+        dangling = os.path.islink(path) and not os.path.exists(path)
+        raise OutputExistsError(f"{path}: already exists{' (a link to a missing file)' if dangling else ''} "
+                                "(pass --overwrite to replace it)")
 
 
 def bad_values(values: np.ndarray, allow_negative: bool = False) -> str | None:

@@ -47,3 +47,13 @@ def test_batch_keeps_only_the_renders_unless_asked_to_keep_the_lookups(tmp_path)
     lookups = sorted(p.name for p in (out / "lookup").iterdir())
     assert "env_studio.exr" in lookups and any(n.startswith("lambert_lookup.g") for n in lookups)
     assert re.search(rf"kept {len(lookups)} lookup files in .*lookup \(\d+\.\d (kB|MB)\)", kept.stdout), kept.stdout
+    # again over the kept set: the rewritten files are counted as this run's, and a group file of
+    # the replaced set that this run does not write (an earlier, larger basis) is removed
+    (out / "lookup" / "lambert_lookup.g07.exr").write_bytes(b"an earlier run's extra group")
+    again = subprocess.run([*args, "--overwrite", "--keep-lookups"], capture_output=True, text=True,
+                           timeout=300, check=False)
+    assert again.returncode == 0, again.stderr[-2000:]
+    assert sorted(p.name for p in (out / "lookup").iterdir()) == lookups
+    assert re.search(rf"kept {len(lookups)} lookup files in .*lookup \(\d+\.\d (kB|MB)\)", again.stdout), \
+        again.stdout
+    assert not [p for p in out.rglob(".*")], "hidden copies of the replaced files were left"

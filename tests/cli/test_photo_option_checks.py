@@ -46,6 +46,11 @@ BAD_OPTIONS = {
                                           "--probe-reflectance applies to the chrome ball of --light-probe"),
     "a malformed chrome ball circle": (["--light-probe", "{photo}", "--probe-circle", "64,64"],
                                        "--probe-circle takes X,Y,R in pixels"),
+    "a circle and a mask": (["--circle", "64,64,60", "--mask", "{photo}"],
+                            "--circle and --mask both place the ball: give one"),
+    "a chrome ball circle and mask": (["--light-probe", "{photo}", "--probe-circle", "64,64,64",
+                                       "--probe-mask", "{photo}"],
+                                      "--probe-circle and --probe-mask both place the ball: give one"),
 }
 
 #: Circle previews refused by infer: (argv, what the one line says).

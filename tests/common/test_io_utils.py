@@ -41,3 +41,59 @@ def test_missing_directory_is_a_clear_error(tmp_path):
     with pytest.raises(SpecGenError, match="does not exist"):
         with atomic_write(tmp_path / "nope" / "out.txt"):
             pass
+
+
+def test_a_link_to_a_missing_file_at_the_output_is_refused_before_the_work(tmp_path, repo_dir):
+    """A dangling link is an existing output: refused up front (it was found only when the
+    finished file could not be published), and replaced, link and all, with overwrite."""
+    import subprocess
+    import sys
+
+    from specgen_addon.common.limits import check_output_file
+
+    out = tmp_path / "b.npz"
+    out.symlink_to(tmp_path / "elsewhere.npz")
+    with pytest.raises(OutputExistsError, match="a link to a missing file"):
+        check_output_file(out)
+    assert check_output_file(out, overwrite=True) == out
+    done = subprocess.run([sys.executable, "-m", "specgen_addon", "infer", "examples/sphere.png", "-o",
+                           str(out), "--no-refine"], capture_output=True, text=True, timeout=120,
+                          cwd=repo_dir)
+    assert done.returncode != 0 and "a link to a missing file" in done.stderr, done.stderr
+    assert len(done.stderr.strip().splitlines()) == 1 and not (tmp_path / "elsewhere.npz").exists()
+
+
+def _write(path, text, overwrite=True):
+    with atomic_write(path, overwrite=overwrite) as tmp:
+        tmp.write_text(text)
+
+
+@pytest.mark.parametrize("stop", [KeyboardInterrupt, SpecGenError], ids=["stopped", "failed"])
+def test_an_overwrite_cut_short_puts_back_every_file_it_had_replaced(tmp_path, capsys, stop):
+    """``--overwrite`` replaces an earlier run's pair of outputs one by one; stopped or failed
+    after the first, the command leaves both old files, not a new one beside an old one."""
+    from specgen_addon.cli.app import run_guarded
+
+    first, second = tmp_path / "b.npz", tmp_path / "b_probe.exr"
+    first.write_text("old material")
+    second.write_text("old probe")
+
+    def work():
+        _write(second, "new probe")          # published, then the run is cut short
+        raise stop("stopped meanwhile")
+
+    assert run_guarded("infer", work, ([], [first, second])) != 0
+    assert second.read_text() == "old probe" and first.read_text() == "old material"
+    assert sorted(p.name for p in tmp_path.iterdir()) == ["b.npz", "b_probe.exr"]   # no copies left
+    capsys.readouterr()
+
+
+def test_an_overwrite_that_succeeds_keeps_the_new_files_and_drops_the_old_copies(tmp_path):
+    from specgen_addon.cli.app import run_guarded
+
+    out = tmp_path / "b.npz"
+    out.write_text("old")
+    assert run_guarded("infer", lambda: _write(out, "new"), ([], [out])) == 0
+    assert out.read_text() == "new" and [p.name for p in tmp_path.iterdir()] == ["b.npz"]
+    _write(out, "outside a command")        # no command keeping copies: replaced at once, none made
+    assert out.read_text() == "outside a command" and [p.name for p in tmp_path.iterdir()] == ["b.npz"]
