@@ -517,6 +517,10 @@ def main(argv: list[str] | None = None) -> int:
 
 
 if __name__ == "__main__":
-    code = main()
+    try:
+        code = main()
+    except KeyboardInterrupt:   # while loading, before the run's clean stop was in place
+        print("cancelled: batch.py stopped by SIGINT while starting; nothing was written", file=sys.stderr)
+        code = 130
     sys.stdout.flush()
     sys.exit(code)

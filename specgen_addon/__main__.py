@@ -1,5 +1,5 @@
 import sys
 
-from specgen_addon.cli.app import main
+from specgen_addon.cli.entry import main
 
 sys.exit(main())

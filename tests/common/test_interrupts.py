@@ -203,3 +203,23 @@ def test_an_error_that_follows_a_signal_is_reported_as_the_stop(tmp_path):
     assert code == 130, text
     assert left == ["keep.txt"], (left, text)
     assert text.count("cancelled:") == 1 and "internal error" not in text, text
+
+
+def test_a_ctrl_c_while_the_commands_load_is_one_line_and_exit_130(monkeypatch, capsys):
+    """The imports take a second or more before a command's clean stop is in place: a Ctrl-C
+    then ends the program as one during the work does, without a traceback."""
+    import builtins
+
+    from specgen_addon.cli import entry
+
+    real_import = builtins.__import__
+
+    def interrupted(name, *args, **kwargs):
+        if name == "specgen_addon.cli.app":
+            raise KeyboardInterrupt
+        return real_import(name, *args, **kwargs)
+
+    monkeypatch.setattr(builtins, "__import__", interrupted)
+    assert entry.main() == 130
+    err = capsys.readouterr().err.strip().splitlines()
+    assert len(err) == 1 and err[0].startswith("cancelled: specgen stopped by SIGINT while starting"), err
