@@ -19,6 +19,7 @@ import numpy as np
 
 from specgen_addon.common.errors import SpecGenError
 from specgen_addon.common.atomic_io import atomic_write
+from specgen_addon.common.quiet import native_output_silenced
 
 
 class ImageIOError(SpecGenError):
@@ -110,28 +111,38 @@ def read_exr(path: str | os.PathLike) -> tuple[dict[str, np.ndarray], dict[str, 
         raise ImageIOError(f"{path}: no such file")
     exr = _openexr()
     try:
-        if exr is not None:
-            with exr.File(str(path), separate_channels=True) as f:
-                part = f.parts[0]
-                header = {k: v for k, v in part.header.items() if isinstance(v, str)}
-                return ({n: np.asarray(c.pixels, dtype=np.float32) for n, c in part.channels.items()},
-                        header)
-        oiio = _oiio()
-        inp = oiio.ImageInput.open(str(path))
-        if inp is None:
-            raise ImageIOError(oiio.geterror())
-        try:
-            spec = inp.spec()
-            data = np.asarray(inp.read_image(0, 0, 0, spec.nchannels, "float"), dtype=np.float32)
-        finally:
-            inp.close()
-        data = data.reshape(spec.height, spec.width, spec.nchannels)
+        with native_output_silenced():   # the readers' own lines about a damaged file
+            if exr is not None:
+                with exr.File(str(path), separate_channels=True) as f:
+                    part = f.parts[0]
+                    header = {k: v for k, v in part.header.items() if isinstance(v, str)}
+                    return ({n: np.asarray(c.pixels, dtype=np.float32) for n, c in part.channels.items()},
+                            header)
+            oiio = _oiio()
+            inp = oiio.ImageInput.open(str(path))
+            if inp is None:
+                raise ImageIOError(oiio.geterror())
+            try:
+                spec = inp.spec()
+                pixels = inp.read_image(0, 0, 0, spec.nchannels, "float")
+            finally:
+                inp.close()
+            if pixels is None:
+                raise ImageIOError(oiio.geterror())
+        data = np.asarray(pixels, dtype=np.float32).reshape(spec.height, spec.width, spec.nchannels)
         header = {p.name: p.value for p in spec.extra_attribs if isinstance(p.value, str)}
         return {n: np.ascontiguousarray(data[..., i]) for i, n in enumerate(spec.channelnames)}, header
-    except ImageIOError as exc:
-        raise ImageIOError(f"{path}: not a readable OpenEXR file ({exc})") from None
     except Exception as exc:  # the bindings raise plain RuntimeError/ValueError on corrupt files
-        raise ImageIOError(f"{path}: not a readable OpenEXR file ({exc})") from None
+        raise ImageIOError(f"{path}: not a readable OpenEXR file ({_reason(exc)})") from None
+
+
+def _reason(exc: BaseException) -> str:
+    """A reader's complaint about a damaged file, as a clause: its first line, or what an
+    indexing error in the bindings means (a file cut short)."""
+    if isinstance(exc, (IndexError, KeyError)):
+        return "damaged or cut short"
+    first = next((line.strip() for line in str(exc).splitlines() if line.strip()), "")
+    return first.removesuffix(".") or "damaged or cut short"
 
 
 def read_ldr(path: str | os.PathLike) -> np.ndarray:
@@ -171,16 +182,17 @@ def read_float_image(path: str | os.PathLike, error: type[SpecGenError] = ImageI
         import OpenImageIO as oiio
     except ImportError:
         raise error(f"{path}: reading {path.suffix} files needs OpenImageIO (bundled with Blender)") from None
-    inp = oiio.ImageInput.open(str(path))
-    if inp is None:
-        raise error(f"{path}: cannot read {what} ({oiio.geterror().strip() or 'unreadable'})")
-    try:
-        spec = inp.spec()
-        data = inp.read_image(0, 0, 0, spec.nchannels, "float")  # integers normalised to [0, 1]
-    finally:
-        inp.close()
+    with native_output_silenced():   # the readers' own lines about a damaged file
+        inp = oiio.ImageInput.open(str(path))
+        if inp is None:
+            raise error(f"{path}: cannot read {what} ({_reason(RuntimeError(oiio.geterror()))})")
+        try:
+            spec = inp.spec()
+            data = inp.read_image(0, 0, 0, spec.nchannels, "float")  # integers normalised to [0, 1]
+        finally:
+            inp.close()
     if data is None:
-        raise error(f"{path}: cannot read {what} ({oiio.geterror().strip() or 'unreadable'})")
+        raise error(f"{path}: cannot read {what} ({_reason(RuntimeError(oiio.geterror()))})")
     return np.asarray(data, dtype=np.float32).reshape(spec.height, spec.width, spec.nchannels)
 
 

@@ -1,5 +1,7 @@
 """Keep native libraries' chatter off stdout (Cycles and Blender's image writer print
-``Saved: ...`` and timing lines from C, past Python's ``sys.stdout``)."""
+``Saved: ...`` and timing lines from C, past Python's ``sys.stdout``), and off both streams
+where a library reports a damaged file in lines of its own before raising (the OpenEXR reader
+on a truncated file): the error the caller raises is then the one sentence the user reads."""
 
 from __future__ import annotations
 
@@ -35,4 +37,32 @@ def native_stdout_silenced(enabled: bool = True) -> Iterator[Callable[[str], Non
         sys.stdout.flush()
         os.dup2(saved, fd)
         os.close(saved)
+        os.close(devnull)
+
+
+@contextlib.contextmanager
+def native_output_silenced() -> Iterator[None]:
+    """Point file descriptors 1 and 2 at ``/dev/null`` for the block (those that exist): a native
+    library's own warning lines are dropped; Python exceptions still propagate, and the caller
+    says what went wrong in one sentence."""
+    streams = []
+    for stream in (sys.stdout, sys.stderr):
+        try:
+            stream.flush()
+            streams.append(stream.fileno())
+        except (AttributeError, OSError, ValueError):
+            continue
+    saved = [os.dup(fd) for fd in streams]
+    devnull = os.open(os.devnull, os.O_WRONLY)
+    try:
+        for fd in streams:
+            os.dup2(devnull, fd)
+        yield
+    finally:
+        for stream in (sys.stdout, sys.stderr):
+            with contextlib.suppress(AttributeError, OSError, ValueError):
+                stream.flush()
+        for fd, copy in zip(streams, saved):
+            os.dup2(copy, fd)
+            os.close(copy)
         os.close(devnull)

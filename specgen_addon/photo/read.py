@@ -132,7 +132,7 @@ def _read_float(path: Path) -> Photo:
         try:
             channels, _ = read_exr(path)
         except ImageIOError as exc:
-            raise ImageInputError(f"{path}: cannot read EXR ({exc})") from None
+            raise ImageInputError(str(exc)) from None   # names the file and what is wrong
         names = [n for n in ("R", "G", "B", "A") if n in channels]
         if names[:3] != ["R", "G", "B"]:
             raise ImageInputError(f"{path}: EXR needs R, G, B channels, has "

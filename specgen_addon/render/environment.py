@@ -73,7 +73,7 @@ def read_exr_rgb(path: str | Path) -> np.ndarray:
     try:
         channels, _ = read_exr(path)
     except ImageIOError as exc:
-        raise SpecGenError(f"{path}: cannot read EXR ({exc})") from None
+        raise SpecGenError(str(exc)) from None   # names the file and what is wrong
     if not all(c in channels for c in "RGB"):
         raise SpecGenError(f"{path}: EXR has no R, G, B channels (has {sorted(channels)})")
     return np.stack([channels[c] for c in "RGB"], -1)

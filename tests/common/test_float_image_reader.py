@@ -38,3 +38,18 @@ def test_an_unreadable_file_raises_the_callers_error_in_one_sentence(tmp_path, e
     with pytest.raises(error, match=r"broken\.hdr: cannot read Radiance HDR \(") as info:
         read_float_image(bad, error, "Radiance HDR")
     assert type(info.value) is error and "\n" not in str(info.value)
+
+
+def test_an_exr_cut_short_after_its_header_is_refused_in_one_line_and_nothing_else(tmp_path, repo_dir):
+    """The OpenEXR reader prints its own warning lines about the missing pixels before raising:
+    the user reads one sentence, on stderr, and nothing on stdout."""
+    import subprocess
+    import sys
+
+    cut = tmp_path / "cut.exr"
+    cut.write_bytes((repo_dir / "examples" / "sphere.exr").read_bytes()[:5000])   # header, few pixels
+    done = subprocess.run([sys.executable, "-m", "specgen_addon", "infer", str(cut), "-o", str(tmp_path / "b.npz"),
+                           "--quiet"], capture_output=True, text=True, timeout=120, cwd=repo_dir)
+    assert done.returncode == 2 and done.stdout == "", done.stdout
+    assert done.stderr.strip().splitlines() == [f"error: {cut}: not a readable OpenEXR file (damaged or cut short)"]
+    assert sorted(p.name for p in tmp_path.iterdir()) == ["cut.exr"]
