@@ -52,10 +52,15 @@ def one_line_warnings(verbose: bool = False) -> Iterator[None]:
     """Show SpecGen's own warnings (e.g. "grayscale converted to RGB") as ``warning: <text>``,
     without Python's file name and source line; other libraries' warnings keep their format."""
     package = os.path.dirname(os.path.dirname(os.path.abspath(__file__)))
+    repo = os.path.dirname(package)
+    # ours: the package, and the entries a warning may be attributed to (``stacklevel``)
+    ours = (package + os.sep, os.path.join(repo, "ops") + os.sep)
+    entries = {os.path.join(repo, "batch.py"), os.path.join(repo, "__init__.py")}
     previous = warnings.showwarning
 
     def show(message, category, filename, lineno, file=None, line=None):
-        if verbose or not os.path.abspath(filename).startswith(package + os.sep):
+        where = os.path.abspath(filename)
+        if verbose or not (where.startswith(ours) or where in entries):
             return previous(message, category, filename, lineno, file, line)
         print(f"warning: {message}", file=file or sys.stderr)
 

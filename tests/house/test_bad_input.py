@@ -648,6 +648,19 @@ def test_conversion_notes_print_as_one_warning_line(tmp_path, capsys):
     assert all(line.startswith("warning: ") for line in err.splitlines()), err  # no source lines
 
 
+def test_a_warning_attributed_to_batch_py_prints_as_one_line_too(capsys):
+    """A warning raised with ``stacklevel`` lands in the caller's file: batch.py's and the Blender
+    tier's are SpecGen's too, and print as one ``warning:`` line, while a library's keep theirs."""
+    from specgen_addon.common.errors import one_line_warnings
+
+    with warnings.catch_warnings(), one_line_warnings():
+        warnings.simplefilter("always")
+        warnings.warn_explicit("the onnx backend cannot run", UserWarning, str(REPO / "batch.py"), 197)
+        warnings.warn_explicit("a library's own", UserWarning, "/usr/lib/python3/site-packages/x.py", 3)
+    # the library's goes to the handler that was there before (pytest's record, here)
+    assert capsys.readouterr().err.splitlines() == ["warning: the onnx backend cannot run"]
+
+
 def test_negative_exr_pixels_are_clamped_with_a_count(tmp_path):
     from specgen_addon.photo import sphere_image as input_image
 
