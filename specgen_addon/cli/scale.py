@@ -39,11 +39,13 @@ def add_parser(sub: argparse._SubParsersAction) -> argparse.ArgumentParser:
                         "a bad input is reported at once")
     p.add_argument("--timeout", type=float, default=None,
                    help="seconds allowed for each step of an item (preparing a BRDF file, running "
-                        "batch.py); a step that runs longer is stopped and retried like a crash "
-                        "(--retries). Default: no time limit")
+                        "batch.py); a step that runs longer is stopped (SIGTERM, its clean stop; "
+                        "killed 10 s later if still running) and retried like a crash (--retries). "
+                        "Default: no time limit")
     p.add_argument("--dashboard-address", default="127.0.0.1:8787",
                    help="LocalCluster dashboard address (default 127.0.0.1:8787, this machine only; "
-                        "give HOST:PORT or :PORT to open it to the network; :0 picks a free port)")
+                        "give HOST:PORT or :PORT to open it to the network; the port is 0-65535, "
+                        ":0 picks a free one)")
     p.add_argument("--blender", default=None, metavar="EXE",
                    help="run batch.py inside this Blender (--background) instead of the bpy module")
     p.add_argument("--batch-script", type=Path, default=None, help=argparse.SUPPRESS)

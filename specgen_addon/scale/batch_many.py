@@ -6,6 +6,11 @@ is one Dask task (:func:`.worker.run_item`) that runs ``batch.py`` in a child pr
 item has its own ``bpy``. Finished items are skipped on a rerun with the same input and settings
 (:mod:`.items`); failures other than a bad input are retried ``retries`` times; a failed item is
 reported and never stops the others.
+
+A stop (Ctrl-C, SIGTERM) at any moment ends the run with nothing of it left but the items
+published before the stop: no staging, no failure logs, no report, no temporary folder, and no
+output folder it created that holds nothing. A stop while the LocalCluster starts is held until
+the workers are up (:func:`_stops_held`), then acted on before any item is submitted.
 """
 
 from __future__ import annotations
@@ -16,9 +21,12 @@ import logging
 import math
 import operator
 import os
+import re
 import shutil
 import signal
+import socket
 import sys
+import tempfile
 import threading
 import time
 import uuid
@@ -30,6 +38,7 @@ from typing import Callable, Iterator
 from specgen_addon.brdf.formats.export import size_text
 from specgen_addon.common.atomic_io import OutputLock, atomic_write
 from specgen_addon.common.errors import SpecGenError
+from specgen_addon.common.interrupts import raise_if_stopped
 from specgen_addon.common.limits import check_number
 from specgen_addon.photo.photo_lighting import attach_signed_values
 from specgen_addon.scale import items as items_mod
@@ -109,6 +118,44 @@ def batch_command(opts: BatchManyOptions) -> list[str]:
     return [worker_mod.PYTHON, script]
 
 
+def check_dashboard_address(address: str, local: bool = True) -> None:
+    """``HOST:PORT``, ``:PORT`` or ``PORT`` with a port from 0 to 65535; with ``local``, a HOST
+    must also be an address of this machine (the LocalCluster's dashboard listens there)."""
+    host, sep, port = address.rpartition(":")
+    if not re.fullmatch(r"-?[0-9]+", port, re.ASCII) or ":" in host or "," in host:
+        raise SpecGenError(f"--dashboard-address {address}: expected HOST:PORT or :PORT (:0 picks a free port)")
+    if not 0 <= int(port) <= 65535:
+        raise SpecGenError(f"--dashboard-address {address}: the port must be between 0 and 65535")
+    if not host or not local:
+        return
+    try:
+        infos = socket.getaddrinfo(host, 0, type=socket.SOCK_STREAM)
+    except (OSError, UnicodeError):
+        raise SpecGenError(f"--dashboard-address {address}: unknown host {host!r}") from None
+    for family, kind, proto, _, where in infos:
+        try:
+            with socket.socket(family, kind, proto) as probe:
+                probe.bind(where)
+            return
+        except OSError:
+            continue
+    raise SpecGenError(f"--dashboard-address {address}: {host} is not an address of this machine")
+
+
+def check_blender(exe: str) -> None:
+    """A Blender executable: a path to an executable file, or a program name found on PATH."""
+    if os.sep in exe or (os.altsep and os.altsep in exe):
+        path = Path(exe)
+        if path.is_dir():
+            raise SpecGenError(f"--blender {exe}: is a folder, expected the Blender executable")
+        if not path.is_file():
+            raise SpecGenError(f"--blender {exe}: Blender executable not found")
+        if not os.access(path, os.X_OK):
+            raise SpecGenError(f"--blender {exe}: not an executable file")
+    elif shutil.which(exe) is None:
+        raise SpecGenError(f"--blender {exe}: no such program on PATH (give the path of the Blender executable)")
+
+
 def _validate(opts: BatchManyOptions) -> list[items_mod.Item]:
     check_number("workers", opts.workers)
     if opts.retries < 0:
@@ -117,8 +164,9 @@ def _validate(opts: BatchManyOptions) -> list[items_mod.Item]:
         raise SpecGenError(f"--timeout must be a positive number of seconds, got {opts.timeout}")
     if opts.scheduler is not None and "://" not in opts.scheduler:
         raise SpecGenError(f"--scheduler {opts.scheduler}: expected an address like tcp://HOST:8786")
-    if opts.blender and not Path(opts.blender).is_file() and not shutil.which(opts.blender):
-        raise SpecGenError(f"{opts.blender}: Blender executable not found")
+    check_dashboard_address(opts.dashboard_address, local=opts.scheduler is None)
+    if opts.blender:
+        check_blender(opts.blender)
     check_batch_args(Path(opts.batch_script), opts.batch_args)
     found = items_mod.make_items(items_mod.collect_inputs(opts.inputs, opts.manifest))
     if opts.out.exists() and not opts.out.is_dir():
@@ -129,8 +177,206 @@ def _validate(opts: BatchManyOptions) -> list[items_mod.Item]:
     return found
 
 
-def _connect(opts: BatchManyOptions):
-    """(client, cluster or None) — a LocalCluster here, or the cluster at ``opts.scheduler``."""
+class _Run:
+    """What one run starts and makes besides published items, and how it is taken down: the
+    client and cluster, the cluster's scratch folder, this run's staging in ``OUT/.work``, the
+    failure logs it moves into ``OUT/failed``, and the output folders it creates."""
+
+    def __init__(self, opts: BatchManyOptions, run: str):
+        self.opts, self.run = opts, run
+        self.staging = opts.out / ".work"
+        out = opts.out.absolute()
+        self.new_folders = [p for p in [out, *out.parents] if not p.exists()]   # deepest first
+        self.client = None
+        self.cluster = None
+        self.scratch: Path | None = None   #: a LocalCluster's scratch and the items' temporary folders
+        self.futures: list = []
+        self.logs = _FailedLogs(opts.out, self.staging, run)
+
+    @property
+    def items_tmp(self) -> str | None:
+        return str(self.scratch / "items") if self.scratch is not None else None
+
+    def close(self, cancel: bool) -> None:
+        """Take the run down; with ``cancel``, leave nothing of it but the items it published.
+
+        Every step runs even when a stop arrives during another; a stop turns what is left of a
+        finished run's clean-up into a cancel's, and is raised again at the end."""
+        stop: list[BaseException] = []
+        workers: list = []
+        children: list = []
+
+        def step(fn) -> None:
+            try:
+                fn()
+            except KeyboardInterrupt as exc:
+                stop.append(exc)
+            except Exception:  # noqa: BLE001 - the clean-up goes on; the run's own error is reported
+                pass
+
+        def cancelling() -> bool:
+            return cancel or bool(stop)
+
+        def mark() -> None:   # an attempt that starts or ends from now on makes nothing
+            if cancelling() and self.opts.out.is_dir():
+                self.staging.mkdir(exist_ok=True)
+                worker_mod.cancel_marker(self.staging, self.run).touch()
+
+        def snapshot() -> None:
+            found = _worker_processes(self.cluster)
+            workers.extend(found[0])
+            children.extend(found[1])
+
+        def stop_items() -> None:
+            if cancelling():
+                if self.client is not None:
+                    self.client.cancel(self.futures, force=True)
+                _terminate(children)
+
+        def wait() -> None:   # nothing of the run may still write when its folders are cleaned
+            _wait_or_kill(workers + children, worker_mod.TERM_GRACE_S)
+
+        def undo_logs() -> None:
+            if cancelling():
+                self.logs.undo()
+
+        def sweep() -> None:
+            # this run's unfinished items, kept logs, counters and marker, and the lock of a
+            # batch.py killed by a timeout
+            for p in [*self.staging.glob(f"*.{self.run}*"), *self.staging.glob(f".*.{self.run}*")]:
+                if p.is_dir() and not p.is_symlink():
+                    shutil.rmtree(p, ignore_errors=True)
+                else:
+                    p.unlink(missing_ok=True)
+            if self.staging.is_dir() and not any(self.staging.iterdir()):
+                self.staging.rmdir()
+
+        def remove_new_folders() -> None:
+            if cancelling():
+                for folder in self.new_folders:
+                    with contextlib.suppress(OSError):
+                        folder.rmdir()   # only when empty: published items stay
+
+        step(mark)
+        step(snapshot)
+        step(stop_items)
+        step(lambda: self.client is not None and self.client.close())
+        step(lambda: self.cluster is not None and self.cluster.close())
+        step(wait)
+        step(undo_logs)
+        step(sweep)
+        step(remove_new_folders)
+        step(lambda: self.scratch is not None and shutil.rmtree(self.scratch, ignore_errors=True))
+        if stop:
+            raise stop[0]
+
+
+class _FailedLogs:
+    """``OUT/failed/`` as a finished run leaves it: the log of each item that failed (kept by its
+    worker in ``OUT/.work``) moved in, the log an earlier run left for an item now done removed.
+    Each log replaced is set aside in ``OUT/.work`` first, so :meth:`undo` (a stop) puts the
+    folder back as it was."""
+
+    def __init__(self, out: Path, staging: Path, run: str):
+        self.folder, self.staging, self.run = out / "failed", staging, run
+        self.made = not self.folder.exists()
+        self.moves: list[tuple[Path, Path, bool]] = []   #: (log, its old version set aside, had one)
+
+    def publish(self, records) -> None:
+        for rec in records:
+            dest = self.folder / f"{rec['id']}.log"
+            kept = worker_mod.staged_log(self.staging, rec["id"], self.run)
+            new = rec["status"] == "failed" and kept.is_file()
+            if not new and not (rec["status"] == "done" and dest.exists()):
+                continue
+            aside = self.staging / f"{rec['id']}.{self.run}.old-log"
+            self.moves.append((dest, aside, dest.exists()))
+            if dest.exists():
+                os.replace(dest, aside)
+            if new:
+                self.folder.mkdir(exist_ok=True)
+                os.replace(kept, dest)
+
+    def undo(self) -> None:
+        for dest, aside, had_one in reversed(self.moves):
+            if aside.exists():
+                os.replace(aside, dest)
+            elif not had_one:
+                dest.unlink(missing_ok=True)
+        if self.made:
+            with contextlib.suppress(OSError):
+                self.folder.rmdir()
+
+
+def _worker_processes(cluster) -> tuple[list, list]:
+    """(workers, what they started: the items' ``batch.py``) of a LocalCluster, as psutil
+    processes, found now: once their worker is gone, its children are no longer ours to find."""
+    if cluster is None:
+        return [], []
+    import psutil
+
+    workers, items = [], []
+    for worker in getattr(cluster, "workers", {}).values():
+        with contextlib.suppress(psutil.Error, TypeError, ValueError):
+            proc = psutil.Process(worker.pid)
+            workers.append(proc)
+            items += proc.children(recursive=True)
+    return workers, items
+
+
+def _terminate(procs: list) -> None:
+    """SIGTERM: an item's ``batch.py`` takes its clean stop (its partial files removed)."""
+    import psutil
+
+    for p in procs:
+        with contextlib.suppress(psutil.Error):
+            p.terminate()
+
+
+def _wait_or_kill(procs: list, grace: float) -> None:
+    """Wait up to ``grace`` seconds for ``procs`` to end; kill what is left."""
+    if not procs:
+        return
+    import psutil
+
+    _, alive = psutil.wait_procs(procs, timeout=grace)
+    for p in alive:
+        with contextlib.suppress(psutil.Error):
+            p.kill()
+    psutil.wait_procs(alive, timeout=5)
+
+
+#: A LocalCluster run's scratch folder in the temporary folder, and the file naming its process.
+SCRATCH_PREFIX = "specgen_batch_many_"
+SCRATCH_OWNER = "owner.json"
+
+
+def remove_stale_scratch(tmp: Path | None = None) -> list[Path]:
+    """Remove the scratch folders of runs killed on this host (kill -9: no clean-up ran); a
+    folder whose process still runs, or of another host, stays. Returns those removed."""
+    removed = []
+    for folder in Path(tmp or tempfile.gettempdir()).glob(SCRATCH_PREFIX + "*"):
+        try:
+            owner = json.loads((folder / SCRATCH_OWNER).read_text())
+            pid, host = int(owner["pid"]), owner["host"]
+        except (OSError, ValueError, KeyError, TypeError):
+            continue   # not one of ours, or its owner is still writing it
+        if host != socket.gethostname() or pid == os.getpid():
+            continue
+        try:
+            os.kill(pid, 0)
+            continue   # still running
+        except ProcessLookupError:
+            pass
+        except OSError:   # another user's process
+            continue
+        shutil.rmtree(folder, ignore_errors=True)
+        removed.append(folder)
+    return removed
+
+
+def _connect(opts: BatchManyOptions, run: _Run) -> None:
+    """Set ``run.client`` (and ``run.cluster``): a LocalCluster here, or the cluster at ``opts.scheduler``."""
     from distributed import Client, LocalCluster
 
     if opts.scheduler:
@@ -138,31 +384,70 @@ def _connect(opts: BatchManyOptions):
             client = Client(opts.scheduler, timeout="15s")
         except (OSError, TimeoutError) as exc:
             raise SpecGenError(f"cannot reach the Dask scheduler at {opts.scheduler} ({exc})") from None
+        run.client = client
         try:
             client.wait_for_workers(1, timeout=60)
         except TimeoutError:
-            client.close()
             raise SpecGenError(f"no Dask worker joined {opts.scheduler} within 60 s") from None
-        return client, None
-    with _workers_ignore_ctrl_c():
-        cluster = LocalCluster(n_workers=opts.workers, threads_per_worker=1, processes=True,
-                               dashboard_address=opts.dashboard_address, silence_logs=logging.ERROR)
-    return Client(cluster), cluster
+        return
+    import dask
+
+    remove_stale_scratch()
+    run.scratch = Path(tempfile.mkdtemp(prefix=SCRATCH_PREFIX))
+    (run.scratch / SCRATCH_OWNER).write_text(json.dumps({"pid": os.getpid(), "host": socket.gethostname()}))
+    (run.scratch / "items").mkdir()
+    raise_if_stopped()   # a stop that arrived during the imports: before any worker starts
+    # Dask's scratch space (scheduler, nannies, workers) goes into the run's scratch folder
+    with _stops_held(), dask.config.set({"temporary-directory": str(run.scratch)}):
+        run.cluster = LocalCluster(n_workers=opts.workers, threads_per_worker=1, processes=True,
+                                   dashboard_address=opts.dashboard_address,
+                                   local_directory=str(run.scratch / "dask"), silence_logs=logging.CRITICAL)
+    run.client = Client(run.cluster)
 
 
 @contextlib.contextmanager
-def _workers_ignore_ctrl_c() -> Iterator[None]:
-    """Start worker processes with SIGINT ignored (inherited by their batch.py children): Ctrl-C
-    in the terminal reaches the whole process group, but only this process should handle it,
-    by shutting the cluster down (workers and their children then end without tracebacks)."""
+def _stops_held() -> Iterator[None]:
+    """Start worker processes that never see Ctrl-C, without losing a Ctrl-C meant for this one.
+
+    Ctrl-C in the terminal reaches the whole process group, but only this process should act on
+    it, by shutting the cluster down (workers and their children then end without tracebacks).
+    So SIGINT is blocked in this thread while the workers start: the threads and processes
+    started meanwhile inherit the mask, and the workers' ``batch.py`` children in turn. Here,
+    SIGINT and SIGTERM are only noted while the block runs (a stop halfway through a cluster's
+    start would leave it half started), and acted on as it ends: the caller's own handlers get
+    them then, before any item is submitted. Where signal masks do not exist, the workers start
+    with SIGINT ignored, as is this process meanwhile."""
     if threading.current_thread() is not threading.main_thread():
         yield
         return
-    previous = signal.signal(signal.SIGINT, signal.SIG_IGN)
+    if not hasattr(signal, "pthread_sigmask"):
+        previous = signal.signal(signal.SIGINT, signal.SIG_IGN)
+        try:
+            yield
+        finally:
+            signal.signal(signal.SIGINT, previous)
+        return
+    from multiprocessing import resource_tracker
+
+    # the tracker unblocks SIGINT in the thread that starts it: start it before the mask is set
+    resource_tracker.ensure_running()
+    held: list[int] = []
+    previous = {s: signal.signal(s, lambda signum, frame: held.append(signum))
+                for s in (signal.SIGINT, signal.SIGTERM)}
+    wakeup = signal.set_wakeup_fd(-1)   # a noted signal must not wake the caller's stop watcher
+    mask = signal.pthread_sigmask(signal.SIG_BLOCK, {signal.SIGINT})
     try:
         yield
     finally:
-        signal.signal(signal.SIGINT, previous)
+        if signal.SIGINT in signal.sigpending():   # sent to this thread while it was blocked
+            signal.sigwait({signal.SIGINT})
+            held.append(signal.SIGINT)
+        signal.pthread_sigmask(signal.SIG_SETMASK, mask)
+        signal.set_wakeup_fd(wakeup, warn_on_full_buffer=False)
+        for s, handler in previous.items():
+            signal.signal(s, handler if handler is not None else signal.SIG_DFL)
+    for signum in dict.fromkeys(held):   # only when the block itself ended without an error
+        signal.raise_signal(signum)
 
 
 def run_batch_many(opts: BatchManyOptions, log: Callable[[str], None] = print) -> dict:
@@ -214,28 +499,31 @@ def _run_on_cluster(opts: BatchManyOptions, todo: list[items_mod.Item], run: str
                     log: Callable[[str], None]) -> dict[str, dict]:
     from distributed import as_completed
 
-    client, cluster = _connect(opts)
-    staging = opts.out / ".work"
+    res = _Run(opts, run)
     results: dict[str, dict] = {}
-    futures: dict = {}
     bar = None
+    finished = False
     try:
+        _connect(opts, res)
         try:  # made only now: a run refused while connecting leaves nothing behind
             opts.out.mkdir(parents=True, exist_ok=True)
         except OSError as exc:
             raise SpecGenError(f"{opts.out}: cannot create the output folder ({exc.strerror})") from None
         out = str(opts.out.resolve())
+        client = res.client
         meta["scheduler"] = client.scheduler.address
         meta["workers"] = len(client.scheduler_info()["workers"])
         meta["dashboard"] = client.dashboard_link
         log(f"Dask: {meta['workers']} workers at {meta['scheduler']}; dashboard {meta['dashboard']}")
         cmd = batch_command(opts)
         run_item = _shipped_run_item(client)
+        futures: dict = {}
         for it in todo:
             fut = client.submit(operator.call, run_item, it.to_dict(), out, run, cmd, list(opts.batch_args),
                                 str(REPO), it.fingerprint(opts.batch_args), opts.timeout, os.getcwd(),
-                                key=f"specgen-{it.id}-{run}", retries=opts.retries, pure=False)
+                                res.items_tmp, key=f"specgen-{it.id}-{run}", retries=opts.retries, pure=False)
             futures[fut] = it
+            res.futures.append(fut)
         if opts.progress:
             from tqdm import tqdm
 
@@ -249,7 +537,7 @@ def _run_on_cluster(opts: BatchManyOptions, todo: list[items_mod.Item], run: str
             elif fut.status == "finished":
                 rec = fut.result()
             else:
-                counter = staging / f"{it.id}.{run}.attempts"
+                counter = res.staging / f"{it.id}.{run}.attempts"
                 attempts = int(counter.read_text()) if counter.is_file() else opts.retries + 1
                 counter.unlink(missing_ok=True)
                 exc = fut.exception()
@@ -261,24 +549,17 @@ def _run_on_cluster(opts: BatchManyOptions, todo: list[items_mod.Item], run: str
             if bar is not None:
                 bar.set_postfix(failed=failed, refresh=False)
                 bar.update(1)
-    except KeyboardInterrupt:
-        client.cancel(list(futures), force=True)
-        raise
+        res.logs.publish(results.values())
+        finished = True
     finally:
-        if bar is not None:
-            bar.close()
-        client.close()
-        if cluster is not None:
-            cluster.close()
-        # this run's unfinished items (Ctrl-C, lost workers), and the lock of a batch.py killed
-        # by a timeout
-        for p in [*staging.glob(f"*.{run}*"), *staging.glob(f".*.{run}*")]:
-            if p.is_dir():
-                shutil.rmtree(p, ignore_errors=True)
-            else:
-                p.unlink(missing_ok=True)
-        if staging.is_dir() and not any(staging.iterdir()):
-            staging.rmdir()
+        try:
+            if bar is not None:
+                bar.close()
+        except BaseException:
+            finished = False
+            raise
+        finally:
+            res.close(cancel=not finished)
     return results
 
 

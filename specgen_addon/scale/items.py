@@ -62,9 +62,20 @@ def read_manifest(path: Path) -> list[Path]:
     A ``.json`` manifest is a list of paths (or ``{"inputs": [...]}``); any other file has one
     path per line, blank lines and ``#`` comments ignored.
     """
+    if path.is_dir():
+        raise SpecGenError(f"{path}: is a folder, expected a manifest file (one path per line, or a "
+                           "JSON list); to run every input in a folder, name the folder itself")
     if not path.is_file():
         raise SpecGenError(f"{path}: manifest not found")
-    text = path.read_text()
+    try:
+        text = path.read_bytes().decode("utf-8")
+    except OSError as exc:
+        raise SpecGenError(f"{path}: cannot read the manifest ({exc.strerror})") from None
+    except UnicodeDecodeError:
+        text = "\0"
+    if "\0" in text:
+        raise SpecGenError(f"{path}: not a text manifest (expected UTF-8 text: one path per line, "
+                           "or a JSON list)")
     if path.suffix.lower() == ".json":
         try:
             data = json.loads(text)

@@ -6,7 +6,14 @@ process and a crash cannot take the worker down. BRDF files go through :mod:`.pr
 
 Atomicity: the item is made in ``OUT/.work/<id>.<run>/`` and renamed to ``OUT/<id>/`` (one
 ``rename`` on the same file system) only after everything, ``item.json`` last, was written. A
-failed or cancelled item leaves no ``OUT/<id>/``, only its log in ``OUT/failed/<id>.log``.
+failed item leaves no ``OUT/<id>/``, only its log, kept as ``OUT/.work/<id>.<run>.log`` until the
+client moves it to ``OUT/failed/<id>.log`` at the end of the run (a cancelled run moves none).
+While the client cancels a run it leaves :func:`cancel_marker` in ``OUT/.work``: an attempt that
+sees it starts nothing and publishes nothing.
+
+Temporary files: every child runs with ``TMPDIR``/``TEMP``/``TMP`` set to a folder of its own,
+removed when the step ends, so a child stopped by ``timeout`` (SIGTERM, then SIGKILL after
+:data:`TERM_GRACE_S`) or killed with its worker leaves none of its temporary work behind.
 
 Failures: a bad input (exit status 2, the pipeline's clean one-line refusal) would fail the same
 way again, so it is returned as a failed record at once. Anything else (a crash, a signal, a
@@ -27,12 +34,25 @@ import signal
 import socket
 import subprocess
 import sys
+import tempfile
 import time
 from pathlib import Path
 
 EXIT_BAD_INPUT = 2
 RECORD_NAME = "item.json"
 PYTHON = "{python}"  #: placeholder in a command for the worker's own interpreter
+#: Seconds a child stopped by ``timeout`` has for its own clean stop (SIGTERM) before SIGKILL.
+TERM_GRACE_S = 10.0
+
+
+def cancel_marker(staging: Path, run: str) -> Path:
+    """The file whose presence in ``OUT/.work`` tells the attempts of run ``run`` it is cancelled."""
+    return staging / f".cancel.{run}"
+
+
+def staged_log(staging: Path, item_id: str, run: str) -> Path:
+    """Where a failed attempt keeps its log until the client moves it to ``OUT/failed/``."""
+    return staging / f"{item_id}.{run}.log"
 
 
 def _die_with_parent() -> None:  # pragma: no cover - runs in the child between fork and exec
@@ -68,25 +88,45 @@ def _run_logged(cmd: list[str], log: Path, cwd: str, env: dict, timeout: float |
     with open(log, "a") as fh:
         fh.write("$ " + " ".join(cmd) + "\n")
         fh.flush()
+        proc = subprocess.Popen(cmd, stdout=fh, stderr=subprocess.STDOUT, cwd=cwd, env=env,
+                                preexec_fn=_die_with_parent if os.name == "posix" else None)
         try:
-            code = subprocess.run(cmd, stdout=fh, stderr=subprocess.STDOUT, cwd=cwd, env=env,
-                                  timeout=timeout, preexec_fn=_die_with_parent if os.name == "posix" else None
-                                  ).returncode
+            code = proc.wait(timeout=timeout)
         except subprocess.TimeoutExpired:
+            _stop_child(proc)
             fh.write(f"timed out after {timeout:g} s\n")
             return -1, f"timed out after {timeout:g} s"
+        except BaseException:
+            _stop_child(proc)
+            raise
     lines = [ln.strip() for ln in log.read_text(errors="replace").splitlines() if ln.strip()]
     return code, lines[-1] if lines else ""
 
 
+def _stop_child(proc: subprocess.Popen) -> None:
+    """Stop a child the way a user would: SIGTERM (batch.py's clean stop removes what it made),
+    then SIGKILL if it is still running after :data:`TERM_GRACE_S`."""
+    try:
+        proc.terminate()
+        proc.wait(TERM_GRACE_S)
+    except subprocess.TimeoutExpired:
+        proc.kill()
+        proc.wait()
+    except OSError:  # already gone
+        proc.wait()
+
+
 def run_item(item: dict, out: str, run: str, batch_cmd: list[str], batch_args: list[str], repo: str,
-             fingerprint: dict, timeout: float | None = None, cwd: str | None = None) -> dict:
+             fingerprint: dict, timeout: float | None = None, cwd: str | None = None,
+             tmp_root: str | None = None) -> dict:
     """Make one item's results in ``out/<id>/``; returns its record (status "done" or "failed").
 
     ``batch_cmd`` starts ``batch.py`` (``{python}`` stands for this worker's interpreter); the
     input option, ``--out`` and ``--overwrite`` are added, then ``batch_args``. It runs in
     ``cwd`` (the folder batch-many was started in, so that relative paths in ``batch_args`` mean
-    what they meant there; default: ``repo``). Raises RuntimeError on a failure worth retrying.
+    what they meant there; default: ``repo``). Its temporary files go to a folder of its own in
+    ``tmp_root`` (default: this worker's temporary folder), removed when the item ends. Raises
+    RuntimeError on a failure worth retrying, and when the run is being cancelled.
     """
     t0 = time.perf_counter()
     out_dir = Path(out)
@@ -96,15 +136,20 @@ def run_item(item: dict, out: str, run: str, batch_cmd: list[str], batch_args: l
         return done
     staging = out_dir / ".work"
     work = staging / f"{item_id}.{run}"
-    failed_log = out_dir / "failed" / f"{item_id}.log"
+    failed_log = out_dir / "failed" / f"{item_id}.log"   # where the client moves the kept log
+    kept_log = staged_log(staging, item_id, run)
     counter = staging / f"{item_id}.{run}.attempts"
     staging.mkdir(parents=True, exist_ok=True)
+    if cancel_marker(staging, run).exists():
+        raise RuntimeError(f"{item_id}: cancelled")
     attempt = int(counter.read_text()) + 1 if counter.is_file() else 1
     counter.write_text(str(attempt))
     shutil.rmtree(work, ignore_errors=True)   # what a killed earlier attempt left
     work.mkdir()
     log = work / "batch.log"
-    env = dict(os.environ, PYTHONPATH=os.pathsep.join(filter(None, [repo, os.environ.get("PYTHONPATH")])))
+    scratch = tempfile.mkdtemp(prefix="specgen_item_", dir=tmp_root)
+    env = dict(os.environ, PYTHONPATH=os.pathsep.join(filter(None, [repo, os.environ.get("PYTHONPATH")])),
+               TMPDIR=scratch, TEMP=scratch, TMP=scratch)
     record = {"id": item_id, "input": item["input"], "worker": f"{socket.gethostname()}:{os.getpid()}",
               "attempts": attempt, "stages_s": {}}
 
@@ -112,11 +157,10 @@ def run_item(item: dict, out: str, run: str, batch_cmd: list[str], batch_args: l
 
     def fail(message: str, retry: bool) -> dict:
         try:
-            failed_log.parent.mkdir(exist_ok=True)
-            shutil.copyfile(log, failed_log)
+            shutil.copyfile(log, kept_log)
         except OSError as exc:  # a full disk: the record still says what failed
             message += f" (its log could not be kept: {exc.strerror})"
-            failed_log.unlink(missing_ok=True)
+            kept_log.unlink(missing_ok=True)
         shutil.rmtree(work, ignore_errors=True)
         if retry:
             raise RuntimeError(f"{item_id}: {message}")
@@ -148,6 +192,8 @@ def run_item(item: dict, out: str, run: str, batch_cmd: list[str], batch_args: l
         record.update(status="done", error=None, outputs=outputs, bytes=sum(p.stat().st_size for p in files),
                       seconds=round(time.perf_counter() - t0, 2),
                       cpu_seconds=round(cpu[0], 2), fingerprint=fingerprint, run=run)
+        if cancel_marker(staging, run).exists():   # the run is being cancelled: publish nothing
+            raise RuntimeError(f"{item_id}: cancelled")
         try:
             (work / RECORD_NAME).write_text(json.dumps(record, indent=1))
             _publish(work, out_dir / item_id, staging / f"{item_id}.old.{run}")
@@ -157,7 +203,9 @@ def run_item(item: dict, out: str, run: str, batch_cmd: list[str], batch_args: l
     except BaseException:
         shutil.rmtree(work, ignore_errors=True)
         raise
-    failed_log.unlink(missing_ok=True)
+    finally:
+        shutil.rmtree(scratch, ignore_errors=True)
+    kept_log.unlink(missing_ok=True)   # an earlier attempt's
     counter.unlink(missing_ok=True)
     return record
 

@@ -81,3 +81,46 @@ def test_tga_hdr_and_camera_raw_files_are_photos_as_the_photo_reader_takes_them(
     assert set(RAW_SUFFIXES) | set(FLOAT_SUFFIXES) <= set(items_mod.IMAGE_SUFFIXES)
     with pytest.raises(SpecGenError, match=r"notes\.txt: not a known input .*\.tga.*\.hdr.*\.dng"):
         items_mod.collect_inputs(touch_inputs(tmp_path / "in", "notes.txt"))
+
+
+#: Arguments refused before any work, in one sentence: (argv, what the one line says).
+BAD_ARGUMENTS = {
+    "a binary manifest": (["--manifest", "{tmp}/list.txt"], "list.txt: not a text manifest"),
+    "a folder as the manifest": (["--manifest", "{tmp}/in"], "in: is a folder, expected a manifest file"),
+    "a dashboard address with no port": (["{photo}", "--dashboard-address", "nonsense"],
+                                         "--dashboard-address nonsense: expected HOST:PORT or :PORT"),
+    "a dashboard port above 65535": (["{photo}", "--dashboard-address", "127.0.0.1:99999"],
+                                     "the port must be between 0 and 65535"),
+    "a negative dashboard port": (["{photo}", "--dashboard-address", ":-5"], "the port must be between 0 and 65535"),
+    "a dashboard host of another machine": (["{photo}", "--dashboard-address", "192.0.2.1:8787"],
+                                            "192.0.2.1 is not an address of this machine"),
+    "a Blender that is not executable": (["{photo}", "--blender", "{tmp}/blender"],
+                                         "blender: not an executable file"),
+    "a folder as Blender": (["{photo}", "--blender", "{tmp}/in"], "is a folder, expected the Blender executable"),
+    "a Blender not on PATH": (["{photo}", "--blender", "no-such-blender-7"], "no such program on PATH"),
+}
+
+
+@pytest.mark.parametrize("case", sorted(BAD_ARGUMENTS))
+def test_an_unusable_argument_is_refused_in_one_sentence_before_any_work(case, tmp_path, capsys):
+    from specgen_addon.cli.app import main
+
+    touch_inputs(tmp_path / "in", "oak.png")
+    (tmp_path / "list.txt").write_bytes(bytes(range(256)) * 4)   # not text
+    (tmp_path / "blender").write_text("#!/bin/sh\n")              # not executable
+    before = sorted(p.name for p in tmp_path.iterdir())
+    argv, message = BAD_ARGUMENTS[case]
+    argv = [a.format(tmp=tmp_path, photo=PHOTO) for a in argv]
+    code = main(["batch-many", *argv, "--out", str(tmp_path / "out"), "--quiet"])
+    err = capsys.readouterr().err.strip()
+    assert code == 2 and err.count("\n") == 0 and message in err, err
+    assert "internal error" not in err
+    assert sorted(p.name for p in tmp_path.iterdir()) == before   # no OUT, no lock left
+
+
+def test_dashboard_addresses_dask_takes_pass_the_up_front_check():
+    from specgen_addon.scale.batch_many import check_dashboard_address
+
+    for address in (":0", ":8787", "8787", "127.0.0.1:8787", "localhost:0", "0.0.0.0:65535"):
+        check_dashboard_address(address)
+    check_dashboard_address("192.0.2.1:8787", local=False)   # with --scheduler it is not used here

@@ -17,7 +17,8 @@ import pytest
 from specgen_addon.common.errors import OutputBusyError
 from specgen_addon.common.atomic_io import lock_path
 from specgen_addon.scale import items as items_mod
-from specgen_addon.scale.batch_many import BatchManyOptions, run_batch_many
+from specgen_addon.scale.batch_many import (SCRATCH_OWNER, SCRATCH_PREFIX, BatchManyOptions,
+                                            remove_stale_scratch, run_batch_many)
 from specgen_addon.scale.worker import PYTHON, RECORD_NAME, run_item
 from batch_stand_in import stand_in, touch_inputs
 
@@ -130,24 +131,48 @@ def test_the_dashboard_listens_on_loopback_unless_an_address_is_given(monkeypatc
 
     monkeypatch.setattr(distributed, "LocalCluster", fake_cluster)
     args = build_parser().parse_args(["batch-many", "x.png", "--out", "o"])
-    with pytest.raises(Stop):
-        batch_many._connect(BatchManyOptions(inputs=[], out=Path("o"), dashboard_address=args.dashboard_address))
+    opts = BatchManyOptions(inputs=[], out=Path("o"), dashboard_address=args.dashboard_address)
+    run = batch_many._Run(opts, "r1")
+    try:
+        with pytest.raises(Stop):
+            batch_many._connect(opts, run)
+    finally:
+        run.close(cancel=True)
     assert seen["dashboard_address"].startswith("127.0.0.1:")
     assert BatchManyOptions(inputs=[], out=Path("o")).dashboard_address.startswith("127.0.0.1:")
 
 
 # ------------------------------------------------------------------------------- kill -9
+def test_the_scratch_folder_of_a_killed_run_is_removed_and_a_running_one_s_kept(tmp_path):
+    gone = subprocess.run([sys.executable, "-c", "import os; print(os.getpid())"], capture_output=True,
+                          text=True).stdout.strip()
+    owners = {"killed": {"pid": int(gone), "host": socket.gethostname()},
+              "running": {"pid": os.getppid(), "host": socket.gethostname()},
+              "elsewhere": {"pid": int(gone), "host": socket.gethostname() + "-other"}}
+    for name, owner in owners.items():
+        (tmp_path / (SCRATCH_PREFIX + name) / "dask").mkdir(parents=True)
+        (tmp_path / (SCRATCH_PREFIX + name) / SCRATCH_OWNER).write_text(json.dumps(owner))
+    (tmp_path / (SCRATCH_PREFIX + "no-owner")).mkdir()   # not one of batch-many's (or not yet)
+    assert remove_stale_scratch(tmp_path) == [tmp_path / (SCRATCH_PREFIX + "killed")]
+    assert sorted(p.name.removeprefix(SCRATCH_PREFIX) for p in tmp_path.iterdir()) == \
+        ["elsewhere", "no-owner", "running"]
+
+
+
 @pytest.mark.slow
 def test_after_kill_9_of_the_main_process_a_rerun_does_every_item_exactly_once(tmp_path):
     """Kill -9 of batch-many (and then of what it left running), rerun: every item made exactly
-    once, report.json and every item.json agree, no .work left."""
+    once, report.json and every item.json agree, no .work left, and the killed run's scratch
+    folder is removed by the rerun."""
     psutil = pytest.importorskip("psutil")
     pytest.importorskip("distributed")
     inputs = touch_inputs(tmp_path / "in", "a.png", "b.png", "c.png", "d.png", "e.png", "f.png")
     out = tmp_path / "out"
     cmd = [sys.executable, "-m", "specgen_addon", "batch-many", *map(str, inputs), "--out", str(out),
            "--workers", "2", "--dashboard-address", ":0", "--quiet", "--batch-script", str(_script(tmp_path))]
-    env = dict(os.environ, FAKE_BATCH_SLOW="1.5")
+    tmp = tmp_path / "tmp"
+    tmp.mkdir()
+    env = dict(os.environ, FAKE_BATCH_SLOW="1.5", TMPDIR=str(tmp))
     proc = subprocess.Popen(cmd, cwd=REPO, env=env, stdout=subprocess.DEVNULL, stderr=subprocess.DEVNULL,
                             start_new_session=True)
     try:
@@ -166,7 +191,8 @@ def test_after_kill_9_of_the_main_process_a_rerun_does_every_item_exactly_once(t
             os.killpg(proc.pid, signal.SIGKILL)
     done_before = {p.parent.name for p in out.glob(f"*/{RECORD_NAME}")}
     assert done_before and len(done_before) < 6, "the kill must land mid-run"
-    again = subprocess.run(cmd, cwd=REPO, env=dict(os.environ, FAKE_BATCH_SLOW="0"), capture_output=True,
+    assert [p.name[:len(SCRATCH_PREFIX)] for p in tmp.iterdir()] == [SCRATCH_PREFIX]   # the killed run's
+    again = subprocess.run(cmd, cwd=REPO, env=dict(env, FAKE_BATCH_SLOW="0"), capture_output=True,
                            text=True, timeout=600)
     assert again.returncode == 0, again.stdout[-2000:] + again.stderr[-2000:]
     runs = (tmp_path / "in" / "runs.txt").read_text().splitlines()
@@ -180,6 +206,7 @@ def test_after_kill_9_of_the_main_process_a_rerun_does_every_item_exactly_once(t
                {k: v for k, v in published.items() if k != "status"}
     assert not (out / ".work").exists()
     assert sum(r["status"] == "skipped" for r in report["items"]) == len(done_before)
+    assert sorted(tmp.iterdir()) == []
 
 
 def test_a_full_disk_while_publishing_is_the_item_s_one_sentence_error(tmp_path, monkeypatch):
