@@ -84,6 +84,20 @@ def _release_stop() -> None:
         _stop_token.release()
 
 
+def _remove_blender_session_folder() -> None:
+    """Remove the session folder a loaded bpy made (``bpy.app.tempdir``, ``blender_XXXXXX`` in
+    the temporary folder), which Blender removes itself on a normal exit only. The module is
+    looked up, never imported: the core does not load bpy."""
+    bpy = sys.modules.get("bpy")
+    folder = getattr(getattr(bpy, "app", None), "tempdir", "") if bpy is not None else ""
+    if not folder:
+        return
+    folder = os.path.abspath(folder)
+    if os.path.basename(folder.rstrip(os.sep)).startswith("blender_") and \
+            os.path.dirname(folder.rstrip(os.sep)) == os.path.abspath(tempfile.gettempdir()):
+        shutil.rmtree(folder, ignore_errors=True)
+
+
 class _Parked(BaseException):
     """Raised asynchronously in the main thread once the watcher owns a stop. CPython creates the
     exception object when a handler (an ``except``, ``finally`` or ``with`` block, or Blender's C
@@ -259,6 +273,7 @@ def stop_on_signals(message=None) -> Iterator[None]:
             for cleanup in reversed(list(_cleanups)):
                 with contextlib.suppress(Exception):
                     cleanup()
+            _remove_blender_session_folder()   # os._exit skips Blender's own clean-up of it
             name = signal.Signals(signum).name
             with contextlib.suppress(Exception):
                 text = message(name) if message else f"cancelled: stopped by {name}"

@@ -223,3 +223,24 @@ def test_a_ctrl_c_while_the_commands_load_is_one_line_and_exit_130(monkeypatch, 
     assert entry.main() == 130
     err = capsys.readouterr().err.strip().splitlines()
     assert len(err) == 1 and err[0].startswith("cancelled: specgen stopped by SIGINT while starting"), err
+
+
+def test_a_hard_stop_removes_blenders_session_folder_and_nothing_else(tmp_path, monkeypatch):
+    """Blender removes its ``blender_XXXXXX`` session folder only on a normal exit; the hard stop
+    ends the process with ``os._exit``, so it removes the folder itself, and only that folder."""
+    import tempfile
+    from types import SimpleNamespace
+
+    from specgen_addon.common import interrupts
+
+    monkeypatch.setattr(tempfile, "tempdir", str(tmp_path))
+    session = tmp_path / "blender_a1b2c3"
+    (session / "sub").mkdir(parents=True)
+    monkeypatch.setitem(sys.modules, "bpy", SimpleNamespace(app=SimpleNamespace(tempdir=str(session) + os.sep)))
+    interrupts._remove_blender_session_folder()
+    assert not session.exists()
+    elsewhere = tmp_path / "project" / "blender_keep"
+    elsewhere.mkdir(parents=True)
+    monkeypatch.setitem(sys.modules, "bpy", SimpleNamespace(app=SimpleNamespace(tempdir=str(elsewhere))))
+    interrupts._remove_blender_session_folder()            # not in the temporary folder: kept
+    assert elsewhere.is_dir()
