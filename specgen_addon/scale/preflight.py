@@ -71,11 +71,8 @@ def _corpus(a) -> None:
     for name in a.tabulate:
         limits.safe_name(name, "--tabulate material name")
     limits.check_output_dir(a.out)
-    if not a.overwrite:
-        for name in a.tabulate:
-            if (Path(a.out) / f"{name}.npz").exists():
-                raise OutputExistsError(f"{Path(a.out) / (name + '.npz')}: already exists "
-                                        "(pass --overwrite to replace it)")
+    for name in a.tabulate:
+        limits.refuse_existing(Path(a.out) / f"{name}.npz", a.overwrite)
 
 
 def _train(a) -> None:
@@ -168,8 +165,7 @@ def _export(a) -> None:
     check_weights_file(a.weights)
 
     for p in onnx_paths(Path(a.weights) if a.weights is not None else DEFAULT_WEIGHTS):
-        if p.exists() and not a.overwrite:
-            raise OutputExistsError(f"{p}: already exists (pass --overwrite to replace it)")
+        limits.refuse_existing(p, a.overwrite)
 
 
 def _render_input(a) -> None:
@@ -321,8 +317,7 @@ def check_batch(args: argparse.Namespace) -> None:
     for p in (target, target.with_name(target.stem + "_preview.png")):
         if p.is_dir():
             raise SpecGenError(f"{p}: is a folder, expected an output file name")
-        if p.exists() and not args.overwrite:
-            raise OutputExistsError(f"{p}: already exists (pass --overwrite to replace it)")
+        limits.refuse_existing(p, args.overwrite)
     if lookup.is_symlink() or (lookup.exists() and lookup.resolve().parent != out.resolve()):
         raise SpecGenError(f"{lookup}: is a link; batch.py writes its lookup textures only in a "
                            "real folder inside the output folder (remove the link)")

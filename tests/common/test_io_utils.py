@@ -61,6 +61,12 @@ def test_a_link_to_a_missing_file_at_the_output_is_refused_before_the_work(tmp_p
                           cwd=repo_dir)
     assert done.returncode != 0 and "a link to a missing file" in done.stderr, done.stderr
     assert len(done.stderr.strip().splitlines()) == 1 and not (tmp_path / "elsewhere.npz").exists()
+    render = tmp_path / "sphere_sphere_studio.exr"                     # batch.py's render, likewise
+    render.symlink_to(tmp_path / "elsewhere.exr")
+    done = subprocess.run([sys.executable, "batch.py", "--image", "examples/sphere.png", "--out", str(tmp_path)],
+                          capture_output=True, text=True, timeout=120, cwd=repo_dir)
+    assert done.returncode == 2 and "a link to a missing file" in done.stderr, done.stderr
+    assert "baked in" not in done.stdout, done.stdout                  # refused before the work
 
 
 def _write(path, text, overwrite=True):
