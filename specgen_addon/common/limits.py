@@ -155,6 +155,9 @@ def check_output_file(path: str | os.PathLike, overwrite: bool = False,
         raise SpecGenError(f"{path}: is a folder, expected an output file name")
     parent = path.parent if str(path.parent) else Path(".")
     if not parent.is_dir():
+        in_the_way = next((p for p in [parent, *parent.parents] if p.exists()), None)
+        if in_the_way is not None and not in_the_way.is_dir():
+            raise SpecGenError(f"{path}: cannot be the output folder ({in_the_way} is a file)")
         raise SpecGenError(f"{path}: output folder {parent} does not exist")
     if not os.access(parent, os.W_OK):
         raise SpecGenError(f"{path}: output folder {parent} is not writable")

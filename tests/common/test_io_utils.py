@@ -103,3 +103,13 @@ def test_an_overwrite_that_succeeds_keeps_the_new_files_and_drops_the_old_copies
     assert out.read_text() == "new" and [p.name for p in tmp_path.iterdir()] == ["b.npz"]
     _write(out, "outside a command")        # no command keeping copies: replaced at once, none made
     assert out.read_text() == "outside a command" and [p.name for p in tmp_path.iterdir()] == ["b.npz"]
+
+
+def test_an_output_under_a_file_names_the_file_in_the_way(tmp_path):
+    from specgen_addon.common.limits import check_output_file
+
+    (tmp_path / "FILE").write_text("a file, not a folder")
+    with pytest.raises(SpecGenError, match=r"cannot be the output folder \(.*FILE is a file\)"):
+        check_output_file(tmp_path / "FILE" / "sub" / "b.npz")
+    with pytest.raises(SpecGenError, match="output folder .*missing does not exist"):
+        check_output_file(tmp_path / "missing" / "b.npz")

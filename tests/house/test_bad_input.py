@@ -282,7 +282,7 @@ CLI_CASES = {
     "tabulate-wavelength-100": (lambda w: ["tabulate", str(w.npz_good), "-o", str(w.out / "t.npz"), "--wl-min", "100"], "between 360 and 1000 nm"),
     "tabulate-output-folder-missing": (lambda w: ["tabulate", str(w.npz_good), "-o", str(w.root / "no" / "t.npz")], "does not exist"),
     "tabulate-output-is-folder": (lambda w: ["tabulate", str(w.npz_good), "-o", str(w.out)], "must end in .npz"),
-    "tabulate-output-under-file": (lambda w: ["tabulate", str(w.npz_good), "-o", str(w.blocker / "t.npz")], "does not exist"),
+    "tabulate-output-under-file": (lambda w: ["tabulate", str(w.npz_good), "-o", str(w.blocker / "t.npz")], "a_file is a file"),
     "tabulate-output-dotdot-missing": (lambda w: ["tabulate", str(w.npz_good), "-o", str(w.out / "x" / ".." / ".." / "no" / "t.npz")], "does not exist"),
     "info-merl-truncated": (lambda w: ["info", str(w.merl_short)], "truncated"),
     "info-merl-overflow": (lambda w: ["info", str(w.merl_inf)], "overflowing"),
