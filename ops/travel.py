@@ -252,6 +252,7 @@ def pack(mat) -> int:
 
     A material already packed keeps its copy unless the file beside it has changed (Generate with
     *Replace Materials*)."""
+    _pack_preview(mat)
     source, img = compact_path(mat), packed_image(mat)
     if not source.is_file():
         if img is not None:
@@ -273,13 +274,26 @@ def pack(mat) -> int:
     return len(data)
 
 
+def _pack_preview(mat) -> None:
+    """The material's preview image (the panel's thumbnail, a few tens of kB) packed too, so a
+    .blend copied alone shows it."""
+    preview = bpy.data.images.get(str(mat.get("specgen_preview", "")))
+    if preview is not None and preview.packed_file is None and preview.filepath \
+            and os.path.isfile(bpy.path.abspath(preview.filepath)):
+        preview.pack()
+
+
 def unpack(mat) -> None:
-    """Remove the material's packed compact file from the .blend (the file beside it stays)."""
+    """Remove the material's packed compact file from the .blend (the file beside it stays), and
+    its packed preview (read from its file again, or written back where that is gone)."""
     img = packed_image(mat)
     if img is not None:
         bpy.data.images.remove(img)
     if PACKED_KEY in mat:
         del mat[PACKED_KEY]
+    preview = bpy.data.images.get(str(mat.get("specgen_preview", "")))
+    if preview is not None and preview.packed_file is not None:
+        preview.unpack(method="USE_ORIGINAL")
 
 
 def _restore_packed(mat, source: Path) -> Path | None:
