@@ -153,6 +153,18 @@ def test_two_generates_make_two_material_sets_and_apply_assigns_the_chosen_one(t
         assert groups["SpecGen sphere.001"].users == 0
         bpy.data.orphans_purge(do_recursive=True)
         assert [g.name for g in bpy.data.node_groups if g.get("specgen")] == ["SpecGen sphere"]
+        # another .blend writing into the same folder, Overwrite on: this file's sets are not its own
+        theirs = {q.name: q.read_bytes() for q in tmp_path.glob("sphere*")}
+        other = bpy.data.scenes.new("another file's")
+        bpy.context.window.scene = other
+        o = other.specgen
+        o.image_path, o.output_dir, o.bands, o.lookup_resolution = s.image_path, str(tmp_path), 4, "45"
+        o.overwrite = True
+        bpy.data.materials["SpecGen sphere"].name = "the first file's, renamed"   # as if not in this file
+        assert bpy.ops.specgen.generate_brdf() == {"FINISHED"}
+        assert o.material.name == "SpecGen sphere.002"                          # a new set beside them
+        assert {q.name: q.read_bytes() for q in tmp_path.glob("sphere*") if q.name in theirs} == theirs
+        bpy.context.window.scene = sc
     finally:
         PKG.unregister()
     # unregistering the add-on keeps the user's data (materials and their groups) intact
