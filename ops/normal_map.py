@@ -3,7 +3,8 @@
 Runs in Blender or with the ``bpy`` module; the core (``specgen_addon``) only reads the ``.npz``
 this writes. Rays are cast orthographically through pixel centres (no rendering, no sampling
 noise) against the evaluated mesh; the hit triangle's corner normals are interpolated
-barycentrically, so smooth shading and modifiers (e.g. subdivision) are honoured.
+barycentrically (:func:`specgen_addon.render.geometry.smooth_normal`), so smooth shading and
+modifiers (e.g. subdivision) are honoured.
 
 Frames: Blender is z-up; the renderer's world is +x right, +y up, +z towards the camera, which is
 Blender's front view (camera at −Y looking +Y): renderer ``(x, y, z)`` = Blender ``(X, Z, −Y)``.
@@ -19,6 +20,8 @@ import argparse
 import sys
 
 import numpy as np
+
+from specgen_addon.render.geometry import smooth_normal
 
 
 def capture_normal_map(obj, resolution: int, margin: float = 0.05) -> tuple[np.ndarray, np.ndarray]:
@@ -57,18 +60,7 @@ def capture_normal_map(obj, resolution: int, margin: float = 0.05) -> tuple[np.n
             hit, _, index, _ = tree.ray_cast(Vector((x, y0, z)), Vector((0.0, 1.0, 0.0)))
             if hit is None:
                 continue
-            p = np.array(tuple(hit))
-            a, b, c = verts[tri_verts[index]]
-            # Barycentric coordinates of the hit in its triangle.
-            v0, v1, v2 = b - a, c - a, p - a
-            d00, d01, d11 = v0 @ v0, v0 @ v1, v1 @ v1
-            d20, d21 = v2 @ v0, v2 @ v1
-            den = d00 * d11 - d01 * d01
-            wb = (d11 * d20 - d01 * d21) / den
-            wc = (d00 * d21 - d01 * d20) / den
-            n = (1 - wb - wc) * corner_n[tri_loops[index, 0]] + wb * corner_n[tri_loops[index, 1]] \
-                + wc * corner_n[tri_loops[index, 2]]
-            n /= np.linalg.norm(n)
+            n = smooth_normal(np.array(tuple(hit)), verts[tri_verts[index]], corner_n[tri_loops[index]])
             normals[row, col] = (n[0], n[2], -n[1])      # Blender → renderer frame
             mask[row, col] = True
     obj.evaluated_get(depsgraph).to_mesh_clear()

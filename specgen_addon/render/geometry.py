@@ -137,3 +137,18 @@ def shading_frame(normals: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
 def to_local(v: np.ndarray, t: np.ndarray, b: np.ndarray, n: np.ndarray) -> np.ndarray:
     """World vectors (…, 3) expressed in the frame (t, b, n), broadcasting over leading axes."""
     return np.stack([np.sum(v * t, -1), np.sum(v * b, -1), np.sum(v * n, -1)], axis=-1)
+
+
+def smooth_normal(point: np.ndarray, corners: np.ndarray, corner_normals: np.ndarray) -> np.ndarray:
+    """The unit normal at ``point`` inside a triangle of ``corners`` (3, 3), interpolated from its
+    ``corner_normals`` (3, 3) with the point's barycentric coordinates: smooth shading, as a
+    renderer interpolates a mesh's normals across a face."""
+    a, b, c = np.asarray(corners, np.float64)
+    v0, v1, v2 = b - a, c - a, np.asarray(point, np.float64) - a
+    d00, d01, d11 = v0 @ v0, v0 @ v1, v1 @ v1
+    d20, d21 = v2 @ v0, v2 @ v1
+    den = d00 * d11 - d01 * d01
+    wb = (d11 * d20 - d01 * d21) / den
+    wc = (d00 * d21 - d01 * d20) / den
+    n = np.array([1.0 - wb - wc, wb, wc]) @ np.asarray(corner_normals, np.float64)
+    return n / np.linalg.norm(n)

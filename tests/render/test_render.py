@@ -219,3 +219,17 @@ def test_lighting_reports_missing_bpy_wheel(monkeypatch):
     monkeypatch.setattr(lighting.importlib.util, "find_spec", lambda name: None)
     with pytest.raises(lighting.LightingAssetError, match="bpy wheel"):
         lighting.studiolights_dir((lighting.wheel_datafiles_dir,))
+
+
+def test_a_smooth_normal_is_its_corners_at_the_corners_and_their_blend_inside():
+    from specgen_addon.render.geometry import smooth_normal
+
+    corners = np.array([[0.0, 0.0, 0.0], [2.0, 0.0, 0.0], [0.0, 3.0, 0.0]])
+    normals = np.array([[0.0, 0.0, 1.0], [1.0, 0.0, 0.0], [0.0, 1.0, 0.0]])
+    for corner, normal in zip(corners, normals):
+        np.testing.assert_allclose(smooth_normal(corner, corners, normals), normal, atol=1e-12)
+    centroid = corners.mean(axis=0)
+    np.testing.assert_allclose(smooth_normal(centroid, corners, normals), np.ones(3) / np.sqrt(3), atol=1e-12)
+    midpoint = (corners[0] + corners[1]) / 2                     # on an edge: the two corners only
+    np.testing.assert_allclose(smooth_normal(midpoint, corners, normals), [1 / np.sqrt(2), 0, 1 / np.sqrt(2)],
+                               atol=1e-12)
