@@ -78,7 +78,8 @@ def build_parser() -> argparse.ArgumentParser:
     ap.add_argument("--env", default="studio",
                     help="environment map name from Blender's studio lights (e.g. studio, courtyard)")
     ap.add_argument("--out", required=True, help="output folder (created if missing)")
-    ap.add_argument("--bands", type=int, default=21, help="number of wavelength bands (default 21)")
+    ap.add_argument("--bands", type=int, default=21,
+                    help="number of wavelength bands, 1–128 (default 21; one band renders at --wl-min)")
     ap.add_argument("--wl-min", type=float, default=380.0, help="shortest wavelength, nm (default 380)")
     ap.add_argument("--wl-max", type=float, default=780.0, help="longest wavelength, nm (default 780)")
     ap.add_argument("--samples", type=int, default=None,
@@ -87,7 +88,8 @@ def build_parser() -> argparse.ArgumentParser:
                     help="image width = height in pixels (default 256; --scene: the scene's)")
     ap.add_argument("--env-samples", type=int, default=2,
                     help="environment directions per Cycles sample in the shader (default 2)")
-    ap.add_argument("--sun", action="store_true", help="add a sun from the upper left (irradiance π)")
+    ap.add_argument("--sun", action="store_true",
+                    help="add a sun from the upper left (irradiance π; D65, of unit luminance over the rendered bands)")
     ap.add_argument("--weights", default=None, help="network weights (.pt); default: the shipped ones")
     ap.add_argument("--backend", choices=("onnx", "torch"), default=None,
                     help="inference backend (default: onnx if onnxruntime is installed)")

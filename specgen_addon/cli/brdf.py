@@ -34,7 +34,7 @@ def add_parser(sub: argparse._SubParsersAction) -> None:
     p.add_argument("--wl-max", type=float, default=DEFAULT_RANGE_NM[1],
                    help="last wavelength, nm (default %(default)g)")
     p.add_argument("--bands", type=int, default=DEFAULT_BAND_COUNT,
-                   help="wavelength count for spectral files (default %(default)s; RGB files keep R, G, B)")
+                   help="wavelength count for spectral files, 1–128 (default %(default)s; RGB files keep R, G, B)")
     p.add_argument("--overwrite", action="store_true", help="replace an existing output")
     p.add_argument("--quiet", action="store_true", help="no progress bar")
     p.set_defaults(func=run_tabulate)
@@ -49,7 +49,8 @@ def describe(path: Path) -> dict:
         info.update(kind="spectral" if brdf.is_spectral else "rgb", channels=len(brdf.channels),
                     grid=list(brdf.values.shape[:3]), metadata=brdf.metadata)
         if brdf.is_spectral:
-            info["wavelengths_nm"] = [float(brdf.wavelengths[0]), float(brdf.wavelengths[-1])]
+            w = [float(x) for x in brdf.wavelengths]
+            info.update(bands=len(w), wavelength_range_nm=[w[0], w[-1]], wavelengths_nm=w)
     else:
         info.update(brdf.info() if hasattr(brdf, "info") else {})
     return info

@@ -76,7 +76,7 @@ def add_parser(sub: argparse._SubParsersAction) -> argparse.ArgumentParser:
     p.add_argument("--full-table", action="store_true",
                    help="write the full float32 table (122 MB at 21 bands) instead of the compact file")
     add_network_arguments(p)
-    p.add_argument("--bands", type=int, default=21, help="wavelength bands (default 21)")
+    p.add_argument("--bands", type=int, default=21, help="wavelength bands, 1–128 (default 21)")
     p.add_argument("--every-band", action="store_true",
                    help="the network evaluates every band (default: bands at most 40 nm apart, the "
                         "others interpolated in λ: about 1 s faster, the table within 1 %% rms)")

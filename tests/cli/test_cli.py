@@ -27,6 +27,16 @@ def test_info_prints_merl_metadata(tmp_path):
     assert res.returncode == 0 and "merl" in res.stdout
 
 
+def test_info_json_of_a_spectral_table_lists_its_wavelengths_and_their_range(tmp_path, ramp_table):
+    import json
+
+    ramp_table.save(tmp_path / "t.npz")
+    res = _run("info", "--json", str(tmp_path / "t.npz"))
+    info = json.loads(res.stdout)
+    assert info["wavelengths_nm"] == [float(w) for w in ramp_table.wavelengths]   # every band, in nm
+    assert info["bands"] == len(ramp_table.wavelengths) and info["wavelength_range_nm"] == [380.0, 780.0]
+
+
 def test_tabulate_merl_writes_table_and_refuses_overwrite(tmp_path):
     p = write_merl(tmp_path / "m.binary", MERLData(np.ones((3, 90, 90, 180))))
     out = tmp_path / "t.npz"
