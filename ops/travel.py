@@ -466,6 +466,40 @@ def _save_pre(filepath, *_args) -> None:
                 print(f"SpecGen: {exc}")
 
 
+def after_copy_saved(copy_path: str) -> None:
+    """What ``save_post`` does after *Save Copy* (the open file stays what it was): the paths
+    ``save_pre`` made relative to the copy's folder are made the open file's again (relative to
+    its folder, or absolute while it is unsaved), so the session keeps finding the lookups that
+    moved beside the copy."""
+    copy_dir = os.path.dirname(os.path.abspath(copy_path))
+    here = os.path.dirname(bpy.data.filepath) if bpy.data.filepath else None
+
+    def mine(path: str) -> str:
+        if not path.startswith("//"):
+            return path
+        where = _absolute(path, copy_dir)
+        return _relative(where, here) if here else where
+
+    for mat in _specgen_materials():
+        mat["specgen_atlas_groups"] = [mine(str(q)) for q in mat["specgen_atlas_groups"]]
+        mat["specgen_atlas"] = mine(str(mat["specgen_atlas"]))
+    if here is None:   # an unsaved file's image paths were set relative to the copy as well
+        for img in bpy.data.images:
+            if img.filepath.startswith("//"):
+                img.filepath_raw = mine(img.filepath)
+    for scene in bpy.data.scenes:
+        s = getattr(scene, "specgen", None)
+        if s is not None and s.atlas_json:
+            s.atlas_json = mine(s.atlas_json)
+
+
+@persistent
+def _save_post(filepath, *_args) -> None:
+    path = filepath if isinstance(filepath, str) and filepath else ""
+    if path and os.path.normpath(os.path.abspath(path)) != os.path.normpath(os.path.abspath(bpy.data.filepath or "/")):
+        after_copy_saved(path)   # Save Copy: the open file is not the one written
+
+
 @persistent
 def _load_post(*_args) -> None:
     for warning in reconnect():
@@ -483,12 +517,15 @@ def register() -> None:
         bpy.utils.register_class(cls)
     if _save_pre not in bpy.app.handlers.save_pre:
         bpy.app.handlers.save_pre.append(_save_pre)
+    if _save_post not in bpy.app.handlers.save_post:
+        bpy.app.handlers.save_post.append(_save_post)
     if _load_post not in bpy.app.handlers.load_post:
         bpy.app.handlers.load_post.append(_load_post)
 
 
 def unregister() -> None:
-    for handlers, fn in ((bpy.app.handlers.save_pre, _save_pre), (bpy.app.handlers.load_post, _load_post)):
+    for handlers, fn in ((bpy.app.handlers.save_pre, _save_pre), (bpy.app.handlers.save_post, _save_post),
+                         (bpy.app.handlers.load_post, _load_post)):
         if fn in handlers:
             handlers.remove(fn)
     for cls in reversed(_CLASSES):

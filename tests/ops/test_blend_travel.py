@@ -149,3 +149,27 @@ def test_first_save_beside_another_blends_set_renames_this_set_and_touches_none_
     assert (shared / "ball.001.npz").is_file()
     after = render.SpectralRenderJob(sc, None, samples=1, resolution=(16, 16)).run()
     np.testing.assert_allclose(after, before, rtol=1e-5, atol=1e-7)
+
+
+@pytest.mark.blender
+def test_save_copy_of_an_unsaved_file_leaves_the_open_file_rendering(tmp_path, monkeypatch, registered_addon):
+    """File → Save Copy writes the copy beside its lookups (moved out of the temporary folder),
+    and the open file, still unsaved, keeps finding them: it renders the same."""
+    monkeypatch.setattr(tempfile, "tempdir", str(tmp_path / "temp"))
+    sc = bpy.context.scene
+    unsaved = Path(properties.output_dir(sc.specgen))
+    unsaved.mkdir(parents=True)
+    from blend_reopen import sphere_scene_with_material
+
+    mat, before = sphere_scene_with_material(unsaved, "ball", _table())
+    copy = tmp_path / "copies" / "copy.blend"
+    copy.parent.mkdir()
+    bpy.ops.wm.save_as_mainfile(filepath=str(copy), copy=True)
+    assert bpy.data.filepath == ""                                       # still the unsaved file
+    assert (copy.parent / "specgen" / "ball_lookup.json").is_file()      # the copy's lookups
+    assert Path(mat["specgen_atlas"]) == copy.parent / "specgen" / "ball_lookup.exr"
+    after = render.SpectralRenderJob(sc, None, samples=1, resolution=(16, 16)).run()
+    np.testing.assert_allclose(after, before, rtol=1e-5, atol=1e-7)
+    out = _reopen(copy, tmp_path / "copy.npy")                           # and the copy renders too
+    assert "RENDERED" in out, out
+    np.testing.assert_allclose(np.load(tmp_path / "copy.npy"), before, rtol=1e-5, atol=1e-7)
