@@ -69,7 +69,7 @@ class SPECGEN_PT_main(bpy.types.Panel):
                 _thumbnail(col, preview)
             col.operator("specgen.export_brdf", icon="EXPORT")   # .bsdf / .binary for other renderers
         if s.refine_residual >= 0.0:
-            col.label(text=f"Refinement residual: {s.refine_residual:.4g}", icon="GRAPH")
+            col.label(text=f"Refined photo match: {s.refine_residual:.1f} dB", icon="GRAPH")
         others = [m.name for m in bpy.data.materials if m.get("specgen") and m != s.material]
         for name in others:
             col.label(text=name, icon="MATERIAL")

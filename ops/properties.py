@@ -104,9 +104,10 @@ class SpecGenSettings(bpy.types.PropertyGroup):
     material: PointerProperty(name="Material", type=bpy.types.Material, poll=_is_specgen_material,
                               description="SpecGen material that Apply assigns (each Generate "
                               "makes a new one unless Replace Materials is on)")
-    refine_residual: FloatProperty(name="Refinement Residual", default=-1.0, precision=4,
-                                   description="RMS residual of the last refinement against the "
-                                   "input photo (negative: not refined)")
+    refine_residual: FloatProperty(name="Refined Photo Match", default=-1.0, precision=4,
+                                   description="Self-reproduction of the last refined table: PSNR (dB) of "
+                                   "its render under the photo's lighting against the photo (negative: "
+                                   "not refined)")
     # State written by the operators (not shown as settings).
     refine_summary: StringProperty(name="Refinement", default="", options={"HIDDEN"})
     atlas_json: StringProperty(name="Baked Lookup", default="", options={"HIDDEN"})

@@ -159,8 +159,13 @@ class FullSceneRenderJob(RenderJobOutputs):
         try:
             with _RenderSettings(self.scene):
                 conversion.prepare()
+                shown = {m.name for m in specgen_materials(self.scene)}   # on render-visible objects
+                if not shown:
+                    self.warn("SpecGen: no render-visible object uses a SpecGen material, so the render "
+                              "shows none (Apply one to an object first)")
                 for mat, fit in conversion.specgen_fits():  # ΔE2000 of the closures (None: not measured)
-                    self.fit_errors[mat.name] = report_fit(mat.name, fit, exact, self.warn, self.log)
+                    if mat.name in shown:
+                        self.fit_errors[mat.name] = report_fit(mat.name, fit, exact, self.warn, self.log)
                 self.timings["convert_s"] = time.perf_counter() - t0
                 yield 0.02
                 t_render = []

@@ -153,7 +153,8 @@ def read_probe(path: str | Path, circle: tuple[float, float, float] | None = Non
                            white_gains=wb).crop(size=256)
     except ImageInputError as exc:
         if circle is None and mask is None:   # it was looked for, and not found
-            raise ProbeError(f"chrome ball not found: {exc} (give its mask or circle)") from None
+            advice = "" if "give" in str(exc) else " (give its mask or circle)"   # said once
+            raise ProbeError(f"chrome ball not found: {exc}{advice}") from None
         raise ProbeError(f"chrome ball: {exc}") from None
     env, sat = unwrap(crop.image.astype(np.float64), reflectance, width, crop.saturated)
     if not np.any(env > 0):

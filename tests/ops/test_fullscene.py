@@ -319,3 +319,15 @@ def test_full_scene_refuses_a_material_whose_lookups_are_gone_before_rendering(b
     # without the exact lookups asked for, the closures alone render (what the user chose)
     stack = fullscene.FullSceneRenderJob(bpy.context.scene, None, WL, exact_direct=False).run()
     assert stack.shape[-1] == WL.size and stack.max() > 0
+
+
+def test_a_generated_material_on_no_object_is_named_as_absent_from_the_render(blank_scene, white_atlas):
+    """Generate without Apply, then render: the render says no object shows a SpecGen material,
+    and says nothing of how that unused material's closures would render."""
+    render.make_material("SpecGen white", white_atlas)                 # generated, not applied
+    demo.ordinary_scene(samples=1, size=(12, 8))
+    warnings = []
+    fullscene.FullSceneRenderJob(bpy.context.scene, None, np.array([450.0, 550.0, 650.0]),
+                                 warn=warnings.append).run()
+    assert any("no render-visible object uses a SpecGen material" in w for w in warnings), warnings
+    assert not any("SpecGen white" in w for w in warnings), warnings

@@ -128,10 +128,10 @@ def test_two_generates_make_two_material_sets_and_apply_assigns_the_chosen_one(t
             bpy.context.view_layer.objects.active = obj
             assert bpy.ops.specgen.apply() == {"FINISHED"}
         assert a.active_material == first and b.active_material == second
-        s.refine_residual = 0.0123                                    # filled by a refinement
+        s.refine_residual = 36.54                                     # filled by a refinement (dB)
         rows = _record_panel()
         labels = [r.label for r in rows if r.kind == "label"]
-        assert "Refinement residual: 0.0123" in labels and "SpecGen sphere" in labels
+        assert "Refined photo match: 36.5 dB" in labels and "SpecGen sphere" in labels
         assert any(r.kind == "template" and r.value == "SpecGen sphere.001" for r in rows)
         user = bpy.data.materials.new("user's mix")                   # the group used elsewhere
         user_node = user.node_tree.nodes.new("ShaderNodeGroup")

@@ -102,10 +102,17 @@ def test_a_chrome_ball_mask_of_the_wrong_size_is_not_called_a_ball_not_found(tmp
     assert "not found" not in message and "give its mask or circle" not in message
 
 
-def test_a_chrome_ball_not_found_asks_for_its_mask_or_circle(tmp_path):
+def test_a_chrome_ball_not_found_asks_for_its_mask_or_circle_once(tmp_path):
     not_found = r"^chrome ball not found: .*\(give its mask or circle\)$"
     with pytest.raises(light_probe.ProbeError, match=not_found):
         light_probe.read_probe(_png(tmp_path / "black.png", 64, 64))
+    disc = np.zeros((64, 64, 3), np.uint8)                      # a bright square: found, not a circle
+    disc[20:44, 10:54] = 255
+    from PIL import Image
+    Image.fromarray(disc).save(tmp_path / "square.png")
+    with pytest.raises(light_probe.ProbeError) as err:
+        light_probe.read_probe(tmp_path / "square.png")
+    assert str(err.value).count("give") == 1, str(err.value)
 
 
 def test_a_reflectance_of_zero_is_refused_not_replaced_by_the_default(tmp_path):
