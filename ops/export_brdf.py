@@ -13,6 +13,7 @@ from bpy_extras.io_utils import ExportHelper
 from specgen_addon.brdf.formats.export import OUTPUT_SUFFIXES
 from specgen_addon.common.errors import SpecGenError
 
+from . import naming
 from .reporting import report_exception
 
 
@@ -23,7 +24,7 @@ def material_file(mat) -> Path:
     if mat is None or "specgen_atlas" not in mat:
         raise SpecGenError("choose a SpecGen material first")
     atlas = Path(_absolute(str(mat["specgen_atlas"])))
-    path = atlas.parent / f"{atlas.name.removesuffix('_lookup.exr')}.npz"
+    path = atlas.parent / f"{naming.atlas_stem(atlas)}.npz"
     if not path.is_file():
         raise SpecGenError(f"material {mat.name!r} has no BRDF file beside its lookups ({path.name}); "
                            "turn on Export Table and Generate it again")

@@ -66,6 +66,11 @@ def preview_name(stem: str) -> str:
     return f"{PREFIX} {stem} preview"
 
 
+def atlas_stem(atlas: str | Path) -> str:
+    """The set's stem from its atlas path (``…/sphere.001_lookup.exr`` → ``sphere.001``)."""
+    return Path(str(atlas)).name.removesuffix("_lookup.exr")
+
+
 def lookup_json(out_dir: str | Path, stem: str) -> Path:
     return Path(out_dir) / f"{stem}_lookup.json"
 

@@ -657,10 +657,9 @@ class SpectralRenderJob(RenderJobOutputs):
         if stale:
             raise SpecGenError(f"SpecGen material {stale[0]!r} was baked by an older SpecGen; "
                                "generate it again")
-        from .travel import restore_missing
+        from .travel import check_lookups
 
-        for note in restore_missing(mats):   # from the compact material, beside them or packed
-            self.warn(f"SpecGen: {note}")
+        check_lookups(mats, self.warn)
         bands = {tuple(m["specgen_wavelengths_nm"]) for m in mats}
         if len(bands) != 1:
             raise SpecGenError("SpecGen materials in the scene have different wavelength bands; "
@@ -674,11 +673,6 @@ class SpectralRenderJob(RenderJobOutputs):
         self.groups = [(np.asarray(b, np.float64).reshape(-1, self.wavelengths_nm.size),
                         np.asarray(o, np.float64), ms) for (b, o), ms in groups.items()]
         self.basis, self.offsets = self.groups[0][0], self.groups[0][1]
-        from .travel import missing_lookups, replaced_lookups
-
-        wrong = missing_lookups(mats) or replaced_lookups(mats)
-        if wrong:
-            raise SpecGenError(wrong[0])
         refresh_shader(mats)
         return mats
 

@@ -135,14 +135,9 @@ class FullSceneRenderJob(RenderJobOutputs):
         """The scene's SpecGen materials' lookups, as the exact render checks them: missing ones
         baked again from the compact material (beside them or packed); still missing, or another
         Generate's, the render refuses in the same sentence rather than show the stand-in alone."""
-        from .travel import missing_lookups, replaced_lookups, restore_missing
+        from .travel import check_lookups
 
-        mats = [m for m in specgen_materials(self.scene) if "specgen_atlas_groups" in m]
-        for note in restore_missing(mats):
-            self.warn(f"SpecGen: {note}")
-        wrong = missing_lookups(mats) or replaced_lookups(mats)
-        if wrong:
-            raise SpecGenError(wrong[0])
+        check_lookups([m for m in specgen_materials(self.scene) if "specgen_atlas_groups" in m], self.warn)
 
     def steps(self) -> Iterator[float]:
         """Generator: convert the scene, one Cycles render per band group, restore, write."""

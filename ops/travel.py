@@ -103,13 +103,13 @@ def _in_unsaved_folder(path: str) -> bool:
         return False
 
 
-def _move_set(mat, old_dir: Path, new_dir: Path) -> dict[str, str]:
-    """Move the material's set of files (:func:`ops.naming.files_of`) from ``old_dir`` to
+def _move_set(stem: str, old_dir: Path, new_dir: Path) -> tuple[str, dict[str, str]]:
+    """Move the set ``stem``'s files (:func:`ops.naming.files_of`) from ``old_dir`` to
     ``new_dir``, all or none; where ``new_dir`` holds a set of the same stem (another .blend's),
-    under the first free stem (``sphere.001``). Gives old → new absolute path of each file."""
+    under the first free stem (``sphere.001``). Gives (the stem it moved under, old → new
+    absolute path of each file)."""
     from specgen_addon.bake import lookup as bake
 
-    stem = Path(str(mat["specgen_atlas"])).name.removesuffix("_lookup.exr")
     new_stem = naming.unique_stem(stem, lambda s: bool(naming.files_of(new_dir, s)))
     moves = [(f, new_dir / f"{new_stem}{f.name[len(stem):]}") for f in naming.files_of(old_dir, stem)]
     taken = next((t for _, t in moves if t.exists()), None)
@@ -128,7 +128,7 @@ def _move_set(mat, old_dir: Path, new_dir: Path) -> dict[str, str]:
         for f, target in reversed(done):   # all or none: a half-moved set is a broken material
             shutil.move(str(target), str(f))
         raise
-    return {os.path.normpath(str(f)): str(t) for f, t in moves}
+    return new_stem, {os.path.normpath(str(f)): str(t) for f, t in moves}
 
 
 def relocate(blend_path: str) -> list[str]:
@@ -147,16 +147,15 @@ def relocate(blend_path: str) -> list[str]:
         atlas = _absolute(str(mat["specgen_atlas"]))
         if groups and _in_unsaved_folder(groups[0]):
             old_dir, new_dir = Path(groups[0]).parent, Path(blend_dir) / FOLDER
-            stem = Path(atlas).name.removesuffix("_lookup.exr")
+            stem = naming.atlas_stem(atlas)
             try:
-                renamed = _move_set(mat, old_dir, new_dir)
+                new_stem, renamed = _move_set(stem, old_dir, new_dir)
             except (OSError, SpecGenError) as exc:
                 warnings.append(f"SpecGen: the lookups of {mat.name!r} stay in {old_dir} ({exc})")
             else:
                 moved.update(renamed)
                 groups = [renamed.get(os.path.normpath(p), p) for p in groups]
-                atlas = str(Path(groups[0]).parent / f"{Path(groups[0]).name.split('_lookup.g')[0]}_lookup.exr")
-                new_stem = Path(atlas).name.removesuffix("_lookup.exr")
+                atlas = str(new_dir / f"{new_stem}_lookup.exr")
                 if new_stem != stem:
                     warnings.append(f"SpecGen: the lookups of {mat.name!r} are saved as {new_stem}_… in "
                                     f"{new_dir}: the set named {stem} there is another .blend's")
@@ -171,8 +170,7 @@ def relocate(blend_path: str) -> list[str]:
             preview.filepath = _relative(preview.filepath, datablock_dir)   # as the lookups: moves with the .blend
         img = packed_image(mat)
         if img is not None:   # Unpack Resources writes it where it is looked for
-            stem = Path(atlas).name.removesuffix("_lookup.exr")
-            img.filepath_raw = _relative(str(Path(atlas).parent / f"{stem}.npz"), datablock_dir)
+            img.filepath_raw = _relative(str(Path(atlas).parent / f"{naming.atlas_stem(atlas)}.npz"), datablock_dir)
         node = script_node(mat)
         if node is not None and node.inputs["Atlas"].default_value:
             node.inputs["Atlas"].default_value = groups[0]
@@ -211,6 +209,17 @@ def owns_set(out_dir: str, stem: str) -> bool:
     return here == os.path.normcase(os.path.normpath(os.path.join(out_dir, f"{stem}_lookup.exr")))
 
 
+def check_lookups(materials, warn) -> None:
+    """Before a render that reads the lookups: bake again those that are missing (from the compact
+    material, beside them or packed; each note to ``warn``), then refuse, in one sentence naming
+    the material and the file, lookups still missing or another Generate's."""
+    for note in restore_missing(materials):
+        warn(f"SpecGen: {note}")
+    wrong = missing_lookups(materials) or replaced_lookups(materials)
+    if wrong:
+        raise SpecGenError(wrong[0])
+
+
 def replaced_lookups(materials=None) -> list[str]:
     """One sentence per material (default: every SpecGen material) whose lookups on disk are
     another Generate's: a later run with *Replace Materials* rewrote them, then Undo brought the
@@ -237,7 +246,7 @@ def replaced_lookups(materials=None) -> list[str]:
 def compact_path(mat) -> Path:
     """Where a material's compact file (``<stem>.npz``) lies: beside its lookups."""
     atlas = Path(_absolute(str(mat["specgen_atlas"])))
-    return atlas.parent / f"{atlas.name.removesuffix('_lookup.exr')}.npz"
+    return atlas.parent / f"{naming.atlas_stem(atlas)}.npz"
 
 
 def packed_image(mat):
@@ -331,7 +340,7 @@ def rebuild(mat) -> str | None:
     from .render import make_material, script_node
 
     atlas = Path(_absolute(str(mat["specgen_atlas"])))
-    stem = atlas.name.removesuffix("_lookup.exr")
+    stem = naming.atlas_stem(atlas)
     source = atlas.parent / f"{stem}.npz"
     node = script_node(mat)
     if node is None:

@@ -136,12 +136,12 @@ def read_exr(path: str | os.PathLike) -> tuple[dict[str, np.ndarray], dict[str, 
         raise ImageIOError(f"{path}: not a readable OpenEXR file ({_reason(exc)})") from None
 
 
-def _reason(exc: BaseException) -> str:
-    """A reader's complaint about a damaged file, as a clause: its first line, or what an
-    indexing error in the bindings means (a file cut short)."""
-    if isinstance(exc, (IndexError, KeyError)):
+def _reason(problem: BaseException | str) -> str:
+    """A reader's complaint about a damaged file (an exception, or the text OpenImageIO keeps), as
+    a clause: its first line, or what an indexing error in the bindings means (a file cut short)."""
+    if isinstance(problem, (IndexError, KeyError)):
         return "damaged or cut short"
-    first = next((line.strip() for line in str(exc).splitlines() if line.strip()), "")
+    first = next((line.strip() for line in str(problem).splitlines() if line.strip()), "")
     return first.removesuffix(".") or "damaged or cut short"
 
 
@@ -185,14 +185,14 @@ def read_float_image(path: str | os.PathLike, error: type[SpecGenError] = ImageI
     with native_output_silenced():   # the readers' own lines about a damaged file
         inp = oiio.ImageInput.open(str(path))
         if inp is None:
-            raise error(f"{path}: cannot read {what} ({_reason(RuntimeError(oiio.geterror()))})")
+            raise error(f"{path}: cannot read {what} ({_reason(oiio.geterror())})")
         try:
             spec = inp.spec()
             data = inp.read_image(0, 0, 0, spec.nchannels, "float")  # integers normalised to [0, 1]
         finally:
             inp.close()
     if data is None:
-        raise error(f"{path}: cannot read {what} ({_reason(RuntimeError(oiio.geterror()))})")
+        raise error(f"{path}: cannot read {what} ({_reason(oiio.geterror())})")
     return np.asarray(data, dtype=np.float32).reshape(spec.height, spec.width, spec.nchannels)
 
 
